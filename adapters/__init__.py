@@ -1,0 +1,1 @@
+"""Robot adapters: turn a chosen grasp point into motions (UR3, hexarotor)."""

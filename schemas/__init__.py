@@ -1,0 +1,17 @@
+"""The wire contract of dlo-service: pydantic v2 models shared by every interface.
+
+Everything that crosses a process boundary (JSON files, HTTP bodies, zenoh samples)
+is one of these models, so producers and consumers validate the same way.
+"""
+
+from schemas.detection import Chain, Crossing, Detection, StageTimings
+from schemas.params import DetectParams, SegmentationMethod
+
+__all__ = [
+    "Chain",
+    "Crossing",
+    "DetectParams",
+    "Detection",
+    "SegmentationMethod",
+    "StageTimings",
+]

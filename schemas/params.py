@@ -1,0 +1,87 @@
+"""Detection parameters: one validated model with documented defaults in pixels."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+
+class SegmentationMethod(StrEnum):
+    """How the foreground mask is found when the caller gives none."""
+
+    auto = "auto"
+    """Otsu threshold on brightness or colourfulness, whichever separates better."""
+    hsv = "hsv"
+    """Fixed HSV range ``hsv_low`` .. ``hsv_high`` (OpenCV ranges: H 0-179, S and V 0-255)."""
+
+
+class DetectParams(BaseModel):
+    """Parameters of the six-step detection pipeline.
+
+    Every length is in pixels of the input image. The defaults suit cables 6 to 40 px
+    wide in images from 640x360 to 3840x2160; none is tuned to a data set.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    segment_length: float = Field(
+        10.0, gt=0.5, le=500.0, description="l_s: length of each chain segment."
+    )
+    expected_count: int | None = Field(
+        None,
+        ge=1,
+        le=100,
+        description="Number of DLOs in view, when known: merging stops when it is reached "
+        "and goes on past the cost threshold until it is.",
+    )
+    segmentation: SegmentationMethod = Field(
+        SegmentationMethod.auto, description="Segmentation when no mask is given."
+    )
+    hsv_low: tuple[int, int, int] = Field((0, 0, 60), description="Lower HSV bound (hsv).")
+    hsv_high: tuple[int, int, int] = Field((179, 255, 255), description="Upper HSV bound (hsv).")
+    min_component_area: int = Field(
+        120, ge=0, le=1_000_000, description="Foreground specks smaller than this are removed."
+    )
+    max_hole_area: int = Field(
+        60, ge=0, le=1_000_000, description="Background holes smaller than this are filled."
+    )
+    spur_length: float | None = Field(
+        None,
+        ge=0,
+        le=1000,
+        description="Skeleton branches from a tip to a junction shorter than this are "
+        "spurs and removed; None: 2.5 times the cable radius.",
+    )
+    max_gap: float = Field(
+        250.0, ge=0, le=10_000, description="Largest gap (occlusion) merging will bridge."
+    )
+    merge_cost_threshold: float = Field(
+        0.6,
+        ge=0,
+        le=100,
+        description="Joins cheaper than this are made; dearer ones only to reach expected_count.",
+    )
+    distance_weight: float = Field(
+        1.0, ge=0, le=100, description="Weight of the end-to-end distance (per max_gap)."
+    )
+    direction_weight: float = Field(
+        0.6, ge=0, le=100, description="Weight of the end direction difference (per pi)."
+    )
+    curvature_weight: float = Field(
+        0.9, ge=0, le=100, description="Weight of the turning needed to connect (per pi)."
+    )
+    min_chain_length: float = Field(
+        20.0, ge=0, le=10_000, description="Chains shorter than this after merging are dropped."
+    )
+
+    @model_validator(mode="after")
+    def _hsv_ranges_are_valid(self) -> DetectParams:
+        limits = (179, 255, 255)
+        for name, bound in (("hsv_low", self.hsv_low), ("hsv_high", self.hsv_high)):
+            for value, limit in zip(bound, limits, strict=True):
+                if not 0 <= value <= limit:
+                    raise ValueError(f"{name} {bound} is outside 0..{limits}")
+        if any(lo > hi for lo, hi in zip(self.hsv_low, self.hsv_high, strict=True)):
+            raise ValueError(f"hsv_low {self.hsv_low} exceeds hsv_high {self.hsv_high}")
+        return self

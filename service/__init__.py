@@ -1,0 +1,1 @@
+"""dlo-service: detection core, HTTP app, zenoh bus and CLI."""

@@ -1,0 +1,223 @@
+"""Processing image files one at a time: read, detect, write the three outputs.
+
+These are the plain functions behind the ``dlo`` command line; they print nothing.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+from schemas import Detection, DetectParams
+from service.imageio import (
+    IMAGE_SUFFIXES,
+    ImageFileError,
+    OutputWriteError,
+    list_images,
+    read_image,
+    read_mask,
+    write_png,
+    write_text,
+)
+from service.perception import InvalidInputError, detect_full, render_labels, render_overlay
+
+
+class InvalidParametersError(ValueError):
+    """Detection parameters failed validation; ``str()`` is one line naming the options."""
+
+
+@dataclass(frozen=True)
+class OutputPaths:
+    """Where the outputs for one input image go."""
+
+    detection_json: Path
+    """``<stem>.json``: the :class:`schemas.Detection`, indented JSON."""
+    labels_png: Path
+    """``<stem>.labels.png``: 16-bit label image, pixel value = chain id + 1, 0 elsewhere."""
+    overlay_png: Path
+    """``<stem>.overlay.png``: the chains drawn over the input image."""
+
+    @classmethod
+    def for_input(
+        cls, image_path: str | os.PathLike[str], out_dir: str | os.PathLike[str]
+    ) -> OutputPaths:
+        """Output paths in ``out_dir`` named after the stem of ``image_path``."""
+        stem = Path(image_path).stem
+        directory = Path(out_dir)
+        return cls(
+            detection_json=directory / f"{stem}.json",
+            labels_png=directory / f"{stem}.labels.png",
+            overlay_png=directory / f"{stem}.overlay.png",
+        )
+
+    def all(self) -> tuple[Path, Path, Path]:
+        """The three paths, in the order they are written (JSON last)."""
+        return (self.labels_png, self.overlay_png, self.detection_json)
+
+
+def build_params(**options: Any) -> DetectParams:
+    """Validate detection options given on a command line into :class:`DetectParams`.
+
+    Parameters
+    ----------
+    **options
+        :class:`DetectParams` fields; those that are None are left at their default.
+
+    Returns
+    -------
+    DetectParams
+
+    Raises
+    ------
+    InvalidParametersError
+        A value is out of range or inconsistent; the message is one line such as
+        ``--segment-length: Input should be greater than 0.5``.
+    """
+    given = {name: value for name, value in options.items() if value is not None}
+    try:
+        return DetectParams(**given)
+    except ValidationError as exc:
+        raise InvalidParametersError(describe_validation_error(exc)) from None
+
+
+def describe_validation_error(error: ValidationError) -> str:
+    """Summarise a pydantic validation error on one line, fields as option names."""
+    parts = []
+    for detail in error.errors(include_url=False):
+        message = str(detail["msg"]).removeprefix("Value error, ")
+        location = detail["loc"]
+        if location:
+            option = "--" + str(location[0]).replace("_", "-")
+            parts.append(f"{option}: {message}")
+        else:
+            parts.append(message)
+    return _one_line("; ".join(parts))
+
+
+def expand_inputs(paths: Iterable[str | os.PathLike[str]]) -> tuple[list[Path], list[str]]:
+    """Turn command-line paths into the image files to process.
+
+    Parameters
+    ----------
+    paths : iterable of str or Path
+        Files and directories as given by the user.
+
+    Returns
+    -------
+    files : list of Path
+        See :func:`service.imageio.list_images`; missing paths are kept so that
+        processing them reports the problem.
+    problems : list of str
+        One-line messages for directories that hold no image.
+    """
+    files: list[Path] = []
+    problems: list[str] = []
+    for path in map(Path, paths):
+        found = list_images([path])
+        if not found:
+            suffixes = " ".join(IMAGE_SUFFIXES)
+            problems.append(f"{path}: directory holds no image ({suffixes})")
+        files.extend(found)
+    return files, problems
+
+
+def find_output_clashes(files: Sequence[Path]) -> dict[Path, Path]:
+    """Inputs whose outputs would overwrite those of an earlier input.
+
+    Outputs are named after the file stem, so ``a/x.png`` and ``b/x.jpg`` clash.
+
+    Returns
+    -------
+    dict
+        Later input -> the earlier input with the same stem.
+    """
+    first_with_stem: dict[str, Path] = {}
+    clashes: dict[Path, Path] = {}
+    for path in files:
+        earlier = first_with_stem.setdefault(path.stem, path)
+        if earlier is not path:
+            clashes[path] = earlier
+    return clashes
+
+
+def process_file(
+    path: str | os.PathLike[str],
+    params: DetectParams | None,
+    out_dir: str | os.PathLike[str] | None,
+    mask_path: str | os.PathLike[str] | None = None,
+) -> Detection:
+    """Detect the DLOs in one image file and write the outputs.
+
+    Parameters
+    ----------
+    path : str or Path
+        The input image.
+    params : DetectParams or None
+        Detection parameters; None for the defaults.
+    out_dir : str or Path or None
+        Existing directory for the files of :class:`OutputPaths`; None writes
+        nothing.
+    mask_path : str or Path, optional
+        Foreground mask file of the image's size; replaces segmentation.
+
+    Returns
+    -------
+    Detection
+
+    Raises
+    ------
+    InvalidInputError
+        The image or mask cannot be used; an :class:`ImageFileError` when the
+        message already names the file (the image or the mask).
+    OutputWriteError
+        An output cannot be written.
+    """
+    image = read_image(path)
+    mask = None if mask_path is None else read_mask(mask_path, image.shape)
+    result = detect_full(image, params, mask=mask)
+    if out_dir is not None:
+        outputs = OutputPaths.for_input(path, out_dir)
+        write_png(outputs.labels_png, render_labels(result.detection, result.mask))
+        write_png(outputs.overlay_png, render_overlay(image, result.detection))
+        write_text(outputs.detection_json, detection_to_json(result.detection) + "\n")
+    return result.detection
+
+
+def detection_to_json(detection: Detection) -> str:
+    """The wire form of a detection: JSON indented by two spaces, no trailing newline."""
+    return detection.model_dump_json(indent=2)
+
+
+def failure_message(path: str | os.PathLike[str], error: BaseException) -> str:
+    """One line telling which file failed and why, for any exception.
+
+    Parameters
+    ----------
+    path : str or Path
+        The input being processed.
+    error : BaseException
+        What :func:`process_file` raised.
+
+    Returns
+    -------
+    str
+        ``"<file>: <problem>"``; the file is the mask when the mask was the problem.
+        Exceptions other than bad input or unwritable output are reported as
+        ``"<file>: internal error: <type>: <message>"``.
+    """
+    if isinstance(error, ImageFileError):
+        message = str(error)
+    elif isinstance(error, InvalidInputError | OutputWriteError):
+        message = f"{path}: {error}"
+    else:
+        message = f"{path}: internal error: {type(error).__name__}: {error}"
+    return _one_line(message)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(line.strip() for line in text.splitlines() if line.strip())

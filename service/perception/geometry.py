@@ -1,0 +1,122 @@
+"""Small geometric helpers on polylines (``(N, 2)`` arrays of ``[x, y]``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def unit(vector: np.ndarray) -> np.ndarray:
+    """The vector scaled to length one (zero stays zero)."""
+    norm = float(np.hypot(vector[0], vector[1]))
+    return vector / norm if norm > 1e-12 else np.zeros(2)
+
+
+def angle_between(a: np.ndarray, b: np.ndarray) -> float:
+    """Unsigned angle between two unit vectors, in radians (0..pi)."""
+    return float(np.arccos(np.clip(a[0] * b[0] + a[1] * b[1], -1.0, 1.0)))
+
+
+def end_tangent(
+    points: np.ndarray, at_start: bool, span: float, skip: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Position and outward unit tangent at one end of a polyline.
+
+    The points between ``skip`` and ``skip + span`` of arc length from the end are
+    fitted with a quadratic in arc length, extrapolated to the end. A plain chord
+    would lag behind the tangent of a curving cable by half its turn; skipping the
+    last stretch ignores the hook that thinning leaves at a square-cut end (such as
+    the edge of an occluder).
+
+    Parameters
+    ----------
+    points : ndarray
+        ``(N, 2)`` polyline, ``N >= 2``.
+    at_start : bool
+        The end at ``points[0]`` (the direction points away from the polyline,
+        backwards) or at ``points[-1]``.
+    span : float
+        Arc length used for the fit; longer is steadier, shorter follows the very end.
+    skip : float
+        Arc length at the very end left out of the fit.
+
+    Returns
+    -------
+    position, direction : ndarray
+        The fitted end point and the unit tangent pointing out of the polyline.
+    """
+    ordered = points[::-1] if at_start else points
+    backwards = ordered[::-1]
+    steps = np.hypot(*np.diff(backwards, axis=0).T)
+    arc = np.concatenate([[0.0], np.cumsum(steps)])
+    if arc[-1] < 2.0 * skip + 1.0:
+        skip = 0.0
+    used = (arc >= skip) & (arc <= skip + span)
+    if used.sum() >= 4:
+        design = np.stack([np.ones(used.sum()), arc[used], arc[used] ** 2], axis=1)
+        coefficients, *_ = np.linalg.lstsq(design, backwards[used], rcond=None)
+        # The linear term points into the polyline; outwards is its opposite.
+        tangent = -coefficients[1]
+        if np.hypot(*tangent) > 1e-9:
+            position = coefficients[0] if skip > 0 else backwards[0]
+            return position, unit(tangent)
+    last = max(int(np.searchsorted(arc, span, side="right")) - 1, 1)
+    return backwards[0], unit(backwards[0] - backwards[last])
+
+
+def end_direction(points: np.ndarray, at_start: bool, span: float) -> np.ndarray:
+    """Outward unit tangent at one end of a polyline (see :func:`end_tangent`)."""
+    return end_tangent(points, at_start, span)[1]
+
+
+def resample(points: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Joints along a polyline with consecutive joints exactly ``step`` apart.
+
+    Each joint is where a circle of radius ``step`` around the previous joint first
+    leaves the polyline, so the chord, not the arc, is ``step``. The last joint is
+    the polyline's end, so the last segment may be shorter.
+
+    Returns
+    -------
+    joints : ndarray
+        ``(K, 2)`` joints.
+    source_edge : ndarray
+        ``(K,)`` index of the polyline edge each joint lies on.
+    """
+    joints = [points[0]]
+    edges = [0]
+    current = points[0]
+    edge = 0
+    n = len(points)
+    step_sq = step * step
+    while edge < n - 1:
+        a, b = points[edge], points[edge + 1]
+        if (b[0] - current[0]) ** 2 + (b[1] - current[1]) ** 2 < step_sq:
+            edge += 1
+            continue
+        # Solve |a + t (b - a) - current| = step for the larger root in [0, 1].
+        d = b - a
+        f = a - current
+        qa = d[0] * d[0] + d[1] * d[1]
+        qb = 2.0 * (f[0] * d[0] + f[1] * d[1])
+        qc = f[0] * f[0] + f[1] * f[1] - step_sq
+        disc = max(qb * qb - 4.0 * qa * qc, 0.0)
+        t = (-qb + disc**0.5) / (2.0 * qa) if qa > 0 else 1.0
+        t = min(max(t, 0.0), 1.0)
+        current = a + t * d
+        joints.append(current)
+        edges.append(edge)
+    tail = points[-1]
+    if np.hypot(*(tail - joints[-1])) > 1e-6 * step:
+        joints.append(tail)
+        edges.append(n - 2)
+    if len(joints) == 1:
+        joints.append(tail)
+        edges.append(n - 2)
+    return np.array(joints), np.array(edges)
+
+
+def polyline_length(points: np.ndarray) -> float:
+    """Arc length of a polyline."""
+    if len(points) < 2:
+        return 0.0
+    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())

@@ -1,0 +1,309 @@
+"""Step 6: merging, joining chain pieces into whole DLOs across gaps and crossings.
+
+Every pair of chain ends gets a cost from three parts, as in Keipour et al. (RA-L
+2022): the distance between the ends, the difference of their directions, and the
+turning a curve needs to connect them. The cheapest pair is joined first, then the
+next, never closing a chain on itself, until the cheapest remaining join is
+implausible or the expected number of DLOs is reached. Each gap is filled with the
+"natural" curve: it leaves each end along that end's direction and turns with one
+constant rate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from schemas import DetectParams
+from service.perception.geometry import angle_between, end_tangent, polyline_length
+
+END_FIT_SPAN_PX = 40.0
+END_FIT_SPAN_RADII = 6.0
+
+
+@dataclass(frozen=True)
+class ChainEnd:
+    """One end of a chain piece: where it is and which way it points (outwards)."""
+
+    piece: int
+    at_start: bool
+    position: np.ndarray
+    direction: np.ndarray
+
+
+@dataclass
+class MergedPath:
+    """A merged DLO as a dense polyline before resampling.
+
+    ``filled[k]`` is True when edge ``k`` (vertices ``k`` to ``k + 1``) was drawn by
+    the merging step across a gap rather than taken from a fitted piece.
+    """
+
+    vertices: np.ndarray
+    filled: np.ndarray
+    pieces: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Join:
+    """A join the merging step made, for evaluation and debugging."""
+
+    end_a: ChainEnd
+    end_b: ChainEnd
+    cost: float
+
+
+@dataclass
+class MergeResult:
+    paths: list[MergedPath]
+    joins: list[Join]
+
+
+def chain_ends(pieces: list[np.ndarray], span: float, skip: float = 0.0) -> list[ChainEnd]:
+    """Both ends of every piece with their outward directions (piece i: ends 2i, 2i+1)."""
+    ends = []
+    for index, points in enumerate(pieces):
+        for at_start in (True, False):
+            position, direction = end_tangent(points, at_start, span, skip)
+            ends.append(ChainEnd(index, at_start, position, direction))
+    return ends
+
+
+def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> float:
+    """Cost of joining two chain ends: distance, direction difference and curvature.
+
+    Parameters
+    ----------
+    a, b : ChainEnd
+    params : DetectParams
+        Weights and ``max_gap``.
+    radius : float
+        Cable half width: below about three radii the direction of the gap itself is
+        noise, so the curvature part fades out.
+
+    Returns
+    -------
+    float
+        0 for ends that touch and continue each other straight; 1 is the default
+        limit of plausibility.
+    """
+    gap = b.position - a.position
+    distance = float(np.hypot(gap[0], gap[1]))
+    leaving = a.direction
+    arriving = -b.direction
+    direction_difference = angle_between(leaving, arriving)
+    cost = params.distance_weight * distance / max(params.max_gap, 1e-9)
+    cost += params.direction_weight * direction_difference / np.pi
+    if distance > 1e-9:
+        heading = gap / distance
+        turning = angle_between(leaving, heading) + angle_between(heading, arriving)
+        fade = min(1.0, distance / max(3.0 * radius, 1e-9))
+        cost += params.curvature_weight * fade * turning / (2.0 * np.pi)
+    return cost
+
+
+def _arc(start: np.ndarray, heading: np.ndarray, turn: float, radius: float, step: float):
+    """Points of a circular arc leaving ``start`` along ``heading`` and turning ``turn`` rad."""
+    sign = 1.0 if turn >= 0 else -1.0
+    normal = sign * np.array([-heading[1], heading[0]])
+    centre = start + radius * normal
+    offset = start - centre
+    count = max(2, int(np.ceil(abs(turn) * radius / step)) + 1)
+    angles = np.linspace(0.0, turn, count)
+    cos, sin = np.cos(angles), np.sin(angles)
+    rotated_x = cos * offset[0] - sin * offset[1]
+    rotated_y = sin * offset[0] + cos * offset[1]
+    return centre + np.stack([rotated_x, rotated_y], axis=1)
+
+
+def _without_repeats(points: np.ndarray) -> np.ndarray:
+    """Drop points that repeat their predecessor (a straight part of zero length)."""
+    steps = np.hypot(*np.diff(points, axis=0).T)
+    keep = np.concatenate([[True], steps > 1e-9])
+    return points[keep]
+
+
+def _segment(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:
+    count = max(2, int(np.ceil(np.hypot(*(b - a)) / step)) + 1)
+    return a + np.linspace(0.0, 1.0, count)[:, None] * (b - a)
+
+
+def natural_curve(
+    start: np.ndarray, leaving: np.ndarray, end: np.ndarray, arriving: np.ndarray, step: float = 1.0
+) -> np.ndarray:
+    """The "natural" curve that bridges a gap between two chain ends.
+
+    It leaves ``start`` along ``leaving``, goes straight while that still helps, turns
+    with one constant rate (the gentlest arc tangent to both end directions), and
+    arrives at ``end`` heading along ``arriving``. When the two end rays do not meet
+    ahead of both ends (an S-shaped or backward gap), no single arc fits, and a
+    cubic Bezier with tangents along both directions is used instead.
+
+    Parameters
+    ----------
+    start, end : ndarray
+        ``[x, y]`` of the two ends.
+    leaving, arriving : ndarray
+        Unit headings at ``start`` and at ``end``.
+    step : float
+        Spacing of the returned samples.
+
+    Returns
+    -------
+    ndarray
+        ``(M, 2)`` samples from ``start`` to ``end`` inclusive.
+    """
+    gap = end - start
+    distance = float(np.hypot(*gap))
+    if distance < 1e-9:
+        return np.array([start, end])
+    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
+    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+    turn = float(np.arctan2(cross, dot))
+    heading = gap / distance
+    if abs(cross) < 1e-6:
+        if dot > 0 and angle_between(leaving, heading) < 1e-3:
+            return _segment(start, end, step)
+    else:
+        # start + t_a * leaving = end - t_b * arriving
+        matrix = np.array([[leaving[0], arriving[0]], [leaving[1], arriving[1]]])
+        t_a, t_b = np.linalg.solve(matrix, gap)
+        if t_a > 0 and t_b > 0:
+            corner = start + t_a * leaving
+            tangent = min(t_a, t_b)
+            arc_start = corner - tangent * leaving
+            arc_radius = tangent / np.tan(abs(turn) / 2.0)
+            arc = _arc(arc_start, leaving, turn, arc_radius, step)
+            parts = [_segment(start, arc_start, step), arc[1:], _segment(arc[-1], end, step)[1:]]
+            curve = np.concatenate(parts)
+            curve[-1] = end
+            return _without_repeats(curve)
+    handle = 0.4 * distance
+    control = np.array([start, start + handle * leaving, end - handle * arriving, end])
+    count = max(4, int(np.ceil(1.3 * distance / step)) + 1)
+    t = np.linspace(0.0, 1.0, count)[:, None]
+    weights = [(1 - t) ** 3, 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t**2, t**3]
+    return sum(w * c for w, c in zip(weights, control, strict=True))
+
+
+class _Components:
+    """Union-find over pieces, so a join never closes a chain on itself."""
+
+    def __init__(self, count: int):
+        self.parent = list(range(count))
+
+    def find(self, item: int) -> int:
+        while self.parent[item] != item:
+            self.parent[item] = self.parent[self.parent[item]]
+            item = self.parent[item]
+        return item
+
+    def union(self, a: int, b: int) -> None:
+        self.parent[self.find(a)] = self.find(b)
+
+
+def choose_joins(
+    ends: list[ChainEnd], piece_count: int, params: DetectParams, radius: float
+) -> list[tuple[int, int, float]]:
+    """Greedy cheapest-first joins between end indices.
+
+    Returns
+    -------
+    list of (int, int, float)
+        Joined end indices and their cost, in the order they were made.
+    """
+    positions = np.array([end.position for end in ends]) if ends else np.zeros((0, 2))
+    distances = np.hypot(*(positions[:, None, :] - positions[None, :, :]).transpose(2, 0, 1))
+    unlimited = params.expected_count is not None
+    candidates = []
+    for i in range(len(ends)):
+        for j in range(i + 1, len(ends)):
+            if ends[i].piece == ends[j].piece:
+                continue
+            if not unlimited and distances[i, j] > params.max_gap:
+                continue
+            candidates.append((join_cost(ends[i], ends[j], params, radius), i, j))
+    candidates.sort()
+    components = _Components(piece_count)
+    used = np.zeros(len(ends), bool)
+    chains_left = piece_count
+    joins = []
+    for cost, i, j in candidates:
+        if params.expected_count is not None and chains_left <= params.expected_count:
+            break
+        if params.expected_count is None and cost > params.merge_cost_threshold:
+            break
+        if used[i] or used[j]:
+            continue
+        piece_i, piece_j = ends[i].piece, ends[j].piece
+        if components.find(piece_i) == components.find(piece_j):
+            continue
+        components.union(piece_i, piece_j)
+        used[i] = used[j] = True
+        chains_left -= 1
+        joins.append((i, j, cost))
+    return joins
+
+
+def assemble_paths(
+    pieces: list[np.ndarray], ends: list[ChainEnd], joins: list[tuple[int, int, float]]
+) -> list[MergedPath]:
+    """Walk every group of joined pieces from one free end to the other."""
+    partner = np.full(len(ends), -1)
+    for i, j, _ in joins:
+        partner[i], partner[j] = j, i
+    visited = np.zeros(len(pieces), bool)
+    paths = []
+    for first_end in range(len(ends)):
+        piece = first_end // 2
+        if visited[piece] or partner[first_end] != -1:
+            continue
+        vertices, filled, order = [], [], []
+        entry = first_end
+        while True:
+            piece = entry // 2
+            visited[piece] = True
+            order.append(piece)
+            points = pieces[piece] if entry % 2 == 0 else pieces[piece][::-1]
+            filled.append(np.zeros(len(points) - 1, bool))
+            vertices.append(points)
+            exit_end = entry ^ 1
+            next_entry = partner[exit_end]
+            if next_entry == -1:
+                break
+            bridge = natural_curve(
+                ends[exit_end].position,
+                ends[exit_end].direction,
+                ends[next_entry].position,
+                -ends[next_entry].direction,
+            )
+            vertices.append(bridge[1:-1])
+            filled.append(np.ones(len(bridge) - 1, bool))
+            entry = next_entry
+        paths.append(MergedPath(np.concatenate(vertices), np.concatenate(filled), pieces=order))
+    return paths
+
+
+def merge_chains(pieces: list[np.ndarray], params: DetectParams, radius: float) -> MergeResult:
+    """Step 6 of the pipeline: join pieces into whole DLOs and fill the gaps.
+
+    Parameters
+    ----------
+    pieces : list of ndarray
+        Non-overlapping ``(K, 2)`` joint arrays from pruning.
+    params : DetectParams
+    radius : float
+        Typical cable half width in pixels.
+
+    Returns
+    -------
+    MergeResult
+        The merged paths (dense polylines with per-edge "filled" flags) and the joins.
+    """
+    span = max(6.0 * params.segment_length, 10.0 * radius)
+    ends = chain_ends(pieces, span, skip=radius)
+    joins = choose_joins(ends, len(pieces), params, radius)
+    paths = assemble_paths(pieces, ends, joins)
+    paths = [path for path in paths if polyline_length(path.vertices) > 0]
+    return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])

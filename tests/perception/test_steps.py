@@ -1,0 +1,238 @@
+"""Each pipeline step on its own, on hand-made shapes with known answers."""
+
+import cv2
+import numpy as np
+import pytest
+
+from schemas import DetectParams, SegmentationMethod
+from service.perception import InvalidInputError
+from service.perception.contours import extract_contours
+from service.perception.fitting import fit_chains, junction_zones, split_contour, walk_joints
+from service.perception.geometry import end_direction, polyline_length, resample
+from service.perception.merging import ChainEnd, join_cost, merge_chains, natural_curve
+from service.perception.pruning import prune_overlaps
+from service.perception.segmentation import as_bgr, clean_mask, segment, validate_mask
+from service.perception.skeleton import branch_counts, estimate_radius, skeletonize_mask
+
+
+def thick_polyline(shape, points, thickness):
+    mask = np.zeros(shape, np.uint8)
+    cv2.polylines(mask, [np.array(points, np.int32)], False, 1, thickness)
+    return mask > 0
+
+
+# --- segmentation -------------------------------------------------------------------
+
+
+def test_auto_segmentation_finds_a_bright_cable_on_a_dark_background():
+    image = np.full((100, 160, 3), 30, np.uint8)
+    cv2.line(image, (10, 50), (150, 50), (200, 200, 200), 7)
+    mask = segment(image, DetectParams())
+    truth = np.zeros((100, 160), np.uint8)
+    cv2.line(truth, (10, 50), (150, 50), 1, 7)
+    dice = 2 * (mask & (truth > 0)).sum() / (mask.sum() + truth.sum())
+    assert dice > 0.95
+
+
+def test_auto_segmentation_uses_colour_when_brightness_does_not_separate():
+    # A red cable on a light grey table: as bright as the table, but colourful.
+    image = np.full((100, 160, 3), 200, np.uint8)
+    cv2.line(image, (10, 50), (150, 50), (40, 40, 210), 9)
+    mask = segment(image, DetectParams())
+    assert mask[50, 80] and not mask[20, 80]
+    assert 0.8 < mask.sum() / (141 * 9) < 1.3
+
+
+def test_hsv_segmentation_selects_only_the_given_hue():
+    image = np.zeros((60, 100, 3), np.uint8)
+    cv2.line(image, (5, 20), (95, 20), (0, 0, 255), 5)  # red
+    cv2.line(image, (5, 40), (95, 40), (255, 0, 0), 5)  # blue
+    params = DetectParams(
+        segmentation=SegmentationMethod.hsv, hsv_low=(100, 100, 100), hsv_high=(130, 255, 255)
+    )
+    mask = segment(image, params)
+    assert mask[40, 50] and not mask[20, 50]
+
+
+def test_clean_mask_removes_specks_and_fills_small_holes():
+    mask = np.zeros((60, 60), bool)
+    mask[10:40, 10:40] = True
+    mask[20:22, 20:22] = False  # small hole
+    mask[50:52, 50:52] = True  # speck
+    cleaned = clean_mask(mask, min_component_area=20, max_hole_area=10)
+    assert cleaned[20:22, 20:22].all()
+    assert not cleaned[50:52, 50:52].any()
+    assert cleaned[10:40, 10:40].all()
+
+
+def test_input_validation_gives_clear_errors():
+    with pytest.raises(InvalidInputError, match="uint8"):
+        as_bgr(np.zeros((20, 20), np.float32))
+    with pytest.raises(InvalidInputError, match="too small"):
+        as_bgr(np.zeros((2, 2, 3), np.uint8))
+    with pytest.raises(InvalidInputError, match="mask is 30x20 px but the image is 40x20 px"):
+        validate_mask(np.ones((20, 30), bool), (20, 40))
+    with pytest.raises(InvalidInputError, match="empty"):
+        validate_mask(np.zeros((20, 40), bool), (20, 40))
+    assert as_bgr(np.zeros((20, 20), np.uint8)).shape == (20, 20, 3)
+    assert as_bgr(np.zeros((20, 20, 4), np.uint8)).shape == (20, 20, 3)
+
+
+# --- skeleton -------------------------------------------------------------------------
+
+
+def test_skeleton_of_a_band_is_one_connected_branch_on_its_centreline():
+    mask = thick_polyline((80, 200), [(20, 40), (180, 40)], 11)
+    skeleton = skeletonize_mask(mask, spur_length=12)
+    counts = branch_counts(skeleton)
+    assert (counts == 1).sum() == 2  # two tips
+    assert (counts >= 3).sum() == 0  # no junction
+    assert np.abs(np.argwhere(skeleton)[:, 0] - 40).max() <= 1
+    assert cv2.connectedComponents(skeleton.astype(np.uint8))[0] == 2  # background + 1
+    assert estimate_radius(mask, skeleton) == pytest.approx(5.5, abs=1.0)
+
+
+def test_skeleton_of_a_crossing_has_a_junction_and_four_tips():
+    mask = thick_polyline((200, 200), [(20, 20), (180, 180)], 9)
+    mask |= thick_polyline((200, 200), [(20, 180), (180, 20)], 9)
+    skeleton = skeletonize_mask(mask, spur_length=12)
+    counts = branch_counts(skeleton)
+    assert (counts == 1).sum() == 4
+    assert (counts >= 3).any()
+
+
+def test_spurs_from_a_ragged_border_are_removed():
+    mask = thick_polyline((80, 200), [(20, 40), (180, 40)], 11)
+    mask[30:35, 100:103] = True  # a bump on the border grows a spur
+    raw = skeletonize_mask(mask, spur_length=0)
+    pruned = skeletonize_mask(mask, spur_length=15)
+    assert (branch_counts(raw) == 1).sum() >= 2
+    assert (branch_counts(pruned) == 1).sum() == 2
+    assert (branch_counts(pruned) >= 3).sum() == 0
+
+
+# --- contours and fitting -------------------------------------------------------------
+
+
+def test_contours_of_a_skeleton_line_walk_out_and_back():
+    skeleton = np.zeros((20, 60), bool)
+    skeleton[10, 5:55] = True
+    contours = extract_contours(skeleton)
+    assert len(contours) == 1
+    xs = contours[0][:, 0]
+    assert xs.min() == 5 and xs.max() == 54
+    assert len(contours[0]) == 2 * 50 - 2  # each pixel twice, the tips once
+
+
+def test_walk_joints_spaces_joints_by_the_segment_length():
+    pixels = np.stack([np.arange(0, 101), np.zeros(101)], axis=1)
+    joints = walk_joints(pixels, 10)
+    assert np.allclose(np.diff(joints[:, 0]), 10)
+    assert joints[0, 0] == 0 and joints[-1, 0] == 100
+
+
+def test_split_contour_cuts_at_tips_and_skips_junction_zones():
+    contour = np.stack([np.arange(10), np.zeros(10, int)], axis=1)
+    tips = np.zeros(10, bool)
+    tips[[0, 9]] = True
+    zones = np.zeros(10, bool)
+    zones[4:6] = True
+    runs = split_contour(contour, tips, zones)
+    assert sorted(len(r) for r in runs) == [4, 4]
+
+
+def test_fitting_and_pruning_give_one_chain_per_branch():
+    mask = thick_polyline((80, 200), [(20, 40), (180, 40)], 9)
+    skeleton = skeletonize_mask(mask, spur_length=12)
+    zones = junction_zones(skeleton, 4.5)
+    pieces = fit_chains(extract_contours(skeleton), skeleton, zones, 10)
+    assert len(pieces) == 2  # the contour walks the branch twice
+    kept = prune_overlaps(pieces, mask.shape)
+    assert len(kept) == 1
+    assert polyline_length(kept[0]) == pytest.approx(polyline_length(pieces[0]), rel=0.05)
+
+
+def test_junction_zones_cover_a_crossing_but_not_the_arms():
+    mask = thick_polyline((200, 200), [(20, 20), (180, 180)], 9)
+    mask |= thick_polyline((200, 200), [(20, 180), (180, 20)], 9)
+    skeleton = skeletonize_mask(mask, spur_length=12)
+    zones = junction_zones(skeleton, 4.5)
+    assert zones[100, 100]
+    assert not zones[40, 40] and not zones[160, 40]
+
+
+# --- geometry and merging -------------------------------------------------------------
+
+
+def test_resample_gives_exact_chord_lengths():
+    t = np.linspace(0, np.pi, 400)
+    arc = np.stack([100 + 50 * np.cos(t), 100 + 50 * np.sin(t)], axis=1)
+    joints, _ = resample(arc, 10.0)
+    steps = np.linalg.norm(np.diff(joints, axis=0), axis=1)
+    assert np.allclose(steps[:-1], 10.0, atol=1e-9)
+    assert steps[-1] <= 10.0 + 1e-9
+    assert np.allclose(joints[-1], arc[-1])
+
+
+def test_end_direction_points_outwards():
+    line = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0]])
+    assert np.allclose(end_direction(line, at_start=False, span=15), [1, 0])
+    assert np.allclose(end_direction(line, at_start=True, span=15), [-1, 0])
+
+
+def test_natural_curve_is_straight_for_aligned_ends():
+    curve = natural_curve(
+        np.array([0.0, 0]), np.array([1.0, 0]), np.array([50.0, 0]), np.array([1.0, 0])
+    )
+    assert np.allclose(curve[:, 1], 0)
+    assert np.allclose(curve[0], [0, 0]) and np.allclose(curve[-1], [50, 0])
+
+
+def test_natural_curve_follows_the_ends_then_turns_at_a_constant_rate():
+    # Leaving east from the origin, arriving heading north at (30, 40): the rays meet
+    # at (30, 0); the gentlest arc is tangent 30 px before that corner.
+    start, end = np.array([0.0, 0.0]), np.array([30.0, 40.0])
+    curve = natural_curve(start, np.array([1.0, 0.0]), end, np.array([0.0, 1.0]), step=0.5)
+    assert np.allclose(curve[0], start) and np.allclose(curve[-1], end)
+    headings = np.diff(curve, axis=0)
+    assert np.allclose(headings[0] / np.linalg.norm(headings[0]), [1, 0], atol=0.01)
+    assert np.allclose(headings[-1] / np.linalg.norm(headings[-1]), [0, 1], atol=0.01)
+    # The arc part (centre (0, 30), radius 30) then a straight stretch north.
+    on_arc = curve[(curve[:, 1] < 30) & (curve[:, 1] > 0.5)]
+    radii = np.hypot(on_arc[:, 0] - 0.0, on_arc[:, 1] - 30.0)
+    assert np.allclose(radii, 30.0, atol=0.05)
+
+
+def test_join_cost_prefers_straight_continuation_over_a_turn():
+    params = DetectParams()
+    a = ChainEnd(0, False, np.array([100.0, 100.0]), np.array([1.0, 0.0]))
+    straight = ChainEnd(1, True, np.array([130.0, 100.0]), np.array([-1.0, 0.0]))
+    turned = ChainEnd(2, True, np.array([115.0, 115.0]), np.array([0.0, -1.0]))
+    backwards = ChainEnd(3, True, np.array([70.0, 100.0]), np.array([1.0, 0.0]))
+    assert join_cost(a, straight, params, 4) < join_cost(a, turned, params, 4)
+    assert join_cost(a, turned, params, 4) < join_cost(a, backwards, params, 4)
+    assert join_cost(a, straight, params, 4) < params.merge_cost_threshold
+
+
+def test_merging_bridges_a_gap_and_marks_it_filled():
+    left = np.stack([np.arange(0, 101, 10.0), np.full(11, 50.0)], axis=1)
+    right = np.stack([np.arange(160, 261, 10.0), np.full(11, 50.0)], axis=1)
+    result = merge_chains([left, right], DetectParams(), radius=4)
+    assert len(result.paths) == 1 and len(result.joins) == 1
+    path = result.paths[0]
+    assert path.filled.any() and not path.filled.all()
+    gap_edges = path.vertices[:-1][path.filled]
+    assert gap_edges[:, 0].min() >= 100 - 1e-9 and gap_edges[:, 0].max() < 160
+
+
+def test_merging_stops_at_the_expected_count():
+    pieces = [
+        np.stack([np.arange(0, 101, 10.0) + 200 * k, np.full(11, 50.0)], axis=1) for k in range(3)
+    ]
+    assert len(merge_chains(pieces, DetectParams(), 4).paths) == 1
+    assert len(merge_chains(pieces, DetectParams(expected_count=2), 4).paths) == 2
+    # Far apart and implausible: with no expected count they stay apart ...
+    far = [pieces[0], pieces[0] + [0, 400]]
+    assert len(merge_chains(far, DetectParams(), 4).paths) == 2
+    # ... and an expected count of one forces the join.
+    assert len(merge_chains(far, DetectParams(expected_count=1), 4).paths) == 1
