@@ -15,6 +15,7 @@ from importlib.metadata import version as installed_version
 from pathlib import Path
 from typing import Annotated, NoReturn
 
+import numpy as np
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -33,6 +34,7 @@ from service.batch import (
     process_file,
 )
 from service.imageio import write_png
+from service.perception import render_overlay
 
 EXIT_FAILED = 1
 """At least one input could not be processed."""
@@ -194,6 +196,14 @@ def demo(
         Path, typer.Option(metavar="DIR", help="Where to write the scene and the outputs.")
     ] = Path("out/demo"),
     seed: Annotated[int, typer.Option(help="Seed of the synthetic scene.")] = 7,
+    figure: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="FILE",
+            help="Also write the scene and its overlay side by side at half size "
+            "(the README picture).",
+        ),
+    ] = None,
 ) -> None:
     """Generate the bundled synthetic example scene and detect the cables in it."""
     console = _stderr_console()
@@ -209,6 +219,10 @@ def demo(
         started = time.perf_counter()
         detection = process_file(example, DetectParams(), out_dir)
         elapsed_ms = (time.perf_counter() - started) * 1000.0
+        if figure is not None:
+            overlay = render_overlay(scene.image, detection)
+            side_by_side = np.hstack([scene.image, overlay])[::2, ::2]
+            write_png(figure, np.ascontiguousarray(side_by_side))
     except Exception as exc:  # report any failure on one line, never a traceback
         _print_error(console, failure_message("demo", exc))
         raise typer.Exit(EXIT_FAILED) from None

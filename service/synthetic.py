@@ -15,6 +15,7 @@ and seed always give the same scene.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 from functools import cached_property
 from itertools import pairwise
@@ -309,10 +310,10 @@ def _validate_arguments(
         raise ValueError("occluders are laid across cables, so they need n_cables >= 1")
     if background not in ("textured", "plain"):
         raise ValueError(f"background must be 'textured' or 'plain', got {background!r}")
-    if not isinstance(noise_sigma, int | float) or not 0 <= noise_sigma < math.inf:
+    if not _is_real(noise_sigma) or not 0 <= noise_sigma < math.inf:
         raise ValueError(f"noise_sigma must be a finite number >= 0, got {noise_sigma!r}")
     if margin is not None:
-        if not isinstance(margin, int | float) or not 0 <= margin < math.inf:
+        if not _is_real(margin) or not 0 <= margin < math.inf:
             raise ValueError(f"margin must be None or a finite number >= 0, got {margin!r}")
         if min(width, height) - 2 * margin < 32:
             raise ValueError(
@@ -322,7 +323,11 @@ def _validate_arguments(
 
 
 def _is_int(value) -> bool:
-    return isinstance(value, int | np.integer) and not isinstance(value, bool)
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool | np.bool_)
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
 
 
 # --------------------------------------------------------------------------- curves
