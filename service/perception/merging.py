@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from schemas import DetectParams
@@ -203,47 +204,133 @@ class _Components:
         self.parent[self.find(a)] = self.find(b)
 
 
-def choose_joins(
-    ends: list[ChainEnd], piece_count: int, params: DetectParams, radius: float
+def _best_matching(
+    members: list[int], ends: list[ChainEnd], params: DetectParams, radius: float
 ) -> list[tuple[int, int, float]]:
-    """Greedy cheapest-first joins between end indices.
+    """Cheapest way to pair up the ends that meet at one junction.
+
+    Every pairing of the ends is considered (junctions are small: a crossing has four
+    ends, a loop touching a cable four, a triple crossing six), with a penalty for each
+    end left unpaired, since a strand rarely ends inside a junction. Two ends of the
+    same piece are never paired.
+    """
+    unpaired_penalty = params.merge_cost_threshold
+    costs = {}
+    for a_pos, a in enumerate(members):
+        for b in members[a_pos + 1 :]:
+            if ends[a].piece != ends[b].piece:
+                costs[a, b] = join_cost(ends[a], ends[b], params, radius)
+    memo: dict[tuple[int, ...], tuple[float, tuple]] = {}
+
+    def solve(remaining: tuple[int, ...]) -> tuple[float, tuple]:
+        if not remaining:
+            return 0.0, ()
+        if remaining in memo:
+            return memo[remaining]
+        first, rest = remaining[0], remaining[1:]
+        best_cost, rest_pairs = solve(rest)
+        best = (best_cost + unpaired_penalty, rest_pairs)
+        for index, other in enumerate(rest):
+            cost = costs.get((first, other))
+            if cost is None:
+                continue
+            sub_cost, sub_pairs = solve(rest[:index] + rest[index + 1 :])
+            if cost + sub_cost < best[0]:
+                best = (cost + sub_cost, ((first, other, cost), *sub_pairs))
+        memo[remaining] = best
+        return best
+
+    return list(solve(tuple(members))[1])
+
+
+# Junctions with more ends than this are paired greedily (the matching is exponential).
+MAX_JUNCTION_ENDS = 10
+
+
+def choose_joins(
+    ends: list[ChainEnd],
+    piece_count: int,
+    params: DetectParams,
+    radius: float,
+    junction_of_end: list[int] | None = None,
+) -> list[tuple[int, int, float]]:
+    """Decide which chain ends to join.
+
+    First the ends that meet at each junction (``junction_of_end[i] >= 0``) are paired
+    by the cheapest matching of that junction; then the remaining ends are joined
+    greedily, cheapest first, across gaps. A join never closes a chain on itself.
 
     Returns
     -------
     list of (int, int, float)
         Joined end indices and their cost, in the order they were made.
     """
-    positions = np.array([end.position for end in ends]) if ends else np.zeros((0, 2))
-    distances = np.hypot(*(positions[:, None, :] - positions[None, :, :]).transpose(2, 0, 1))
-    unlimited = params.expected_count is not None
-    candidates = []
-    for i in range(len(ends)):
-        for j in range(i + 1, len(ends)):
-            if ends[i].piece == ends[j].piece:
-                continue
-            if not unlimited and distances[i, j] > params.max_gap:
-                continue
-            candidates.append((join_cost(ends[i], ends[j], params, radius), i, j))
-    candidates.sort()
     components = _Components(piece_count)
     used = np.zeros(len(ends), bool)
     chains_left = piece_count
     joins = []
+
+    def try_join(i: int, j: int, cost: float) -> bool:
+        nonlocal chains_left
+        if used[i] or used[j]:
+            return False
+        piece_i, piece_j = ends[i].piece, ends[j].piece
+        if components.find(piece_i) == components.find(piece_j):
+            return False
+        components.union(piece_i, piece_j)
+        used[i] = used[j] = True
+        chains_left -= 1
+        joins.append((i, j, cost))
+        return True
+
+    if junction_of_end is not None:
+        groups: dict[int, list[int]] = {}
+        for index, junction in enumerate(junction_of_end):
+            if junction >= 0:
+                groups.setdefault(junction, []).append(index)
+        proposals = []
+        for members in groups.values():
+            if 2 <= len(members) <= MAX_JUNCTION_ENDS:
+                proposals.extend(_best_matching(members, ends, params, radius))
+        for i, j, cost in sorted(proposals, key=lambda item: item[2]):
+            try_join(i, j, cost)
+
+    positions = np.array([end.position for end in ends]) if ends else np.zeros((0, 2))
+    distances = np.hypot(*(positions[:, None, :] - positions[None, :, :]).transpose(2, 0, 1))
+    unlimited = params.expected_count is not None
+    candidates = []
+    free = np.flatnonzero(~used)
+    for a_pos, i in enumerate(free):
+        for j in free[a_pos + 1 :]:
+            if ends[i].piece == ends[j].piece:
+                continue
+            if not unlimited and distances[i, j] > params.max_gap:
+                continue
+            candidates.append((join_cost(ends[i], ends[j], params, radius), int(i), int(j)))
+    candidates.sort()
     for cost, i, j in candidates:
         if params.expected_count is not None and chains_left <= params.expected_count:
             break
         if params.expected_count is None and cost > params.merge_cost_threshold:
             break
-        if used[i] or used[j]:
-            continue
-        piece_i, piece_j = ends[i].piece, ends[j].piece
-        if components.find(piece_i) == components.find(piece_j):
-            continue
-        components.union(piece_i, piece_j)
-        used[i] = used[j] = True
-        chains_left -= 1
-        joins.append((i, j, cost))
+        try_join(i, j, cost)
     return joins
+
+
+def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -> list[int]:
+    """The junction zone each end touches (its connected-component label), or -1."""
+    if zones is None or not zones.any():
+        return [-1] * len(ends)
+    kernel = np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)
+    grown = cv2.dilate(zones.astype(np.uint8), kernel)
+    _, labels = cv2.connectedComponents(grown, connectivity=8)
+    height, width = zones.shape
+    result = []
+    for end in ends:
+        col = min(max(round(float(end.position[0])), 0), width - 1)
+        row = min(max(round(float(end.position[1])), 0), height - 1)
+        result.append(int(labels[row, col]) - 1 if labels[row, col] > 0 else -1)
+    return result
 
 
 def assemble_paths(
@@ -285,7 +372,12 @@ def assemble_paths(
     return paths
 
 
-def merge_chains(pieces: list[np.ndarray], params: DetectParams, radius: float) -> MergeResult:
+def merge_chains(
+    pieces: list[np.ndarray],
+    params: DetectParams,
+    radius: float,
+    zones: np.ndarray | None = None,
+) -> MergeResult:
     """Step 6 of the pipeline: join pieces into whole DLOs and fill the gaps.
 
     Parameters
@@ -295,15 +387,20 @@ def merge_chains(pieces: list[np.ndarray], params: DetectParams, radius: float) 
     params : DetectParams
     radius : float
         Typical cable half width in pixels.
+    zones : ndarray of bool, optional
+        Junction zones from fitting: the ends that meet in one zone are paired
+        together first.
 
     Returns
     -------
     MergeResult
         The merged paths (dense polylines with per-edge "filled" flags) and the joins.
     """
-    span = max(6.0 * params.segment_length, 10.0 * radius)
+    # End tangents are fitted over a few cable widths: long enough to average out
+    # the pixel steps of the skeleton, short enough to follow a bending cable.
+    span = max(END_FIT_SPAN_PX, END_FIT_SPAN_RADII * radius)
     ends = chain_ends(pieces, span, skip=radius)
-    joins = choose_joins(ends, len(pieces), params, radius)
+    joins = choose_joins(ends, len(pieces), params, radius, junctions_of_ends(ends, zones))
     paths = assemble_paths(pieces, ends, joins)
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])

@@ -188,7 +188,7 @@ def detect_full(
     watch.lap("pruning")
 
     # 6. Merging across gaps and crossings, then crossings and their order.
-    merged = merge_chains(pieces, params, radius)
+    merged = merge_chains(pieces, params, radius, zones)
     distance = cv2.distanceTransform(foreground.astype(np.uint8), cv2.DIST_L2, 5)
     finals = []
     for path in merged.paths:

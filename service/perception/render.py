@@ -92,9 +92,16 @@ def render_labels(detection: Detection, mask: np.ndarray) -> np.ndarray:
     for chain in detection.chains:
         thickness = max(1, round(2 * chain.radius + 1))
         for k, inferred in enumerate(chain.inferred):
-            if inferred:
-                segment = _pixel_polyline(chain.points[k : k + 2])
-                cv2.polylines(hidden, [segment], False, chain.id + 1, thickness)
+            if not inferred:
+                continue
+            (x0, y0), (x1, y1) = chain.points[k], chain.points[k + 1]
+            col = min(max(round((x0 + x1) / 2), 0), width - 1)
+            row = min(max(round((y0 + y1) / 2), 0), height - 1)
+            if mask[row, col]:
+                # Covered by the strand on top: already labelled as that strand.
+                continue
+            segment = _pixel_polyline(chain.points[k : k + 2])
+            cv2.polylines(hidden, [segment], False, chain.id + 1, thickness)
     free = (labels == 0) & (hidden > 0) & ~mask
     labels[free] = hidden[free]
     return labels
