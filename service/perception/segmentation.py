@@ -79,8 +79,12 @@ def _otsu(feature: np.ndarray) -> tuple[float, float]:
     between[valid] = (mean_all * weight_low[valid] - mean_low_sum[valid]) ** 2 / (
         weight_low[valid] * weight_high[valid]
     )
-    best = int(np.argmax(between))
-    return float(best), float(between[best] / var_all)
+    # With an empty stretch of the histogram between the classes every threshold in it
+    # is equally good; the middle one keeps the most margin to both classes.
+    peak = between.max()
+    best_levels = np.flatnonzero(between >= peak * (1.0 - 1e-12))
+    best = int(best_levels[len(best_levels) // 2])
+    return float(best), float(peak / var_all)
 
 
 def cue_images(image_bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -95,32 +99,44 @@ def cue_images(image_bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # Otsu separability above which a cue is taken as clearly two-class (cable and not).
 BIMODAL_SEPARABILITY = 0.8
+# Hysteresis: pixels down to this fraction of the way from the background's mean to
+# Otsu's threshold are cable when they touch pixels above the threshold, which keeps
+# dim stretches and soft edges of a cable without letting background pixels in.
+HYSTERESIS_FRACTION = 0.85
+
+
+def hysteresis_threshold(cue: np.ndarray, low: float, high: float) -> np.ndarray:
+    """Pixels above ``low`` that are 8-connected to a pixel above ``high``."""
+    weak = (cue > low).astype(np.uint8)
+    count, labels = cv2.connectedComponents(weak, connectivity=8)
+    keep = np.zeros(count, bool)
+    keep[np.unique(labels[cue > high])] = True
+    keep[0] = False
+    return keep[labels]
 
 
 def segment_auto(image_bgr: np.ndarray) -> np.ndarray:
-    """Foreground mask from brightness and colourfulness.
+    """Foreground mask from brightness, or from colourfulness when brightness fails.
 
-    Each cue is thresholded by Otsu's method. A cue whose histogram is clearly two-class
-    contributes its bright side; with white and coloured cables in one scene both do,
-    and their union keeps both kinds. When neither is clearly two-class the better one
-    decides alone.
+    Brightness thresholded by Otsu's method (with hysteresis) is used whenever its
+    histogram is clearly two-class: it keeps white and coloured cables alike, and
+    its edges follow the cable better than colour, which JPEG chroma subsampling
+    smears. Otherwise (a colourful cable on a light surface) the better-separating
+    of the two cues decides.
     """
     # No blur: it moves the border of thin cables more than it removes noise, and
     # the clean-up afterwards removes the specks noise leaves.
-    masks, best_mask, best_score = [], None, -1.0
-    for cue in cue_images(image_bgr):
-        threshold, separability = _otsu(cue)
-        mask = cue > threshold
-        if separability >= BIMODAL_SEPARABILITY:
-            masks.append(mask)
-        if separability > best_score:
-            best_mask, best_score = mask, separability
-    if not masks:
-        return best_mask
-    union = masks[0]
-    for mask in masks[1:]:
-        union = union | mask
-    return union
+    brightness, colourfulness = cue_images(image_bgr)
+    threshold, separability = _otsu(brightness)
+    if separability >= BIMODAL_SEPARABILITY:
+        below = brightness[brightness <= threshold]
+        background = float(below.mean()) if below.size else 0.0
+        low = background + HYSTERESIS_FRACTION * (threshold - background)
+        return hysteresis_threshold(brightness, low, threshold)
+    colour_threshold, colour_separability = _otsu(colourfulness)
+    if colour_separability > separability:
+        return colourfulness > colour_threshold
+    return brightness > threshold
 
 
 def segment_hsv(image_bgr: np.ndarray, low: tuple[int, int, int], high: tuple[int, int, int]):
