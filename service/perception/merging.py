@@ -317,6 +317,49 @@ def choose_joins(
     return joins
 
 
+# Pieces shared by two strands (a shallow crossing) are at most this many radii long.
+SHARED_PIECE_RADII = 16.0
+
+
+def absorb_shared_pieces(
+    pieces: list[np.ndarray], junction_of_end: list[int], radius: float
+) -> tuple[list[int], set[int]]:
+    """Fold pieces that two strands share into one junction.
+
+    Where two strands cross at a shallow angle, thinning draws one line along the
+    stretch where they overlap, with a three-way junction at each end. That piece
+    belongs to both strands, so it is dropped and its two junctions become one
+    crossing whose four ends are paired like any other.
+
+    Returns
+    -------
+    junction_of_end : list of int
+        Updated junction labels (the dropped pieces' ends get -1).
+    dropped : set of int
+        Indices of the dropped pieces.
+    """
+    labels = list(junction_of_end)
+    sizes: dict[int, int] = {}
+    for label in labels:
+        if label >= 0:
+            sizes[label] = sizes.get(label, 0) + 1
+    dropped: set[int] = set()
+    for index, points in enumerate(pieces):
+        first, second = labels[2 * index], labels[2 * index + 1]
+        if first < 0 or second < 0 or first == second:
+            continue
+        if sizes.get(first) != 3 or sizes.get(second) != 3:
+            continue
+        if polyline_length(points) > SHARED_PIECE_RADII * radius:
+            continue
+        dropped.add(index)
+        labels[2 * index] = labels[2 * index + 1] = -1
+        labels = [first if label == second else label for label in labels]
+        sizes[first] = 4
+        sizes.pop(second, None)
+    return labels, dropped
+
+
 def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -> list[int]:
     """The junction zone each end touches (its connected-component label), or -1."""
     if zones is None or not zones.any():
@@ -400,7 +443,9 @@ def merge_chains(
     # the pixel steps of the skeleton, short enough to follow a bending cable.
     span = max(END_FIT_SPAN_PX, END_FIT_SPAN_RADII * radius)
     ends = chain_ends(pieces, span, skip=radius)
-    joins = choose_joins(ends, len(pieces), params, radius, junctions_of_ends(ends, zones))
-    paths = assemble_paths(pieces, ends, joins)
+    junction_of_end, dropped = absorb_shared_pieces(pieces, junctions_of_ends(ends, zones), radius)
+    joins = choose_joins(ends, len(pieces), params, radius, junction_of_end)
+    # A dropped piece's ends are never joined, so it would come out alone: skip it.
+    paths = [p for p in assemble_paths(pieces, ends, joins) if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])
