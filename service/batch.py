@@ -6,7 +6,7 @@ These are the plain functions behind the ``dlo`` command line; they print nothin
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,6 +25,9 @@ from service.imageio import (
     write_text,
 )
 from service.perception import InvalidInputError, detect_full, render_labels, render_overlay
+
+OUTPUT_KINDS = ("json", "labels", "overlay")
+"""The outputs written per image, as named on the command line (``--outputs``)."""
 
 
 class InvalidParametersError(ValueError):
@@ -83,6 +86,40 @@ def build_params(**options: Any) -> DetectParams:
         return DetectParams(**given)
     except ValidationError as exc:
         raise InvalidParametersError(describe_validation_error(exc)) from None
+
+
+def parse_outputs(text: str) -> frozenset[str]:
+    """Parse an ``--outputs`` value such as ``json,overlay`` into output names.
+
+    Parameters
+    ----------
+    text : str
+        Comma-separated names from :data:`OUTPUT_KINDS`, any case, spaces allowed.
+
+    Returns
+    -------
+    frozenset of str
+
+    Raises
+    ------
+    InvalidParametersError
+        An unknown name, or no name at all; the message is one line.
+
+    Examples
+    --------
+    >>> sorted(parse_outputs("JSON, overlay"))
+    ['json', 'overlay']
+    """
+    names = [part.strip().lower() for part in text.split(",") if part.strip()]
+    choices = ", ".join(OUTPUT_KINDS)
+    for name in names:
+        if name not in OUTPUT_KINDS:
+            raise InvalidParametersError(
+                f"--outputs: unknown output {name!r}; choose from {choices}"
+            )
+    if not names:
+        raise InvalidParametersError(f"--outputs: name at least one of {choices}")
+    return frozenset(names)
 
 
 def describe_validation_error(error: ValidationError) -> str:
@@ -150,6 +187,7 @@ def process_file(
     params: DetectParams | None,
     out_dir: str | os.PathLike[str] | None,
     mask_path: str | os.PathLike[str] | None = None,
+    outputs: Collection[str] = OUTPUT_KINDS,
 ) -> Detection:
     """Detect the DLOs in one image file and write the outputs.
 
@@ -164,6 +202,9 @@ def process_file(
         nothing.
     mask_path : str or Path, optional
         Foreground mask file of the image's size; replaces segmentation.
+    outputs : collection of str
+        Which of :data:`OUTPUT_KINDS` to write in ``out_dir`` (all by default); the
+        images that are not asked for are not rendered.
 
     Returns
     -------
@@ -181,10 +222,13 @@ def process_file(
     mask = None if mask_path is None else read_mask(mask_path, image.shape)
     result = detect_full(image, params, mask=mask)
     if out_dir is not None:
-        outputs = OutputPaths.for_input(path, out_dir)
-        write_png(outputs.labels_png, render_labels(result.detection, result.mask))
-        write_png(outputs.overlay_png, render_overlay(image, result.detection))
-        write_text(outputs.detection_json, detection_to_json(result.detection) + "\n")
+        paths = OutputPaths.for_input(path, out_dir)
+        if "labels" in outputs:
+            write_png(paths.labels_png, render_labels(result.detection, result.mask))
+        if "overlay" in outputs:
+            write_png(paths.overlay_png, render_overlay(image, result.detection))
+        if "json" in outputs:
+            write_text(paths.detection_json, detection_to_json(result.detection) + "\n")
     return result.detection
 
 
