@@ -137,6 +137,15 @@ def detect_full(
 
     Same as :func:`detect`, but returns a :class:`DetectionResult` holding the mask,
     the skeleton and the joins as well as the :class:`schemas.Detection`.
+
+    Examples
+    --------
+    >>> import cv2, numpy as np
+    >>> image = np.zeros((120, 200, 3), np.uint8)
+    >>> _ = cv2.line(image, (10, 60), (190, 60), (0, 200, 255), 9)
+    >>> result = detect_full(image)
+    >>> len(result.detection.chains), result.mask.shape, bool(result.mask[60, 100])
+    (1, (120, 200), True)
     """
     started = time.perf_counter()
     params = DetectParams() if params is None else params

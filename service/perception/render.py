@@ -85,7 +85,7 @@ def render_labels(detection: Detection, mask: np.ndarray) -> np.ndarray:
         first = max(0, crossing.over_segment - reach)
         last = min(len(over.points) - 1, crossing.over_segment + reach + 1)
         tube = np.zeros((height, width), np.uint8)
-        thickness = max(1, round(2 * over.radius + 1))
+        thickness = max(1, round(2 * over.radius))
         cv2.polylines(tube, [_pixel_polyline(over.points[first : last + 1])], False, 1, thickness)
         labels[(tube > 0) & mask] = over.id + 1
     hidden = np.zeros((height, width), np.uint16)
@@ -124,6 +124,18 @@ def render_overlay(image: np.ndarray, detection: Detection) -> np.ndarray:
     -------
     ndarray
         ``(H, W, 3)`` ``uint8`` BGR.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from schemas import Chain, Detection
+    >>> image = np.zeros((40, 60, 3), np.uint8)
+    >>> chain = Chain(id=0, points=[(5, 20), (15, 20), (25, 20)], radius=3,
+    ...               inferred=[False, True])
+    >>> overlay = render_overlay(image, Detection(width=60, height=40, segment_length=10,
+    ...                                           chains=[chain]))
+    >>> overlay.shape, overlay.dtype.name, bool(overlay[20, 10].any())
+    ((40, 60, 3), 'uint8', True)
     """
     canvas = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image[:, :, :3].copy()
     # Dim the photograph so the drawing stands out on bright cables.
