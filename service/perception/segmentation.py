@@ -121,8 +121,9 @@ def segment_auto(image_bgr: np.ndarray) -> np.ndarray:
     Brightness thresholded by Otsu's method (with hysteresis) is used whenever its
     histogram is clearly two-class: it keeps white and coloured cables alike, and
     its edges follow the cable better than colour, which JPEG chroma subsampling
-    smears. Otherwise (a colourful cable on a light surface) the better-separating
-    of the two cues decides.
+    smears. Otherwise (a colourful cable on a light surface) colourfulness is used
+    if it is clearly two-class; if neither is, the image is taken to show no cable
+    and the mask is empty.
     """
     # No blur: it moves the border of thin cables more than it removes noise, and
     # the clean-up afterwards removes the specks noise leaves.
@@ -134,9 +135,12 @@ def segment_auto(image_bgr: np.ndarray) -> np.ndarray:
         low = background + HYSTERESIS_FRACTION * (threshold - background)
         return hysteresis_threshold(brightness, low, threshold)
     colour_threshold, colour_separability = _otsu(colourfulness)
-    if colour_separability > separability:
+    if colour_separability >= BIMODAL_SEPARABILITY:
         return colourfulness > colour_threshold
-    return brightness > threshold
+    # Neither cue has two clear classes: an empty table, or cables this method cannot
+    # tell from their background. Reporting nothing is safer for a robot than chains
+    # traced through texture; such scenes need a mask or an HSV range.
+    return np.zeros(brightness.shape, bool)
 
 
 def segment_hsv(image_bgr: np.ndarray, low: tuple[int, int, int], high: tuple[int, int, int]):

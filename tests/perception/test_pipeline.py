@@ -208,3 +208,11 @@ def test_detection_round_trips_through_json():
     detection = detect(make_scene(640, 360, 2, seed=7, occluders=1).image)
     again = Detection.model_validate_json(detection.model_dump_json())
     assert again == detection
+
+
+def test_a_textured_table_without_cables_gives_no_chains():
+    # Texture alone has no clear cable/background split: report nothing rather than
+    # chains traced through the texture.
+    for seed in range(3):
+        scene = make_scene(640, 360, 0, seed=seed, background="textured")
+        assert detect(scene.image).chains == []
