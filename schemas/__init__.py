@@ -5,13 +5,37 @@ is one of these models, so producers and consumers validate the same way.
 """
 
 from schemas.detection import Chain, Crossing, Detection, StageTimings
+from schemas.grasp import (
+    CameraModel,
+    EndPoint,
+    FractionPoint,
+    GraspSelector,
+    GraspTarget,
+    Motion,
+    PickReport,
+    PickStep,
+    PixelPoint,
+    PlaneSurface,
+    SegmentPoint,
+)
 from schemas.params import DetectParams, SegmentationMethod
 
 __all__ = [
+    "CameraModel",
     "Chain",
     "Crossing",
     "DetectParams",
     "Detection",
+    "EndPoint",
+    "FractionPoint",
+    "GraspSelector",
+    "GraspTarget",
+    "Motion",
+    "PickReport",
+    "PickStep",
+    "PixelPoint",
+    "PlaneSurface",
+    "SegmentPoint",
     "SegmentationMethod",
     "StageTimings",
 ]

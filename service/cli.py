@@ -26,6 +26,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 from rich.text import Text
 
+from adapters.cli import grasp_app
 from schemas import Detection, DetectParams, SegmentationMethod
 from service.batch import (
     OUTPUT_KINDS,
@@ -40,6 +41,7 @@ from service.batch import (
     process_file,
 )
 from service.evaluation.cli import eval_command
+from service.http.cli import serve_command
 from service.imageio import OutputWriteError, write_png
 from service.perception import render_overlay
 from service.video import (
@@ -326,6 +328,12 @@ def version() -> None:
 
 
 app.command("eval")(eval_command)
+
+# the robot adapters' grasp planning.
+# Commands that live beside their own packages: the HTTP service and the robot
+# adapters' grasp planning.
+app.command("serve")(serve_command)
+app.add_typer(grasp_app, name="grasp")
 
 
 def main() -> None:

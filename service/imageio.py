@@ -1,4 +1,4 @@
-"""Reading images and masks from files, writing PNGs, expanding input paths.
+"""Reading images and masks from files or memory (uploads), writing PNGs, expanding paths.
 
 Every problem with an input file becomes an :class:`ImageFileError` (an
 :class:`~service.perception.InvalidInputError`) whose one-line message names the
@@ -100,11 +100,54 @@ def read_mask(path: str | os.PathLike[str], shape: tuple[int, ...]) -> np.ndarra
     ImageFileError
         The file cannot be read as an image, or its size differs from ``shape``.
     """
-    height, width = shape[:2]
     image, is_jpeg = _decode_file(path)
+    return _binary_mask(path, image, is_jpeg, shape)
+
+
+def decode_image(data: bytes, name: str = "image") -> np.ndarray:
+    """Decode an encoded image held in memory (an upload) as :func:`read_image` does a file.
+
+    Parameters
+    ----------
+    data : bytes
+        The encoded image (PNG, JPEG, or anything else OpenCV decodes).
+    name : str
+        What to call the input in error messages, e.g. ``"image"``.
+
+    Returns
+    -------
+    np.ndarray
+        ``(H, W, 3)`` ``uint8`` array in BGR order.
+
+    Raises
+    ------
+    ImageFileError
+        ``data`` is empty, not an image, truncated, or decodes to no pixels;
+        ``str()`` is ``"<name>: <problem>"``.
+    """
+    image, _ = _decode_buffer(name, np.frombuffer(data, dtype=np.uint8))
+    return _to_uint8(name, image)
+
+
+def decode_mask(data: bytes, shape: tuple[int, ...], name: str = "mask") -> np.ndarray:
+    """Decode a mask held in memory as :func:`read_mask` reads a file.
+
+    Raises
+    ------
+    ImageFileError
+        ``data`` cannot be decoded, or its size differs from ``shape``.
+    """
+    image, is_jpeg = _decode_buffer(name, np.frombuffer(data, dtype=np.uint8))
+    return _binary_mask(name, image, is_jpeg, shape)
+
+
+def _binary_mask(
+    name: str | os.PathLike[str], image: np.ndarray, is_jpeg: bool, shape: tuple[int, ...]
+) -> np.ndarray:
+    height, width = shape[:2]
     if image.shape[:2] != (height, width):
         raise ImageFileError(
-            path,
+            name,
             f"mask is {image.shape[1]}x{image.shape[0]} but the image is {width}x{height}",
         )
     if image.dtype.kind == "f":
@@ -212,6 +255,12 @@ def _decode_file(path: str | os.PathLike[str]) -> tuple[np.ndarray, bool]:
         buffer = np.fromfile(file_path, dtype=np.uint8)
     except OSError as exc:
         raise ImageFileError(path, f"cannot read: {exc.strerror or exc}") from exc
+    return _decode_buffer(path, buffer)
+
+
+def _decode_buffer(name: str | os.PathLike[str], buffer: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Decode ``buffer`` (``uint8`` encoded bytes) read from ``name``; as :func:`_decode_file`."""
+    path = name
     if buffer.size == 0:
         raise ImageFileError(path, "empty file (0 bytes)")
 

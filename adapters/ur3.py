@@ -1,0 +1,551 @@
+"""UR3 pick adapter: grasp a cable at a :class:`~schemas.GraspTarget` with ur_rtde.
+
+Ports and adapters
+------------------
+The robot is reached through three ports with the method names of ur_rtde's
+``RTDEControlInterface``, ``RTDEReceiveInterface`` and ``RTDEIOInterface``. A factory
+``connect(robot_ip) -> (control, receive, io)`` makes them; the default,
+:func:`connect`, imports ur_rtde lazily, and tests inject :mod:`adapters.fakes`.
+
+Planning (:func:`plan_motions`, :func:`check_workspace`, :func:`tool_down_rotation_vector`)
+is pure; :class:`UR3Picker` adds the robot-state pre-checks and sends the plan.
+
+Safety rules
+------------
+* Every check runs before anything is sent; a refusal raises and sends nothing.
+* Speed and acceleration are clamped to :data:`MAX_SPEED_M_S` and
+  :data:`MAX_ACCELERATION_M_S2`.
+* After a failure mid-sequence (an exception, a command refused, or a link that
+  reports itself disconnected) the picker sends ``stopL``, tries to reconnect once
+  and reports the failure. It never resumes the motion.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal, Protocol
+
+from schemas import GraspTarget, Motion, PickReport, PickStep
+
+MAX_SPEED_M_S = 0.25
+"""Hard cap on the tool speed of every move, whatever the configuration asks."""
+MAX_ACCELERATION_M_S2 = 0.5
+"""Hard cap on the tool acceleration of every move."""
+
+
+class UnsafeTargetError(ValueError):
+    """The target or a pose of the plan is outside the workspace or the safety limits."""
+
+
+class RobotNotReadyError(RuntimeError):
+    """The robot cannot move now: disconnected, stopped or no control script running."""
+
+
+class ControlPort(Protocol):
+    """The subset of ``rtde_control.RTDEControlInterface`` the picker uses."""
+
+    def moveL(
+        self, pose: list[float], speed: float, acceleration: float, asynchronous: bool = False
+    ) -> bool: ...
+    def stopL(self, a: float = 10.0, asynchronous: bool = False) -> None: ...
+    def isPoseWithinSafetyLimits(self, pose: list[float]) -> bool: ...
+    def isProgramRunning(self) -> bool: ...
+    def isConnected(self) -> bool: ...
+    def reconnect(self) -> bool: ...
+
+
+class ReceivePort(Protocol):
+    """The subset of ``rtde_receive.RTDEReceiveInterface`` the picker uses."""
+
+    def getActualTCPPose(self) -> list[float]: ...
+    def isProtectiveStopped(self) -> bool: ...
+    def isEmergencyStopped(self) -> bool: ...
+    def getSafetyMode(self) -> int: ...
+    def isConnected(self) -> bool: ...
+    def reconnect(self) -> bool: ...
+
+
+class IOPort(Protocol):
+    """The subset of ``rtde_io.RTDEIOInterface`` the picker uses."""
+
+    def setToolDigitalOut(self, output_id: int, level: bool) -> bool: ...
+    def setStandardDigitalOut(self, output_id: int, level: bool) -> bool: ...
+    def isConnected(self) -> bool: ...
+    def reconnect(self) -> bool: ...
+
+
+Interfaces = tuple[ControlPort, ReceivePort, IOPort]
+ConnectFactory = Callable[[str], Interfaces]
+
+
+def connect(robot_ip: str) -> Interfaces:
+    """Open the three ur_rtde interfaces to the robot at ``robot_ip``.
+
+    ur_rtde is imported here, not at module import, so planning and tests work
+    without it. Constructing ``RTDEControlInterface`` uploads ur_rtde's control
+    script, which makes the robot controllable remotely.
+    """
+    import rtde_control
+    import rtde_io
+    import rtde_receive
+
+    control = rtde_control.RTDEControlInterface(robot_ip)
+    receive = rtde_receive.RTDEReceiveInterface(robot_ip)
+    io = rtde_io.RTDEIOInterface(robot_ip)
+    return control, receive, io
+
+
+SAFETY_MODES_READY = frozenset({1, 2})
+"""``getSafetyMode`` values that allow motion: 1 normal, 2 reduced."""
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """Where the tool may go, in the base frame (metres).
+
+    * every commanded position within ``reach_m - reach_margin_m`` of the base origin;
+    * every commanded position at least ``clearance_m`` above ``table_z_m``;
+    * every commanded position, and the straight path from the current tool position
+      to the approach pose, outside the vertical keep-out cylinder of radius
+      ``keep_out_radius_m`` around the base z axis.
+    """
+
+    reach_m: float = 0.50
+    reach_margin_m: float = 0.05
+    table_z_m: float = 0.0
+    clearance_m: float = 0.01
+    keep_out_radius_m: float = 0.10
+
+    @property
+    def max_radius_m(self) -> float:
+        """Largest allowed distance of a tool position from the base origin."""
+        return self.reach_m - self.reach_margin_m
+
+
+@dataclass(frozen=True)
+class GripperOutput:
+    """The digital output that drives the gripper.
+
+    ``kind`` ``"tool"`` uses ``setToolDigitalOut``, ``"standard"``
+    ``setStandardDigitalOut``; ``close_value`` is the level that closes it.
+    """
+
+    kind: Literal["tool", "standard"] = "tool"
+    index: int = 0
+    close_value: bool = True
+
+    def __post_init__(self) -> None:
+        limit = 1 if self.kind == "tool" else 7
+        if not 0 <= self.index <= limit:
+            raise ValueError(
+                f"{self.kind} digital output index must be 0..{limit}, got {self.index}"
+            )
+
+
+@dataclass(frozen=True)
+class UR3Config:
+    """Pick parameters; lengths in metres, speeds in m/s, accelerations in m/s^2.
+
+    ``grasp_height_m`` is the tool (TCP) height above the target point at the grasp;
+    with a fingertip TCP and a cable on the table it keeps the fingers off the table.
+    ``gripper_yaw_offset_rad`` is the angle from the tool x axis to the direction the
+    fingers close (0: they close along tool x). ``speed_m_s`` and
+    ``acceleration_m_s2`` are clamped to the module caps.
+    """
+
+    approach_height_m: float = 0.10
+    grasp_height_m: float = 0.015
+    speed_m_s: float = MAX_SPEED_M_S
+    acceleration_m_s2: float = MAX_ACCELERATION_M_S2
+    stop_deceleration_m_s2: float = 2.0
+    gripper_settle_s: float = 0.5
+    gripper_yaw_offset_rad: float = 0.0
+    workspace: Workspace = field(default_factory=Workspace)
+    gripper: GripperOutput = field(default_factory=GripperOutput)
+
+    def __post_init__(self) -> None:
+        positive = ("approach_height_m", "speed_m_s", "acceleration_m_s2", "stop_deceleration_m_s2")
+        for name in positive:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value}")
+        for name in ("grasp_height_m", "gripper_settle_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be >= 0, got {value}")
+
+    @property
+    def speed(self) -> float:
+        """The tool speed actually commanded (clamped)."""
+        return min(self.speed_m_s, MAX_SPEED_M_S)
+
+    @property
+    def acceleration(self) -> float:
+        """The tool acceleration actually commanded (clamped)."""
+        return min(self.acceleration_m_s2, MAX_ACCELERATION_M_S2)
+
+
+def tool_down_rotation_vector(yaw: float) -> tuple[float, float, float]:
+    """Rotation vector of a tool pointing straight down, its x axis at ``yaw`` about base z.
+
+    The orientation is ``R = Rz(yaw) @ Rx(pi)``: a half turn about base x (roll = pi)
+    points the tool z axis down, then ``yaw`` turns it about base z. Its columns are
+    tool x = ``(cos yaw, sin yaw, 0)``, tool y = ``(sin yaw, -cos yaw, 0)`` and tool
+    z = ``(0, 0, -1)``. The trace is -1, so ``R`` is a half turn, ``R = 2 n n^T - I``,
+    about the horizontal axis ``n = (cos(yaw/2), sin(yaw/2), 0)``; the rotation
+    vector (UR's ``[rx, ry, rz]``) is ``pi * n``. Yaw 0 gives ``[pi, 0, 0]``.
+    """
+    half = yaw / 2
+    return math.pi * math.cos(half), math.pi * math.sin(half), 0.0
+
+
+def grasp_poses(target: GraspTarget, config: UR3Config) -> tuple[tuple, tuple]:
+    """The approach pose (above the target) and the grasp pose, as UR poses."""
+    x, y, z = target.position_m
+    rotation = tool_down_rotation_vector(target.yaw_rad - config.gripper_yaw_offset_rad)
+    grasp_z = z + config.grasp_height_m
+    approach = (x, y, grasp_z + config.approach_height_m, *rotation)
+    grasp = (x, y, grasp_z, *rotation)
+    return approach, grasp
+
+
+def plan_motions(target: GraspTarget, config: UR3Config) -> list[Motion]:
+    """The pick as a list of commands: approach, descend, close the gripper, lift.
+
+    Pure: no robot involved; :meth:`UR3Picker.pick` sends exactly this list and a dry
+    run can print it. The tool points down with the fingers closing along
+    ``target.yaw_rad`` (see :func:`tool_down_rotation_vector`).
+    """
+    approach, grasp = grasp_poses(target, config)
+    speed, acceleration = config.speed, config.acceleration
+
+    def move(label: Any, pose: tuple) -> Motion:
+        return Motion(
+            label=label, kind="moveL", pose=pose, speed_m_s=speed, acceleration_m_s2=acceleration
+        )
+
+    return [
+        move("approach", approach),
+        move("descend", grasp),
+        Motion(label="close_gripper", kind="gripper", output_value=config.gripper.close_value),
+        move("lift", approach),
+    ]
+
+
+def check_workspace(
+    motions: Sequence[Motion],
+    workspace: Workspace,
+    current_position: Sequence[float] | None = None,
+) -> None:
+    """Refuse a plan with a position outside ``workspace``.
+
+    Parameters
+    ----------
+    motions
+        The plan; every moveL position is checked.
+    workspace
+        The limits.
+    current_position
+        The tool position now; when given, the straight path from it to the first
+        move must stay outside the keep-out cylinder too.
+
+    Raises
+    ------
+    UnsafeTargetError
+        Naming the move and the rule broken.
+    """
+    floor = workspace.table_z_m + workspace.clearance_m
+    for motion in motions:
+        if motion.pose is None:
+            continue
+        x, y, z = motion.pose[:3]
+        if not all(math.isfinite(v) for v in motion.pose):
+            raise UnsafeTargetError(f"{motion.label} pose {list(motion.pose)} is not finite")
+        distance = math.sqrt(x * x + y * y + z * z)
+        if distance > workspace.max_radius_m:
+            raise UnsafeTargetError(
+                f"{motion.label} position ({x:.3f}, {y:.3f}, {z:.3f}) m is {distance:.3f} m from "
+                f"the base, beyond the {workspace.max_radius_m:.3f} m allowed"
+            )
+        if z < floor:
+            raise UnsafeTargetError(
+                f"{motion.label} height z = {z:.4f} m is below the table clearance "
+                f"z = {floor:.4f} m"
+            )
+        radial = math.hypot(x, y)
+        if radial < workspace.keep_out_radius_m:
+            raise UnsafeTargetError(
+                f"{motion.label} position is {radial:.3f} m from the base axis, inside the "
+                f"{workspace.keep_out_radius_m:.3f} m keep-out cylinder"
+            )
+    first = next((motion for motion in motions if motion.pose is not None), None)
+    if current_position is not None and first is not None:
+        start = (float(current_position[0]), float(current_position[1]))
+        radial = _segment_distance_to_origin(start, (first.pose[0], first.pose[1]))
+        if radial < workspace.keep_out_radius_m:
+            raise UnsafeTargetError(
+                f"the straight path from the current tool position to the {first.label} pose "
+                f"passes {radial:.3f} m from the base axis, inside the "
+                f"{workspace.keep_out_radius_m:.3f} m keep-out cylinder"
+            )
+
+
+def _segment_distance_to_origin(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """Distance from the origin to the 2D segment ``a``-``b``."""
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    squared = dx * dx + dy * dy
+    t = 0.0 if squared == 0 else min(max(-(a[0] * dx + a[1] * dy) / squared, 0.0), 1.0)
+    return math.hypot(a[0] + t * dx, a[1] + t * dy)
+
+
+class _StepFailed(Exception):
+    """Internal: a step failed; ``reason`` goes to the report."""
+
+
+class UR3Picker:
+    """Picks with a UR3 through the three ur_rtde ports.
+
+    Parameters
+    ----------
+    robot_ip
+        Address given to the ``connect`` factory.
+    config
+        Heights, speeds, workspace and gripper output.
+    connect
+        ``connect(robot_ip) -> (control, receive, io)``; the real ur_rtde by default.
+    clock, sleep
+        Injectable time source (seconds) and wait, for the step durations and the
+        gripper settle time.
+
+    Examples
+    --------
+    >>> with UR3Picker("192.168.1.10") as picker:  # doctest: +SKIP
+    ...     report = picker.pick(target)
+    """
+
+    def __init__(
+        self,
+        robot_ip: str,
+        config: UR3Config | None = None,
+        *,
+        connect: ConnectFactory = connect,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> None:
+        self.robot_ip = robot_ip
+        self.config = config or UR3Config()
+        self._connect = connect
+        self._clock = clock
+        self._sleep = sleep
+        self._interfaces: Interfaces | None = None
+
+    def open(self) -> None:
+        """Connect (once); later calls do nothing."""
+        if self._interfaces is None:
+            self._interfaces = self._connect(self.robot_ip)
+
+    def close(self) -> None:
+        """Disconnect every interface that has a ``disconnect`` method."""
+        interfaces, self._interfaces = self._interfaces, None
+        for interface in interfaces or ():
+            disconnect = getattr(interface, "disconnect", None)
+            if disconnect is not None:
+                with contextlib.suppress(Exception):  # closing must not hide an error
+                    disconnect()
+
+    def __enter__(self) -> UR3Picker:
+        self.open()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    @property
+    def interfaces(self) -> Interfaces:
+        """The connected ``(control, receive, io)``; connects on first use."""
+        self.open()
+        assert self._interfaces is not None
+        return self._interfaces
+
+    def check(self, target: GraspTarget) -> list[Motion]:
+        """Run every pre-check and return the plan; sends no command.
+
+        Raises
+        ------
+        UnsafeTargetError
+            A pose outside the workspace, a path through the keep-out cylinder, or a
+            pose ur_rtde's ``isPoseWithinSafetyLimits`` rejects.
+        RobotNotReadyError
+            A link down, an emergency or protective stop, a safety mode other than
+            normal or reduced, or no control script running.
+        """
+        motions = plan_motions(target, self.config)
+        check_workspace(motions, self.config.workspace)
+        try:
+            current = self._check_robot(motions)
+        except (UnsafeTargetError, RobotNotReadyError):
+            raise
+        except Exception as error:
+            raise RobotNotReadyError(
+                f"could not read the robot state: {type(error).__name__}: {error}"
+            ) from error
+        check_workspace(motions, self.config.workspace, current_position=current[:3])
+        return motions
+
+    def _check_robot(self, motions: list[Motion]) -> list[float]:
+        """The robot-state pre-checks (queries only); returns the current TCP pose."""
+        control, receive, io = self.interfaces
+        for name, interface in (("control", control), ("receive", receive), ("io", io)):
+            if not interface.isConnected():
+                raise RobotNotReadyError(f"the RTDE {name} interface is not connected")
+        if receive.isEmergencyStopped():
+            raise RobotNotReadyError("the robot is emergency stopped")
+        if receive.isProtectiveStopped():
+            raise RobotNotReadyError("the robot is protective stopped")
+        mode = receive.getSafetyMode()
+        if mode not in SAFETY_MODES_READY:
+            raise RobotNotReadyError(
+                f"the robot safety mode is {mode}, not normal (1) or reduced (2)"
+            )
+        if not control.isProgramRunning():
+            raise RobotNotReadyError(
+                "the ur_rtde control script is not running on the robot "
+                "(is the robot in remote control, and was it stopped from the pendant?)"
+            )
+        for motion in motions:
+            if motion.pose is not None and not control.isPoseWithinSafetyLimits(list(motion.pose)):
+                raise UnsafeTargetError(
+                    f"{motion.label} pose {[round(v, 4) for v in motion.pose]} is outside the "
+                    "robot's safety limits or unreachable (isPoseWithinSafetyLimits)"
+                )
+        current = list(receive.getActualTCPPose())
+        if len(current) != 6:
+            raise RobotNotReadyError(f"getActualTCPPose returned {current!r}, not 6 values")
+        return current
+
+    def pick(self, target: GraspTarget) -> PickReport:
+        """Check, then approach, descend, close the gripper and lift.
+
+        Returns
+        -------
+        PickReport
+            ``ok`` with one step per motion, or ``ok=False`` with the reason, the steps
+            sent so far, and whether ``stopL`` was sent and a reconnect worked.
+
+        Raises
+        ------
+        UnsafeTargetError, RobotNotReadyError
+            From :meth:`check`; nothing has been sent.
+        """
+        motions = self.check(target)
+        steps: list[PickStep] = []
+        for motion in motions:
+            started = self._clock()
+            try:
+                reached = self._send(motion)
+            except _StepFailed as failure:
+                reason = f"{motion.label}: {failure}"
+                steps.append(
+                    PickStep(
+                        motion=motion,
+                        ok=False,
+                        duration_s=max(self._clock() - started, 0.0),
+                        error=str(failure),
+                    )
+                )
+                return self._abort(target, steps, reason)
+            steps.append(
+                PickStep(
+                    motion=motion,
+                    ok=True,
+                    reached_pose=reached,
+                    duration_s=max(self._clock() - started, 0.0),
+                )
+            )
+        return PickReport(ok=True, target=target, steps=steps)
+
+    def _send(self, motion: Motion) -> tuple | None:
+        """Send one motion and return the pose reached; raise :class:`_StepFailed`."""
+        control, receive, io = self.interfaces
+        try:
+            self._require_links()
+            if motion.kind == "moveL":
+                assert motion.pose is not None
+                done = control.moveL(
+                    list(motion.pose), motion.speed_m_s, motion.acceleration_m_s2, False
+                )
+                if not done:
+                    raise _StepFailed(
+                        "moveL was not completed (the controller refused or stopped it)"
+                    )
+            else:
+                gripper = self.config.gripper
+                setter = (
+                    io.setToolDigitalOut if gripper.kind == "tool" else io.setStandardDigitalOut
+                )
+                if not setter(gripper.index, bool(motion.output_value)):
+                    raise _StepFailed(f"setting the {gripper.kind} digital output failed")
+                self._sleep(self.config.gripper_settle_s)
+            self._require_links()
+            pose = receive.getActualTCPPose()
+        except _StepFailed:
+            raise
+        except Exception as error:
+            raise _StepFailed(f"{type(error).__name__}: {error}") from error
+        return tuple(float(v) for v in pose) if pose is not None and len(pose) == 6 else None
+
+    def _require_links(self) -> None:
+        for name, interface in zip(("control", "receive", "io"), self.interfaces, strict=True):
+            if not interface.isConnected():
+                raise _StepFailed(f"the RTDE {name} interface lost its connection")
+
+    def _abort(self, target: GraspTarget, steps: list[PickStep], reason: str) -> PickReport:
+        """stopL, then one reconnect attempt, then a failed report; never more motion.
+
+        Each interface that reports itself disconnected gets one ``reconnect`` call, in
+        the order control, receive, io, stopping at the first that fails. When the
+        first stopL could not go out and the reconnect worked, stopL is sent again.
+        """
+        control = self.interfaces[0]
+        stop_sent = self._stop(control)
+        attempted, reconnected = False, True
+        for interface in self.interfaces:
+            if _is_connected(interface):
+                continue
+            attempted = True
+            try:
+                reconnected = bool(interface.reconnect())
+            except Exception:
+                reconnected = False
+            if not reconnected:
+                break  # the robot is unreachable; one attempt is all we make
+        if attempted and reconnected and not stop_sent:
+            stop_sent = self._stop(control)
+        return PickReport(
+            ok=False,
+            reason=reason,
+            target=target,
+            steps=steps,
+            stop_sent=stop_sent,
+            reconnect_attempted=attempted,
+            reconnected=attempted and reconnected,
+        )
+
+    def _stop(self, control: ControlPort) -> bool:
+        """Send stopL; True when it went out on a link that is still up."""
+        try:
+            control.stopL(self.config.stop_deceleration_m_s2)
+        except Exception:
+            return False
+        return _is_connected(control)
+
+
+def _is_connected(interface: Any) -> bool:
+    try:
+        return bool(interface.isConnected())
+    except Exception:
+        return False

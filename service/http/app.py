@@ -1,0 +1,100 @@
+"""The FastAPI application: :func:`create_app` wires settings, state, middleware and routes."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI, Request
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException
+
+from service.http.inputs import RequestError
+from service.http.jobs import DetectFunction, default_detect, warm_up
+from service.http.metrics import Metrics
+from service.http.middleware import RequestContextMiddleware, error_payload, request_id_of
+from service.http.routes import router
+from service.http.settings import Settings
+from service.http.state import AppState
+
+logger = logging.getLogger(__name__)
+
+
+def create_app(settings: Settings | None = None, detect: DetectFunction | None = None) -> FastAPI:
+    """Build the dlo HTTP service.
+
+    Parameters
+    ----------
+    settings : Settings, optional
+        Limits and pool size; by default read from ``DLO_*`` environment variables.
+    detect : callable, optional
+        ``detect(image, params, mask) -> Detection`` run for each request; by default
+        :func:`service.perception.detect`. Tests inject slow or failing ones.
+
+    Returns
+    -------
+    FastAPI
+        The app; its lifespan starts the worker pool and the warm-up detection, and
+        stores the :class:`AppState` as ``app.state.dlo``.
+    """
+    settings = Settings() if settings is None else settings
+    detect = default_detect if detect is None else detect
+    metrics = Metrics()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        state = AppState.start(settings, metrics, detect)
+        app.state.dlo = state
+        state.background.append(asyncio.create_task(_warm_up(state)))
+        try:
+            yield
+        finally:
+            await state.close()
+
+    app = FastAPI(
+        title="dlo-service",
+        summary="Cables (deformable linear objects) in images as chains of fixed-length segments.",
+        version="0.1.0",
+        lifespan=lifespan,
+    )
+    app.include_router(router)
+    app.add_middleware(RequestContextMiddleware, metrics=metrics)
+    app.add_exception_handler(RequestError, _request_error)
+    app.add_exception_handler(HTTPException, _http_exception)
+    return app
+
+
+async def _warm_up(state: AppState) -> None:
+    """Run one detection on a tiny image in the pool; then the service is ready."""
+    try:
+        await state.pool.run(warm_up, state.detect)
+    except asyncio.CancelledError:
+        raise
+    except Exception as exc:
+        state.warm_up_error = f"warm-up detection failed: {type(exc).__name__}: {exc}"
+        logger.exception("warm-up detection failed; /readyz answers 503")
+        return
+    state.ready = True
+    state.metrics.ready.set(1)
+    logger.info("warm-up detection done; ready")
+
+
+async def _request_error(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, RequestError)
+    return _json_error(request, exc.status, exc.code, exc.message, dict(exc.headers))
+
+
+async def _http_exception(request: Request, exc: Exception) -> JSONResponse:
+    """404, 405 and the like, in the same JSON shape as every other error."""
+    assert isinstance(exc, HTTPException)
+    code = {404: "not_found", 405: "method_not_allowed"}.get(exc.status_code, "http_error")
+    return _json_error(request, exc.status_code, code, str(exc.detail), dict(exc.headers or {}))
+
+
+def _json_error(
+    request: Request, status: int, code: str, message: str, headers: dict[str, str]
+) -> JSONResponse:
+    payload = error_payload(status, code, message, request_id_of(request.scope))
+    return JSONResponse(payload, status_code=status, headers=headers)

@@ -1,0 +1,242 @@
+"""From an HTTP request to the inputs of one detection: image, optional mask, parameters.
+
+Everything here runs on the event loop and is cheap: reading the body (bounded), parsing
+the multipart form and the query, and reading image sizes from PNG and JPEG headers.
+Decoding, which is CPU work, happens in the worker pool (:mod:`service.http.jobs`).
+Every problem becomes a :class:`RequestError` carrying the HTTP status and a one-line
+message saying what is wrong.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, get_origin
+
+from pydantic import ValidationError
+from starlette.datastructures import QueryParams, UploadFile
+from starlette.requests import Request
+
+from schemas import DetectParams
+
+RAW_IMAGE_TYPES = ("image/jpeg", "image/png")
+"""Content types accepted for an image sent as the whole request body."""
+MULTIPART_TYPE = "multipart/form-data"
+FORM_FIELDS = ("image", "mask")
+
+_TUPLE_FIELDS = frozenset(
+    name for name, info in DetectParams.model_fields.items() if get_origin(info.annotation) is tuple
+)
+
+
+@dataclass
+class RequestError(Exception):
+    """A request the service does not process; answered with ``status`` and ``message``."""
+
+    status: int
+    code: str
+    message: str
+    headers: Mapping[str, str] = field(default_factory=dict)
+
+    def __str__(self) -> str:
+        return self.message
+
+
+@dataclass(frozen=True)
+class Frame:
+    """The encoded inputs of one detection, as they arrived."""
+
+    image: bytes
+    params: DetectParams
+    mask: bytes | None = None
+
+
+async def read_frame(request: Request, max_body_bytes: int) -> Frame:
+    """Read the image (raw body or multipart ``image``), the optional mask and the query.
+
+    Raises
+    ------
+    RequestError
+        415 for another content type, 413 for a body over ``max_body_bytes``, 422 for
+        bad parameters, a missing or unexpected form field.
+    """
+    params = parse_params(request.query_params)
+    media_type = content_type(request)
+    if media_type not in (*RAW_IMAGE_TYPES, MULTIPART_TYPE):
+        shown = media_type or "none"
+        raise RequestError(
+            415,
+            "unsupported_media_type",
+            f"Content-Type {shown} is not accepted: send the image as the body with "
+            "Content-Type image/jpeg or image/png, or as the file field 'image' of a "
+            "multipart/form-data body (optional file field 'mask')",
+        )
+    body = await read_body(request, max_body_bytes)
+    if media_type == MULTIPART_TYPE:
+        image, mask = await _parse_form(request, body, max_body_bytes)
+        return Frame(image=image, mask=mask, params=params)
+    if not body:
+        raise RequestError(422, "invalid_image", "image: empty body (0 bytes)")
+    return Frame(image=body, params=params)
+
+
+def content_type(request: Request) -> str:
+    """The media type of the request body, lower case, without parameters ('' if none)."""
+    return request.headers.get("content-type", "").split(";", 1)[0].strip().lower()
+
+
+async def read_body(request: Request, limit: int) -> bytes:
+    """The whole request body, refusing (413) as soon as it is known to exceed ``limit``.
+
+    A ``Content-Length`` over the limit is refused before anything is read; a body
+    without one (chunked) is refused when the bytes read pass the limit.
+    """
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.strip().isdigit() and int(declared) > limit:
+        raise _body_too_large(int(declared), limit)
+    received = bytearray()
+    async for chunk in request.stream():
+        received += chunk
+        if len(received) > limit:
+            raise _body_too_large(None, limit)
+    return bytes(received)
+
+
+def _body_too_large(size: int | None, limit: int) -> RequestError:
+    given = "" if size is None else f" ({size / 1048576:.1f} MiB)"
+    return RequestError(
+        413,
+        "payload_too_large",
+        f"request body{given} is larger than the limit of {limit / 1048576:.1f} MiB",
+    )
+
+
+async def _parse_form(request: Request, body: bytes, limit: int) -> tuple[bytes, bytes | None]:
+    """The ``image`` and ``mask`` file fields of a multipart body already read."""
+    delivered = False
+
+    async def replay() -> dict[str, Any]:
+        nonlocal delivered
+        if delivered:
+            return {"type": "http.disconnect"}
+        delivered = True
+        return {"type": "http.request", "body": body, "more_body": False}
+
+    form_request = Request(request.scope, replay)
+    try:
+        form = await form_request.form(max_files=4, max_fields=8, max_part_size=limit)
+    except Exception as exc:  # the multipart parser's own error types vary between versions
+        detail = getattr(exc, "detail", None) or getattr(exc, "message", None) or exc
+        raise RequestError(422, "invalid_form", f"malformed multipart body: {detail}") from None
+    try:
+        unexpected = sorted(set(form.keys()) - set(FORM_FIELDS))
+        if unexpected:
+            raise RequestError(
+                422,
+                "invalid_form",
+                f"unexpected form field(s) {', '.join(unexpected)}: "
+                "send the file field 'image' and optionally 'mask'",
+            )
+        parts = {}
+        for name in FORM_FIELDS:
+            values = form.getlist(name)
+            if len(values) > 1:
+                raise RequestError(422, "invalid_form", f"form field '{name}' is given twice")
+            parts[name] = await _part_bytes(values[0]) if values else None
+        if parts["image"] is None:
+            raise RequestError(422, "invalid_form", "multipart body has no 'image' file field")
+        if not parts["image"]:
+            raise RequestError(422, "invalid_image", "image: empty file (0 bytes)")
+        if parts["mask"] is not None and not parts["mask"]:
+            raise RequestError(422, "invalid_mask", "mask: empty file (0 bytes)")
+        return parts["image"], parts["mask"]
+    finally:
+        await form.close()
+
+
+async def _part_bytes(value: UploadFile | str) -> bytes:
+    if isinstance(value, str):
+        return value.encode("utf-8")
+    return await value.read()
+
+
+def parse_params(query: QueryParams) -> DetectParams:
+    """Validate the query into :class:`DetectParams` (422 with a one-line message if not).
+
+    Tuple fields (``hsv_low``, ``hsv_high``) are given repeated (``?hsv_low=0&hsv_low=80
+    &hsv_low=60``) or comma separated (``?hsv_low=0,80,60``); other fields once.
+    """
+    values: dict[str, Any] = {}
+    problems: list[str] = []
+    for name in dict.fromkeys(query.keys()):
+        given = query.getlist(name)
+        if name not in DetectParams.model_fields:
+            problems.append(f"{name}: unknown parameter")
+        elif name in _TUPLE_FIELDS:
+            values[name] = [part.strip() for item in given for part in item.split(",")]
+        elif len(given) > 1:
+            problems.append(f"{name}: given {len(given)} times, expected once")
+        else:
+            values[name] = given[0]
+    if not problems:
+        try:
+            return DetectParams.model_validate(values)
+        except ValidationError as exc:
+            problems = _describe(exc)
+    raise RequestError(422, "invalid_parameters", "invalid parameters: " + "; ".join(problems))
+
+
+def _describe(error: ValidationError) -> list[str]:
+    problems = []
+    for detail in error.errors(include_url=False):
+        message = str(detail["msg"]).removeprefix("Value error, ")
+        location = detail["loc"]
+        if not location:
+            problems.append(message)
+            continue
+        name = str(location[0])
+        name += "".join(f"[{index}]" for index in location[1:])
+        problems.append(f"{name}: {message} (got {detail.get('input')!r})")
+    return problems
+
+
+def image_size(data: bytes) -> tuple[int, int] | None:
+    """``(width, height)`` from a PNG or JPEG header, without decoding; None otherwise.
+
+    Lets a huge image be refused (413) before it is decoded. Other formats, and headers
+    this does not understand, are checked after decoding instead.
+    """
+    if data.startswith(b"\x89PNG\r\n\x1a\n") and data[12:16] == b"IHDR" and len(data) >= 24:
+        return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    if data.startswith(b"\xff\xd8"):
+        return _jpeg_size(data)
+    return None
+
+
+_JPEG_FRAME_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+"""Start-of-frame markers (baseline, progressive, lossless...): they hold the size."""
+
+
+def _jpeg_size(data: bytes) -> tuple[int, int] | None:
+    position = 2
+    while position + 4 <= len(data):
+        if data[position] != 0xFF:
+            return None
+        marker = data[position + 1]
+        if marker == 0xFF:  # fill byte
+            position += 1
+            continue
+        if 0xD0 <= marker <= 0xD9 or marker == 0x01:  # markers without a payload
+            position += 2
+            continue
+        length = int.from_bytes(data[position + 2 : position + 4], "big")
+        if marker in _JPEG_FRAME_MARKERS:
+            if position + 9 > len(data):
+                return None
+            height = int.from_bytes(data[position + 5 : position + 7], "big")
+            width = int.from_bytes(data[position + 7 : position + 9], "big")
+            return width, height
+        if marker == 0xDA or length < 2:  # scan data before any frame header: give up
+            return None
+        position += 2 + length
+    return None

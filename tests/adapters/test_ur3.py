@@ -1,0 +1,296 @@
+"""UR3 pick adapter against the in-process fake: exact commands, refusals, lost links."""
+
+from __future__ import annotations
+
+import math
+import os
+
+import cv2
+import numpy as np
+import pytest
+
+from adapters.fakes import FakeRobot
+from adapters.ur3 import (
+    MAX_ACCELERATION_M_S2,
+    MAX_SPEED_M_S,
+    GripperOutput,
+    RobotNotReadyError,
+    UnsafeTargetError,
+    UR3Config,
+    UR3Picker,
+    Workspace,
+    plan_motions,
+    tool_down_rotation_vector,
+)
+from schemas import GraspTarget
+
+
+def target(x=0.3, y=0.1, z=0.0, yaw=0.3) -> GraspTarget:
+    return GraspTarget(
+        position_m=(x, y, z),
+        yaw_rad=yaw,
+        chain_id=0,
+        segment_index=2,
+        inferred=False,
+        pixel=(320.0, 240.0),
+    )
+
+
+def picker(robot: FakeRobot, config: UR3Config | None = None) -> tuple[UR3Picker, list[float]]:
+    sleeps: list[float] = []
+    return UR3Picker("10.0.0.2", config, connect=robot.connect, sleep=sleeps.append), sleeps
+
+
+def rz(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+RX_PI = np.diag([1.0, -1.0, -1.0])
+
+
+# --- pure planning -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.3, -1.2, math.pi / 2, -math.pi / 2 + 1e-6])
+def test_tool_down_rotation_vector_is_rz_yaw_times_rx_pi(yaw):
+    rotvec = np.array(tool_down_rotation_vector(yaw))
+    assert np.linalg.norm(rotvec) == pytest.approx(math.pi)
+    matrix, _ = cv2.Rodrigues(rotvec)
+    np.testing.assert_allclose(matrix, rz(yaw) @ RX_PI, atol=1e-12)
+    np.testing.assert_allclose(matrix[:, 0], [math.cos(yaw), math.sin(yaw), 0], atol=1e-12)
+    np.testing.assert_allclose(matrix[:, 2], [0, 0, -1], atol=1e-12)
+
+
+def test_plan_motions_is_approach_descend_close_lift_in_metres():
+    motions = plan_motions(target(yaw=0.3), UR3Config())
+    rot = tool_down_rotation_vector(0.3)
+    approach = (0.3, 0.1, 0.015 + 0.10, *rot)
+    grasp = (0.3, 0.1, 0.015, *rot)
+    assert [(m.label, m.kind) for m in motions] == [
+        ("approach", "moveL"),
+        ("descend", "moveL"),
+        ("close_gripper", "gripper"),
+        ("lift", "moveL"),
+    ]
+    assert [m.pose for m in motions] == [
+        pytest.approx(approach),
+        pytest.approx(grasp),
+        None,
+        pytest.approx(approach),
+    ]
+    assert {(m.speed_m_s, m.acceleration_m_s2) for m in motions if m.kind == "moveL"} == {
+        (0.25, 0.5)
+    }
+    assert motions[2].output_value is True
+
+
+def test_speeds_are_clamped_to_the_caps():
+    config = UR3Config(speed_m_s=3.0, acceleration_m_s2=10.0)
+    for motion in plan_motions(target(), config):
+        if motion.kind == "moveL":
+            assert motion.speed_m_s == MAX_SPEED_M_S
+            assert motion.acceleration_m_s2 == MAX_ACCELERATION_M_S2
+    slow = plan_motions(target(), UR3Config(speed_m_s=0.05, acceleration_m_s2=0.2))
+    assert (slow[0].speed_m_s, slow[0].acceleration_m_s2) == (0.05, 0.2)
+    with pytest.raises(ValueError, match="speed_m_s must be a positive number"):
+        UR3Config(speed_m_s=0.0)
+
+
+def test_gripper_yaw_offset_turns_the_tool():
+    motions = plan_motions(target(yaw=0.3), UR3Config(gripper_yaw_offset_rad=math.pi / 2))
+    assert motions[0].pose[3:] == pytest.approx(tool_down_rotation_vector(0.3 - math.pi / 2))
+
+
+# --- pick against the fake ----------------------------------------------------------------
+
+
+def test_pick_sends_exactly_the_plan_and_reports_each_step():
+    robot = FakeRobot()
+    p, sleeps = picker(robot)
+    report = p.pick(target())
+    rot = list(tool_down_rotation_vector(0.3))
+    approach = [0.3, 0.1, 0.115, *rot]
+    grasp = [0.3, 0.1, 0.015, *rot]
+    sent = [(c.interface, c.method, c.args) for c in robot.sent()]
+    assert sent == [
+        ("control", "moveL", (pytest.approx(approach), 0.25, 0.5, False)),
+        ("control", "moveL", (pytest.approx(grasp), 0.25, 0.5, False)),
+        ("io", "setToolDigitalOut", (0, True)),
+        ("control", "moveL", (pytest.approx(approach), 0.25, 0.5, False)),
+    ]
+    assert report.ok and report.reason is None and not report.stop_sent
+    assert [s.motion.label for s in report.steps] == [
+        "approach",
+        "descend",
+        "close_gripper",
+        "lift",
+    ]
+    assert all(s.ok and s.duration_s >= 0 for s in report.steps)
+    assert report.steps[1].reached_pose == pytest.approx(grasp)
+    assert report.steps[3].reached_pose == pytest.approx(approach)
+    assert sleeps == [0.5]
+    assert robot.connected_to == ["10.0.0.2"]
+    # Every check ran before the first command.
+    first_command = robot.calls.index(robot.sent()[0])
+    queries = robot.methods()[:first_command]
+    for method in (
+        "isEmergencyStopped",
+        "isProtectiveStopped",
+        "getSafetyMode",
+        "isProgramRunning",
+        "isPoseWithinSafetyLimits",
+        "getActualTCPPose",
+    ):
+        assert method in queries
+    assert queries.count("isPoseWithinSafetyLimits") == 3
+
+
+def test_standard_output_gripper():
+    robot = FakeRobot()
+    config = UR3Config(gripper=GripperOutput(kind="standard", index=5, close_value=False))
+    picker(robot, config)[0].pick(target())
+    assert ("setStandardDigitalOut", (5, False)) in [(c.method, c.args) for c in robot.sent()]
+    assert robot.digital_outputs == {("standard", 5): False}
+    with pytest.raises(ValueError, match=r"tool digital output index must be 0\.\.1"):
+        GripperOutput(kind="tool", index=2)
+
+
+def _grasp_z_below(limit: float):
+    return lambda pose: pose[2] >= limit
+
+
+@pytest.mark.parametrize(
+    ("robot_settings", "goal", "error", "message"),
+    [
+        ({"emergency_stopped": True}, target(), RobotNotReadyError, "emergency stopped"),
+        ({"protective_stopped": True}, target(), RobotNotReadyError, "protective stopped"),
+        ({"program_running": False}, target(), RobotNotReadyError, "control script is not running"),
+        ({"connected": False}, target(), RobotNotReadyError, "control interface is not connected"),
+        (
+            {"within_safety_limits": _grasp_z_below(0.05)},
+            target(),
+            UnsafeTargetError,
+            "descend pose .* outside the robot's safety limits",
+        ),
+        ({}, target(x=0.5, y=0.2), UnsafeTargetError, "approach position .* beyond the 0.450 m"),
+        ({}, target(z=-0.01), UnsafeTargetError, "descend height .* below the table clearance"),
+        ({}, target(x=0.05, y=0.05), UnsafeTargetError, "inside the 0.100 m keep-out cylinder"),
+        (
+            {"tcp_pose": [-0.3, 0.02, 0.3, math.pi, 0, 0]},
+            target(x=0.3, y=0.0),
+            UnsafeTargetError,
+            "straight path from the current tool position",
+        ),
+    ],
+)
+def test_every_refusal_sends_nothing(robot_settings, goal, error, message):
+    robot = FakeRobot(**robot_settings)
+    p, sleeps = picker(robot)
+    with pytest.raises(error, match=message):
+        p.pick(goal)
+    assert robot.sent() == []
+    assert robot.motions() == []
+    assert sleeps == []
+
+
+def test_query_failure_during_checks_is_not_ready_and_sends_nothing():
+    robot = FakeRobot()
+    robot.within_safety_limits = lambda pose: (_ for _ in ()).throw(RuntimeError("timeout"))
+    with pytest.raises(RobotNotReadyError, match="could not read the robot state: RuntimeError"):
+        picker(robot)[0].pick(target())
+    assert robot.sent() == []
+
+
+@pytest.mark.parametrize("raises", [True, False])
+def test_lost_connection_mid_move_stops_reconnects_once_and_fails(raises):
+    robot = FakeRobot(disconnect_after=1, disconnect_raises=raises)
+    report = picker(robot)[0].pick(target())
+    assert not report.ok
+    assert report.reason.startswith("descend:")
+    assert [s.ok for s in report.steps] == [True, False]
+    methods = robot.methods()
+    failed_move = [i for i, m in enumerate(methods) if m == "moveL"][1]
+    after = methods[failed_move + 1 :]
+    assert "moveL" not in after and "setToolDigitalOut" not in after
+    assert after.count("reconnect") == 1
+    assert after.index("stopL") < after.index("reconnect")
+    assert report.reconnect_attempted and report.reconnected
+    # stopL first went down the dead link; once reconnected it went through.
+    assert methods.count("stopL") == 2 and report.stop_sent
+    assert robot.motions()[-1].args[0] == pytest.approx(report.steps[1].motion.pose)
+    assert robot.tcp_pose == pytest.approx(report.steps[0].motion.pose)  # never moved again
+
+
+def test_lost_connection_without_reconnect_reports_it():
+    robot = FakeRobot(disconnect_after=2, reconnect_succeeds=False)
+    report = picker(robot)[0].pick(target())
+    assert not report.ok and report.reason.startswith("close_gripper:")
+    assert report.reconnect_attempted and not report.reconnected and not report.stop_sent
+    methods = robot.methods()
+    assert methods.count("reconnect") == 1
+    assert methods.count("stopL") == 1
+    assert methods.count("moveL") == 2
+    assert robot.digital_outputs == {}
+
+
+def test_disconnect_noticed_after_a_move_stops_before_the_next():
+    robot = FakeRobot()
+    p, _ = picker(robot)
+    original = robot.control.moveL
+
+    def move_then_drop(*args):
+        done = original(*args)
+        robot.connected = False
+        robot.disconnect_raises = False
+        return done
+
+    robot.control.moveL = move_then_drop
+    report = p.pick(target())
+    assert not report.ok and "lost its connection" in report.reason
+    assert robot.methods().count("moveL") == 1
+    assert robot.methods().count("reconnect") == 1
+
+
+def test_refused_move_stops_without_reconnecting():
+    robot = FakeRobot(move_fails=True)
+    report = picker(robot)[0].pick(target())
+    assert not report.ok and "moveL was not completed" in report.reason
+    assert robot.methods().count("moveL") == 1
+    assert report.stop_sent and not report.reconnect_attempted
+    assert robot.sent()[-1].method == "stopL"
+    assert robot.sent()[-1].args == (2.0, False)
+
+
+# --- live robot (opt-in) ------------------------------------------------------------------
+
+
+@pytest.mark.ur_live
+def test_live_pick_on_a_real_ur3():
+    """Runs the full pick on UR_ROBOT_IP at UR_LIVE_TARGET="x,y,z[,yaw]" (metres, radians).
+
+    Both must be set; the target must be a free spot on the table, since the arm goes
+    down to it and closes the gripper.
+    """
+    robot_ip = os.environ.get("UR_ROBOT_IP")
+    spot = os.environ.get("UR_LIVE_TARGET")
+    if not robot_ip or not spot:
+        pytest.skip("set UR_ROBOT_IP and UR_LIVE_TARGET to run against a real robot")
+    values = [float(v) for v in spot.split(",")]
+    goal = target(*values[:3], yaw=values[3] if len(values) > 3 else 0.0)
+    with UR3Picker(robot_ip, UR3Config(speed_m_s=0.1, acceleration_m_s2=0.3)) as p:
+        report = p.pick(goal)
+    assert report.ok, report.reason
+    for step in report.steps:
+        if step.motion.kind == "moveL":
+            assert step.reached_pose[:3] == pytest.approx(step.motion.pose[:3], abs=2e-3)
+
+
+def test_workspace_defaults():
+    workspace = Workspace()
+    assert workspace.max_radius_m == pytest.approx(0.45)
+    assert (workspace.table_z_m, workspace.clearance_m, workspace.keep_out_radius_m) == (
+        0.0,
+        0.01,
+        0.10,
+    )
