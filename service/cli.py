@@ -40,6 +40,7 @@ from service.batch import (
     parse_outputs,
     process_file,
 )
+from service.bench import bench_command
 from service.evaluation.cli import eval_command
 from service.http.cli import serve_command
 from service.imageio import OutputWriteError, write_png
@@ -329,10 +330,10 @@ def version() -> None:
 
 app.command("eval")(eval_command)
 
+# Commands that live beside their own packages: the HTTP service, the benchmark and
 # the robot adapters' grasp planning.
-# Commands that live beside their own packages: the HTTP service and the robot
-# adapters' grasp planning.
 app.command("serve")(serve_command)
+app.command("bench")(bench_command)
 app.add_typer(grasp_app, name="grasp")
 
 

@@ -12,7 +12,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from service.perception.skeleton import branch_counts
+from service.perception import _kernels
+from service.perception.skeleton import _BRANCH_COUNT, as_uint8
 
 # Skeleton branches between two junction zones shorter than this many cable radii
 # are the bridge the thinning draws through one crossing.
@@ -36,24 +37,12 @@ def junction_zones(skeleton: np.ndarray, radius: float) -> np.ndarray:
     -------
     ndarray of bool
     """
-    junctions = (branch_counts(skeleton) >= 3).astype(np.uint8)
-    if not junctions.any():
-        return np.zeros_like(skeleton, dtype=bool)
     zone_radius = max(2, round(1.5 * radius))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * zone_radius + 1,) * 2)
-    zones = cv2.dilate(junctions, disc) > 0
-    # Short branches between zones are bridges of one crossing: fold them in.
-    outside = (skeleton & ~zones).astype(np.uint8)
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(outside, connectivity=8)
-    if count > 1:
-        tips = branch_counts(skeleton) == 1
-        has_tip = np.zeros(count, bool)
-        has_tip[np.unique(labels[tips & (labels > 0)])] = True
-        bridge_length = BRIDGE_RADII * radius
-        short = (stats[:, cv2.CC_STAT_AREA] < bridge_length) & ~has_tip
-        short[0] = False
-        zones |= short[labels]
-    return zones
+    zones, _ = _kernels.junction_zones_kernel(
+        as_uint8(skeleton), disc, BRIDGE_RADII * radius, _BRANCH_COUNT
+    )
+    return zones.view(np.bool_)
 
 
 def walk_joints(pixels: np.ndarray, segment_length: float) -> np.ndarray:
@@ -154,11 +143,25 @@ def fit_chains(
         ``(K, 2)`` joint arrays. Each skeleton branch appears about twice (once per
         side of the contour); :func:`service.perception.pruning.prune_overlaps`
         removes the repeats.
+
+    Notes
+    -----
+    Runs :func:`split_contour` and :func:`walk_joints` over all contours in one
+    compiled loop (``_kernels.fit_kernel``), with the same result.
     """
-    tips = branch_counts(skeleton) == 1
-    chains = []
-    for contour in contours:
-        xs, ys = contour[:, 0], contour[:, 1]
-        for run in split_contour(contour, tips[ys, xs], zones[ys, xs]):
-            chains.append(walk_joints(run, segment_length))
-    return chains
+    if not contours:
+        return []
+    points = np.concatenate([np.asarray(c).reshape(-1, 2) for c in contours])
+    points = np.ascontiguousarray(points, dtype=np.int32)
+    starts = np.zeros(len(contours) + 1, np.int64)
+    np.cumsum([len(c) for c in contours], out=starts[1:])
+    joints, ends = _kernels.fit_kernel(
+        points,
+        starts,
+        as_uint8(skeleton),
+        as_uint8(zones),
+        float(segment_length),
+        _BRANCH_COUNT,
+    )
+    starts = [0, *ends[:-1].tolist()]
+    return [joints[a:b] for a, b in zip(starts, ends.tolist(), strict=True)]

@@ -3,13 +3,18 @@
 Morphological thinning keeps every component connected. Thinning also leaves short
 spurs where the border of the mask is ragged; those are removed so that the skeleton
 has one branch per real branch of the cable.
+
+The pixel loops run in compiled kernels (:mod:`service.perception._kernels`) that
+visit only the pixels that can change: the thinning is scikit-image's Zhang-Suen
+thinning, pixel for pixel, and the distances are OpenCV's 5x5 chamfer distances.
 """
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
-from skimage.morphology import skeletonize
+from skimage.morphology import skeletonize as skimage_skeletonize
+
+from service.perception import _kernels
 
 # Offsets of the 8 neighbours in circular order (clockwise from east), as (row, col).
 NEIGHBOUR_OFFSETS = ((0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1), (-1, 0), (-1, 1))
@@ -39,17 +44,28 @@ def _branch_count_table() -> np.ndarray:
 _BRANCH_COUNT = _branch_count_table()
 
 
+def as_uint8(image: np.ndarray) -> np.ndarray:
+    """A C-contiguous ``uint8`` 0/1 view (no copy when possible) of a boolean image."""
+    image = np.asarray(image)
+    if image.dtype != np.bool_:
+        return np.ascontiguousarray(image != 0).view(np.uint8)
+    image = np.ascontiguousarray(image)
+    if not image.flags.writeable:
+        # The kernels are compiled for writable arrays; a read-only one would make
+        # numba compile (and cache) another version on the spot.
+        image = image.copy()
+    return image.view(np.uint8)
+
+
 def neighbour_pattern(skeleton: np.ndarray) -> np.ndarray:
     """8-bit pattern of the set neighbours of every pixel (bit k: NEIGHBOUR_OFFSETS[k])."""
-    # One correlation with powers of two sums the neighbour bits; float32 holds the
-    # sums (at most 255) exactly.
-    kernel = np.zeros((3, 3), np.float32)
+    skeleton = as_uint8(skeleton)
+    pattern = np.zeros(skeleton.shape, np.uint8)
+    height, width = skeleton.shape
+    padded = np.pad(skeleton, 1)
     for bit, (dr, dc) in enumerate(NEIGHBOUR_OFFSETS):
-        kernel[1 + dr, 1 + dc] = 1 << bit
-    pattern = cv2.filter2D(
-        skeleton.astype(np.uint8), cv2.CV_32F, kernel, borderType=cv2.BORDER_CONSTANT
-    )
-    return pattern.astype(np.uint8)
+        pattern |= padded[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width] << bit
+    return pattern
 
 
 def branch_counts(skeleton: np.ndarray) -> np.ndarray:
@@ -57,20 +73,37 @@ def branch_counts(skeleton: np.ndarray) -> np.ndarray:
 
     Zero off the skeleton.
     """
-    counts = _BRANCH_COUNT[neighbour_pattern(skeleton)]
-    counts[~skeleton] = 0
-    return counts
+    return _kernels.branch_count_image(as_uint8(skeleton), _BRANCH_COUNT)
 
 
-def _next_pixels(skeleton, row, col, visited):
-    """Unvisited skeleton neighbours, orthogonal ones first (so staircases are not skipped)."""
-    height, width = skeleton.shape
-    found = []
-    for dr, dc in ((0, 1), (1, 0), (0, -1), (-1, 0), (1, 1), (1, -1), (-1, -1), (-1, 1)):
-        r, c = row + dr, col + dc
-        if 0 <= r < height and 0 <= c < width and skeleton[r, c] and (r, c) not in visited:
-            found.append((r, c))
-    return found
+def skeletonize(mask: np.ndarray) -> np.ndarray:
+    """Thin a 2D mask to a one-pixel-wide 8-connected skeleton.
+
+    Zhang-Suen thinning by ``skimage.morphology.skeletonize``, run only on the
+    bounding box of the foreground.
+
+    Parameters
+    ----------
+    mask : ndarray
+        2D foreground mask (nonzero = foreground).
+
+    Returns
+    -------
+    ndarray of bool
+    """
+    mask = as_uint8(mask)
+    if mask.ndim != 2:
+        raise ValueError(f"skeletonize needs a 2D mask, not {mask.ndim}D")
+    skeleton = np.zeros(mask.shape, bool)
+    rows = np.flatnonzero(mask.any(axis=1))
+    if rows.size == 0:
+        return skeleton
+    cols = np.flatnonzero(mask.any(axis=0))
+    # One pixel of margin: thinning treats the array border as background anyway.
+    top, bottom = max(rows[0] - 1, 0), min(rows[-1] + 2, mask.shape[0])
+    left, right = max(cols[0] - 1, 0), min(cols[-1] + 2, mask.shape[1])
+    skeleton[top:bottom, left:right] = skimage_skeletonize(mask[top:bottom, left:right] > 0)
+    return skeleton
 
 
 def remove_spurs(skeleton: np.ndarray, spur_length: float, passes: int = 2) -> np.ndarray:
@@ -78,44 +111,21 @@ def remove_spurs(skeleton: np.ndarray, spur_length: float, passes: int = 2) -> n
 
     Branches from a tip to another tip (a whole short component) are left alone: they
     are removed, if at all, by the size filter of the segmentation.
+
+    In each pass, every tip (in row-major order) starts a walk along its branch: the
+    next pixel is the first unvisited neighbour in the order E, S, W, N, SE, SW, NW,
+    NE (orthogonal first, so staircases are not skipped), and the walk ends at a
+    junction (branch count 3 or more at the start of the pass, or more than two ways
+    on). A walk that reaches a junction within ``spur_length`` is removed. After a
+    pass that removed anything, the skeleton is thinned again, since a removed spur
+    can leave a stub pixel at its junction.
     """
-    skeleton = skeleton.copy()
+    skeleton = as_uint8(skeleton).copy()
     for _ in range(passes):
-        counts = branch_counts(skeleton)
-        tips = np.argwhere(counts == 1)
-        removed_any = False
-        for row, col in tips:
-            if not skeleton[row, col]:
-                continue
-            path = [(row, col)]
-            visited = {(row, col)}
-            length = 0.0
-            reached_junction = False
-            while length <= spur_length:
-                row_c, col_c = path[-1]
-                candidates = _next_pixels(skeleton, row_c, col_c, visited)
-                if not candidates:
-                    break
-                nxt = candidates[0]
-                if counts[nxt] >= 3 or len(candidates) > 2:
-                    reached_junction = True
-                    break
-                length += 1.0 if (nxt[0] == row_c or nxt[1] == col_c) else 1.4142
-                path.append(nxt)
-                visited.add(nxt)
-                # A staircase step leaves the skipped diagonal as a visited neighbour.
-                for extra in candidates[1:]:
-                    if abs(extra[0] - nxt[0]) <= 1 and abs(extra[1] - nxt[1]) <= 1:
-                        visited.add(extra)
-            if reached_junction and length < spur_length:
-                for r, c in path:
-                    skeleton[r, c] = False
-                removed_any = True
-        if not removed_any:
+        if not _kernels.remove_spurs_inplace(skeleton, float(spur_length), _BRANCH_COUNT):
             break
-        # Removing a spur can leave a stub pixel at the junction; thin again.
-        skeleton = skeletonize(skeleton)
-    return skeleton
+        skeleton = as_uint8(skeletonize(skeleton))
+    return skeleton.view(np.bool_)
 
 
 def skeletonize_mask(mask: np.ndarray, spur_length: float) -> np.ndarray:
@@ -139,11 +149,34 @@ def skeletonize_mask(mask: np.ndarray, spur_length: float) -> np.ndarray:
     return skeleton
 
 
-def estimate_radius(mask: np.ndarray, skeleton: np.ndarray) -> float:
-    """Typical half width of the cables: the median distance from skeleton to border."""
-    if not skeleton.any():
+def distance_transform(mask: np.ndarray) -> np.ndarray:
+    """``cv2.distanceTransform(mask, cv2.DIST_L2, 5)``, bit for bit, in O(foreground).
+
+    Float32 distance of each foreground pixel to the nearest background pixel centre
+    (OpenCV's 5x5 chamfer approximation of the Euclidean distance); 0 on background.
+    """
+    return _kernels.distance_transform(as_uint8(mask))
+
+
+def estimate_radius(
+    mask: np.ndarray, skeleton: np.ndarray, distance: np.ndarray | None = None
+) -> float:
+    """Typical half width of the cables: the median distance from skeleton to border.
+
+    Parameters
+    ----------
+    mask, skeleton : ndarray of bool
+    distance : ndarray, optional
+        ``distance_transform(mask)`` when the caller has it already; otherwise the
+        distance is computed at the skeleton pixels only.
+    """
+    skeleton = as_uint8(skeleton)
+    if distance is not None:
+        values = distance[skeleton.view(np.bool_)]
+    else:
+        values = _kernels.distances_on_skeleton(as_uint8(mask), skeleton)
+    if values.size == 0:
         return 0.0
-    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
     # The distance is to the nearest background pixel centre, half a pixel beyond
     # the border.
-    return max(float(np.median(distance[skeleton])) - 0.5, 0.5)
+    return max(float(np.median(values)) - 0.5, 0.5)

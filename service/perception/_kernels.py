@@ -1,0 +1,721 @@
+"""Compiled pixel loops of steps 2 to 5 (numba, one thread, no GIL held).
+
+Every kernel here reproduces, bit for bit, the result of the plain NumPy / OpenCV /
+scikit-image code it replaced; ``tests/perception/test_speed_equivalence.py`` keeps
+those plain versions as references and checks the kernels against them. The speed
+comes from touching only the pixels that matter (the border of the mask while it is
+thinned, the skeleton pixels afterwards) instead of whole images, and from walking
+contours in one compiled loop instead of one Python step per pixel.
+
+Kernels take ``uint8`` views of boolean images (0 or 1). ``cache=True`` keeps the
+machine code in ``__pycache__`` (or numba's user cache when that is not writable), so
+only the very first import on a machine compiles; :func:`warm_up` then loads every
+kernel so that the first real image pays nothing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# --------------------------------------------------------------------------- tables
+
+# OpenCV's 5x5 chamfer distance (cv2.DIST_L2, mask 5): steps of 1 (axial), 1.4
+# (diagonal) and 2.1969 (knight's move), added in float32 as cv2.distanceTransform
+# (OpenCV 5) adds them; the outside of the image is "far" (FLT_MAX).
+_HV_DIST = np.float32(1.0)
+_DIAG_DIST = np.float32(1.4)
+_LONG_DIST = np.float32(2.1969)
+_DIST_MAX = np.float32(np.finfo(np.float32).max)
+
+# Offsets (row, col) of the 8 neighbours in the order of the branch-count bits
+# (clockwise from east), the same as skeleton.NEIGHBOUR_OFFSETS.
+_RING_DR = np.array([0, 1, 1, 1, 0, -1, -1, -1], np.int64)
+_RING_DC = np.array([1, 1, 0, -1, -1, -1, 0, 1], np.int64)
+# The order in which a spur walk looks for the next pixel: orthogonal ones first.
+_WALK_DR = np.array([0, 1, 0, -1, 1, 1, -1, -1], np.int64)
+_WALK_DC = np.array([1, 0, -1, 0, 1, -1, -1, 1], np.int64)
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+@njit(cache=True, nogil=True)
+def _pattern(skeleton, row, col):
+    """8-bit pattern of the set neighbours (bit k: ring offset k); outside is unset."""
+    height, width = skeleton.shape
+    pattern = 0
+    for k in range(8):
+        r = row + _RING_DR[k]
+        c = col + _RING_DC[k]
+        if 0 <= r < height and 0 <= c < width and skeleton[r, c]:
+            pattern |= 1 << k
+    return pattern
+
+
+_BYTE_ONES = np.uint64(0x0101010101010101)
+_TOP_BYTE = np.uint64(56)
+
+
+@njit(cache=True, nogil=True)
+def nonzero_flat(flat):
+    """Indices of the set entries of a 1D 0/1 ``uint8`` array, in increasing order.
+
+    Both passes skip 8 zero bytes at a time, so that sparse images (a skeleton, a mask
+    of thin cables) cost little more than reading them once: the first counts (the
+    bytes of a word are 0 or 1, so multiplying by 0x0101... sums them into the top
+    byte), the second gathers without branching on each byte.
+    """
+    n_words = flat.size // 8
+    words = flat[: n_words * 8].view(np.uint64)
+    n = 0
+    for w in range(n_words):
+        x = words[w]
+        if x != 0:
+            n += np.int64((x * _BYTE_ONES) >> _TOP_BYTE)
+    for i in range(n_words * 8, flat.size):
+        n += flat[i] != 0
+    # Room for 8 more: every byte of a word is written before the count moves on.
+    indices = np.empty(n + 8, np.int64)
+    k = 0
+    for w in range(n_words):
+        if words[w] != 0:
+            base = w * 8
+            for b in range(8):
+                indices[k] = base + b
+                k += flat[base + b] != 0
+    for i in range(n_words * 8, flat.size):
+        indices[k] = i
+        k += flat[i] != 0
+    return indices[:k]
+
+
+@njit(cache=True, nogil=True)
+def skeleton_pixels(skeleton):
+    """Rows and columns of the set pixels of a C-contiguous image, in row-major order."""
+    width = skeleton.shape[1]
+    indices = nonzero_flat(skeleton.reshape(skeleton.size))
+    rows = np.empty(indices.size, np.int64)
+    cols = np.empty(indices.size, np.int64)
+    row = 0
+    row_start = 0
+    for k in range(indices.size):
+        index = indices[k]
+        while index >= row_start + width:
+            row_start += width
+            row += 1
+        rows[k] = row
+        cols[k] = index - row_start
+    return rows, cols
+
+
+@njit(cache=True, nogil=True)
+def branch_counts_at(skeleton, rows, cols, branch_table):
+    """Branch count (``branch_table`` of the neighbour pattern) at the given pixels."""
+    counts = np.empty(rows.size, np.uint8)
+    for k in range(rows.size):
+        counts[k] = branch_table[_pattern(skeleton, rows[k], cols[k])]
+    return counts
+
+
+@njit(cache=True, nogil=True)
+def branch_count_image(skeleton, branch_table):
+    """Branch count of every skeleton pixel, zero elsewhere, as a full image."""
+    counts = np.zeros(skeleton.shape, np.uint8)
+    rows, cols = skeleton_pixels(skeleton)
+    for i in range(rows.size):
+        counts[rows[i], cols[i]] = branch_table[_pattern(skeleton, rows[i], cols[i])]
+    return counts
+
+
+# --------------------------------------------------------------------------- thinning
+
+
+@njit(cache=True, nogil=True)
+def remove_spurs_inplace(skeleton, spur_length, branch_table):
+    """One pass of cutting tip-to-junction branches shorter than ``spur_length``.
+
+    See skeleton.remove_spurs: branch counts are taken once per pass, the next pixel is
+    the first unvisited set neighbour in the order E, S, W, N, SE, SW, NW, NE, and a
+    staircase step marks the diagonal it skipped as visited. Returns whether anything
+    was removed (the caller then thins the skeleton again).
+    """
+    height, width = skeleton.shape
+    counts = np.zeros((height, width), np.uint8)
+    visited = np.zeros((height, width), np.uint8)
+    rows, cols = skeleton_pixels(skeleton)
+    # A walk takes at most one step per unit of length, and never revisits a pixel.
+    max_steps = min(max(int(min(spur_length, 1e9)), 0), rows.size) + 2
+    path_r = np.empty(max_steps + 1, np.int64)
+    path_c = np.empty(max_steps + 1, np.int64)
+    marked_r = np.empty(8 * (max_steps + 1), np.int64)
+    marked_c = np.empty(8 * (max_steps + 1), np.int64)
+    cand_r = np.empty(8, np.int64)
+    cand_c = np.empty(8, np.int64)
+    for i in range(rows.size):
+        counts[rows[i], cols[i]] = branch_table[_pattern(skeleton, rows[i], cols[i])]
+    removed_any = False
+    for i in range(rows.size):
+        row = rows[i]
+        col = cols[i]
+        if counts[row, col] != 1 or not skeleton[row, col]:
+            continue
+        n_path = 1
+        path_r[0] = row
+        path_c[0] = col
+        n_marked = 1
+        marked_r[0] = row
+        marked_c[0] = col
+        visited[row, col] = 1
+        length = 0.0
+        reached_junction = False
+        while length <= spur_length:
+            rc = path_r[n_path - 1]
+            cc = path_c[n_path - 1]
+            n_cand = 0
+            for k in range(8):
+                r = rc + _WALK_DR[k]
+                c = cc + _WALK_DC[k]
+                if 0 <= r < height and 0 <= c < width and skeleton[r, c] and not visited[r, c]:
+                    cand_r[n_cand] = r
+                    cand_c[n_cand] = c
+                    n_cand += 1
+            if n_cand == 0:
+                break
+            nr = cand_r[0]
+            nc = cand_c[0]
+            if counts[nr, nc] >= 3 or n_cand > 2:
+                reached_junction = True
+                break
+            length += 1.0 if (nr == rc or nc == cc) else 1.4142
+            path_r[n_path] = nr
+            path_c[n_path] = nc
+            n_path += 1
+            visited[nr, nc] = 1
+            marked_r[n_marked] = nr
+            marked_c[n_marked] = nc
+            n_marked += 1
+            for k in range(1, n_cand):
+                if (
+                    abs(cand_r[k] - nr) <= 1
+                    and abs(cand_c[k] - nc) <= 1
+                    and not visited[cand_r[k], cand_c[k]]
+                ):
+                    visited[cand_r[k], cand_c[k]] = 1
+                    marked_r[n_marked] = cand_r[k]
+                    marked_c[n_marked] = cand_c[k]
+                    n_marked += 1
+        if reached_junction and length < spur_length:
+            for k in range(n_path):
+                skeleton[path_r[k], path_c[k]] = 0
+            removed_any = True
+        for k in range(n_marked):
+            visited[marked_r[k], marked_c[k]] = 0
+    return removed_any
+
+
+# --------------------------------------------------------------------------- distance
+
+
+@njit(cache=True, nogil=True)
+def _row_starts(rows, height):
+    """Index of the first pixel of each row in a row-major pixel list (``height + 1``)."""
+    starts = np.empty(height + 1, np.int64)
+    k = 0
+    for r in range(height + 1):
+        while k < rows.size and rows[k] < r:
+            k += 1
+        starts[r] = k
+    return starts
+
+
+@njit(cache=True, nogil=True)
+def chamfer_values(rows, cols, height, width):
+    """OpenCV's two-pass 5x5 chamfer distance at the foreground pixels only.
+
+    ``rows, cols`` list the foreground in row-major order; the distances come back in
+    the same order. No image-sized array is made: the two rows above (below, going
+    back) live in three small row buffers, background 0 and the outside of the image
+    OpenCV's "far" value. The additions and minima are OpenCV's (float32), so the
+    values are identical to ``cv2.distanceTransform(mask, cv2.DIST_L2, 5)``.
+    """
+    n = rows.size
+    values = np.empty(n, np.float32)
+    if n == 0:
+        return values
+    starts = _row_starts(rows, height)
+    first = rows[0]
+    last = rows[n - 1]
+    # Buffer index = column + 2: two "far" columns pad each side.
+    buffers = np.zeros((3, width + 4), np.float32)
+    far = np.full(width + 4, _DIST_MAX, np.float32)
+    for b in range(3):
+        buffers[b, 0] = buffers[b, 1] = _DIST_MAX
+        buffers[b, width + 2] = buffers[b, width + 3] = _DIST_MAX
+    for r in range(first, last + 1):
+        here = buffers[r % 3]
+        if r >= 3:
+            for k in range(starts[r - 3], starts[r - 2]):
+                here[cols[k] + 2] = 0.0
+        up1 = buffers[(r - 1) % 3] if r >= 1 else far
+        up2 = buffers[(r - 2) % 3] if r >= 2 else far
+        for k in range(starts[r], starts[r + 1]):
+            c = cols[k] + 2
+            # Minima taken as a tree (exact, so the order does not matter) to keep
+            # the dependency chain short.
+            t0 = min(
+                min(
+                    min(up2[c - 1] + _LONG_DIST, up2[c + 1] + _LONG_DIST),
+                    min(up1[c - 2] + _LONG_DIST, up1[c + 2] + _LONG_DIST),
+                ),
+                min(
+                    min(up1[c - 1] + _DIAG_DIST, up1[c + 1] + _DIAG_DIST),
+                    min(up1[c] + _HV_DIST, _DIST_MAX),
+                ),
+            )
+            t0 = min(t0, here[c - 1] + _HV_DIST)
+            here[c] = t0
+            values[k] = t0
+    buffers[:, 2 : width + 2] = 0.0
+    for r in range(last, first - 1, -1):
+        here = buffers[r % 3]
+        if r + 3 <= last:
+            for k in range(starts[r + 3], starts[r + 4]):
+                here[cols[k] + 2] = 0.0
+        for k in range(starts[r], starts[r + 1]):
+            here[cols[k] + 2] = values[k]
+        down1 = buffers[(r + 1) % 3] if r + 1 < height else far
+        down2 = buffers[(r + 2) % 3] if r + 2 < height else far
+        for k in range(starts[r + 1] - 1, starts[r] - 1, -1):
+            c = cols[k] + 2
+            t0 = here[c]
+            if t0 > _HV_DIST:
+                t0 = min(
+                    min(
+                        min(down2[c + 1] + _LONG_DIST, down2[c - 1] + _LONG_DIST),
+                        min(down1[c + 2] + _LONG_DIST, down1[c - 2] + _LONG_DIST),
+                    ),
+                    min(
+                        min(down1[c + 1] + _DIAG_DIST, down1[c - 1] + _DIAG_DIST),
+                        min(down1[c] + _HV_DIST, t0),
+                    ),
+                )
+                t0 = min(t0, here[c + 1] + _HV_DIST)
+                here[c] = t0
+                values[k] = t0
+    return values
+
+
+@njit(cache=True, nogil=True)
+def distance_transform(mask):
+    """``cv2.distanceTransform(mask, cv2.DIST_L2, 5)``, bit for bit, in O(foreground)."""
+    height, width = mask.shape
+    distance = np.zeros((height, width), np.float32)
+    rows, cols = skeleton_pixels(mask)
+    values = chamfer_values(rows, cols, height, width)
+    for k in range(rows.size):
+        distance[rows[k], cols[k]] = values[k]
+    return distance
+
+
+@njit(cache=True, nogil=True)
+def distances_on_skeleton(mask, skeleton):
+    """The distance of :func:`distance_transform` at the skeleton pixels (row-major).
+
+    Skeleton pixels off the mask get 0, as they would in the distance image.
+    """
+    height, width = mask.shape
+    rows, cols = skeleton_pixels(mask)
+    values = chamfer_values(rows, cols, height, width)
+    skel_rows, skel_cols = skeleton_pixels(skeleton)
+    found = np.zeros(skel_rows.size, np.float32)
+    k = 0
+    for i in range(skel_rows.size):
+        r = skel_rows[i]
+        c = skel_cols[i]
+        while k < rows.size and (rows[k] < r or (rows[k] == r and cols[k] < c)):
+            k += 1
+        if k < rows.size and rows[k] == r and cols[k] == c:
+            found[i] = values[k]
+    return found
+
+
+# --------------------------------------------------------------------------- zones
+
+
+@njit(cache=True, nogil=True)
+def junction_zones_kernel(skeleton, disc, bridge_length, branch_table):
+    """Junction zones of fitting.junction_zones: discs round junctions plus short bridges.
+
+    ``disc`` is the (odd, square) structuring element of the dilation; it is stamped
+    mirrored at every junction pixel, which is what ``cv2.dilate`` computes. Returns
+    the zones as ``uint8`` and whether there was any junction at all.
+    """
+    height, width = skeleton.shape
+    zones = np.zeros((height, width), np.uint8)
+    rows, cols = skeleton_pixels(skeleton)
+    counts = branch_counts_at(skeleton, rows, cols, branch_table)
+    size = disc.shape[0]
+    half = size // 2
+    any_junction = False
+    for i in range(rows.size):
+        if counts[i] < 3:
+            continue
+        any_junction = True
+        for a in range(size):
+            r = rows[i] + a - half
+            if r < 0 or r >= height:
+                continue
+            for b in range(size):
+                c = cols[i] + b - half
+                if 0 <= c < width and disc[size - 1 - a, size - 1 - b]:
+                    zones[r, c] = 1
+    if not any_junction:
+        return zones, False
+    # 8-connected pieces of the skeleton outside the zones; a piece with no tip and
+    # fewer than bridge_length pixels is the bridge of a crossing and joins the zones
+    # (after all pieces are found: the zones must not grow while they are).
+    # Seen pixels are marked 2 in ``zones`` itself and cleared at the end.
+    stack_r = np.empty(rows.size, np.int64)
+    stack_c = np.empty(rows.size, np.int64)
+    members_r = np.empty(rows.size, np.int64)
+    members_c = np.empty(rows.size, np.int64)
+    n_bridge = 0
+    for i in range(rows.size):
+        r0 = rows[i]
+        c0 = cols[i]
+        if zones[r0, c0]:
+            continue
+        zones[r0, c0] = 2
+        n_stack = 1
+        stack_r[0] = r0
+        stack_c[0] = c0
+        start = n_bridge
+        n_members = 0
+        has_tip = False
+        while n_stack:
+            n_stack -= 1
+            r = stack_r[n_stack]
+            c = stack_c[n_stack]
+            members_r[start + n_members] = r
+            members_c[start + n_members] = c
+            n_members += 1
+            pattern = 0
+            for k in range(8):
+                rr = r + _RING_DR[k]
+                cc = c + _RING_DC[k]
+                if 0 <= rr < height and 0 <= cc < width and skeleton[rr, cc]:
+                    pattern |= 1 << k
+                    if not zones[rr, cc]:
+                        zones[rr, cc] = 2
+                        stack_r[n_stack] = rr
+                        stack_c[n_stack] = cc
+                        n_stack += 1
+            if branch_table[pattern] == 1:
+                has_tip = True
+        if n_members < bridge_length and not has_tip:
+            n_bridge += n_members
+    for i in range(rows.size):
+        if zones[rows[i], cols[i]] == 2:
+            zones[rows[i], cols[i]] = 0
+    for k in range(n_bridge):
+        zones[members_r[k], members_c[k]] = 1
+    return zones, True
+
+
+# --------------------------------------------------------------------------- fitting
+
+
+@njit(cache=True, nogil=True)
+def _emit_run(points, idx, n_idx, segment_length_sq, joints, n_joints, ends, n_chains):
+    """walk_joints on the run ``points[idx[:n_idx]]``; appends one chain."""
+    x0 = np.float64(points[idx[0], 0])
+    y0 = np.float64(points[idx[0], 1])
+    joints[n_joints, 0] = x0
+    joints[n_joints, 1] = y0
+    n_joints += 1
+    for i in range(1, n_idx):
+        x = np.float64(points[idx[i], 0])
+        y = np.float64(points[idx[i], 1])
+        dx = x - x0
+        dy = y - y0
+        if dx * dx + dy * dy >= segment_length_sq:
+            joints[n_joints, 0] = x
+            joints[n_joints, 1] = y
+            n_joints += 1
+            x0 = x
+            y0 = y
+    if n_idx > 1:
+        xl = np.float64(points[idx[n_idx - 1], 0])
+        yl = np.float64(points[idx[n_idx - 1], 1])
+        if joints[n_joints - 1, 0] != xl or joints[n_joints - 1, 1] != yl:
+            joints[n_joints, 0] = xl
+            joints[n_joints, 1] = yl
+            n_joints += 1
+    ends[n_chains] = n_joints
+    return n_joints, n_chains + 1
+
+
+@njit(cache=True, nogil=True)
+def fit_kernel(points, starts, skeleton, zones, segment_length, branch_table):
+    """split_contour + walk_joints over every contour in one pass; see fitting.fit_chains.
+
+    ``points`` holds all contours' ``[x, y]`` pixels back to back, contour ``i`` being
+    ``points[starts[i]:starts[i + 1]]``. Returns the joints of all chains back to back
+    and the end index of each chain in them.
+    """
+    n_points = points.shape[0]
+    n_contours = starts.size - 1
+    # Each pixel gives at most one joint per run and a run adds at most two more.
+    joints = np.empty((2 * n_points + 4 * n_contours + 4, 2), np.float64)
+    ends = np.empty(n_points + n_contours + 1, np.int64)
+    n_joints = 0
+    n_chains = 0
+    is_tip = np.empty(n_points, np.bool_)
+    in_zone = np.empty(n_points, np.bool_)
+    for i in range(n_points):
+        x = points[i, 0]
+        y = points[i, 1]
+        in_zone[i] = zones[y, x] != 0
+        is_tip[i] = branch_table[_pattern(skeleton, y, x)] == 1 and skeleton[y, x] != 0
+    current = np.empty(n_points + 1, np.int64)
+    limit_sq = segment_length * segment_length
+    for ci in range(n_contours):
+        s = starts[ci]
+        n = starts[ci + 1] - s
+        if n == 0:
+            continue
+        first = -1
+        for i in range(n):
+            if is_tip[s + i] or in_zone[s + i]:
+                first = i
+                break
+        if first < 0:
+            # A closed loop with no tip or junction: one run around it.
+            for i in range(n):
+                current[i] = s + i
+            n_joints, n_chains = _emit_run(
+                points, current, n, limit_sq, joints, n_joints, ends, n_chains
+            )
+            continue
+        n_current = 0
+        for step in range(n):
+            index = s + (first + step) % n
+            if in_zone[index]:
+                if n_current > 1:
+                    n_joints, n_chains = _emit_run(
+                        points, current, n_current, limit_sq, joints, n_joints, ends, n_chains
+                    )
+                n_current = 0
+            elif is_tip[index]:
+                current[n_current] = index
+                n_current += 1
+                if n_current > 1:
+                    n_joints, n_chains = _emit_run(
+                        points, current, n_current, limit_sq, joints, n_joints, ends, n_chains
+                    )
+                current[0] = index
+                n_current = 1
+            else:
+                current[n_current] = index
+                n_current += 1
+        if n_current > 1:
+            first_break = s + first
+            if is_tip[first_break] and not in_zone[first_break]:
+                current[n_current] = first_break
+                n_current += 1
+            n_joints, n_chains = _emit_run(
+                points, current, n_current, limit_sq, joints, n_joints, ends, n_chains
+            )
+    return joints[:n_joints], ends[:n_chains]
+
+
+# --------------------------------------------------------------------------- pruning
+
+
+@njit(cache=True, nogil=True)
+def _block_sum(values, start, stop):
+    """NumPy's sum of at most 128 contiguous float64 values (eight running sums)."""
+    n = stop - start
+    if n < 8:
+        total = 0.0
+        for i in range(start, stop):
+            total += values[i]
+        return total
+    r0 = values[start]
+    r1 = values[start + 1]
+    r2 = values[start + 2]
+    r3 = values[start + 3]
+    r4 = values[start + 4]
+    r5 = values[start + 5]
+    r6 = values[start + 6]
+    r7 = values[start + 7]
+    body = start + n - n % 8
+    for i in range(start + 8, body, 8):
+        r0 += values[i]
+        r1 += values[i + 1]
+        r2 += values[i + 2]
+        r3 += values[i + 3]
+        r4 += values[i + 4]
+        r5 += values[i + 5]
+        r6 += values[i + 6]
+        r7 += values[i + 7]
+    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    for i in range(body, stop):
+        total += values[i]
+    return total
+
+
+@njit(cache=True, nogil=True)
+def _pairwise_sum(values, start, stop):
+    """``values[start:stop].sum()`` added in NumPy's order, bit for bit.
+
+    NumPy sums blocks of up to 128 values with eight running sums and splits longer
+    arrays in two (the first part a multiple of 8 long), recursively; the recursion is
+    unrolled here on a small stack. Summing in the same order keeps the chain lengths,
+    and so the order of the chains, exactly those of ``chain_length``.
+    """
+    if stop - start <= 128:
+        return _block_sum(values, start, stop)
+    lo = np.empty(64, np.int64)
+    hi = np.empty(64, np.int64)
+    phase = np.empty(64, np.int64)  # 0: not split yet, 1: left part pending, 2: right
+    left = np.empty(64, np.float64)
+    lo[0] = start
+    hi[0] = stop
+    phase[0] = 0
+    depth = 1
+    result = 0.0
+    have_result = False
+    while depth > 0:
+        t = depth - 1
+        if have_result:
+            if phase[t] == 1:
+                left[t] = result
+                phase[t] = 2
+                have_result = False
+                half = (hi[t] - lo[t]) // 2
+                half -= half % 8
+                lo[depth] = lo[t] + half
+                hi[depth] = hi[t]
+                phase[depth] = 0
+                depth += 1
+            else:
+                result = left[t] + result
+                depth -= 1
+            continue
+        n = hi[t] - lo[t]
+        if n <= 128:
+            result = _block_sum(values, lo[t], hi[t])
+            have_result = True
+            depth -= 1
+            continue
+        half = n // 2
+        half -= half % 8
+        phase[t] = 1
+        lo[depth] = lo[t]
+        hi[depth] = lo[t] + half
+        phase[depth] = 0
+        depth += 1
+    return result
+
+
+@njit(cache=True, nogil=True)
+def _polyline_length(joints, start, stop, scratch):
+    """``pruning.chain_length(joints[start:stop])`` with the same rounding."""
+    if stop - start < 2:
+        return 0.0
+    for i in range(start, stop - 1):
+        dx = joints[i + 1, 0] - joints[i, 0]
+        dy = joints[i + 1, 1] - joints[i, 1]
+        scratch[i - start] = np.sqrt(dx * dx + dy * dy)
+    return 0.0 + _pairwise_sum(scratch, 0, stop - start - 1)
+
+
+@njit(cache=True, nogil=True)
+def chain_lengths(joints, ends):
+    """Arc length of each chain of ``joints`` (chain ``i`` ends at ``ends[i]``)."""
+    lengths = np.empty(ends.size, np.float64)
+    scratch = np.empty(max(joints.shape[0], 1), np.float64)
+    start = 0
+    for i in range(ends.size):
+        lengths[i] = _polyline_length(joints, start, ends[i], scratch)
+        start = ends[i]
+    return lengths
+
+
+@njit(cache=True, nogil=True)
+def uncovered_runs(joints, coverage):
+    """Runs of a chain whose segments are not already covered; see pruning.prune_overlaps.
+
+    A segment is covered when at least two of its points at 1/4, 1/2 and 3/4 of its
+    length (rounded to the nearest pixel, half to even, and clipped to the image)
+    are set in ``coverage``. Returns ``(start, stop)`` joint index pairs of the
+    maximal runs of uncovered segments at least 1 px long.
+    """
+    height, width = coverage.shape
+    n = joints.shape[0]
+    runs = np.empty((n, 2), np.int64)
+    scratch = np.empty(max(n, 1), np.float64)
+    n_runs = 0
+    start = -1
+    for k in range(n):
+        covered = False
+        if k < n - 1:
+            sx = joints[k, 0]
+            sy = joints[k, 1]
+            dx = joints[k + 1, 0] - sx
+            dy = joints[k + 1, 1] - sy
+            hits = 0
+            for f in (0.25, 0.5, 0.75):
+                col = min(max(np.int64(np.rint(sx + f * dx)), 0), width - 1)
+                row = min(max(np.int64(np.rint(sy + f * dy)), 0), height - 1)
+                hits += coverage[row, col]
+            covered = hits >= 2
+        if k < n - 1 and not covered:
+            if start < 0:
+                start = k
+        elif start >= 0:
+            # Segments start .. k-1 are uncovered: joints start .. k.
+            if _polyline_length(joints, start, k + 1, scratch) >= 1.0:
+                runs[n_runs, 0] = start
+                runs[n_runs, 1] = k + 1
+                n_runs += 1
+            start = -1
+    return runs[:n_runs]
+
+
+# --------------------------------------------------------------------------- warm-up
+
+
+def warm_up() -> None:
+    """Load (or, on a machine's very first run, compile) every kernel.
+
+    Runs steps 2 to 5 on a tiny mask through the same wrappers, and so with the same
+    argument types, as the pipeline uses. Call it once at start-up so that the first
+    image pays nothing; calling it again costs well under a millisecond.
+    """
+    from service.perception.contours import extract_contours
+    from service.perception.fitting import fit_chains, junction_zones
+    from service.perception.pruning import prune_overlaps
+    from service.perception.skeleton import (
+        branch_counts,
+        distance_transform,
+        estimate_radius,
+        remove_spurs,
+        skeletonize,
+    )
+
+    mask = np.zeros((40, 48), bool)
+    mask[17:23, 2:46] = True  # a cross: one junction, four arms
+    mask[2:38, 21:27] = True
+    mask[8, 4] = True  # a speck
+    skeleton = skeletonize(mask)
+    distance = distance_transform(mask)
+    radius = max(estimate_radius(mask, skeleton), 1.0)
+    estimate_radius(mask, skeleton, distance)
+    skeleton = remove_spurs(skeleton, 2.5 * radius)
+    branch_counts(skeleton)
+    zones = junction_zones(skeleton, radius)
+    chains = fit_chains(extract_contours(skeleton), skeleton, zones, 5.0)
+    prune_overlaps(chains, mask.shape)

@@ -1,0 +1,355 @@
+"""The compiled steps 2 to 5 give exactly what the plain implementations gave.
+
+The ``_reference_*`` functions below are the plain NumPy / OpenCV / scikit-image
+versions of skeletonization, spur removal, radius estimate, junction zones, fitting
+and pruning that the numba kernels replaced (issue 4). They live here, not in the
+package, as the specification the kernels are held to: identical arrays and identical
+chains (same joints, same order) on hand-made shapes, generated scenes and random
+masks with holes, specks and pixels on the image border.
+"""
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from skimage.morphology import skeletonize as skimage_skeletonize
+
+from service.perception import _kernels
+from service.perception.contours import extract_contours
+from service.perception.fitting import BRIDGE_RADII, fit_chains, junction_zones
+from service.perception.pruning import prune_overlaps
+from service.perception.skeleton import (
+    _BRANCH_COUNT,
+    NEIGHBOUR_OFFSETS,
+    branch_counts,
+    distance_transform,
+    estimate_radius,
+    remove_spurs,
+    skeletonize,
+)
+from service.synthetic import make_scene
+
+MBEST = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "mbest"
+
+# --------------------------------------------------------------------------- references
+
+
+def _reference_branch_counts(skeleton):
+    kernel = np.zeros((3, 3), np.float32)
+    for bit, (dr, dc) in enumerate(NEIGHBOUR_OFFSETS):
+        kernel[1 + dr, 1 + dc] = 1 << bit
+    pattern = cv2.filter2D(
+        skeleton.astype(np.uint8), cv2.CV_32F, kernel, borderType=cv2.BORDER_CONSTANT
+    ).astype(np.uint8)
+    counts = _BRANCH_COUNT[pattern]
+    counts[~skeleton] = 0
+    return counts
+
+
+def _reference_next_pixels(skeleton, row, col, visited):
+    height, width = skeleton.shape
+    found = []
+    for dr, dc in ((0, 1), (1, 0), (0, -1), (-1, 0), (1, 1), (1, -1), (-1, -1), (-1, 1)):
+        r, c = row + dr, col + dc
+        if 0 <= r < height and 0 <= c < width and skeleton[r, c] and (r, c) not in visited:
+            found.append((r, c))
+    return found
+
+
+def _reference_remove_spurs(skeleton, spur_length, passes=2):
+    skeleton = skeleton.copy()
+    for _ in range(passes):
+        counts = _reference_branch_counts(skeleton)
+        removed_any = False
+        for row, col in np.argwhere(counts == 1):
+            if not skeleton[row, col]:
+                continue
+            path = [(row, col)]
+            visited = {(row, col)}
+            length = 0.0
+            reached_junction = False
+            while length <= spur_length:
+                row_c, col_c = path[-1]
+                candidates = _reference_next_pixels(skeleton, row_c, col_c, visited)
+                if not candidates:
+                    break
+                nxt = candidates[0]
+                if counts[nxt] >= 3 or len(candidates) > 2:
+                    reached_junction = True
+                    break
+                length += 1.0 if (nxt[0] == row_c or nxt[1] == col_c) else 1.4142
+                path.append(nxt)
+                visited.add(nxt)
+                for extra in candidates[1:]:
+                    if abs(extra[0] - nxt[0]) <= 1 and abs(extra[1] - nxt[1]) <= 1:
+                        visited.add(extra)
+            if reached_junction and length < spur_length:
+                for r, c in path:
+                    skeleton[r, c] = False
+                removed_any = True
+        if not removed_any:
+            break
+        skeleton = skimage_skeletonize(skeleton)
+    return skeleton
+
+
+def _reference_estimate_radius(mask, skeleton):
+    if not skeleton.any():
+        return 0.0
+    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    return max(float(np.median(distance[skeleton])) - 0.5, 0.5)
+
+
+def _reference_junction_zones(skeleton, radius):
+    junctions = (_reference_branch_counts(skeleton) >= 3).astype(np.uint8)
+    if not junctions.any():
+        return np.zeros_like(skeleton, dtype=bool)
+    zone_radius = max(2, round(1.5 * radius))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * zone_radius + 1,) * 2)
+    zones = cv2.dilate(junctions, disc) > 0
+    outside = (skeleton & ~zones).astype(np.uint8)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(outside, connectivity=8)
+    if count > 1:
+        tips = _reference_branch_counts(skeleton) == 1
+        has_tip = np.zeros(count, bool)
+        has_tip[np.unique(labels[tips & (labels > 0)])] = True
+        short = (stats[:, cv2.CC_STAT_AREA] < BRIDGE_RADII * radius) & ~has_tip
+        short[0] = False
+        zones |= short[labels]
+    return zones
+
+
+def _reference_walk_joints(pixels, segment_length):
+    pixels = np.asarray(pixels, dtype=np.float64)
+    joints = [pixels[0]]
+    start = pixels[0]
+    limit_sq = segment_length * segment_length
+    for point in pixels[1:]:
+        delta = point - start
+        if delta[0] * delta[0] + delta[1] * delta[1] >= limit_sq:
+            joints.append(point)
+            start = point
+    if len(pixels) > 1 and not np.array_equal(joints[-1], pixels[-1]):
+        joints.append(pixels[-1])
+    return np.array(joints)
+
+
+def _reference_split_contour(contour, is_tip, in_zone):
+    n = len(contour)
+    breaks = np.flatnonzero(is_tip | in_zone)
+    if len(breaks) == 0:
+        return [contour]
+    order = np.roll(np.arange(n), -int(breaks[0]))
+    runs, current = [], []
+    for index in order:
+        if in_zone[index]:
+            if len(current) > 1:
+                runs.append(contour[current])
+            current = []
+        elif is_tip[index]:
+            current.append(index)
+            if len(current) > 1:
+                runs.append(contour[current])
+            current = [index]
+        else:
+            current.append(index)
+    if len(current) > 1:
+        first_break = order[0]
+        if is_tip[first_break] and not in_zone[first_break]:
+            current.append(first_break)
+        runs.append(contour[current])
+    return runs
+
+
+def _reference_fit_chains(contours, skeleton, zones, segment_length):
+    tips = _reference_branch_counts(skeleton) == 1
+    chains = []
+    for contour in contours:
+        xs, ys = contour[:, 0], contour[:, 1]
+        for run in _reference_split_contour(contour, tips[ys, xs], zones[ys, xs]):
+            chains.append(_reference_walk_joints(run, segment_length))
+    return chains
+
+
+def _reference_chain_length(joints):
+    return float(np.linalg.norm(np.diff(joints, axis=0), axis=1).sum()) if len(joints) > 1 else 0.0
+
+
+def _reference_prune_overlaps(chains, shape, tolerance=2.0):
+    fractions = np.array([0.25, 0.5, 0.75])
+    coverage = np.zeros(shape, np.uint8)
+    thickness = max(1, round(2 * tolerance + 1))
+    kept = []
+    for joints in sorted(chains, key=_reference_chain_length, reverse=True):
+        if len(joints) < 2:
+            continue
+        starts, ends = joints[:-1], joints[1:]
+        samples = starts[:, None, :] + fractions[None, :, None] * (ends - starts)[:, None, :]
+        cols = np.clip(np.rint(samples[..., 0]).astype(int), 0, shape[1] - 1)
+        rows = np.clip(np.rint(samples[..., 1]).astype(int), 0, shape[0] - 1)
+        covered = coverage[rows, cols].sum(axis=1) >= 2
+        runs, start = [], None
+        for k, is_covered in enumerate(covered):
+            if not is_covered and start is None:
+                start = k
+            if is_covered and start is not None:
+                runs.append(joints[start : k + 1])
+                start = None
+        if start is not None:
+            runs.append(joints[start:])
+        for run in runs:
+            if _reference_chain_length(run) < 1.0:
+                continue
+            kept.append(run)
+            cv2.polylines(coverage, [np.rint(run).astype(np.int32)], False, 1, thickness)
+    return kept
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def _thick(shape, polylines, thickness):
+    mask = np.zeros(shape, np.uint8)
+    for points in polylines:
+        cv2.polylines(mask, [np.array(points, np.int32)], False, 1, thickness)
+    return mask > 0
+
+
+def _random_mask(seed, shape=(150, 200)):
+    """Random thick strokes and rings, with pinholes and specks, some off the edges."""
+    rng = np.random.default_rng(seed)
+    height, width = shape
+    mask = np.zeros(shape, np.uint8)
+    for _ in range(5):
+        points = rng.integers(-15, [width + 15, height + 15], size=(rng.integers(2, 5), 2))
+        cv2.polylines(
+            mask, [points.astype(np.int32)], bool(rng.integers(0, 2)), 1, int(rng.integers(2, 18))
+        )
+    centre = tuple(int(v) for v in rng.integers(0, [width, height]))
+    cv2.circle(mask, centre, int(rng.integers(8, 40)), 1, int(rng.integers(2, 9)))
+    near = cv2.dilate(mask, np.ones((3, 3), np.uint8)) > 0
+    return (mask > 0) ^ (near & (rng.random(shape) < 0.02))
+
+
+def _inputs():
+    shape = (120, 160)
+    cases = {
+        "band": _thick(shape, [[(10, 60), (150, 60)]], 11),
+        "cross": _thick(shape, [[(10, 20), (150, 100)], [(10, 100), (150, 20)]], 9),
+        "ragged": _thick(shape, [[(5, 30), (155, 35)], [(80, 30), (80, 118)]], 7)
+        | _thick(shape, [[(40, 30), (43, 24)], [(120, 35), (122, 42)]], 3),
+        "loop": _thick(shape, [[(20, 100), (80, 10), (140, 100), (20, 40)]], 8),
+        "edges": _thick(shape, [[(-5, 0), (165, 119)], [(0, 119), (159, 0)]], 6),
+        "block": np.pad(np.ones((40, 60), bool), 20),
+        "speck": np.pad(np.ones((1, 1), bool), 3),
+        "empty": np.zeros((20, 30), bool),
+    }
+    for seed in range(6):
+        cases[f"random{seed}"] = _random_mask(seed)
+    for seed, (width, height, n) in enumerate([(200, 150, 2), (256, 192, 3), (320, 240, 3)]):
+        cases[f"scene{seed}"] = make_scene(width, height, n, seed=seed, radius_range=(3, 6)).mask
+    return cases
+
+
+INPUTS = _inputs()
+
+
+def _reference_steps(mask, segment_length=10.0):
+    skeleton = skimage_skeletonize(mask)
+    radius = max(_reference_estimate_radius(mask, skeleton), 1.0)
+    pruned_skeleton = _reference_remove_spurs(skeleton, 2.5 * radius)
+    contours = extract_contours(pruned_skeleton)
+    zones = _reference_junction_zones(pruned_skeleton, radius)
+    pieces = _reference_fit_chains(contours, pruned_skeleton, zones, segment_length)
+    kept = _reference_prune_overlaps(pieces, mask.shape)
+    return skeleton, radius, pruned_skeleton, zones, pieces, kept
+
+
+def _assert_same_chains(fast, reference):
+    assert len(fast) == len(reference)
+    for a, b in zip(fast, reference, strict=True):
+        assert a.dtype == b.dtype and a.shape == b.shape
+        np.testing.assert_array_equal(a, b)
+
+
+def _assert_steps_match(mask, segment_length=10.0):
+    skeleton, radius, pruned_skeleton, zones, pieces, kept = _reference_steps(mask, segment_length)
+
+    fast_skeleton = skeletonize(mask)
+    assert fast_skeleton.dtype == bool
+    np.testing.assert_array_equal(fast_skeleton, skeleton)
+    fast_radius = max(estimate_radius(mask, fast_skeleton), 1.0)
+    assert fast_radius == radius
+    assert estimate_radius(mask, fast_skeleton, distance_transform(mask)) == estimate_radius(
+        mask, fast_skeleton
+    )
+    fast_pruned = remove_spurs(fast_skeleton, 2.5 * fast_radius)
+    np.testing.assert_array_equal(fast_pruned, pruned_skeleton)
+    np.testing.assert_array_equal(
+        branch_counts(fast_pruned), _reference_branch_counts(pruned_skeleton)
+    )
+    fast_zones = junction_zones(fast_pruned, fast_radius)
+    assert fast_zones.dtype == bool
+    np.testing.assert_array_equal(fast_zones, zones)
+    fast_pieces = fit_chains(extract_contours(fast_pruned), fast_pruned, fast_zones, segment_length)
+    _assert_same_chains(fast_pieces, pieces)
+    _assert_same_chains(prune_overlaps(fast_pieces, mask.shape), kept)
+
+
+# --------------------------------------------------------------------------- tests
+
+
+@pytest.mark.parametrize("name", sorted(INPUTS))
+def test_fast_steps_equal_the_reference_steps(name):
+    _assert_steps_match(INPUTS[name])
+
+
+def test_fitting_with_short_segments_equals_the_reference():
+    _assert_steps_match(INPUTS["random3"], segment_length=3.0)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_thinning_equals_scikit_image_on_random_noise(seed):
+    # Dense noise makes every removal pattern of the thinning table occur.
+    rng = np.random.default_rng(seed)
+    mask = rng.random((64, 80)) < (0.5 + 0.1 * seed)
+    np.testing.assert_array_equal(skeletonize(mask), skimage_skeletonize(mask))
+    full = np.ones((7 + seed, 9), bool)
+    np.testing.assert_array_equal(skeletonize(full), skimage_skeletonize(full))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_distance_transform_equals_opencv(seed):
+    rng = np.random.default_rng(seed)
+    mask = cv2.dilate((rng.random((90, 70)) < 0.05).astype(np.uint8), np.ones((9, 9), np.uint8))
+    mask[rng.random(mask.shape) < 0.03] = 0
+    for image in (mask, np.ones((6, 9), np.uint8), np.zeros((5, 5), np.uint8)):
+        np.testing.assert_array_equal(
+            distance_transform(image > 0), cv2.distanceTransform(image, cv2.DIST_L2, 5)
+        )
+
+
+def test_chain_lengths_add_up_like_numpy():
+    rng = np.random.default_rng(0)
+    arrays = [rng.random((n, 2)) * 300 for n in (0, 1, 2, 7, 8, 9, 130, 300, 1100)]
+    ends = np.cumsum([len(a) for a in arrays])
+    lengths = _kernels.chain_lengths(np.concatenate(arrays), ends)
+    assert list(lengths) == [_reference_chain_length(a) for a in arrays]
+
+
+def test_warm_up_runs_and_is_cheap_the_second_time():
+    _kernels.warm_up()
+    _kernels.warm_up()
+
+
+@pytest.mark.slow
+@pytest.mark.shared_data
+def test_fast_steps_equal_the_reference_steps_on_mbest_labels():
+    if not MBEST.is_dir():
+        pytest.skip(f"{MBEST} not present")
+    labels = sorted(MBEST.glob("S*/labels/*.png"))[::25]
+    assert labels
+    for path in labels:
+        mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED) > 0
+        _assert_steps_match(mask)
