@@ -99,6 +99,9 @@ def cue_images(image_bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # Otsu separability above which a cue is taken as clearly two-class (cable and not).
 BIMODAL_SEPARABILITY = 0.8
+# A less clearly two-class cue still counts when its bright class is this thin.
+THIN_SEPARABILITY = 0.5
+THIN_FOREGROUND_SHARE = 0.25
 # Hysteresis: pixels down to this fraction of the way from the background's mean to
 # Otsu's threshold are cable when they touch pixels above the threshold, which keeps
 # dim stretches and soft edges of a cable without letting background pixels in.
@@ -115,29 +118,42 @@ def hysteresis_threshold(cue: np.ndarray, low: float, high: float) -> np.ndarray
     return keep[labels]
 
 
+def _cable_like(cue: np.ndarray, threshold: float, separability: float) -> bool:
+    """Does thresholding this cue look like cables against a background?
+
+    Either the histogram is clearly two-class, or it is moderately so and the bright
+    class is a small share of the image: cables are thin, while a split of plain
+    texture puts about half the image on each side.
+    """
+    if separability >= BIMODAL_SEPARABILITY:
+        return True
+    share = float(np.count_nonzero(cue > threshold)) / cue.size
+    return separability >= THIN_SEPARABILITY and share <= THIN_FOREGROUND_SHARE
+
+
 def segment_auto(image_bgr: np.ndarray) -> np.ndarray:
     """Foreground mask from brightness, or from colourfulness when brightness fails.
 
-    Brightness thresholded by Otsu's method (with hysteresis) is used whenever its
-    histogram is clearly two-class: it keeps white and coloured cables alike, and
-    its edges follow the cable better than colour, which JPEG chroma subsampling
-    smears. Otherwise (a colourful cable on a light surface) colourfulness is used
-    if it is clearly two-class; if neither is, the image is taken to show no cable
-    and the mask is empty.
+    Brightness thresholded by Otsu's method (with hysteresis) is used whenever it
+    looks like cables against a background (:func:`_cable_like`): it keeps white and
+    coloured cables alike, and its edges follow the cable better than colour, which
+    JPEG chroma subsampling smears. Otherwise (a colourful cable on a light surface)
+    colourfulness is used if it looks like cables; if neither does, the image is taken
+    to show no cable and the mask is empty.
     """
     # No blur: it moves the border of thin cables more than it removes noise, and
     # the clean-up afterwards removes the specks noise leaves.
     brightness, colourfulness = cue_images(image_bgr)
     threshold, separability = _otsu(brightness)
-    if separability >= BIMODAL_SEPARABILITY:
+    if _cable_like(brightness, threshold, separability):
         below = brightness[brightness <= threshold]
         background = float(below.mean()) if below.size else 0.0
         low = background + HYSTERESIS_FRACTION * (threshold - background)
         return hysteresis_threshold(brightness, low, threshold)
     colour_threshold, colour_separability = _otsu(colourfulness)
-    if colour_separability >= BIMODAL_SEPARABILITY:
+    if _cable_like(colourfulness, colour_threshold, colour_separability):
         return colourfulness > colour_threshold
-    # Neither cue has two clear classes: an empty table, or cables this method cannot
+    # Neither cue looks like cables: an empty table, or cables this method cannot
     # tell from their background. Reporting nothing is safer for a robot than chains
     # traced through texture; such scenes need a mask or an HSV range.
     return np.zeros(brightness.shape, bool)
