@@ -17,14 +17,13 @@ from collections.abc import Callable, Iterable
 from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as installed_version
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import Annotated
 
 import numpy as np
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
-from rich.text import Text
 
 from adapters.cli import grasp_app
 from schemas import Detection, DetectParams, SegmentationMethod
@@ -41,6 +40,13 @@ from service.batch import (
     process_file,
 )
 from service.bench import bench_command
+from service.console import (
+    EXIT_FAILED,
+    exit_usage,
+    print_error,
+    print_warning,
+    stderr_console,
+)
 from service.evaluation.cli import eval_command
 from service.http.cli import serve_command
 from service.imageio import OutputWriteError, write_png
@@ -57,10 +63,6 @@ from service.video import (
     process_stream,
 )
 
-EXIT_FAILED = 1
-"""At least one input could not be processed."""
-EXIT_USAGE = 2
-"""The command line itself is wrong; nothing was processed."""
 EXIT_INTERRUPTED = 130
 """Ctrl-C before anything was processed (128 + SIGINT, as shells report it)."""
 
@@ -181,7 +183,7 @@ def detect(
     JSON per frame to <stem>.jsonl: {"frame": i, "timestamp_s": t, "detection": {...}}.
     Ctrl-C stops cleanly, keeping every line written so far.
     """
-    console = _stderr_console()
+    console = stderr_console()
     try:
         params = build_params(
             segment_length=segment_length,
@@ -192,17 +194,17 @@ def detect(
         )
         selected = OUTPUT_KINDS if outputs is None else parse_outputs(outputs)
     except InvalidParametersError as exc:
-        _exit_usage(console, str(exc))
+        exit_usage(console, str(exc))
     if max_frames is not None and max_frames < 1:
-        _exit_usage(console, "--max-frames: must be at least 1")
+        exit_usage(console, "--max-frames: must be at least 1")
 
     if camera is not None:
         if paths:
-            _exit_usage(console, "--camera cannot be combined with PATH arguments")
+            exit_usage(console, "--camera cannot be combined with PATH arguments")
         if mask is not None:
-            _exit_usage(console, "--mask applies to a single input image")
+            exit_usage(console, "--mask applies to a single input image")
         if out_dir is None:
-            _exit_usage(console, "--camera needs --out-dir")
+            exit_usage(console, "--camera needs --out-dir")
         stream_outputs = _stream_outputs(console, outputs, selected, overlay_video)
         _make_out_dir(console, out_dir)
         source = parse_camera(camera)
@@ -214,24 +216,24 @@ def detect(
         raise typer.Exit(0 if summary is not None and summary.succeeded else EXIT_FAILED)
 
     if not paths:
-        _exit_usage(console, "give image or video files (PATH...), or --camera SRC")
+        exit_usage(console, "give image or video files (PATH...), or --camera SRC")
     files, problems = expand_inputs(paths)
     videos = [path for path in files if is_video_path(path)]
     images = [path for path in files if not is_video_path(path)]
     if mask is not None and (len(paths) != 1 or len(files) > 1 or videos):
-        _exit_usage(console, "--mask applies to a single input image")
+        exit_usage(console, "--mask applies to a single input image")
     if out_dir is None and videos:
-        _exit_usage(console, "videos need --out-dir")
+        exit_usage(console, "videos need --out-dir")
     if out_dir is None and len(files) > 1:
-        _exit_usage(console, "several inputs need --out-dir")
+        exit_usage(console, "several inputs need --out-dir")
     if out_dir is None and outputs is not None:
-        _exit_usage(console, "--outputs needs --out-dir")
+        exit_usage(console, "--outputs needs --out-dir")
     stream_outputs = (
         _stream_outputs(console, outputs, selected, overlay_video) if videos else (False, False)
     )
 
     for problem in problems:
-        _print_error(console, problem)
+        print_error(console, problem)
     failed = len(problems)
 
     if out_dir is None:
@@ -257,7 +259,7 @@ def detect(
         if interrupted:
             break
         if path in clashes:
-            _print_error(
+            print_error(
                 console, f"{path}: outputs would overwrite those of {clashes[path]} (same name)"
             )
             failed += 1
@@ -292,7 +294,7 @@ def demo(
     ] = None,
 ) -> None:
     """Generate the bundled synthetic example scene and detect the cables in it."""
-    console = _stderr_console()
+    console = stderr_console()
     width, height = DEMO_SIZE
     try:
         # Imported here so that `dlo detect` does not depend on the scene generator.
@@ -310,7 +312,7 @@ def demo(
             side_by_side = np.hstack([scene.image, overlay])[::2, ::2]
             write_png(figure, np.ascontiguousarray(side_by_side))
     except Exception as exc:  # report any failure on one line, never a traceback
-        _print_error(console, failure_message("demo", exc))
+        print_error(console, failure_message("demo", exc))
         raise typer.Exit(EXIT_FAILED) from None
 
     _print_summary(console, detection, len(scene.cables), elapsed_ms)
@@ -354,7 +356,7 @@ def _stream_outputs(
     if given is None:
         return True, overlay_video
     if "labels" in chosen:
-        _exit_usage(console, "--outputs: labels are not available for videos (use json, overlay)")
+        exit_usage(console, "--outputs: labels are not available for videos (use json, overlay)")
     return "json" in chosen, "overlay" in chosen or overlay_video
 
 
@@ -362,7 +364,7 @@ def _make_out_dir(console: Console, out_dir: Path) -> None:
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        _print_error(console, f"{out_dir}: cannot create output directory: {exc.strerror or exc}")
+        print_error(console, f"{out_dir}: cannot create output directory: {exc.strerror or exc}")
         raise typer.Exit(EXIT_FAILED) from None
 
 
@@ -394,7 +396,7 @@ def _detect_images(
             for path in images:
                 progress.update(task, description=path.name)
                 if path in clashes:
-                    _print_error(
+                    print_error(
                         console,
                         f"{path}: outputs would overwrite those of {clashes[path]} (same name)",
                     )
@@ -432,7 +434,7 @@ def _run_stream(
     try:
         source = open_source()
     except VideoSourceError as exc:
-        _print_error(console, str(exc))
+        print_error(console, str(exc))
         return None
     except KeyboardInterrupt:
         return StreamSummary(source="", interrupted=True)
@@ -455,9 +457,9 @@ def _run_stream(
         nonlocal reported
         if outcome.problem is not None:
             if reported < FRAME_MESSAGES_PER_STREAM:
-                _print_warning(console, f"{source.label}: {outcome.problem}")
+                print_warning(console, f"{source.label}: {outcome.problem}")
             elif reported == FRAME_MESSAGES_PER_STREAM:
-                _print_warning(
+                print_warning(
                     console, f"{source.label}: further skipped frames are only counted below"
                 )
             reported += 1
@@ -478,16 +480,16 @@ def _run_stream(
                 on_frame=on_frame,
             )
         except OutputWriteError as exc:
-            _print_error(console, str(exc))
+            print_error(console, str(exc))
             return None
 
     if summary.stop_reason is not None:
-        report = _print_warning if summary.processed else _print_error
+        report = print_warning if summary.processed else print_error
         report(console, f"{source.label}: {summary.stop_reason}")
     if summary.output_error is not None:
-        _print_error(console, summary.output_error)
+        print_error(console, summary.output_error)
     elif summary.processed == 0 and not summary.interrupted and summary.stop_reason is None:
-        _print_error(console, f"{source.label}: no frame could be processed")
+        print_error(console, f"{source.label}: no frame could be processed")
     console.print(_stream_summary_line(summary), markup=False, highlight=False, soft_wrap=True)
     return summary
 
@@ -520,7 +522,7 @@ def _process_or_report(
     try:
         return process_file(path, params, out_dir, mask_path=mask, outputs=frozenset(outputs))
     except Exception as exc:  # every failure is reported per file and the batch goes on
-        _print_error(console, failure_message(path, exc))
+        print_error(console, failure_message(path, exc))
         return None
 
 
@@ -570,24 +572,3 @@ def _print_summary(
         highlight=False,
         soft_wrap=True,
     )
-
-
-def _stderr_console() -> Console:
-    return Console(stderr=True)
-
-
-def _print_error(console: Console, message: str) -> None:
-    line = Text("error: ", style="bold red")
-    line.append(message)
-    console.print(line, soft_wrap=True, highlight=False)
-
-
-def _print_warning(console: Console, message: str) -> None:
-    line = Text("warning: ", style="bold yellow")
-    line.append(message)
-    console.print(line, soft_wrap=True, highlight=False)
-
-
-def _exit_usage(console: Console, message: str) -> NoReturn:
-    _print_error(console, message)
-    raise typer.Exit(EXIT_USAGE)

@@ -29,16 +29,14 @@ import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any, NoReturn, TextIO
+from typing import Annotated, Any, TextIO
 
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
-from rich.text import Text
 
-EXIT_FAILED = 1
-EXIT_USAGE = 2
+from service.console import EXIT_FAILED, exit_usage, print_error
 
 SYNTHETIC_SIZE = (1280, 720)
 SYNTHETIC_CABLES = "1-3"
@@ -131,7 +129,7 @@ def eval_command(
     """Score the detector on a labelled data set, or on synthetic scenes (--synthetic N)."""
     errors = Console(stderr=True)
     if worst < 0:
-        _exit_usage(errors, "--worst must be 0 or more")
+        exit_usage(errors, "--worst must be 0 or more")
     synthetic_options = {
         "--seed": seed,
         "--occluders": occluders,
@@ -141,14 +139,14 @@ def eval_command(
     }
     if synthetic is None:
         if dataset_dir is None:
-            _exit_usage(errors, "give a DATASET_DIR or --synthetic N")
+            exit_usage(errors, "give a DATASET_DIR or --synthetic N")
         given = [name for name, value in synthetic_options.items() if value is not None]
         if given:
-            _exit_usage(errors, f"{', '.join(given)} apply only with --synthetic N")
+            exit_usage(errors, f"{', '.join(given)} apply only with --synthetic N")
         _run_dataset(errors, dataset_dir, mask_from_labels, csv_file, out_dir, worst, json_output)
     else:
         if dataset_dir is not None:
-            _exit_usage(errors, "give either a DATASET_DIR or --synthetic N, not both")
+            exit_usage(errors, "give either a DATASET_DIR or --synthetic N, not both")
         _run_synthetic(
             errors,
             synthetic,
@@ -183,9 +181,9 @@ def _run_dataset(
     try:
         items, unlabelled = dataset.find_labelled_images(root)
     except dataset.DatasetLayoutError as exc:
-        _exit_usage(errors, str(exc))
+        exit_usage(errors, str(exc))
     for problem in unlabelled:
-        _print_error(errors, problem)
+        print_error(errors, problem)
     _make_out_dir(errors, out_dir)
 
     scores = []
@@ -208,7 +206,7 @@ def _run_dataset(
                 if out_dir is not None:
                     _write_outputs(out_dir / f"{item.subset}_{item.name}", image, result, predicted)
             except Exception as exc:  # one line per failed image; the run goes on
-                _print_error(errors, _failure(item.image, exc))
+                print_error(errors, _failure(item.image, exc))
                 failed += 1
             else:
                 scores.append(score)
@@ -308,17 +306,17 @@ def _run_synthetic(
     from service.synthetic import make_scene
 
     if count < 1:
-        _exit_usage(errors, "--synthetic must be 1 or more")
+        exit_usage(errors, "--synthetic must be 1 or more")
     if first_seed < 0:
-        _exit_usage(errors, "--seed must be 0 or more")
+        exit_usage(errors, "--seed must be 0 or more")
     if occluders < 0:
-        _exit_usage(errors, "--occluders must be 0 or more")
+        exit_usage(errors, "--occluders must be 0 or more")
     if width < MIN_SIDE or height < MIN_SIDE:
-        _exit_usage(errors, f"--width and --height must be {MIN_SIDE} or more")
+        exit_usage(errors, f"--width and --height must be {MIN_SIDE} or more")
     try:
         low, high = synthetic_eval.parse_cable_counts(cables)
     except ValueError as exc:
-        _exit_usage(errors, str(exc))
+        exit_usage(errors, str(exc))
     _make_out_dir(errors, out_dir)
 
     scores = []
@@ -343,7 +341,7 @@ def _run_synthetic(
                     predicted = render_labels(result.detection, result.mask)
                     _write_outputs(stem, scene.image, result, predicted)
             except Exception as exc:  # one line per failed scene; the run goes on
-                _print_error(errors, _failure(f"scene seed {seed}", exc))
+                print_error(errors, _failure(f"scene seed {seed}", exc))
                 failed += 1
             else:
                 scores.append(score)
@@ -486,7 +484,7 @@ def _make_out_dir(errors: Console, out_dir: Path | None) -> None:
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        _exit_usage(errors, f"{out_dir}: cannot create output directory: {exc.strerror or exc}")
+        exit_usage(errors, f"{out_dir}: cannot create output directory: {exc.strerror or exc}")
 
 
 @contextmanager
@@ -498,7 +496,7 @@ def _csv_writer(errors: Console, path: Path | None, columns) -> Iterator:
     try:
         handle: TextIO = path.open("w", newline="", encoding="utf-8")
     except OSError as exc:
-        _exit_usage(errors, f"{path}: cannot write the CSV file: {exc.strerror or exc}")
+        exit_usage(errors, f"{path}: cannot write the CSV file: {exc.strerror or exc}")
     with handle:
         writer = csv.DictWriter(handle, fieldnames=list(columns))
         writer.writeheader()
@@ -550,14 +548,3 @@ def _finite(value: float, digits: int = 4) -> float | None:
 
 def _print_json(data: dict[str, Any]) -> None:
     typer.echo(json.dumps(data, indent=2))
-
-
-def _print_error(console: Console, message: str) -> None:
-    line = Text("error: ", style="bold red")
-    line.append(message)
-    console.print(line, soft_wrap=True, highlight=False)
-
-
-def _exit_usage(console: Console, message: str) -> NoReturn:
-    _print_error(console, message)
-    raise typer.Exit(EXIT_USAGE)
