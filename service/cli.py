@@ -40,6 +40,7 @@ from service.batch import (
     process_file,
 )
 from service.bench import bench_command
+from service.bus_cli import router_command
 from service.console import (
     EXIT_FAILED,
     exit_usage,
@@ -335,6 +336,7 @@ app.command("eval")(eval_command)
 # Commands that live beside their own packages: the HTTP service, the benchmark and
 # the robot adapters' grasp planning.
 app.command("serve")(serve_command)
+app.command("router")(router_command)
 app.command("bench")(bench_command)
 app.add_typer(grasp_app, name="grasp")
 

@@ -48,6 +48,8 @@ def create_app(settings: Settings | None = None, detect: DetectFunction | None =
         state = AppState.start(settings, metrics, detect)
         app.state.dlo = state
         state.background.append(asyncio.create_task(_warm_up(state)))
+        if settings.zenoh:
+            state.background.append(asyncio.create_task(_open_bus(state)))
         try:
             yield
         finally:
@@ -79,6 +81,31 @@ async def _warm_up(state: AppState) -> None:
     state.ready = True
     state.metrics.ready.set(1)
     logger.info("warm-up detection done; ready")
+
+
+async def _open_bus(state: AppState) -> None:
+    """Open the zenoh front end (in a thread: opening may take a moment)."""
+    from service.bus import DetectionBus, make_config  # only load zenoh when enabled
+
+    settings = state.settings
+    try:
+        config = make_config(settings.zenoh_config, multicast=settings.zenoh_multicast)
+        bus = DetectionBus(
+            config,
+            detect=state.detect,
+            metrics=state.metrics,
+            max_pixels=settings.max_pixels,
+            max_bytes=settings.max_body_bytes,
+        )
+        state.bus = bus  # before opening: close() then waits for open() to finish
+        await asyncio.to_thread(bus.open)
+    except asyncio.CancelledError:
+        raise
+    except Exception as exc:
+        state.bus_error = f"zenoh session failed to open: {type(exc).__name__}: {exc}"
+        logger.exception("zenoh session failed to open; /readyz answers 503")
+        return
+    logger.info("zenoh session open; serving dlo/*/image and dlo/detect")
 
 
 async def _request_error(request: Request, exc: Exception) -> JSONResponse:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -20,18 +21,40 @@ def serve_command(
         int | None,
         typer.Option(help="Detection threads (env DLO_WORKERS, default 2)."),
     ] = None,
+    zenoh: Annotated[
+        bool | None,
+        typer.Option(
+            "--zenoh/--no-zenoh",
+            help="Also serve over zenoh: dlo/*/image -> dlo/*/chains, dlo/detect "
+            "(env DLO_ZENOH, default on).",
+        ),
+    ] = None,
+    zenoh_config: Annotated[
+        Path | None,
+        typer.Option(
+            exists=True,
+            dir_okay=False,
+            help="zenoh JSON5 configuration file (env DLO_ZENOH_CONFIG; default: a peer).",
+        ),
+    ] = None,
 ) -> None:
     """Serve detection over HTTP (POST /v1/detect; OpenAPI docs at /docs).
 
     Other settings come from DLO_* environment variables: DLO_QUEUE_SIZE,
-    DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_LOG_LEVEL (see the README).
+    DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_ZENOH_MULTICAST, DLO_LOG_LEVEL (see the README).
     """
     # Imported here so that the other commands do not load the web stack.
     import uvicorn
 
     from service.http import Settings, create_app
 
-    options = {"host": host, "port": port, "workers": workers}
+    options = {
+        "host": host,
+        "port": port,
+        "workers": workers,
+        "zenoh": zenoh,
+        "zenoh_config": zenoh_config,
+    }
     try:
         settings = Settings(**{name: value for name, value in options.items() if value is not None})
     except ValidationError as exc:

@@ -53,6 +53,20 @@ class Metrics:
             "Detections running or waiting in the queue.",
             registry=self.registry,
         )
+        self.bus_frames = Counter(
+            "dlo_zenoh_frames",
+            "Samples received on the zenoh bus, by outcome: published, replaced (a newer "
+            "frame of the same camera arrived before it was processed), rejected (not an "
+            "image or bad parameters) or failed (detection failed inside the service).",
+            ("outcome",),
+            registry=self.registry,
+        )
+        self.bus_queries = Counter(
+            "dlo_zenoh_queries",
+            "Queries on dlo/detect, by outcome: answered, rejected, failed or busy.",
+            ("outcome",),
+            registry=self.registry,
+        )
         self.ready = Gauge(
             "dlo_ready", "1 once the warm-up detection has finished.", registry=self.registry
         )

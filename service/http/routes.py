@@ -162,16 +162,19 @@ async def healthz() -> dict[str, str]:
 
 @router.get(
     "/readyz",
-    summary="Readiness: the warm-up detection has run",
-    responses={503: {"description": "Still warming up, or the warm-up failed."}},
+    summary="Readiness: the warm-up detection has run (and the zenoh session is open)",
+    responses={503: {"description": "Still warming up, or the warm-up or zenoh failed."}},
 )
 async def readyz(request: Request) -> JSONResponse:
     state = app_state(request)
-    if state.ready:
+    if state.bus_error is not None:
+        return JSONResponse({"status": "failed", "detail": state.bus_error}, status_code=503)
+    if state.ready and state.bus_ready:
         return JSONResponse({"status": "ready"})
     if state.warm_up_error is not None:
         return JSONResponse({"status": "failed", "detail": state.warm_up_error}, status_code=503)
-    return JSONResponse({"status": "warming up"}, status_code=503, headers={"Retry-After": "1"})
+    status = "warming up" if not state.ready else "opening the zenoh session"
+    return JSONResponse({"status": status}, status_code=503, headers={"Retry-After": "1"})
 
 
 @router.get("/metrics", summary="Prometheus metrics", response_class=Response)

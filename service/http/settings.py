@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Literal
 
 from pydantic import Field, field_validator
@@ -33,6 +34,16 @@ class Settings(BaseSettings):
     )
     max_body_mb: float = Field(
         25.0, gt=0, le=1000, description="Largest request body accepted, in MiB (413)."
+    )
+    zenoh: bool = Field(
+        True, description="Also serve detection over zenoh (dlo/*/image, dlo/detect)."
+    )
+    zenoh_config: Path | None = Field(
+        None, description="zenoh JSON5 configuration file; default: an embedded peer."
+    )
+    zenoh_multicast: bool | None = Field(
+        None,
+        description="Multicast scouting on/off; default: as the configuration file (or zenoh).",
     )
     log_level: Literal["critical", "error", "warning", "info", "debug"] = Field(
         "info", description="Server log level."

@@ -8,11 +8,14 @@ import logging
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from service.http.jobs import DetectFunction
 from service.http.metrics import Metrics
 from service.http.settings import Settings
+
+if TYPE_CHECKING:
+    from service.bus import DetectionBus
 
 logger = logging.getLogger(__name__)
 
@@ -75,8 +78,8 @@ class WorkerPool:
 class AppState:
     """Everything the routes need, created by the app's lifespan.
 
-    A later front end (e.g. a zenoh subscriber) shares the same pool and metrics, so that
-    the limits hold across all of them.
+    The zenoh front end (:class:`service.bus.DetectionBus`, in ``bus`` when enabled)
+    shares the metrics and the detect function; it runs detection in a thread of its own.
     """
 
     settings: Settings
@@ -86,6 +89,13 @@ class AppState:
     ready: bool = False
     warm_up_error: str | None = None
     background: list[asyncio.Task[Any] | Future[Any]] = field(default_factory=list)
+    bus: DetectionBus | None = None
+    bus_error: str | None = None
+
+    @property
+    def bus_ready(self) -> bool:
+        """True when zenoh is disabled, or its session is open."""
+        return not self.settings.zenoh or (self.bus is not None and self.bus.is_open)
 
     @classmethod
     def start(cls, settings: Settings, metrics: Metrics, detect: DetectFunction) -> AppState:
@@ -96,4 +106,6 @@ class AppState:
     async def close(self) -> None:
         for task in self.background:
             task.cancel()
+        if self.bus is not None:
+            await asyncio.to_thread(self.bus.close)
         self.pool.shutdown()
