@@ -1,4 +1,4 @@
-"""Compiled pixel loops of steps 2 to 5 (numba, one thread, no GIL held).
+"""Compiled pixel loops of steps 2 to 6 (numba, one thread, no GIL held).
 
 Every kernel here reproduces, bit for bit, the result of the plain NumPy / OpenCV /
 scikit-image code it replaced; ``tests/perception/test_speed_equivalence.py`` keeps
@@ -685,6 +685,142 @@ def uncovered_runs(joints, coverage):
     return runs[:n_runs]
 
 
+# --------------------------------------------------------------------------- merging
+
+
+@njit(cache=True, nogil=True)
+def segment_intersections(starts, ends, chain_ids, indices, order, stops):
+    """The sweep of crossings.find_intersections over all segments, in its order.
+
+    ``order`` sorts the segments by their smallest x and ``stops[k]`` is where the
+    segments of ``order`` that may overlap ``order[k]`` along x end. Returns the
+    pairs ``(a, b)`` of proper intersections (``a`` the segment of the sweep) and
+    the parameter ``t`` of the point along ``a``, with the same float64 arithmetic.
+    """
+    n = order.size
+    capacity = 16
+    pairs = np.empty((capacity, 2), np.int64)
+    params = np.empty(capacity, np.float64)
+    count = 0
+    for position in range(n):
+        a = order[position]
+        ax0 = starts[a, 0]
+        ay0 = starts[a, 1]
+        rx = ends[a, 0] - ax0
+        ry = ends[a, 1] - ay0
+        a_lo_y = min(ay0, ends[a, 1])
+        a_hi_y = max(ay0, ends[a, 1])
+        for k in range(position + 1, stops[position]):
+            b = order[k]
+            bx0 = starts[b, 0]
+            by0 = starts[b, 1]
+            bx1 = ends[b, 0]
+            by1 = ends[b, 1]
+            if not (min(by0, by1) <= a_hi_y and max(by0, by1) >= a_lo_y):
+                continue
+            if chain_ids[b] == chain_ids[a] and abs(indices[b] - indices[a]) <= 2:
+                continue
+            sx = bx1 - bx0
+            sy = by1 - by0
+            denom = rx * sy - ry * sx
+            if not abs(denom) > 1e-12:
+                continue
+            qpx = bx0 - ax0
+            qpy = by0 - ay0
+            t = (qpx * sy - qpy * sx) / denom
+            u = (qpx * ry - qpy * rx) / denom
+            if t >= 0 and t < 1 and u >= 0 and u < 1:
+                if count == capacity:
+                    capacity *= 2
+                    grown = np.empty((capacity, 2), np.int64)
+                    grown[:count] = pairs[:count]
+                    pairs = grown
+                    grown_params = np.empty(capacity, np.float64)
+                    grown_params[:count] = params[:count]
+                    params = grown_params
+                pairs[count, 0] = a
+                pairs[count, 1] = b
+                params[count] = t
+                count += 1
+    return pairs[:count], params[:count]
+
+
+@njit(cache=True, nogil=True)
+def resample_kernel(points, step):
+    """The loop of geometry.resample in float64 (a correctly rounded square root)."""
+    n = points.shape[0]
+    step_sq = step * step
+    capacity = 16
+    joints = np.empty((capacity, 2), np.float64)
+    edges = np.empty(capacity, np.int64)
+    cx = points[0, 0]
+    cy = points[0, 1]
+    joints[0, 0] = cx
+    joints[0, 1] = cy
+    edges[0] = 0
+    count = 1
+    edge = 0
+    while edge < n - 1:
+        ax = points[edge, 0]
+        ay = points[edge, 1]
+        bx = points[edge + 1, 0]
+        by = points[edge + 1, 1]
+        if (bx - cx) ** 2 + (by - cy) ** 2 < step_sq:
+            edge += 1
+            continue
+        dx = bx - ax
+        dy = by - ay
+        fx = ax - cx
+        fy = ay - cy
+        qa = dx * dx + dy * dy
+        qb = 2.0 * (fx * dx + fy * dy)
+        qc = fx * fx + fy * fy - step_sq
+        disc = max(qb * qb - 4.0 * qa * qc, 0.0)
+        t = (-qb + np.sqrt(disc)) / (2.0 * qa) if qa > 0 else 1.0
+        t = min(max(t, 0.0), 1.0)
+        cx = ax + t * dx
+        cy = ay + t * dy
+        if count + 2 > capacity:
+            capacity *= 2
+            grown = np.empty((capacity, 2), np.float64)
+            grown[:count] = joints[:count]
+            joints = grown
+            grown_edges = np.empty(capacity, np.int64)
+            grown_edges[:count] = edges[:count]
+            edges = grown_edges
+        joints[count, 0] = cx
+        joints[count, 1] = cy
+        edges[count] = edge
+        count += 1
+    return joints[:count], edges[:count]
+
+
+@njit(cache=True, nogil=True)
+def inferred_segments(source_edge, edge_lengths, hidden_edge):
+    """The per-segment "inferred" flags of pipeline._finalise_path.
+
+    Segment ``k`` (joints ``k`` to ``k + 1``) spans the polyline edges
+    ``source_edge[k]`` to ``source_edge[k + 1]``; it is inferred when more than half of
+    their length is hidden (or, if they have no length, when the first one is). The
+    sums are added in NumPy's order (:func:`_pairwise_sum`), so the comparisons are
+    those of the plain code.
+    """
+    n = max(source_edge.size - 1, 0)
+    inferred = np.zeros(n, np.bool_)
+    scratch = np.empty(max(edge_lengths.size, 1), np.float64)
+    for k in range(n):
+        lo = source_edge[k]
+        hi = min(source_edge[k + 1] + 1, edge_lengths.size)
+        total = _pairwise_sum(edge_lengths, lo, hi) if hi > lo else 0.0
+        if total > 0:
+            for i in range(lo, hi):
+                scratch[i - lo] = edge_lengths[i] if hidden_edge[i] else 0.0
+            inferred[k] = _pairwise_sum(scratch, 0, hi - lo) > 0.5 * total
+        else:
+            inferred[k] = hidden_edge[source_edge[k]]
+    return inferred
+
+
 # --------------------------------------------------------------------------- warm-up
 
 
@@ -696,7 +832,9 @@ def warm_up() -> None:
     image pays nothing; calling it again costs well under a millisecond.
     """
     from service.perception.contours import extract_contours
+    from service.perception.crossings import find_intersections
     from service.perception.fitting import fit_chains, junction_zones
+    from service.perception.geometry import resample
     from service.perception.pruning import prune_overlaps
     from service.perception.skeleton import (
         branch_counts,
@@ -719,3 +857,11 @@ def warm_up() -> None:
     zones = junction_zones(skeleton, radius)
     chains = fit_chains(extract_contours(skeleton), skeleton, zones, 5.0)
     prune_overlaps(chains, mask.shape)
+    # Merging: resampling and the crossing search (two chains that cross).
+    strands = [
+        np.array([[0.0, 5.0], [4.0, 5.0], [8.0, 5.0], [12.0, 5.0]]),
+        np.array([[6.0, 0.0], [6.0, 4.0], [6.0, 8.0], [6.0, 12.0]]),
+    ]
+    resample(strands[0], 2.0)
+    find_intersections(strands)
+    inferred_segments(np.array([0, 1, 2]), np.array([1.0, 0.0, 2.0]), np.array([True, False, True]))

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from service.perception import _kernels
+
 
 @dataclass(frozen=True)
 class CrossingFound:
@@ -46,56 +48,98 @@ def find_intersections(chains: list[np.ndarray]) -> list[tuple[int, int, int, in
     starts, ends, chain_ids, indices = _segments(chains)
     lo = np.minimum(starts, ends)
     hi = np.maximum(starts, ends)
-    found = []
-    # Sweep along x: only segments whose x ranges overlap can intersect.
+    # Sweep along x: only segments whose x ranges overlap can intersect. The sweep
+    # itself is compiled (_kernels.segment_intersections).
     order = np.argsort(lo[:, 0])
     lo_sorted_x = lo[order, 0]
-    for position, a in enumerate(order):
-        stop = np.searchsorted(lo_sorted_x, hi[a, 0], side="right")
-        others = order[position + 1 : stop]
-        if len(others) == 0:
-            continue
-        others = others[(lo[others, 1] <= hi[a, 1]) & (hi[others, 1] >= lo[a, 1])]
-        same = chain_ids[others] == chain_ids[a]
-        near = np.abs(indices[others] - indices[a]) <= 2
-        others = others[~(same & near)]
-        if len(others) == 0:
-            continue
-        p, r = starts[a], ends[a] - starts[a]
-        q, s = starts[others], ends[others] - starts[others]
-        denom = r[0] * s[:, 1] - r[1] * s[:, 0]
-        qp = q - p
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (qp[:, 0] * s[:, 1] - qp[:, 1] * s[:, 0]) / denom
-            u = (qp[:, 0] * r[1] - qp[:, 1] * r[0]) / denom
-        hit = (np.abs(denom) > 1e-12) & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
-        for b, t_hit in zip(others[hit], t[hit], strict=True):
-            first, second = (
-                (a, b) if (chain_ids[a], indices[a]) <= (chain_ids[b], indices[b]) else (b, a)
+    stops = np.searchsorted(lo_sorted_x, hi[order, 0], side="right")
+    pairs, params = _kernels.segment_intersections(
+        np.ascontiguousarray(starts, np.float64),
+        np.ascontiguousarray(ends, np.float64),
+        chain_ids.astype(np.int64),
+        indices.astype(np.int64),
+        order.astype(np.int64),
+        stops.astype(np.int64),
+    )
+    found = []
+    for (a, b), t_hit in zip(pairs.tolist(), params, strict=True):
+        first, second = (
+            (a, b) if (chain_ids[a], indices[a]) <= (chain_ids[b], indices[b]) else (b, a)
+        )
+        found.append(
+            (
+                int(chain_ids[first]),
+                int(indices[first]),
+                int(chain_ids[second]),
+                int(indices[second]),
+                starts[a] + t_hit * (ends[a] - starts[a]),
             )
-            found.append(
-                (
-                    int(chain_ids[first]),
-                    int(indices[first]),
-                    int(chain_ids[second]),
-                    int(indices[second]),
-                    p + t_hit * r,
-                )
-            )
+        )
     return found
+
+
+def _profile_maps(centre: np.ndarray, direction: np.ndarray, half_length: float):
+    """The ``float32`` sampling maps of a line through ``centre`` (1 px apart)."""
+    offsets = np.arange(-half_length, half_length + 0.5, 1.0)
+    points = centre[None, :] + offsets[:, None] * direction[None, :]
+    map_x = points[:, 0].astype(np.float32).reshape(1, -1)
+    map_y = points[:, 1].astype(np.float32).reshape(1, -1)
+    return map_x, map_y
+
+
+def _variation(image_lab: np.ndarray, map_x: np.ndarray, map_y: np.ndarray) -> float:
+    samples = cv2.remap(image_lab, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    samples = samples.reshape(-1, image_lab.shape[2])
+    return float(np.abs(np.diff(samples, axis=0)).sum(axis=1).mean())
 
 
 def profile_variation(
     image_lab: np.ndarray, centre: np.ndarray, direction: np.ndarray, half_length: float
 ) -> float:
     """Mean absolute change of the image per pixel along a line through ``centre``."""
-    offsets = np.arange(-half_length, half_length + 0.5, 1.0)
-    points = centre[None, :] + offsets[:, None] * direction[None, :]
-    map_x = points[:, 0].astype(np.float32).reshape(1, -1)
-    map_y = points[:, 1].astype(np.float32).reshape(1, -1)
-    samples = cv2.remap(image_lab, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
-    samples = samples.reshape(-1, image_lab.shape[2])
-    return float(np.abs(np.diff(samples, axis=0)).sum(axis=1).mean())
+    return _variation(image_lab, *_profile_maps(centre, direction, half_length))
+
+
+def _lab(image_bgr: np.ndarray) -> np.ndarray:
+    """The image as ``float32`` Lab after a 3x3 Gaussian blur."""
+    blurred = cv2.GaussianBlur(image_bgr, (3, 3), 0)
+    return cv2.cvtColor(blurred, cv2.COLOR_BGR2LAB).astype(np.float32)
+
+
+# Pixels round the samples' box that the bilinear samples and the blur may read.
+_SAMPLE_MARGIN = 2
+_BLUR_MARGIN = 1
+
+
+def profile_variations(
+    image_bgr: np.ndarray, lines: list[tuple[np.ndarray, np.ndarray, float]], full_lab=None
+) -> tuple[list[float], np.ndarray | None]:
+    """:func:`profile_variation` of several lines, in ``_lab(image_bgr)``.
+
+    Blurs and converts only the patch round the lines when they stay clear of the
+    image border, which gives the very same samples: the blur and the colour
+    conversion of a pixel depend on its 3x3 neighbourhood alone, every bilinear
+    sample reads pixels inside the patch, and the sample coordinates move by whole
+    pixels (exact in ``float32``). Near the border (where the reflection would differ)
+    the whole image is converted, once, and returned for the next call.
+    """
+    maps = [_profile_maps(centre, direction, half) for centre, direction, half in lines]
+    xs = np.concatenate([map_x.ravel() for map_x, _ in maps])
+    ys = np.concatenate([map_y.ravel() for _, map_y in maps])
+    height, width = image_bgr.shape[:2]
+    x0 = int(np.floor(xs.min())) - _SAMPLE_MARGIN
+    y0 = int(np.floor(ys.min())) - _SAMPLE_MARGIN
+    x1 = int(np.floor(xs.max())) + _SAMPLE_MARGIN + 1
+    y1 = int(np.floor(ys.max())) + _SAMPLE_MARGIN + 1
+    m = _BLUR_MARGIN
+    if x0 - m >= 0 and y0 - m >= 0 and x1 + m <= width and y1 + m <= height:
+        patch = _lab(image_bgr[y0 - m : y1 + m, x0 - m : x1 + m])[m:-m, m:-m]
+        shift_x, shift_y = np.float32(x0), np.float32(y0)
+        values = [_variation(patch, mx - shift_x, my - shift_y) for mx, my in maps]
+        return values, full_lab
+    if full_lab is None:
+        full_lab = _lab(image_bgr)
+    return [_variation(full_lab, mx, my) for mx, my in maps], full_lab
 
 
 def detect_crossings(
@@ -116,21 +160,21 @@ def detect_crossings(
     intersections = find_intersections(chains)
     if not intersections:
         return []
-    image_lab = None
-    if image_bgr is not None:
-        blurred = cv2.GaussianBlur(image_bgr, (3, 3), 0)
-        image_lab = cv2.cvtColor(blurred, cv2.COLOR_BGR2LAB).astype(np.float32)
+    # The Lab image is converted only round each crossing (or whole, once, when a
+    # crossing is near the border): see profile_variations.
+    full_lab = None
     crossings = []
     for chain_a, seg_a, chain_b, seg_b, point in intersections:
-        if image_lab is None:
+        if image_bgr is None:
             over_first, confidence = True, 0.0
         else:
             half = 2.0 * max(radii[chain_a], radii[chain_b]) + 2.0
-            variation = []
+            lines = []
             for chain, seg in ((chain_a, seg_a), (chain_b, seg_b)):
                 direction = chains[chain][seg + 1] - chains[chain][seg]
                 direction = direction / max(float(np.hypot(*direction)), 1e-12)
-                variation.append(profile_variation(image_lab, point, direction, half))
+                lines.append((point, direction, half))
+            variation, full_lab = profile_variations(image_bgr, lines, full_lab)
             over_first = variation[0] <= variation[1]
             total = variation[0] + variation[1]
             confidence = abs(variation[0] - variation[1]) / total if total > 0 else 0.0

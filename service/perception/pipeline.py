@@ -5,10 +5,10 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from schemas import Chain, Crossing, Detection, DetectParams, StageTimings
+from service.perception import _kernels
 from service.perception.contours import extract_contours
 from service.perception.crossings import detect_crossings
 from service.perception.errors import InvalidInputError
@@ -17,7 +17,12 @@ from service.perception.geometry import end_direction, polyline_length, resample
 from service.perception.merging import Join, MergedPath, merge_chains
 from service.perception.pruning import prune_overlaps
 from service.perception.segmentation import as_bgr, clean_mask, segment, validate_mask
-from service.perception.skeleton import estimate_radius, remove_spurs, skeletonize
+from service.perception.skeleton import (
+    distance_transform,
+    estimate_radius,
+    remove_spurs,
+    skeletonize,
+)
 
 
 @dataclass(frozen=True)
@@ -97,15 +102,13 @@ def _finalise_path(path: MergedPath, mask, distance, params: DetectParams, radiu
     rows = np.clip(np.rint(midpoints[:, 1]).astype(int), 0, height - 1)
     hidden_edge = filled & ~mask[rows, cols]
     joints, source_edge = resample(vertices, params.segment_length)
-    inferred = np.zeros(len(joints) - 1, bool)
     edge_lengths = np.linalg.norm(np.diff(vertices, axis=0), axis=1)
-    for k in range(len(joints) - 1):
-        span_edges = slice(source_edge[k], source_edge[k + 1] + 1)
-        weights = edge_lengths[span_edges]
-        if weights.sum() > 0:
-            inferred[k] = (weights * hidden_edge[span_edges]).sum() > 0.5 * weights.sum()
-        else:
-            inferred[k] = bool(hidden_edge[source_edge[k]])
+    # Inferred where more than half the length of the edges a segment spans is hidden.
+    inferred = _kernels.inferred_segments(
+        source_edge.astype(np.int64),
+        np.ascontiguousarray(edge_lengths, np.float64),
+        np.ascontiguousarray(hidden_edge, bool),
+    )
     cols = np.clip(np.rint(joints[:, 0]).astype(int), 0, width - 1)
     rows = np.clip(np.rint(joints[:, 1]).astype(int), 0, height - 1)
     on_cable = distance[rows, cols] > 0
@@ -198,7 +201,8 @@ def detect_full(
 
     # 6. Merging across gaps and crossings, then crossings and their order.
     merged = merge_chains(pieces, params, radius, zones)
-    distance = cv2.distanceTransform(foreground.astype(np.uint8), cv2.DIST_L2, 5)
+    # The compiled distance transform: cv2's values, bit for bit, in O(foreground).
+    distance = distance_transform(foreground)
     finals = []
     for path in merged.paths:
         if polyline_length(path.vertices) < params.min_chain_length:

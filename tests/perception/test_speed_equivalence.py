@@ -353,3 +353,211 @@ def test_fast_steps_equal_the_reference_steps_on_mbest_labels():
     for path in labels:
         mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED) > 0
         _assert_steps_match(mask)
+
+
+# --------------------------------------------------------------------------- steps 1 and 6
+# Plain versions of the segmentation clean-up and of the merging stage's loops that
+# faster code replaced; the replacements must give the same results.
+
+
+def _reference_otsu_hist(feature):
+    return np.bincount(feature.ravel(), minlength=256).astype(np.float64)
+
+
+def _reference_hysteresis(cue, low, high):
+    weak = (cue > low).astype(np.uint8)
+    count, labels = cv2.connectedComponents(weak, connectivity=8)
+    keep = np.zeros(count, bool)
+    keep[np.unique(labels[cue > high])] = True
+    keep[0] = False
+    return keep[labels]
+
+
+def _reference_clean_mask(mask, min_component_area, max_hole_area):
+    mask_u8 = mask.astype(np.uint8)
+    if min_component_area > 0:
+        _, labels, stats, _ = cv2.connectedComponentsWithStats(mask_u8, connectivity=8)
+        keep = stats[:, cv2.CC_STAT_AREA] >= min_component_area
+        keep[0] = False
+        mask_u8 = keep[labels].astype(np.uint8)
+    if max_hole_area > 0:
+        background = (1 - mask_u8).astype(np.uint8)
+        _, labels, stats, _ = cv2.connectedComponentsWithStats(background, connectivity=4)
+        x, y, w, h, area = (stats[:, k] for k in range(5))
+        height, width = mask.shape
+        touches_border = (x == 0) | (y == 0) | (x + w == width) | (y + h == height)
+        fill = (area <= max_hole_area) & ~touches_border
+        fill[0] = False if background[0, 0] == 0 else fill[0]
+        mask_u8 = np.where(fill[labels], 1, mask_u8).astype(np.uint8)
+    return mask_u8 > 0
+
+
+def _reference_resample(points, step):
+    joints, edges = [points[0]], [0]
+    current, edge, n, step_sq = points[0], 0, len(points), step * step
+    while edge < n - 1:
+        a, b = points[edge], points[edge + 1]
+        if (b[0] - current[0]) ** 2 + (b[1] - current[1]) ** 2 < step_sq:
+            edge += 1
+            continue
+        d, f = b - a, a - current
+        qa = d[0] * d[0] + d[1] * d[1]
+        qb = 2.0 * (f[0] * d[0] + f[1] * d[1])
+        qc = f[0] * f[0] + f[1] * f[1] - step_sq
+        disc = max(qb * qb - 4.0 * qa * qc, 0.0)
+        t = (-qb + np.sqrt(disc)) / (2.0 * qa) if qa > 0 else 1.0
+        current = a + min(max(t, 0.0), 1.0) * d
+        joints.append(current)
+        edges.append(edge)
+    return np.array(joints), np.array(edges)
+
+
+def _reference_intersections(chains):
+    starts = np.concatenate([c[:-1] for c in chains])
+    ends = np.concatenate([c[1:] for c in chains])
+    chain_ids = np.concatenate([np.full(len(c) - 1, i) for i, c in enumerate(chains)])
+    indices = np.concatenate([np.arange(len(c) - 1) for c in chains])
+    lo, hi = np.minimum(starts, ends), np.maximum(starts, ends)
+    found = []
+    order = np.argsort(lo[:, 0])
+    lo_sorted_x = lo[order, 0]
+    for position, a in enumerate(order):
+        others = order[position + 1 : np.searchsorted(lo_sorted_x, hi[a, 0], side="right")]
+        others = others[(lo[others, 1] <= hi[a, 1]) & (hi[others, 1] >= lo[a, 1])]
+        near = np.abs(indices[others] - indices[a]) <= 2
+        others = others[~((chain_ids[others] == chain_ids[a]) & near)]
+        if len(others) == 0:
+            continue
+        p, r = starts[a], ends[a] - starts[a]
+        q, s = starts[others], ends[others] - starts[others]
+        denom = r[0] * s[:, 1] - r[1] * s[:, 0]
+        qp = q - p
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (qp[:, 0] * s[:, 1] - qp[:, 1] * s[:, 0]) / denom
+            u = (qp[:, 0] * r[1] - qp[:, 1] * r[0]) / denom
+        hit = (np.abs(denom) > 1e-12) & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
+        for b, t_hit in zip(others[hit], t[hit], strict=True):
+            key_a, key_b = (chain_ids[a], indices[a]), (chain_ids[b], indices[b])
+            first, second = (a, b) if key_a <= key_b else (b, a)
+            found.append(
+                (
+                    int(chain_ids[first]),
+                    int(indices[first]),
+                    int(chain_ids[second]),
+                    int(indices[second]),
+                    p + t_hit * r,
+                )
+            )
+    return found
+
+
+def _random_mask(seed, shape=(90, 120)):
+    rng = np.random.default_rng(seed)
+    mask = cv2.dilate((rng.random(shape) < 0.02).astype(np.uint8), np.ones((7, 7), np.uint8))
+    mask[rng.random(shape) < 0.08] ^= 1  # specks and holes, some on the border
+    mask[0, rng.integers(0, shape[1], 5)] = 1
+    return mask > 0
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_clean_mask_equals_the_reference(seed):
+    from service.perception.segmentation import clean_mask
+
+    mask = _random_mask(seed)
+    for min_area, max_hole in ((0, 0), (5, 0), (0, 6), (5, 6), (30, 40), (1000, 3)):
+        np.testing.assert_array_equal(
+            clean_mask(mask, min_area, max_hole), _reference_clean_mask(mask, min_area, max_hole)
+        )
+    for edge_case in (np.zeros((9, 11), bool), np.ones((9, 11), bool)):
+        np.testing.assert_array_equal(
+            clean_mask(edge_case, 5, 6), _reference_clean_mask(edge_case, 5, 6)
+        )
+    # Many specks: the whole-box lookup path.
+    specks = np.random.default_rng(seed).random((60, 60)) < 0.05
+    np.testing.assert_array_equal(clean_mask(specks, 3, 2), _reference_clean_mask(specks, 3, 2))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_hysteresis_and_histogram_equal_the_reference(seed):
+    from service.perception.segmentation import _histogram, hysteresis_threshold
+
+    rng = np.random.default_rng(seed)
+    cue = cv2.GaussianBlur((rng.random((70, 90)) * 255).astype(np.uint8), (5, 5), 0)
+    for low, high in ((120.0, 135.0), (127.5, 127.5), (250.0, 254.0), (0.0, 10.0)):
+        np.testing.assert_array_equal(
+            hysteresis_threshold(cue, low, high), _reference_hysteresis(cue, low, high)
+        )
+    np.testing.assert_array_equal(_histogram(cue), _reference_otsu_hist(cue))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_resample_kernel_equals_the_reference(seed):
+    from service.perception.geometry import resample
+
+    rng = np.random.default_rng(seed)
+    for _ in range(50):
+        points = np.cumsum(rng.normal(0, 3, (rng.integers(2, 50), 2)), axis=0) + 400.0
+        step = float(rng.uniform(1.0, 12.0))
+        joints, edges = _kernels.resample_kernel(points, step)
+        expected_joints, expected_edges = _reference_resample(points, step)
+        np.testing.assert_array_equal(joints, expected_joints)
+        np.testing.assert_array_equal(edges, expected_edges)
+        full_joints, _ = resample(points, step)
+        np.testing.assert_array_equal(full_joints[: len(joints)], joints)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_intersection_kernel_equals_the_reference(seed):
+    from service.perception.crossings import find_intersections
+
+    rng = np.random.default_rng(seed)
+    chains = [
+        np.cumsum(rng.normal(0, 6, (int(rng.integers(2, 40)), 2)), axis=0) + 100.0 for _ in range(4)
+    ]
+    chains.append(np.array([[0.0, 100.0], [200.0, 100.0], [0.0, 100.0]]))  # collinear
+    found, expected = find_intersections(chains), _reference_intersections(chains)
+    assert [f[:4] for f in found] == [e[:4] for e in expected]
+    for f, e in zip(found, expected, strict=True):
+        np.testing.assert_array_equal(f[4], e[4])
+
+
+def test_crossing_profiles_on_patches_equal_the_whole_image():
+    from service.perception.crossings import _lab, profile_variation, profile_variations
+
+    image = make_scene(320, 180, 3, seed=2).image
+    lab = _lab(image)
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        # Most lines lie inside; some reach the border and use the whole image.
+        centre = rng.uniform([0, 0], [320, 180])
+        angle = rng.uniform(0, np.pi)
+        lines = [(centre, np.array([np.cos(a), np.sin(a)]), 7.5) for a in (angle, angle + 1.0)]
+        values, _ = profile_variations(image, lines)
+        assert values == [profile_variation(lab, *line) for line in lines]
+
+
+def _reference_inferred(source_edge, edge_lengths, hidden_edge):
+    inferred = np.zeros(len(source_edge) - 1, bool)
+    for k in range(len(source_edge) - 1):
+        span_edges = slice(source_edge[k], source_edge[k + 1] + 1)
+        weights = edge_lengths[span_edges]
+        if weights.sum() > 0:
+            inferred[k] = (weights * hidden_edge[span_edges]).sum() > 0.5 * weights.sum()
+        else:
+            inferred[k] = bool(hidden_edge[source_edge[k]])
+    return inferred
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_inferred_segments_kernel_equals_the_reference(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(40):
+        n_edges = int(rng.integers(1, 400))
+        edge_lengths = rng.random(n_edges) * rng.choice([0.0, 1.0, 3.0])
+        edge_lengths[rng.random(n_edges) < 0.1] = 0.0
+        hidden_edge = rng.random(n_edges) < rng.random()
+        source_edge = np.sort(rng.integers(0, n_edges, int(rng.integers(2, 60))))
+        np.testing.assert_array_equal(
+            _kernels.inferred_segments(source_edge, edge_lengths, hidden_edge),
+            _reference_inferred(source_edge, edge_lengths, hidden_edge),
+        )
