@@ -57,17 +57,6 @@ def as_uint8(image: np.ndarray) -> np.ndarray:
     return image.view(np.uint8)
 
 
-def neighbour_pattern(skeleton: np.ndarray) -> np.ndarray:
-    """8-bit pattern of the set neighbours of every pixel (bit k: NEIGHBOUR_OFFSETS[k])."""
-    skeleton = as_uint8(skeleton)
-    pattern = np.zeros(skeleton.shape, np.uint8)
-    height, width = skeleton.shape
-    padded = np.pad(skeleton, 1)
-    for bit, (dr, dc) in enumerate(NEIGHBOUR_OFFSETS):
-        pattern |= padded[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width] << bit
-    return pattern
-
-
 def branch_counts(skeleton: np.ndarray) -> np.ndarray:
     """Branches leaving each skeleton pixel: 1 at a tip, 2 along a line, 3+ at a junction.
 

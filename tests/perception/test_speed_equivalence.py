@@ -17,7 +17,13 @@ from skimage.morphology import skeletonize as skimage_skeletonize
 
 from service.perception import _kernels
 from service.perception.contours import extract_contours
-from service.perception.fitting import BRIDGE_RADII, fit_chains, junction_zones
+from service.perception.fitting import (
+    BRIDGE_RADII,
+    fit_chains,
+    junction_zones,
+    split_contour,
+    walk_joints,
+)
 from service.perception.pruning import prune_overlaps
 from service.perception.skeleton import (
     _BRANCH_COUNT,
@@ -120,55 +126,13 @@ def _reference_junction_zones(skeleton, radius):
     return zones
 
 
-def _reference_walk_joints(pixels, segment_length):
-    pixels = np.asarray(pixels, dtype=np.float64)
-    joints = [pixels[0]]
-    start = pixels[0]
-    limit_sq = segment_length * segment_length
-    for point in pixels[1:]:
-        delta = point - start
-        if delta[0] * delta[0] + delta[1] * delta[1] >= limit_sq:
-            joints.append(point)
-            start = point
-    if len(pixels) > 1 and not np.array_equal(joints[-1], pixels[-1]):
-        joints.append(pixels[-1])
-    return np.array(joints)
-
-
-def _reference_split_contour(contour, is_tip, in_zone):
-    n = len(contour)
-    breaks = np.flatnonzero(is_tip | in_zone)
-    if len(breaks) == 0:
-        return [contour]
-    order = np.roll(np.arange(n), -int(breaks[0]))
-    runs, current = [], []
-    for index in order:
-        if in_zone[index]:
-            if len(current) > 1:
-                runs.append(contour[current])
-            current = []
-        elif is_tip[index]:
-            current.append(index)
-            if len(current) > 1:
-                runs.append(contour[current])
-            current = [index]
-        else:
-            current.append(index)
-    if len(current) > 1:
-        first_break = order[0]
-        if is_tip[first_break] and not in_zone[first_break]:
-            current.append(first_break)
-        runs.append(contour[current])
-    return runs
-
-
 def _reference_fit_chains(contours, skeleton, zones, segment_length):
     tips = _reference_branch_counts(skeleton) == 1
     chains = []
     for contour in contours:
         xs, ys = contour[:, 0], contour[:, 1]
-        for run in _reference_split_contour(contour, tips[ys, xs], zones[ys, xs]):
-            chains.append(_reference_walk_joints(run, segment_length))
+        for run in split_contour(contour, tips[ys, xs], zones[ys, xs]):
+            chains.append(walk_joints(run, segment_length))
     return chains
 
 
@@ -451,7 +415,7 @@ def _reference_intersections(chains):
     return found
 
 
-def _random_mask(seed, shape=(90, 120)):
+def _speckled_mask(seed, shape=(90, 120)):
     rng = np.random.default_rng(seed)
     mask = cv2.dilate((rng.random(shape) < 0.02).astype(np.uint8), np.ones((7, 7), np.uint8))
     mask[rng.random(shape) < 0.08] ^= 1  # specks and holes, some on the border
@@ -463,7 +427,7 @@ def _random_mask(seed, shape=(90, 120)):
 def test_clean_mask_equals_the_reference(seed):
     from service.perception.segmentation import clean_mask
 
-    mask = _random_mask(seed)
+    mask = _speckled_mask(seed)
     for min_area, max_hole in ((0, 0), (5, 0), (0, 6), (5, 6), (30, 40), (1000, 3)):
         np.testing.assert_array_equal(
             clean_mask(mask, min_area, max_hole), _reference_clean_mask(mask, min_area, max_hole)
