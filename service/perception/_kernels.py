@@ -130,6 +130,92 @@ def branch_count_image(skeleton, branch_table):
 
 # --------------------------------------------------------------------------- thinning
 
+# The ring P2..P9 of Zhang and Suen (1984) as offsets: N, NE, E, SE, S, SW, W, NW;
+# bit k of a thinning pattern is P(k+2). (The branch-count patterns use _RING_*.)
+_ZS_DR = np.array([-1, -1, 0, 1, 1, 1, 0, -1], np.int64)
+_ZS_DC = np.array([0, 1, 1, 1, 0, -1, -1, -1], np.int64)
+
+
+@njit(cache=True, nogil=True)
+def _zs_pattern(flat, index, offsets):
+    """Thinning pattern of the pixel ``index`` of a flattened padded image."""
+    pattern = 0
+    for k in range(8):
+        if flat[index + offsets[k]]:
+            pattern |= 1 << k
+    return pattern
+
+
+@njit(cache=True, nogil=True)
+def thin_padded(padded, first_table, second_table, staircase_table):
+    """Thin, in place, a 0/1 image whose outermost rows and columns are 0.
+
+    See skeleton.thin for the rule. Each sub-iteration marks, from the image as it
+    was, the pixels its table removes, then removes them. Only pixels whose
+    neighbourhood changed can change their answer, so a pixel is looked at again only
+    until it has met both tables since a neighbour was last removed; the work follows
+    the shrinking border of the mask, not the whole image.
+    """
+    width = padded.shape[1]
+    flat = padded.ravel()
+    offsets = np.empty(8, np.int64)
+    for k in range(8):
+        offsets[k] = _ZS_DR[k] * width + _ZS_DC[k]
+    total = 0
+    for i in range(flat.size):
+        total += flat[i] != 0
+    listed = np.empty(total, np.int64)
+    age = np.empty(total, np.uint8)
+    n_listed = 0
+    for i in range(flat.size):
+        if flat[i] and _zs_pattern(flat, i, offsets) != 255:
+            listed[n_listed] = i
+            age[n_listed] = 0
+            n_listed += 1
+    queued = np.zeros(flat.size, np.uint8)
+    remove = np.empty(total, np.uint8)
+    next_listed = np.empty(total, np.int64)
+    next_age = np.empty(total, np.uint8)
+    quiet = 0
+    first = True
+    while quiet < 2 and n_listed > 0:
+        table = first_table if first else second_table
+        first = not first
+        removed = 0
+        for j in range(n_listed):
+            remove[j] = table[_zs_pattern(flat, listed[j], offsets)]
+            removed += remove[j]
+        quiet = quiet + 1 if removed == 0 else 0
+        for j in range(n_listed):
+            if remove[j]:
+                flat[listed[j]] = 0
+        n_next = 0
+        for j in range(n_listed):
+            if remove[j]:
+                for k in range(8):
+                    neighbour = listed[j] + offsets[k]
+                    if flat[neighbour] and not queued[neighbour]:
+                        queued[neighbour] = 1
+                        next_listed[n_next] = neighbour
+                        next_age[n_next] = 0
+                        n_next += 1
+        for j in range(n_listed):
+            index = listed[j]
+            if not remove[j] and not queued[index] and age[j] == 0:
+                queued[index] = 1
+                next_listed[n_next] = index
+                next_age[n_next] = 1
+                n_next += 1
+        for j in range(n_next):
+            queued[next_listed[j]] = 0
+        listed, next_listed = next_listed, listed
+        age, next_age = next_age, age
+        n_listed = n_next
+    # The staircase pass: one raster scan, each pixel judged on the image as it is.
+    for i in range(flat.size):
+        if flat[i] and staircase_table[_zs_pattern(flat, i, offsets)]:
+            flat[i] = 0
+
 
 @njit(cache=True, nogil=True)
 def remove_spurs_inplace(skeleton, spur_length, branch_table):
@@ -821,6 +907,232 @@ def inferred_segments(source_edge, edge_lengths, hidden_edge):
     return inferred
 
 
+@njit(cache=True, nogil=True)
+def end_fit(backwards, skip, span):
+    """Quadratic least-squares fit of a polyline's last stretch (see geometry.end_tangent).
+
+    ``backwards`` starts at the end. Returns ``(fitted, x0, y0, dx, dy, last)``:
+    whether at least four points lie between ``skip`` and ``skip + span`` of arc
+    length; the end position (the fit's value at arc length 0 when a stretch was
+    skipped, else the first point); the fit's first-order coefficient; and the index
+    of the last point within ``span`` (for the chord fallback).
+    """
+    n = backwards.shape[0]
+    total = 0.0
+    for i in range(1, n):
+        total += np.hypot(
+            backwards[i, 0] - backwards[i - 1, 0], backwards[i, 1] - backwards[i - 1, 1]
+        )
+    if total < 2.0 * skip + 1.0:
+        skip = 0.0
+    reach = skip + span
+    # Normal equations in t = s / reach, which keeps them well conditioned.
+    sums = np.zeros(5)
+    rhs = np.zeros((3, 2))
+    used = 0
+    last = 0
+    arc = 0.0
+    for i in range(n):
+        if i > 0:
+            arc += np.hypot(
+                backwards[i, 0] - backwards[i - 1, 0], backwards[i, 1] - backwards[i - 1, 1]
+            )
+        if arc <= span:
+            last = i
+        if arc > reach:
+            break
+        if arc >= skip:
+            t = arc / reach if reach > 0 else 0.0
+            power = 1.0
+            for k in range(5):
+                sums[k] += power
+                if k < 3:
+                    rhs[k, 0] += power * backwards[i, 0]
+                    rhs[k, 1] += power * backwards[i, 1]
+                power *= t
+            used += 1
+    last = max(last, 1)
+    if used < 4:
+        return False, backwards[0, 0], backwards[0, 1], 0.0, 0.0, last
+    normal = np.empty((3, 3))
+    for r in range(3):
+        for c in range(3):
+            normal[r, c] = sums[r + c]
+    if abs(np.linalg.det(normal)) < 1e-12:
+        return False, backwards[0, 0], backwards[0, 1], 0.0, 0.0, last
+    coefficients = np.linalg.solve(normal, rhs)
+    x0, y0 = backwards[0, 0], backwards[0, 1]
+    if skip > 0:
+        x0, y0 = coefficients[0, 0], coefficients[0, 1]
+    return (
+        True,
+        x0,
+        y0,
+        coefficients[1, 0] / reach,
+        coefficients[1, 1] / reach,
+        last,
+    )
+
+
+# --------------------------------------------------------------------------- segmentation
+
+# The 8 neighbours and, first, the 4 orthogonal ones (for 4-connected fills).
+_FILL_DR = np.array([0, 1, 0, -1, 1, 1, -1, -1], np.int64)
+_FILL_DC = np.array([1, 0, -1, 0, 1, -1, -1, 1], np.int64)
+
+
+@njit(cache=True, nogil=True)
+def brightness_histogram(image_bgr):
+    """Brightness (largest channel) of a BGR ``uint8`` image and its 256-level histogram."""
+    height, width = image_bgr.shape[:2]
+    brightness = np.empty((height, width), np.uint8)
+    hist = np.zeros(256, np.int64)
+    for r in range(height):
+        for c in range(width):
+            value = max(image_bgr[r, c, 0], image_bgr[r, c, 1], image_bgr[r, c, 2])
+            brightness[r, c] = value
+            hist[value] += 1
+    return brightness, hist
+
+
+@njit(cache=True, nogil=True)
+def hysteresis_kernel(cue, low, high):
+    """Pixels of ``cue`` above ``low`` 8-connected to one above ``high`` (0/1 ``uint8``).
+
+    Every pixel above ``high`` seeds a flood fill through the pixels above ``low``;
+    each pixel is filled once, so the cost is one scan plus the size of the result.
+    """
+    height, width = cue.shape
+    result = np.zeros((height, width), np.uint8)
+    # Room for every pixel above ``low`` up front: growing the stack inside the loop
+    # makes numba count references on every step, which costs more than the fill.
+    weak = 0
+    for r in range(height):
+        for c in range(width):
+            weak += cue[r, c] > low
+    stack = np.empty(weak, np.int64)
+    for r0 in range(height):
+        for c0 in range(width):
+            # A seed must be above ``low`` too: the stack only has room for those.
+            if result[r0, c0] or not (cue[r0, c0] > high and cue[r0, c0] > low):
+                continue
+            result[r0, c0] = 1
+            stack[0] = r0 * width + c0
+            top = 1
+            while top:
+                top -= 1
+                r = stack[top] // width
+                c = stack[top] - r * width
+                for k in range(8):
+                    rr = r + _FILL_DR[k]
+                    cc = c + _FILL_DC[k]
+                    inside = 0 <= rr < height and 0 <= cc < width
+                    if inside and not result[rr, cc] and cue[rr, cc] > low:
+                        result[rr, cc] = 1
+                        stack[top] = rr * width + cc
+                        top += 1
+    return result
+
+
+@njit(cache=True, nogil=True)
+def remove_small_components(mask, min_area):
+    """Clear, in place, the 8-connected foreground components of fewer than ``min_area`` px."""
+    height, width = mask.shape
+    seen = np.zeros((height, width), np.uint8)
+    # Room for the largest possible component up front (see hysteresis_kernel).
+    members = np.empty(max(np.count_nonzero(mask), 1), np.int64)
+    for r0 in range(height):
+        for c0 in range(width):
+            if not mask[r0, c0] or seen[r0, c0]:
+                continue
+            # Breadth-first over ``members``: the filled pixels are the component.
+            seen[r0, c0] = 1
+            members[0] = r0 * width + c0
+            count = 1
+            head = 0
+            while head < count:
+                r = members[head] // width
+                c = members[head] - r * width
+                head += 1
+                for k in range(8):
+                    rr = r + _FILL_DR[k]
+                    cc = c + _FILL_DC[k]
+                    if 0 <= rr < height and 0 <= cc < width and mask[rr, cc] and not seen[rr, cc]:
+                        seen[rr, cc] = 1
+                        members[count] = rr * width + cc
+                        count += 1
+            if count < min_area:
+                for i in range(count):
+                    r = members[i] // width
+                    c = members[i] - r * width
+                    mask[r, c] = 0
+
+
+_UNSEEN, _SMALL_HOLE, _OPEN = 0, 1, 2
+
+
+@njit(cache=True, nogil=True)
+def fill_small_holes(mask, max_hole_area):
+    """Fill, in place, the 4-connected background components of at most ``max_hole_area``
+    pixels that do not touch the image border.
+
+    Every hole borders the foreground, so fills start only from background pixels next
+    to it. A fill stops as soon as its component is known not to be a hole: more than
+    ``max_hole_area`` pixels, the image border, or a pixel an earlier stopped fill
+    reached (the same component). Its pixels are then marked open, so no background
+    pixel is filled twice and the cost stays near the length of the mask's border.
+    """
+    height, width = mask.shape
+    state = np.zeros((height, width), np.uint8)
+    # A fill stops before it holds more than ``max_hole_area`` pixels.
+    members = np.empty(max_hole_area + 1, np.int64)
+    for r0 in range(height):
+        for c0 in range(width):
+            if not mask[r0, c0]:
+                continue
+            for k0 in range(4):
+                rs = r0 + _FILL_DR[k0]
+                cs = c0 + _FILL_DC[k0]
+                if not (0 <= rs < height and 0 <= cs < width):
+                    continue
+                if mask[rs, cs] or state[rs, cs] != _UNSEEN:
+                    continue
+                state[rs, cs] = _SMALL_HOLE
+                members[0] = rs * width + cs
+                count = 1
+                head = 0
+                is_hole = True
+                while head < count and is_hole:
+                    r = members[head] // width
+                    c = members[head] - r * width
+                    head += 1
+                    if r == 0 or c == 0 or r == height - 1 or c == width - 1:
+                        is_hole = False
+                        break
+                    for k in range(4):
+                        rr = r + _FILL_DR[k]
+                        cc = c + _FILL_DC[k]
+                        if mask[rr, cc]:
+                            continue
+                        if state[rr, cc] == _OPEN:
+                            is_hole = False
+                            break
+                        if state[rr, cc] == _UNSEEN:
+                            if count >= max_hole_area:
+                                is_hole = False
+                                break
+                            state[rr, cc] = _SMALL_HOLE
+                            members[count] = rr * width + cc
+                            count += 1
+                for i in range(count):
+                    r = members[i] // width
+                    c = members[i] - r * width
+                    if is_hole:
+                        mask[r, c] = 1
+                    else:
+                        state[r, c] = _OPEN
+
+
 # --------------------------------------------------------------------------- warm-up
 
 
@@ -831,11 +1143,13 @@ def warm_up() -> None:
     argument types, as the pipeline uses. Call it once at start-up so that the first
     image pays nothing; calling it again costs well under a millisecond.
     """
+    from schemas import DetectParams
     from service.perception.contours import extract_contours
     from service.perception.crossings import find_intersections
     from service.perception.fitting import fit_chains, junction_zones
-    from service.perception.geometry import resample
+    from service.perception.geometry import end_tangent, resample
     from service.perception.pruning import prune_overlaps
+    from service.perception.segmentation import clean_mask, segment
     from service.perception.skeleton import (
         branch_counts,
         distance_transform,
@@ -848,6 +1162,10 @@ def warm_up() -> None:
     mask[17:23, 2:46] = True  # a cross: one junction, four arms
     mask[2:38, 21:27] = True
     mask[8, 4] = True  # a speck
+    # Segmentation: the cues, the hysteresis and the clean-up of the same cross.
+    image = np.repeat((mask * 200 + 20).astype(np.uint8)[:, :, None], 3, axis=2)
+    segment(image, DetectParams())
+    clean_mask(mask, 2, 2)
     skeleton = skeletonize(mask)
     distance = distance_transform(mask)
     radius = max(estimate_radius(mask, skeleton), 1.0)
@@ -863,5 +1181,6 @@ def warm_up() -> None:
         np.array([[6.0, 0.0], [6.0, 4.0], [6.0, 8.0], [6.0, 12.0]]),
     ]
     resample(strands[0], 2.0)
+    end_tangent(strands[0], True, 10.0, 1.0)
     find_intersections(strands)
     inferred_segments(np.array([0, 1, 2]), np.array([1.0, 0.0, 2.0]), np.array([True, False, True]))

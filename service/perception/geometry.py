@@ -47,22 +47,13 @@ def end_tangent(
         The fitted end point and the unit tangent pointing out of the polyline.
     """
     ordered = points[::-1] if at_start else points
-    backwards = ordered[::-1]
-    steps = np.hypot(*np.diff(backwards, axis=0).T)
-    arc = np.concatenate([[0.0], np.cumsum(steps)])
-    if arc[-1] < 2.0 * skip + 1.0:
-        skip = 0.0
-    used = (arc >= skip) & (arc <= skip + span)
-    if used.sum() >= 4:
-        design = np.stack([np.ones(used.sum()), arc[used], arc[used] ** 2], axis=1)
-        coefficients, *_ = np.linalg.lstsq(design, backwards[used], rcond=None)
-        # The linear term points into the polyline; outwards is its opposite.
-        tangent = -coefficients[1]
-        if np.hypot(*tangent) > 1e-9:
-            position = coefficients[0] if skip > 0 else backwards[0]
-            return position, unit(tangent)
-    last = max(int(np.searchsorted(arc, span, side="right")) - 1, 1)
-    return backwards[0], unit(backwards[0] - backwards[last])
+    backwards = np.ascontiguousarray(ordered[::-1], dtype=np.float64)
+    fitted, x0, y0, dx, dy, last = _kernels.end_fit(backwards, float(skip), float(span))
+    # The linear term points into the polyline; outwards is its opposite.
+    tangent = np.array([-dx, -dy])
+    if fitted and np.hypot(*tangent) > 1e-9:
+        return np.array([x0, y0]), unit(tangent)
+    return backwards[0].copy(), unit(backwards[0] - backwards[last])
 
 
 def end_direction(points: np.ndarray, at_start: bool, span: float) -> np.ndarray:

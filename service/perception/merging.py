@@ -21,6 +21,9 @@ from service.perception.geometry import angle_between, end_tangent, polyline_len
 
 END_FIT_SPAN_PX = 40.0
 END_FIT_SPAN_RADII = 6.0
+# Thinning stops about a radius from the edge of the picture; an end this much
+# further in still counts as at the edge.
+BORDER_MARGIN_PX = 2.0
 
 
 @dataclass(frozen=True)
@@ -253,12 +256,15 @@ def choose_joins(
     params: DetectParams,
     radius: float,
     junction_of_end: list[int] | None = None,
+    at_border: np.ndarray | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
     First the ends that meet at each junction (``junction_of_end[i] >= 0``) are paired
     by the cheapest matching of that junction; then the remaining ends are joined
-    greedily, cheapest first, across gaps. A join never closes a chain on itself.
+    greedily, cheapest first, across gaps, up to ``merge_cost_threshold``; last, two
+    free ends that are each other's clearly cheapest partner are joined up to a looser
+    limit, unless either is ``at_border``. A join never closes a chain on itself.
 
     Returns
     -------
@@ -314,7 +320,55 @@ def choose_joins(
         if params.expected_count is None and cost > params.merge_cost_threshold:
             break
         try_join(i, j, cost)
+    if params.expected_count is None:
+        # A cable bending out of sight under an occluder costs a little more than the
+        # limit; when two free ends have no other plausible partner, nothing else can
+        # explain either of them, and they are joined up to a looser limit.
+        # Ends at the edge of the picture are cables leaving it, never gaps.
+        excluded = used if at_border is None else used | at_border
+        near = [
+            (cost, i, j)
+            for cost, i, j in candidates
+            if distances[i, j] <= MUTUAL_GAP_RADII * radius
+        ]
+        for cost, i, j in _mutual_best(near, excluded, params.merge_cost_threshold):
+            try_join(i, j, cost)
     return joins
+
+
+# The looser limit of a join between two ends that are each other's only candidate,
+# as a multiple of merge_cost_threshold, and how much cheaper than any alternative
+# of either end it must be.
+MUTUAL_COST_FACTOR = 1.5
+MUTUAL_MARGIN = 0.5
+# Only short gaps, at most this many radii (five cable widths), get the looser limit:
+# an object that hides a cable's bend is about as wide as the bend is tight, while two
+# cable tips far apart that merely face each other are not evidence of one cable.
+MUTUAL_GAP_RADII = 10.0
+
+
+def _mutual_best(
+    candidates: list[tuple[float, int, int]], used: np.ndarray, threshold: float
+) -> list[tuple[float, int, int]]:
+    """Pairs of free ends that are each other's clearly cheapest, within the looser limit."""
+    best: dict[int, list[tuple[float, int]]] = {}
+    for cost, i, j in candidates:
+        if used[i] or used[j]:
+            continue
+        best.setdefault(i, []).append((cost, j))
+        best.setdefault(j, []).append((cost, i))
+    for options in best.values():
+        options.sort()
+    pairs = []
+    limit = MUTUAL_COST_FACTOR * threshold
+    for i, options in best.items():
+        cost, j = options[0]
+        if j < i or cost > limit or best[j][0][1] != i:
+            continue
+        rivals = [c for c, _ in options[1:2]] + [c for c, _ in best[j][1:2]]
+        if all(rival - cost >= MUTUAL_MARGIN * threshold for rival in rivals):
+            pairs.append((cost, i, j))
+    return sorted(pairs)
 
 
 # Pieces shared by two strands (a shallow crossing) are at most this many radii long.
@@ -364,15 +418,22 @@ def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -
     """The junction zone each end touches (its connected-component label), or -1."""
     if zones is None or not zones.any():
         return [-1] * len(ends)
-    kernel = np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)
-    grown = cv2.dilate(zones.astype(np.uint8), kernel)
-    _, labels = cv2.connectedComponents(grown, connectivity=8)
+    zones_u8 = zones.astype(np.uint8)
     height, width = zones.shape
+    # Grow and label only the zones' box plus the reach: every grown pixel is inside,
+    # and components keep their raster order, hence their labels.
+    x, y, w, h = cv2.boundingRect(zones_u8)
+    left, top = max(x - reach, 0), max(y - reach, 0)
+    right, bottom = min(x + w + reach, width), min(y + h + reach, height)
+    kernel = np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)
+    grown = cv2.dilate(zones_u8[top:bottom, left:right], kernel)
+    _, labels = cv2.connectedComponents(grown, connectivity=8)
     result = []
     for end in ends:
-        col = min(max(round(float(end.position[0])), 0), width - 1)
-        row = min(max(round(float(end.position[1])), 0), height - 1)
-        result.append(int(labels[row, col]) - 1 if labels[row, col] > 0 else -1)
+        col = min(max(round(float(end.position[0])), 0), width - 1) - left
+        row = min(max(round(float(end.position[1])), 0), height - 1) - top
+        inside = 0 <= row < bottom - top and 0 <= col < right - left
+        result.append(int(labels[row, col]) - 1 if inside and labels[row, col] > 0 else -1)
     return result
 
 
@@ -444,7 +505,18 @@ def merge_chains(
     span = max(END_FIT_SPAN_PX, END_FIT_SPAN_RADII * radius)
     ends = chain_ends(pieces, span, skip=radius)
     junction_of_end, dropped = absorb_shared_pieces(pieces, junctions_of_ends(ends, zones), radius)
-    joins = choose_joins(ends, len(pieces), params, radius, junction_of_end)
+    at_border = None
+    if zones is not None:
+        height, width = zones.shape
+        positions = np.array([end.position for end in ends]).reshape(-1, 2)
+        margin = radius + BORDER_MARGIN_PX
+        at_border = (
+            (positions[:, 0] < margin)
+            | (positions[:, 1] < margin)
+            | (positions[:, 0] > width - 1 - margin)
+            | (positions[:, 1] > height - 1 - margin)
+        )
+    joins = choose_joins(ends, len(pieces), params, radius, junction_of_end, at_border)
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
     paths = [p for p in assemble_paths(pieces, ends, joins) if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]

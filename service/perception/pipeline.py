@@ -62,20 +62,25 @@ def _extend_end(points: np.ndarray, at_start: bool, mask, radius: float, span: f
     """Push a chain end out to where the cable ends in the mask, less one radius.
 
     Thinning stops about one radius short of a square-cut cable end; a grasp at "the
-    end" should still be on the cable, so the end is placed one radius inside.
+    end" should still be on the cable, so the end is placed one radius inside. A cable
+    that runs out of the picture does not end there: its chain goes to the edge.
     """
     direction = end_direction(points, at_start, span)
     tip = points[0] if at_start else points[-1]
     height, width = mask.shape
     reach = 0.0
     limit = 3.0 * radius + 2.0
+    leaves_image = False
     while reach < limit:
         probe = tip + (reach + 1.0) * direction
         col, row = round(probe[0]), round(probe[1])
-        if not (0 <= col < width and 0 <= row < height and mask[row, col]):
+        if not (0 <= col < width and 0 <= row < height):
+            leaves_image = True
+            break
+        if not mask[row, col]:
             break
         reach += 1.0
-    extension = reach - radius
+    extension = reach if leaves_image else reach - radius
     if extension < 1.0:
         return points
     new_tip = tip + extension * direction
@@ -178,7 +183,9 @@ def detect_full(
 
     # 2. Skeletonization, then spurs shorter than a few cable radii are cut.
     skeleton = skeletonize(foreground)
-    radius = max(estimate_radius(foreground, skeleton), 1.0)
+    # The compiled distance transform: cv2's values, bit for bit, in O(foreground).
+    distance = distance_transform(foreground)
+    radius = max(estimate_radius(foreground, skeleton, distance), 1.0)
     spur_length = 2.5 * radius if params.spur_length is None else params.spur_length
     if spur_length > 0:
         skeleton = remove_spurs(skeleton, spur_length)
@@ -201,8 +208,6 @@ def detect_full(
 
     # 6. Merging across gaps and crossings, then crossings and their order.
     merged = merge_chains(pieces, params, radius, zones)
-    # The compiled distance transform: cv2's values, bit for bit, in O(foreground).
-    distance = distance_transform(foreground)
     finals = []
     for path in merged.paths:
         if polyline_length(path.vertices) < params.min_chain_length:

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from schemas import DetectParams, SegmentationMethod
+from service.perception import _kernels
 from service.perception.errors import InvalidInputError
 
 
@@ -123,19 +124,9 @@ HYSTERESIS_FRACTION = 0.85
 
 def hysteresis_threshold(cue: np.ndarray, low: float, high: float) -> np.ndarray:
     """Pixels above ``low`` that are 8-connected to a pixel above ``high``."""
-    weak = (cue > low).astype(np.uint8)
-    result = np.zeros(cue.shape, bool)
-    # Only the bounding box of the weak pixels can hold a component.
-    x, y, w, h = cv2.boundingRect(weak)
-    if w == 0 or h == 0:
-        return result
-    count, labels = cv2.connectedComponents(weak[y : y + h, x : x + w], connectivity=8)
-    keep = np.zeros(count, bool)
-    # Every pixel above ``high`` is above ``low`` too, so it has a label.
-    keep[labels[cue[y : y + h, x : x + w] > high]] = True
-    keep[0] = False
-    result[y : y + h, x : x + w] = keep[labels]
-    return result
+    return _kernels.hysteresis_kernel(np.ascontiguousarray(cue), float(low), float(high)).view(
+        np.bool_
+    )
 
 
 def _cable_like(
@@ -170,8 +161,8 @@ def segment_auto(image_bgr: np.ndarray) -> np.ndarray:
     """
     # No blur: it moves the border of thin cables more than it removes noise, and
     # the clean-up afterwards removes the specks noise leaves.
-    brightness, colourfulness = cue_images(image_bgr)
-    hist = _histogram(brightness)
+    brightness, counts = _kernels.brightness_histogram(image_bgr)
+    hist = counts.astype(np.float64)
     threshold, separability = _otsu(brightness, hist)
     if _cable_like(brightness, threshold, separability, hist):
         # The mean of the levels up to the threshold, from the histogram: sums of
@@ -182,6 +173,7 @@ def segment_auto(image_bgr: np.ndarray) -> np.ndarray:
         background = float(below_sum / below_count) if below_count else 0.0
         low = background + HYSTERESIS_FRACTION * (threshold - background)
         return hysteresis_threshold(brightness, low, threshold)
+    colourfulness = cue_images(image_bgr)[1]
     colour_hist = _histogram(colourfulness)
     colour_threshold, colour_separability = _otsu(colourfulness, colour_hist)
     if _cable_like(colourfulness, colour_threshold, colour_separability, colour_hist):
@@ -198,23 +190,6 @@ def segment_hsv(image_bgr: np.ndarray, low: tuple[int, int, int], high: tuple[in
     return cv2.inRange(hsv, np.array(low, np.uint8), np.array(high, np.uint8)) > 0
 
 
-# Above this many components, one lookup over the box beats one small box each.
-_MANY_COMPONENTS = 64
-
-
-def _clear_components(roi, labels, stats, which, value) -> None:
-    """Set the pixels of the components ``which`` of ``labels`` to ``value`` in ``roi``."""
-    if len(which) > _MANY_COMPONENTS:
-        selected = np.zeros(len(stats), bool)
-        selected[which] = True
-        roi[selected[labels]] = value
-        return
-    for k in which:
-        cx, cy, cw, ch = (int(v) for v in stats[k, :4])
-        box = roi[cy : cy + ch, cx : cx + cw]
-        box[labels[cy : cy + ch, cx : cx + cw] == k] = value
-
-
 def clean_mask(mask: np.ndarray, min_component_area: int, max_hole_area: int) -> np.ndarray:
     """Remove foreground specks and fill small background holes.
 
@@ -226,37 +201,19 @@ def clean_mask(mask: np.ndarray, min_component_area: int, max_hole_area: int) ->
     max_hole_area : int
         4-connected background components with at most this many pixels that do not
         touch the border are filled.
+
+    Returns
+    -------
+    ndarray of bool
+        A new mask; ``mask`` is not changed.
     """
-    mask_u8 = mask.astype(np.uint8)
-    # Both passes label only the bounding box of the foreground and change only the
-    # components they remove or fill, inside those components' own boxes.
-    x, y, w, h = cv2.boundingRect(mask_u8)
-    if w == 0 or h == 0:
-        return mask_u8 > 0
+    # The fills visit the foreground and the background next to it, not the whole image.
+    cleaned = np.array(mask, dtype=bool, order="C").view(np.uint8)
     if min_component_area > 0:
-        roi = mask_u8[y : y + h, x : x + w]
-        _, labels, stats, _ = cv2.connectedComponentsWithStats(roi, connectivity=8)
-        small = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] < min_component_area) + 1
-        _clear_components(roi, labels, stats, small, 0)
-        if len(small):
-            x, y, w, h = cv2.boundingRect(mask_u8)
-            if w == 0 or h == 0:
-                return mask_u8 > 0
+        _kernels.remove_small_components(cleaned, int(min_component_area))
     if max_hole_area > 0:
-        # A background component outside the foreground's box, or one reaching the
-        # box's edge, is connected to the image border (the rows and columns outside
-        # the box are all background); so the holes are the components of the box's
-        # background that do not reach the box's edge, with the same pixels.
-        roi = mask_u8[y : y + h, x : x + w]
-        background = 1 - roi
-        _, labels, stats, _ = cv2.connectedComponentsWithStats(background, connectivity=4)
-        bx, by, bw, bh, area = (stats[:, k] for k in range(5))
-        touches_border = (bx == 0) | (by == 0) | (bx + bw == w) | (by + bh == h)
-        fill = (area <= max_hole_area) & ~touches_border
-        # Label 0 is the foreground itself: filling it would change nothing.
-        fill[0] = False
-        _clear_components(roi, labels, stats, np.flatnonzero(fill), 1)
-    return mask_u8 > 0
+        _kernels.fill_small_holes(cleaned, int(max_hole_area))
+    return cleaned.view(np.bool_)
 
 
 def segment(image_bgr: np.ndarray, params: DetectParams) -> np.ndarray:

@@ -1,11 +1,12 @@
-"""The compiled steps 2 to 5 give exactly what the plain implementations gave.
+"""The compiled kernels give exactly what plain implementations give.
 
-The ``_reference_*`` functions below are the plain NumPy / OpenCV / scikit-image
-versions of skeletonization, spur removal, radius estimate, junction zones, fitting
-and pruning that the numba kernels replaced (issue 4). They live here, not in the
-package, as the specification the kernels are held to: identical arrays and identical
-chains (same joints, same order) on hand-made shapes, generated scenes and random
-masks with holes, specks and pixels on the image border.
+The ``_reference_*`` functions below are plain NumPy / OpenCV versions of thinning
+(written straight from the rule in ``skeleton.thin``), spur removal, radius estimate,
+junction zones, fitting, pruning and segmentation clean-up, most of them the code the
+numba kernels replaced (issue 4). They live here, not in the package, as the
+specification the kernels are held to: identical arrays and identical chains (same
+joints, same order) on hand-made shapes, generated scenes and random masks with
+holes, specks and pixels on the image border.
 """
 
 from pathlib import Path
@@ -13,7 +14,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from skimage.morphology import skeletonize as skimage_skeletonize
 
 from service.perception import _kernels
 from service.perception.contours import extract_contours
@@ -39,6 +39,63 @@ from service.synthetic import make_scene
 MBEST = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "mbest"
 
 # --------------------------------------------------------------------------- references
+
+
+_ZS_RING = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))
+
+
+def _reference_ring(image, row, col):
+    """The values of P2..P9 round (row, col); outside the image is 0."""
+    height, width = image.shape
+    return [
+        int(0 <= row + dr < height and 0 <= col + dc < width and image[row + dr, col + dc])
+        for dr, dc in _ZS_RING
+    ]
+
+
+def _reference_zhang_suen_removes(ring, first):
+    north, east, south, west = ring[0], ring[2], ring[4], ring[6]
+    steps = sum(1 for k in range(8) if not ring[k] and ring[(k + 1) % 8])
+    if not (2 <= sum(ring) <= 6 and steps == 1):
+        return False
+    if first:
+        return not (north and east and south) and not (east and south and west)
+    return not (north and east and west) and not (north and south and west)
+
+
+def _reference_staircase_removes(ring):
+    north, east, south, west = ring[0], ring[2], ring[4], ring[6]
+    if sum(ring) < 2 or (north and east and south and west):
+        return False
+    if not ((north and east) or (east and south) or (south and west) or (west and north)):
+        return False
+    # The set neighbours must be one 8-connected group: label the 3x3 patch.
+    patch = np.zeros((3, 3), np.uint8)
+    for value, (dr, dc) in zip(ring, _ZS_RING, strict=True):
+        patch[1 + dr, 1 + dc] = value
+    return cv2.connectedComponents(patch, connectivity=8)[0] - 1 == 1
+
+
+def _reference_thin(mask):
+    """Zhang-Suen sub-iterations on the whole image, then the raster staircase pass."""
+    image = (np.asarray(mask) != 0).astype(np.uint8)
+    rows, cols = np.nonzero(image)
+    quiet, first = 0, True
+    while quiet < 2:
+        rows, cols = np.nonzero(image)
+        doomed = [
+            (r, c)
+            for r, c in zip(rows, cols, strict=True)
+            if _reference_zhang_suen_removes(_reference_ring(image, r, c), first)
+        ]
+        for r, c in doomed:
+            image[r, c] = 0
+        quiet = 0 if doomed else quiet + 1
+        first = not first
+    for r, c in zip(*np.nonzero(image), strict=True):
+        if image[r, c] and _reference_staircase_removes(_reference_ring(image, r, c)):
+            image[r, c] = 0
+    return image > 0
 
 
 def _reference_branch_counts(skeleton):
@@ -96,7 +153,7 @@ def _reference_remove_spurs(skeleton, spur_length, passes=2):
                 removed_any = True
         if not removed_any:
             break
-        skeleton = skimage_skeletonize(skeleton)
+        skeleton = _reference_thin(skeleton)
     return skeleton
 
 
@@ -220,7 +277,7 @@ INPUTS = _inputs()
 
 
 def _reference_steps(mask, segment_length=10.0):
-    skeleton = skimage_skeletonize(mask)
+    skeleton = _reference_thin(mask)
     radius = max(_reference_estimate_radius(mask, skeleton), 1.0)
     pruned_skeleton = _reference_remove_spurs(skeleton, 2.5 * radius)
     contours = extract_contours(pruned_skeleton)
@@ -274,13 +331,50 @@ def test_fitting_with_short_segments_equals_the_reference():
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_thinning_equals_scikit_image_on_random_noise(seed):
-    # Dense noise makes every removal pattern of the thinning table occur.
+def test_thinning_equals_the_reference_on_random_noise(seed):
+    # Dense noise makes every removal pattern of the thinning tables occur.
     rng = np.random.default_rng(seed)
     mask = rng.random((64, 80)) < (0.5 + 0.1 * seed)
-    np.testing.assert_array_equal(skeletonize(mask), skimage_skeletonize(mask))
+    np.testing.assert_array_equal(skeletonize(mask), _reference_thin(mask))
     full = np.ones((7 + seed, 9), bool)
-    np.testing.assert_array_equal(skeletonize(full), skimage_skeletonize(full))
+    np.testing.assert_array_equal(skeletonize(full), _reference_thin(full))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_thinning_keeps_topology_and_leaves_lines_one_pixel_wide(seed):
+    # Rings, thick strokes and solid blobs, overlapping at random.
+    rng = np.random.default_rng(seed)
+    shapes = np.zeros((120, 160), np.uint8)
+    for _ in range(12):
+        centre = (int(rng.integers(10, 150)), int(rng.integers(10, 110)))
+        radius = int(rng.integers(5, 14))
+        cv2.circle(shapes, centre, radius, 1, int(rng.choice([-1, 3, 5])))
+        end = (int(rng.integers(0, 160)), int(rng.integers(0, 120)))
+        cv2.line(shapes, centre, end, 1, int(rng.integers(3, 9)))
+    skeleton = skeletonize(shapes).astype(np.uint8)
+
+    def components(image):
+        # Background round the image, as the thinning assumes: a hole is a 4-connected
+        # background component that does not reach it.
+        padded = np.pad(image, 1)
+        return (
+            cv2.connectedComponents(padded, connectivity=8)[0],
+            cv2.connectedComponents(1 - padded, connectivity=4)[0],
+        )
+
+    assert components(skeleton) == components(shapes)
+    blocks = skeleton[:-1, :-1] & skeleton[1:, :-1] & skeleton[:-1, 1:] & skeleton[1:, 1:]
+    assert not blocks.any()
+    # Lines, not clumps: most pixels have exactly two branches.
+    counts = branch_counts(skeleton > 0)
+    assert np.count_nonzero(counts == 2) > 0.8 * np.count_nonzero(skeleton)
+
+
+def test_thinning_a_bar_leaves_its_centre_line():
+    bar = np.zeros((21, 60), bool)
+    bar[6:15, 5:55] = True
+    rows, cols = np.nonzero(skeletonize(bar))
+    assert set(rows[(cols > 12) & (cols < 48)]) == {10}
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -452,6 +546,26 @@ def test_hysteresis_and_histogram_equal_the_reference(seed):
             hysteresis_threshold(cue, low, high), _reference_hysteresis(cue, low, high)
         )
     np.testing.assert_array_equal(_histogram(cue), _reference_otsu_hist(cue))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_brightness_and_cleaning_equal_the_reference_on_scenes(seed):
+    from service.perception.segmentation import clean_mask
+
+    image = make_scene(seed=seed, width=320, height=240, n_cables=3).image
+    brightness, counts = _kernels.brightness_histogram(image)
+    channels = cv2.split(image)
+    np.testing.assert_array_equal(
+        brightness, cv2.max(cv2.max(channels[0], channels[1]), channels[2])
+    )
+    np.testing.assert_array_equal(counts, _reference_otsu_hist(brightness))
+    # Noisy thresholds of a real scene: many specks and holes, of every size.
+    rng = np.random.default_rng(seed)
+    mask = (brightness > np.median(brightness)) ^ (rng.random(brightness.shape) < 0.02)
+    for min_area, max_hole in ((120, 60), (1, 1), (400, 0), (0, 400)):
+        np.testing.assert_array_equal(
+            clean_mask(mask, min_area, max_hole), _reference_clean_mask(mask, min_area, max_hole)
+        )
 
 
 @pytest.mark.parametrize("seed", range(4))
