@@ -1,0 +1,596 @@
+"""A SITL-free fake hexarotor that speaks MAVLink 2 over UDP, for tests and the ``dlo hexa`` trial.
+
+It is neither ArduPilot nor PX4: it imitates what a ground station sees of them, enough
+to exercise :mod:`adapters.mavlink` over real sockets.
+
+* Heartbeat at 1 Hz as an ArduCopter-like (``MAV_AUTOPILOT_ARDUPILOTMEGA``, custom modes
+  STABILIZE 0, GUIDED 4, LOITER 5, LAND 9) or a PX4-like (``MAV_AUTOPILOT_PX4``, main mode in
+  bits 16-23 and sub mode in bits 24-31 of ``custom_mode``: POSCTL 3, AUTO 4 with LOITER 3,
+  OFFBOARD 6) hexarotor.
+* ``MAV_CMD_DO_SET_MODE``, ``MAV_CMD_COMPONENT_ARM_DISARM`` and ``MAV_CMD_DO_GRIPPER`` are
+  answered with ``COMMAND_ACK``; other commands get ``MAV_RESULT_UNSUPPORTED``. Like PX4, the
+  PX4 flavour denies OFFBOARD unless setpoints have streamed for ``offboard_warmup_s``.
+* ``SET_POSITION_TARGET_LOCAL_NED`` with ``type_mask`` 0x09F8 (position and yaw) in
+  ``MAV_FRAME_LOCAL_NED`` is followed when armed and in GUIDED / OFFBOARD; any other mask or
+  frame is ignored and counted in :attr:`FakeVehicle.rejected_setpoints`.
+* ``LOCAL_POSITION_NED`` and ``ATTITUDE`` at ``telemetry_hz`` (default 40 Hz).
+
+Dynamics (a fully-actuated vehicle, so it stays level): a cascaded position controller,
+``v_des = clip(k_p (x_sp - x), v_max)`` and ``a = clip(k_v (v_des - v), a_max) + gust``,
+integrated in steps of at most 5 ms of wall-clock time. Gusts are an Ornstein-Uhlenbeck
+acceleration per axis (standard deviation ``gust_std_m_s2``, time constant
+``gust_time_constant_s``); the reported position and attitude carry white Gaussian noise.
+When setpoints stop for ``setpoint_timeout_s`` the vehicle brakes and holds where it is
+(the PX4 flavour also falls back to AUTO.LOITER, as PX4's offboard-loss failsafe does).
+There is no takeoff procedure: when armed in the guided mode it simply follows setpoints;
+disarmed it does not move.
+
+The random streams are seeded, but the simulation follows the wall clock, so two runs
+are statistically alike, not bit for bit.
+
+Run it as a process with ``python -m adapters.fake_vehicle --url udpout:127.0.0.1:14550``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+# MAVLink 2 must be chosen before mavutil is imported, or it loads the v1 dialect.
+os.environ["MAVLINK20"] = "1"
+from pymavlink import mavutil
+
+if mavutil.mavlink.WIRE_PROTOCOL_VERSION != "2.0":  # mavutil was imported earlier, without it
+    mavutil.set_dialect(mavutil.current_dialect)
+mavlink = mavutil.mavlink
+
+Autopilot = Literal["ardupilot", "px4"]
+
+POSITION_YAW_TYPE_MASK = 0x09F8
+"""``SET_POSITION_TARGET_LOCAL_NED.type_mask`` ignoring velocity, acceleration and yaw rate."""
+
+ARDUPILOT_MODES = {"STABILIZE": 0, "GUIDED": 4, "LOITER": 5, "LAND": 9}
+PX4_MAIN_POSCTL, PX4_MAIN_AUTO, PX4_MAIN_OFFBOARD = 3, 4, 6
+PX4_SUB_AUTO_LOITER = 3
+
+PHYSICS_STEP_S = 0.005
+
+
+def px4_custom_mode(main_mode: int, sub_mode: int = 0) -> int:
+    """PX4's ``custom_mode``: main mode in bits 16-23, sub mode in bits 24-31."""
+    return (main_mode << 16) | (sub_mode << 24)
+
+
+@dataclass(frozen=True)
+class Disturbance:
+    """Wind gusts and sensor noise of the fake (the defaults are the ``dlo hexa trial`` ones).
+
+    Attributes
+    ----------
+    gust_std_m_s2 : float
+        Standard deviation of the gust acceleration per axis, m/s^2; 0.05 m/s^2 on a 3 kg
+        vehicle is a 0.15 N push, a light indoor draught.
+    gust_time_constant_s : float
+        Correlation time of the gusts, s.
+    position_noise_m : float
+        Standard deviation of the reported position per axis, m (motion capture to good
+        visual-inertial odometry).
+    attitude_noise_rad : float
+        Standard deviation of the reported roll, pitch and yaw, rad.
+    """
+
+    gust_std_m_s2: float = 0.05
+    gust_time_constant_s: float = 1.0
+    position_noise_m: float = 0.002
+    attitude_noise_rad: float = 0.002
+
+    def __post_init__(self) -> None:
+        for name in ("gust_std_m_s2", "position_noise_m", "attitude_noise_rad"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not self.gust_time_constant_s > 0:
+            raise ValueError(f"gust_time_constant_s must be > 0, got {self.gust_time_constant_s}")
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """Controller gains and limits of the fake's position loop.
+
+    The defaults make a stiff indoor position loop (natural frequency
+    ``sqrt(k_p k_v)`` = 4.6 rad/s, damping 0.76), as on a fully-actuated vehicle under
+    motion capture; a steady push ``d`` leaves an offset of ``d / (k_p k_v)``.
+    """
+
+    position_gain: float = 3.0
+    """1/s: desired speed per metre of position error."""
+    velocity_gain: float = 7.0
+    """1/s: commanded acceleration per m/s of speed error."""
+    max_speed_m_s: float = 2.0
+    max_accel_m_s2: float = 3.0
+    yaw_rate_rad_s: float = 1.5
+    telemetry_hz: float = 40.0
+    setpoint_timeout_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
+
+
+@dataclass(frozen=True)
+class GripperEvent:
+    """A gripper command the fake received, with the ground truth at that instant."""
+
+    grab: bool
+    time_s: float
+    position_ned: tuple[float, float, float]
+    yaw_rad: float
+    end_effector_ned: tuple[float, float, float]
+
+
+@dataclass
+class _State:
+    position: np.ndarray
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    yaw: float = 0.0
+    gust: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+def _wrap(angle: float) -> float:
+    return math.remainder(angle, 2.0 * math.pi)
+
+
+def _clip_norm(vector: np.ndarray, limit: float) -> np.ndarray:
+    norm = float(np.linalg.norm(vector))
+    return vector * (limit / norm) if norm > limit else vector
+
+
+class FakeVehicle:
+    """A simulated MAVLink hexarotor on its own thread (see the module docstring).
+
+    Parameters
+    ----------
+    url
+        pymavlink connection string, normally ``udpout:127.0.0.1:PORT`` (the adapter
+        listens with ``udpin:``).
+    autopilot
+        ``"ardupilot"`` or ``"px4"``: the heartbeat, mode numbers and OFFBOARD rule.
+    seed
+        Seed of the gust and noise streams.
+    disturbance, dynamics
+        Gusts and noise; controller gains and limits.
+    start_ned
+        Initial position in the local NED frame, m.
+    end_effector_frd
+        Where the gripper sits in the body frame (forward, right, down), m; only used to
+        record the ground truth of :attr:`gripper_events`.
+    offboard_warmup_s
+        PX4 flavour: how long setpoints must have streamed before OFFBOARD is accepted.
+    system_id
+        MAVLink system id of the vehicle.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        *,
+        autopilot: Autopilot = "ardupilot",
+        seed: int = 0,
+        disturbance: Disturbance | None = None,
+        dynamics: Dynamics | None = None,
+        start_ned: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        end_effector_frd: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        offboard_warmup_s: float = 1.0,
+        system_id: int = 1,
+    ) -> None:
+        if autopilot not in ("ardupilot", "px4"):
+            raise ValueError(f"autopilot must be 'ardupilot' or 'px4', got {autopilot!r}")
+        self.url = url
+        self.autopilot: Autopilot = autopilot
+        self.disturbance = disturbance or Disturbance()
+        self.dynamics = dynamics or Dynamics()
+        self.end_effector_frd = np.asarray(end_effector_frd, dtype=float)
+        self.offboard_warmup_s = offboard_warmup_s
+        self.system_id = system_id
+        gust_seed, noise_seed = np.random.SeedSequence(seed).spawn(2)
+        self._gust_rng = np.random.default_rng(gust_seed)
+        self._noise_rng = np.random.default_rng(noise_seed)
+        self._state = _State(position=np.asarray(start_ned, dtype=float).copy())
+        self._hold_point: np.ndarray | None = self._state.position.copy()
+        self._hold_yaw = 0.0
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._connection: mavutil.mavfile | None = None
+        self._link_up = True
+        self.heartbeats_enabled = True
+        """False silences the heartbeat only (telemetry and commands still flow)."""
+        self._heartbeat_due = False
+        self._started_at = time.monotonic()
+
+        self.armed = False
+        self.custom_mode = (
+            ARDUPILOT_MODES["LOITER"]
+            if autopilot == "ardupilot"
+            else px4_custom_mode(PX4_MAIN_POSCTL)
+        )
+        self.setpoint: tuple[np.ndarray, float] | None = None
+        self.setpoints_received = 0
+        self.rejected_setpoints = 0
+        self.commands_received: list[int] = []
+        self.gripper_events: list[GripperEvent] = []
+        self.gcs_heartbeats = 0
+        self._last_setpoint_at = -math.inf
+        self._stream_started_at = math.inf
+
+    # -- lifecycle -------------------------------------------------------------------
+
+    def start(self) -> FakeVehicle:
+        """Open the link and start simulating on a daemon thread; returns ``self``."""
+        if self._thread is not None:
+            raise RuntimeError("the fake vehicle is already running")
+        self._connection = mavutil.mavlink_connection(
+            self.url, source_system=self.system_id, source_component=1
+        )
+        self._started_at = time.monotonic()
+        self._thread = threading.Thread(target=self._run, name="fake-vehicle", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop the simulation thread and close the link (idempotent)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        if self._connection is not None:
+            self._connection.close()
+            self._connection = None
+
+    def __enter__(self) -> FakeVehicle:
+        return self.start()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+    def set_link(self, up: bool) -> None:
+        """Cut (``False``) or restore the radio: nothing is sent or received while cut."""
+        self._link_up = up
+
+    def switch_mode(self, custom_mode: int) -> None:
+        """Change mode as a pilot's transmitter would (no command), and announce it."""
+        with self._lock:
+            self.custom_mode = custom_mode
+            self._hold_point = self._state.position.copy()
+            self._hold_yaw = self._state.yaw
+        self._heartbeat_due = True  # sent by the simulation thread, the only one that writes
+
+    # -- ground truth for tests ------------------------------------------------------
+
+    @property
+    def true_position(self) -> np.ndarray:
+        """Actual position in the local NED frame (no noise), m."""
+        with self._lock:
+            return self._state.position.copy()
+
+    @property
+    def true_velocity(self) -> np.ndarray:
+        with self._lock:
+            return self._state.velocity.copy()
+
+    @property
+    def true_yaw(self) -> float:
+        with self._lock:
+            return self._state.yaw
+
+    @property
+    def guided(self) -> bool:
+        """In the mode that follows external setpoints (GUIDED or OFFBOARD)."""
+        if self.autopilot == "ardupilot":
+            return self.custom_mode == ARDUPILOT_MODES["GUIDED"]
+        return self.custom_mode == px4_custom_mode(PX4_MAIN_OFFBOARD)
+
+    def true_end_effector(self) -> np.ndarray:
+        """Actual gripper position in the local NED frame (the vehicle is level), m."""
+        with self._lock:
+            return self._state.position + _yaw_matrix(self._state.yaw) @ self.end_effector_frd
+
+    # -- the loop --------------------------------------------------------------------
+
+    def _run(self) -> None:
+        period = 1.0 / self.dynamics.telemetry_hz
+        now = time.monotonic()
+        last_step = now
+        next_telemetry = now
+        next_heartbeat = now
+        while not self._stop.is_set():
+            now = time.monotonic()
+            wait = max(0.0, min(next_telemetry, next_heartbeat) - now)
+            message = self._connection.recv_match(blocking=True, timeout=min(wait, 0.02))
+            while message is not None:
+                if self._link_up:
+                    self._handle(message)
+                message = self._connection.recv_match(blocking=False)
+            now = time.monotonic()
+            self._advance(now - last_step, now)
+            last_step = now
+            if now >= next_heartbeat or self._heartbeat_due:
+                self._heartbeat_due = False
+                self._send_heartbeat()
+                next_heartbeat = now + 1.0
+            if now >= next_telemetry:
+                self._send_telemetry(now)
+                # Skip missed ticks instead of bursting after a stall of the machine.
+                next_telemetry = max(next_telemetry + period, now)
+
+    def _advance(self, elapsed: float, now: float) -> None:
+        steps = max(1, math.ceil(elapsed / PHYSICS_STEP_S))
+        dt = elapsed / steps
+        if dt <= 0:
+            return
+        dyn, dist = self.dynamics, self.disturbance
+        with self._lock:
+            state = self._state
+            if not self.armed:
+                state.velocity[:] = 0.0
+                return
+            target, target_yaw = self._target(now)
+            decay = math.exp(-dt / dist.gust_time_constant_s)
+            spread = dist.gust_std_m_s2 * math.sqrt(1.0 - decay * decay)
+            for _ in range(steps):
+                state.gust = decay * state.gust + spread * self._gust_rng.standard_normal(3)
+                state.position, state.velocity, state.yaw = step_dynamics(
+                    state.position,
+                    state.velocity,
+                    state.yaw,
+                    target,
+                    target_yaw,
+                    dt,
+                    dyn,
+                    state.gust,
+                )
+
+    def _target(self, now: float) -> tuple[np.ndarray, float]:
+        """Setpoint to follow, or the hold point once setpoints have stopped (lock held)."""
+        fresh = now - self._last_setpoint_at <= self.dynamics.setpoint_timeout_s
+        if self.guided and self.setpoint is not None and fresh:
+            self._hold_point = None
+            return self.setpoint
+        if self._hold_point is None:
+            # Setpoints just stopped: brake and hold here (where we would stop braking).
+            self._hold_point = self._state.position.copy()
+            self._hold_yaw = self._state.yaw
+            if self.autopilot == "px4" and self.guided:
+                self.custom_mode = px4_custom_mode(PX4_MAIN_AUTO, PX4_SUB_AUTO_LOITER)
+        return self._hold_point, self._hold_yaw
+
+    # -- messages --------------------------------------------------------------------
+
+    def _handle(self, message: object) -> None:
+        kind = message.get_type()
+        if kind == "HEARTBEAT":
+            self.gcs_heartbeats += 1
+        elif kind == "SET_POSITION_TARGET_LOCAL_NED":
+            self._handle_setpoint(message)
+        elif kind == "COMMAND_LONG":
+            self._handle_command(message)
+
+    def _handle_setpoint(self, message: object) -> None:
+        if message.target_system not in (0, self.system_id):
+            return
+        if (
+            message.type_mask != POSITION_YAW_TYPE_MASK
+            or message.coordinate_frame != mavlink.MAV_FRAME_LOCAL_NED
+        ):
+            self.rejected_setpoints += 1
+            return
+        now = time.monotonic()
+        with self._lock:
+            if now - self._last_setpoint_at > self.dynamics.setpoint_timeout_s:
+                self._stream_started_at = now
+            self._last_setpoint_at = now
+            self.setpoint = (np.array([message.x, message.y, message.z]), float(message.yaw))
+            self.setpoints_received += 1
+
+    def _handle_command(self, message: object) -> None:
+        if message.target_system not in (0, self.system_id):
+            return
+        command = message.command
+        self.commands_received.append(command)
+        if command == mavlink.MAV_CMD_DO_SET_MODE:
+            result = self._set_mode(message.param1, message.param2, message.param3)
+        elif command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            self.armed = message.param1 >= 0.5
+            result = mavlink.MAV_RESULT_ACCEPTED
+        elif command == mavlink.MAV_CMD_DO_GRIPPER:
+            result = self._gripper(message.param2)
+        else:
+            result = mavlink.MAV_RESULT_UNSUPPORTED
+        self._connection.mav.command_ack_send(
+            command,
+            result,
+            target_system=message.get_srcSystem(),
+            target_component=message.get_srcComponent(),
+        )
+        if result == mavlink.MAV_RESULT_ACCEPTED and command != mavlink.MAV_CMD_DO_GRIPPER:
+            self._send_heartbeat()  # announce the new mode or arming state at once
+
+    def _set_mode(self, base_mode: float, first: float, second: float) -> int:
+        if not int(base_mode) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return mavlink.MAV_RESULT_UNSUPPORTED
+        if self.autopilot == "ardupilot":
+            if int(first) not in ARDUPILOT_MODES.values():
+                return mavlink.MAV_RESULT_DENIED
+            mode = int(first)
+        else:
+            main, sub = int(first), int(second)
+            if main not in (PX4_MAIN_POSCTL, PX4_MAIN_AUTO, PX4_MAIN_OFFBOARD):
+                return mavlink.MAV_RESULT_DENIED
+            if main == PX4_MAIN_OFFBOARD and not self._setpoints_streaming():
+                return mavlink.MAV_RESULT_DENIED
+            mode = px4_custom_mode(main, sub)
+        with self._lock:
+            self.custom_mode = mode
+            self._hold_point = self._state.position.copy()
+            self._hold_yaw = self._state.yaw
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    def _setpoints_streaming(self) -> bool:
+        now = time.monotonic()
+        with self._lock:
+            fresh = now - self._last_setpoint_at <= self.dynamics.setpoint_timeout_s
+            return fresh and now - self._stream_started_at >= self.offboard_warmup_s
+
+    def _gripper(self, action: float) -> int:
+        grab = int(action) == mavlink.GRIPPER_ACTION_GRAB
+        with self._lock:
+            position = self._state.position.copy()
+            yaw = self._state.yaw
+        end_effector = position + _yaw_matrix(yaw) @ self.end_effector_frd
+        self.gripper_events.append(
+            GripperEvent(
+                grab=grab,
+                time_s=time.monotonic() - self._started_at,
+                position_ned=tuple(float(v) for v in position),
+                yaw_rad=yaw,
+                end_effector_ned=tuple(float(v) for v in end_effector),
+            )
+        )
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    def _send_heartbeat(self) -> None:
+        if not (self._link_up and self.heartbeats_enabled):
+            return
+        autopilot = (
+            mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+            if self.autopilot == "ardupilot"
+            else mavlink.MAV_AUTOPILOT_PX4
+        )
+        base_mode = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if self.armed:
+            base_mode |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        status = mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY
+        self._connection.mav.heartbeat_send(
+            mavlink.MAV_TYPE_HEXAROTOR, autopilot, base_mode, self.custom_mode, status
+        )
+
+    def _send_telemetry(self, now: float) -> None:
+        if not self._link_up:
+            return
+        dist = self.disturbance
+        with self._lock:
+            position = self._state.position.copy()
+            velocity = self._state.velocity.copy()
+            yaw = self._state.yaw
+        position_noise = self._noise_rng.normal(0.0, dist.position_noise_m, 3)
+        attitude_noise = self._noise_rng.normal(0.0, dist.attitude_noise_rad, 3)
+        boot_ms = int((now - self._started_at) * 1000) & 0xFFFFFFFF
+        x, y, z = position + position_noise
+        self._connection.mav.local_position_ned_send(boot_ms, x, y, z, *velocity)
+        self._connection.mav.attitude_send(
+            boot_ms,
+            attitude_noise[0],
+            attitude_noise[1],
+            _wrap(yaw + attitude_noise[2]),
+            0.0,
+            0.0,
+            0.0,
+        )
+
+
+def step_dynamics(
+    position: np.ndarray,
+    velocity: np.ndarray,
+    yaw: float,
+    target: np.ndarray,
+    target_yaw: float,
+    dt: float,
+    dynamics: Dynamics,
+    disturbance_m_s2: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """One semi-implicit Euler step of the fake's closed-loop position dynamics.
+
+    ``v_des = clip(k_p (target - x), v_max)``, ``a = clip(k_v (v_des - v), a_max) + d``;
+    yaw turns towards ``target_yaw`` at no more than ``yaw_rate_rad_s``. The ground
+    (``z = 0`` in NED) stops downward motion.
+
+    Parameters
+    ----------
+    position, velocity : ndarray, shape (3,)
+        NED, m and m/s.
+    yaw, target_yaw : float
+        rad.
+    target : ndarray, shape (3,)
+        Position setpoint, NED, m.
+    dt : float
+        Step, s (> 0).
+    dynamics : Dynamics
+        Gains and limits.
+    disturbance_m_s2 : ndarray, shape (3,), optional
+        External acceleration (gusts) added after the controller's bounded command.
+
+    Returns
+    -------
+    position, velocity, yaw
+        The new state (new arrays).
+    """
+    desired = _clip_norm(dynamics.position_gain * (target - position), dynamics.max_speed_m_s)
+    accel = _clip_norm(dynamics.velocity_gain * (desired - velocity), dynamics.max_accel_m_s2)
+    if disturbance_m_s2 is not None:
+        accel = accel + disturbance_m_s2
+    velocity = velocity + accel * dt
+    position = position + velocity * dt
+    if position[2] > 0.0:  # the ground (NED: z down, ground at z = 0)
+        position[2] = 0.0
+        velocity[2] = min(velocity[2], 0.0)
+    yaw_error = _wrap(target_yaw - yaw)
+    turn = math.copysign(min(abs(yaw_error), dynamics.yaw_rate_rad_s * dt), yaw_error)
+    return position, velocity, _wrap(yaw + turn)
+
+
+def free_udp_port(host: str = "127.0.0.1") -> int:
+    """A UDP port on ``host`` that nothing was bound to a moment ago (for tests and trials)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind((host, 0))
+        return int(probe.getsockname()[1])
+
+
+def _yaw_matrix(yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m adapters.fake_vehicle``: run a fake vehicle until Ctrl-C."""
+    parser = argparse.ArgumentParser(
+        prog="python -m adapters.fake_vehicle", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument("--url", default="udpout:127.0.0.1:14550", help="pymavlink URL")
+    parser.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--gust-std", type=float, default=Disturbance.gust_std_m_s2)
+    parser.add_argument("--position-noise", type=float, default=Disturbance.position_noise_m)
+    args = parser.parse_args(argv)
+    disturbance = Disturbance(gust_std_m_s2=args.gust_std, position_noise_m=args.position_noise)
+    vehicle = FakeVehicle(
+        args.url, autopilot=args.autopilot, seed=args.seed, disturbance=disturbance
+    ).start()
+    print(f"fake {args.autopilot} hexarotor on {args.url}; Ctrl-C stops it", flush=True)
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        vehicle.stop()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,940 @@
+"""Hexarotor adapter over MAVLink 2 (pymavlink): connect, guided mode, arm, stream setpoints, grasp.
+
+Frames
+------
+* **Local NED** (what the autopilot speaks): ``x`` north, ``y`` east, ``z`` down, metres,
+  origin at the autopilot's local origin; yaw from north towards east, radians.
+* **Robot cell ENU**: ``x`` east, ``y`` north, ``z`` up, metres; this is the base frame of
+  :class:`~schemas.GraspTarget` when the cell is laid out along the compass. Its origin
+  sits at ``cell_origin_ned`` in the local NED frame; :func:`ned_from_enu` and
+  :func:`yaw_ned_from_enu` convert, :func:`enu_from_ned` goes back.
+* **Body FRD**: ``x`` forward, ``y`` right, ``z`` down; the gripper sits at
+  :attr:`ApproachConfig.end_effector_frd` in it.
+
+Safety rules
+------------
+* Nothing is sent without a heartbeat from the vehicle in the last
+  :attr:`LinkConfig.link_loss_s` seconds (2 s): commands raise :class:`LinkLostError`,
+  the setpoint stream pauses.
+* Every ``COMMAND_LONG`` waits for its ``COMMAND_ACK``; anything but ``MAV_RESULT_ACCEPTED``
+  raises :class:`CommandRejectedError`, silence raises :class:`CommandTimeoutError`.
+* Every setpoint and every point of an approach is checked against the :class:`Geofence`
+  before anything is sent; a refusal raises :class:`UnsafeTargetError`.
+* Streamed setpoints move towards their goal at no more than the requested speed, itself
+  capped at :data:`MAX_SPEED_M_S`.
+* A lost link, a mode change away from GUIDED / OFFBOARD, disarming or a timeout during an
+  approach freezes the setpoint and returns a failed :class:`ApproachReport`; the vehicle
+  holds (the autopilot holds at its last setpoint, or brakes when setpoints stop).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+# MAVLink 2 must be chosen before mavutil is imported, or it loads the v1 dialect.
+os.environ["MAVLINK20"] = "1"
+from pymavlink import mavutil
+
+if mavutil.mavlink.WIRE_PROTOCOL_VERSION != "2.0":  # mavutil was imported earlier, without it
+    mavutil.set_dialect(mavutil.current_dialect)
+mavlink = mavutil.mavlink
+
+POSITION_YAW_TYPE_MASK = 0x09F8
+"""``type_mask`` of ``SET_POSITION_TARGET_LOCAL_NED`` using position and yaw only."""
+MAX_SPEED_M_S = 2.0
+"""Hard cap on the speed of the streamed setpoints, whatever the caller asks."""
+MIN_SETPOINT_RATE_HZ = 10.0
+"""Below this, ArduPilot and PX4 treat the stream as lost."""
+
+ARDUPILOT_GUIDED = 4
+PX4_MAIN_OFFBOARD = 6
+
+Vector3 = tuple[float, float, float]
+
+
+class MavlinkError(RuntimeError):
+    """Base class of the link's failures."""
+
+
+class LinkTimeoutError(MavlinkError):
+    """No heartbeat from a vehicle arrived in time."""
+
+
+class LinkLostError(MavlinkError):
+    """The vehicle's heartbeat is older than the link-loss limit; nothing was sent."""
+
+
+class CommandRejectedError(MavlinkError):
+    """A command was answered with something other than ``MAV_RESULT_ACCEPTED``."""
+
+
+class CommandTimeoutError(MavlinkError):
+    """A command got no ``COMMAND_ACK`` after all retries."""
+
+
+class VehicleNotReadyError(MavlinkError):
+    """The vehicle is not armed in its guided mode, or sent no position yet."""
+
+
+class UnsafeTargetError(ValueError):
+    """A target lies outside the geofence or the limits; nothing was sent."""
+
+
+# -- frames (pure) ------------------------------------------------------------------------
+
+
+def ned_from_enu(point_enu: Sequence[float], cell_origin_ned: Sequence[float] = (0, 0, 0)):
+    """Convert a point from the robot-cell ENU frame to the local NED frame.
+
+    ``(east, north, up)`` becomes ``(north, east, -up)``, then the cell origin (given in
+    NED) is added: ``p_ned = (y, x, -z) + cell_origin_ned``.
+
+    Parameters
+    ----------
+    point_enu
+        ``(x_east, y_north, z_up)``, metres.
+    cell_origin_ned
+        Where the cell's origin lies in the local NED frame, metres.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+    """
+    x, y, z = _finite3(point_enu, "point_enu")
+    return np.array([y, x, -z]) + _finite3(cell_origin_ned, "cell_origin_ned")
+
+
+def enu_from_ned(point_ned: Sequence[float], cell_origin_ned: Sequence[float] = (0, 0, 0)):
+    """Inverse of :func:`ned_from_enu`: a local NED point in the robot-cell ENU frame."""
+    north, east, down = _finite3(point_ned, "point_ned") - _finite3(
+        cell_origin_ned, "cell_origin_ned"
+    )
+    return np.array([east, north, -down])
+
+
+def yaw_ned_from_enu(yaw_enu: float) -> float:
+    """Heading in NED (from north towards east) of a yaw in ENU (from east towards north).
+
+    ``psi_ned = pi/2 - psi_enu``, wrapped to ``[-pi, pi]``; the map is its own inverse.
+    """
+    return math.remainder(math.pi / 2 - yaw_enu, 2 * math.pi)
+
+
+def body_to_ned(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """Rotation taking body FRD vectors to NED (aerospace Z-Y-X order: yaw, pitch, roll)."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def end_effector_ned(
+    position_ned: Sequence[float],
+    roll: float,
+    pitch: float,
+    yaw: float,
+    end_effector_frd: Sequence[float],
+) -> np.ndarray:
+    """Where the gripper is in NED, given the vehicle's position and attitude."""
+    return np.asarray(position_ned, dtype=float) + body_to_ned(roll, pitch, yaw) @ np.asarray(
+        end_effector_frd, dtype=float
+    )
+
+
+def _finite3(values: Sequence[float], name: str) -> np.ndarray:
+    vector = np.asarray(values, dtype=float)
+    if vector.shape != (3,) or not np.all(np.isfinite(vector)):
+        raise ValueError(f"{name} must be three finite numbers, got {values!r}")
+    return vector
+
+
+# -- configuration, fence and approach planning (pure) ------------------------------------
+
+
+@dataclass(frozen=True)
+class Geofence:
+    """An axis-aligned box in the local NED frame, metres (``down`` < 0 is above the origin).
+
+    The default reaches 10 cm below the origin so that a vehicle standing on the ground
+    at the origin, its position a little noisy, is still inside.
+    """
+
+    north: tuple[float, float] = (-5.0, 5.0)
+    east: tuple[float, float] = (-5.0, 5.0)
+    down: tuple[float, float] = (-3.0, 0.1)
+
+    def __post_init__(self) -> None:
+        for name in ("north", "east", "down"):
+            low, high = getattr(self, name)
+            if not (math.isfinite(low) and math.isfinite(high) and low < high):
+                raise ValueError(f"geofence {name} must be finite with low < high")
+
+    def contains(self, point_ned: Sequence[float]) -> bool:
+        """True when ``point_ned`` lies inside the box (borders included)."""
+        north, east, down = _finite3(point_ned, "point_ned")
+        return (
+            self.north[0] <= north <= self.north[1]
+            and self.east[0] <= east <= self.east[1]
+            and self.down[0] <= down <= self.down[1]
+        )
+
+    def check(self, point_ned: Sequence[float], what: str) -> None:
+        """Raise :class:`UnsafeTargetError` when ``point_ned`` is outside the box."""
+        if not self.contains(point_ned):
+            shown = ", ".join(f"{v:.3f}" for v in np.asarray(point_ned, dtype=float))
+            raise UnsafeTargetError(
+                f"{what} [{shown}] (NED, m) is outside the geofence north {self.north}, "
+                f"east {self.east}, down {self.down}"
+            )
+
+
+@dataclass(frozen=True)
+class LinkConfig:
+    """Timing of the MAVLink link."""
+
+    heartbeat_timeout_s: float = 10.0
+    """How long :meth:`MavlinkVehicle.connect` waits for the vehicle's first heartbeat."""
+    link_loss_s: float = 2.0
+    """A vehicle heartbeat older than this means the link is lost."""
+    setpoint_rate_hz: float = 20.0
+    command_timeout_s: float = 1.5
+    """Wait for each ``COMMAND_ACK``; the command is resent up to ``command_attempts`` times."""
+    command_attempts: int = 3
+    offboard_warmup_s: float = 1.2
+    """PX4: how long setpoints stream before OFFBOARD is requested (PX4 wants about 1 s)."""
+    mode_timeout_s: float = 5.0
+    """After an accepted mode or arming command, wait this long to see it in the heartbeat."""
+
+    def __post_init__(self) -> None:
+        if not self.setpoint_rate_hz >= MIN_SETPOINT_RATE_HZ:
+            raise ValueError(
+                f"setpoint_rate_hz must be >= {MIN_SETPOINT_RATE_HZ}, got {self.setpoint_rate_hz}"
+            )
+        for name in (
+            "heartbeat_timeout_s",
+            "link_loss_s",
+            "command_timeout_s",
+            "offboard_warmup_s",
+            "mode_timeout_s",
+        ):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
+        if self.command_attempts < 1:
+            raise ValueError(f"command_attempts must be >= 1, got {self.command_attempts}")
+
+
+@dataclass(frozen=True)
+class ApproachConfig:
+    """The grasp approach: standoff, final move, closing rule and limits."""
+
+    end_effector_frd: Vector3 = (0.40, 0.0, 0.20)
+    """Gripper position in the body frame (forward, right, down), m."""
+    standoff_m: float = 0.5
+    """Distance of the standoff from the grasp point, against the approach direction."""
+    tolerance_m: float = 0.010
+    """The gripper closes once the end-effector error stayed below this ..."""
+    dwell_s: float = 0.3
+    """... for this long, s."""
+    standoff_tolerance_m: float = 0.05
+    """The final move starts once the vehicle is this close to the standoff ..."""
+    settle_speed_m_s: float = 0.1
+    """... and slower than this."""
+    transit_speed_m_s: float = 1.0
+    """Setpoint speed to the standoff."""
+    approach_speed_m_s: float = 0.25
+    """Setpoint speed of the final move onto the target."""
+    timeout_s: float = 30.0
+    """Give up (and hold) when the approach takes longer."""
+
+    def __post_init__(self) -> None:
+        _finite3(self.end_effector_frd, "end_effector_frd")
+        for name in (
+            "standoff_m",
+            "tolerance_m",
+            "standoff_tolerance_m",
+            "settle_speed_m_s",
+            "transit_speed_m_s",
+            "approach_speed_m_s",
+            "timeout_s",
+        ):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
+        if not (math.isfinite(self.dwell_s) and self.dwell_s >= 0):
+            raise ValueError(f"dwell_s must be finite and >= 0, got {self.dwell_s}")
+        for name in ("transit_speed_m_s", "approach_speed_m_s"):
+            if getattr(self, name) > MAX_SPEED_M_S:
+                raise ValueError(f"{name} must be <= {MAX_SPEED_M_S} m/s")
+
+
+@dataclass(frozen=True)
+class ApproachPlan:
+    """Vehicle positions (NED) of the two legs of an approach, and the heading."""
+
+    target_ned: np.ndarray
+    """The grasp point the end-effector must reach."""
+    standoff_ned: np.ndarray
+    """Vehicle position with the end-effector ``standoff_m`` short of the target."""
+    final_ned: np.ndarray
+    """Vehicle position with the end-effector on the target."""
+    yaw_ned: float
+    """Heading of the vehicle; the approach runs along it."""
+
+
+def plan_approach(
+    target_ned: Sequence[float], yaw_ned: float, config: ApproachConfig
+) -> ApproachPlan:
+    """Where the vehicle must be to hold the standoff and to put the gripper on the target.
+
+    The vehicle is level and faces ``yaw_ned``; the approach direction is that heading,
+    horizontal. The end-effector first waits ``standoff_m`` before the target along it,
+    then moves forward onto the target.
+    """
+    target = _finite3(target_ned, "target_ned")
+    if not math.isfinite(yaw_ned):
+        raise ValueError(f"yaw_ned must be finite, got {yaw_ned}")
+    offset = body_to_ned(0.0, 0.0, yaw_ned) @ np.asarray(config.end_effector_frd, dtype=float)
+    heading = np.array([math.cos(yaw_ned), math.sin(yaw_ned), 0.0])
+    final = target - offset
+    return ApproachPlan(
+        target_ned=target,
+        standoff_ned=final - config.standoff_m * heading,
+        final_ned=final,
+        yaw_ned=yaw_ned,
+    )
+
+
+def check_plan(plan: ApproachPlan, fence: Geofence) -> None:
+    """Refuse a plan any point of which (target, standoff, final position) leaves the fence."""
+    fence.check(plan.target_ned, "grasp target")
+    fence.check(plan.standoff_ned, "standoff position")
+    fence.check(plan.final_ned, "final vehicle position")
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """The latest telemetry: position and velocity in NED, attitude, and when it arrived."""
+
+    position_ned: np.ndarray
+    velocity_ned: np.ndarray
+    roll: float
+    pitch: float
+    yaw: float
+    received_at: float
+    """``time.monotonic()`` of the newer of the two messages."""
+
+
+@dataclass(frozen=True)
+class ApproachReport:
+    """The outcome of :meth:`MavlinkVehicle.approach`."""
+
+    ok: bool
+    """The gripper closed on target."""
+    error_m: float | None
+    """Measured end-effector error when the gripper closed (None when it did not)."""
+    reason: str
+    """``"closed"``, ``"link lost"``, ``"left guided mode"`` or ``"timeout"``."""
+    duration_s: float
+
+
+@dataclass
+class _Setpoint:
+    goal: np.ndarray
+    commanded: np.ndarray
+    yaw: float
+    speed: float
+
+
+@dataclass
+class _Inbox:
+    heartbeat_at: float = -math.inf
+    autopilot: int | None = None
+    custom_mode: int | None = None
+    base_mode: int = 0
+    system: int = 0
+    component: int = 0
+    position: np.ndarray | None = None
+    velocity: np.ndarray | None = None
+    position_at: float = -math.inf
+    attitude: tuple[float, float, float] | None = None
+    attitude_at: float = -math.inf
+    acks: list[tuple[int, int]] = field(default_factory=list)
+
+
+class MavlinkVehicle:
+    """A hexarotor reached over MAVLink 2 (see the module docstring for the rules).
+
+    Parameters
+    ----------
+    url
+        pymavlink connection string: ``udpin:127.0.0.1:14550`` (a vehicle sending to us,
+        the usual case), ``udpout:HOST:PORT``, ``tcp:HOST:PORT`` or a serial device
+        (``/dev/ttyUSB0``, with ``baud``).
+    fence
+        Geofence in the local NED frame.
+    link
+        Link timing.
+    baud
+        Serial speed (ignored for network URLs).
+    source_system, source_component
+        Our MAVLink ids (a ground station by default).
+
+    Examples
+    --------
+    >>> with MavlinkVehicle("udpin:127.0.0.1:14550") as vehicle:  # doctest: +SKIP
+    ...     vehicle.set_guided_mode()
+    ...     vehicle.arm()
+    ...     report = vehicle.approach((1.0, 0.5, -1.0), yaw_ned=0.0)
+    """
+
+    def __init__(
+        self,
+        url: str,
+        *,
+        fence: Geofence | None = None,
+        link: LinkConfig | None = None,
+        baud: int = 57600,
+        source_system: int = 255,
+        source_component: int = mavlink.MAV_COMP_ID_MISSIONPLANNER,
+    ) -> None:
+        self.url = url
+        self.fence = fence or Geofence()
+        self.link = link or LinkConfig()
+        self._baud = baud
+        self._source = (source_system, source_component)
+        self._connection: mavutil.mavfile | None = None
+        self._send_lock = threading.Lock()
+        self._condition = threading.Condition()
+        self._inbox = _Inbox()
+        self._setpoint: _Setpoint | None = None
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+
+    # -- lifecycle -------------------------------------------------------------------
+
+    def connect(self) -> MavlinkVehicle:
+        """Open the link, wait for the vehicle's heartbeat, start our heartbeat and stream.
+
+        Raises
+        ------
+        LinkTimeoutError
+            No vehicle heartbeat within ``link.heartbeat_timeout_s``.
+        """
+        if self._connection is not None:
+            raise MavlinkError("already connected")
+        self._connection = mavutil.mavlink_connection(
+            self.url,
+            baud=self._baud,
+            source_system=self._source[0],
+            source_component=self._source[1],
+        )
+        self._stop.clear()
+        for target, name in (
+            (self._receive_loop, "mavlink-rx"),
+            (self._heartbeat_loop, "mavlink-heartbeat"),
+            (self._stream_loop, "mavlink-setpoints"),
+        ):
+            thread = threading.Thread(target=target, name=name, daemon=True)
+            thread.start()
+            self._threads.append(thread)
+        if not self._wait_for(
+            lambda: self._inbox.autopilot is not None, self.link.heartbeat_timeout_s
+        ):
+            self.close()
+            raise LinkTimeoutError(
+                f"no vehicle heartbeat on {self.url} within {self.link.heartbeat_timeout_s} s"
+            )
+        return self
+
+    def close(self) -> None:
+        """Stop the threads and close the link (idempotent). The vehicle keeps holding."""
+        self._stop.set()
+        for thread in self._threads:
+            thread.join(timeout=5.0)
+        self._threads.clear()
+        if self._connection is not None:
+            self._connection.close()
+            self._connection = None
+
+    def __enter__(self) -> MavlinkVehicle:
+        return self.connect()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- what we know about the vehicle ----------------------------------------------
+
+    @property
+    def autopilot(self) -> Literal["ardupilot", "px4", "other"]:
+        """The autopilot family the heartbeat announces."""
+        kind = self._inbox.autopilot
+        if kind == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA:
+            return "ardupilot"
+        if kind == mavlink.MAV_AUTOPILOT_PX4:
+            return "px4"
+        return "other"
+
+    def heartbeat_age(self) -> float:
+        """Seconds since the vehicle's last heartbeat (``inf`` before the first)."""
+        return time.monotonic() - self._inbox.heartbeat_at
+
+    def link_ok(self) -> bool:
+        """The vehicle's heartbeat is recent enough to command it."""
+        return self.heartbeat_age() <= self.link.link_loss_s
+
+    @property
+    def armed(self) -> bool:
+        return bool(self._inbox.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+
+    @property
+    def in_guided_mode(self) -> bool:
+        """The heartbeat reports GUIDED (ArduPilot) or OFFBOARD (PX4)."""
+        mode = self._inbox.custom_mode
+        if mode is None:
+            return False
+        if self.autopilot == "ardupilot":
+            return mode == ARDUPILOT_GUIDED
+        if self.autopilot == "px4":
+            return (mode >> 16) & 0xFF == PX4_MAIN_OFFBOARD
+        return False
+
+    def state(self) -> VehicleState | None:
+        """The latest position and attitude, or None before both have arrived."""
+        with self._condition:
+            inbox = self._inbox
+            if inbox.position is None or inbox.attitude is None:
+                return None
+            return VehicleState(
+                position_ned=inbox.position.copy(),
+                velocity_ned=inbox.velocity.copy(),
+                roll=inbox.attitude[0],
+                pitch=inbox.attitude[1],
+                yaw=inbox.attitude[2],
+                received_at=max(inbox.position_at, inbox.attitude_at),
+            )
+
+    def wait_for_state(self, timeout_s: float = 5.0) -> VehicleState:
+        """Block until telemetry has arrived; raise :class:`VehicleNotReadyError` otherwise."""
+        if not self._wait_for(lambda: self.state() is not None, timeout_s):
+            raise VehicleNotReadyError(f"no LOCAL_POSITION_NED and ATTITUDE within {timeout_s} s")
+        return self.state()
+
+    # -- commands --------------------------------------------------------------------
+
+    def command(self, command: int, *params: float) -> None:
+        """Send ``COMMAND_LONG`` and wait for an accepting ``COMMAND_ACK``.
+
+        Resent (with ``confirmation`` counting up) when no ack arrives in
+        ``link.command_timeout_s``; ``MAV_RESULT_IN_PROGRESS`` keeps waiting.
+
+        Raises
+        ------
+        LinkLostError, CommandRejectedError, CommandTimeoutError
+        """
+        if len(params) > 7:
+            raise ValueError("COMMAND_LONG has 7 parameters")
+        padded = [float(p) for p in params] + [0.0] * (7 - len(params))
+        name = (
+            mavlink.enums["MAV_CMD"][command].name
+            if command in mavlink.enums["MAV_CMD"]
+            else command
+        )
+        for confirmation in range(self.link.command_attempts):
+            self._require_link()
+            with self._condition:
+                self._inbox.acks = [ack for ack in self._inbox.acks if ack[0] != command]
+            self._send(
+                lambda conn, c=confirmation: conn.mav.command_long_send(
+                    self._inbox.system, self._inbox.component, command, c, *padded
+                )
+            )
+            deadline = time.monotonic() + self.link.command_timeout_s
+            while True:
+                result = self._pop_ack(command, deadline)
+                if result is None:
+                    break  # timed out: resend
+                if result == mavlink.MAV_RESULT_IN_PROGRESS:
+                    deadline = time.monotonic() + self.link.command_timeout_s
+                    continue
+                if result != mavlink.MAV_RESULT_ACCEPTED:
+                    label = (
+                        mavlink.enums["MAV_RESULT"][result].name
+                        if result in mavlink.enums["MAV_RESULT"]
+                        else str(result)
+                    )
+                    raise CommandRejectedError(f"{name} was refused: {label}")
+                return
+        raise CommandTimeoutError(
+            f"{name}: no COMMAND_ACK after {self.link.command_attempts} attempts"
+        )
+
+    def set_guided_mode(self) -> None:
+        """Switch to GUIDED (ArduPilot) or OFFBOARD (PX4) and wait to see it in the heartbeat.
+
+        For PX4, a hold setpoint at the current position streams for
+        ``link.offboard_warmup_s`` first, because PX4 refuses OFFBOARD without a stream.
+        """
+        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if self.autopilot == "ardupilot":
+            self.command(mavlink.MAV_CMD_DO_SET_MODE, base, ARDUPILOT_GUIDED)
+        elif self.autopilot == "px4":
+            self.hold()
+            self._sleep_checking_link(self.link.offboard_warmup_s)
+            self.command(mavlink.MAV_CMD_DO_SET_MODE, base, PX4_MAIN_OFFBOARD, 0)
+        else:
+            raise VehicleNotReadyError("unknown autopilot: only ArduPilot and PX4 are supported")
+        if not self._wait_for(lambda: self.in_guided_mode, self.link.mode_timeout_s):
+            raise VehicleNotReadyError(
+                "the mode change was accepted but the heartbeat never showed it"
+            )
+
+    def arm(self) -> None:
+        """Arm the motors (``MAV_CMD_COMPONENT_ARM_DISARM``) and wait to see it."""
+        self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+        if not self._wait_for(lambda: self.armed, self.link.mode_timeout_s):
+            raise VehicleNotReadyError("arming was accepted but the heartbeat never showed it")
+
+    def disarm(self) -> None:
+        """Disarm the motors."""
+        self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0)
+
+    def set_gripper(self, grab: bool) -> None:
+        """Close (``grab``) or open gripper 1 with ``MAV_CMD_DO_GRIPPER``."""
+        action = mavlink.GRIPPER_ACTION_GRAB if grab else mavlink.GRIPPER_ACTION_RELEASE
+        self.command(mavlink.MAV_CMD_DO_GRIPPER, 1, action)
+
+    # -- setpoints -------------------------------------------------------------------
+
+    def goto(self, position_ned: Sequence[float], yaw_ned: float, speed_m_s: float) -> None:
+        """Stream setpoints moving towards ``position_ned`` at ``speed_m_s`` (capped).
+
+        The stream starts from the current setpoint, or from the measured position when
+        none is streaming. Raises :class:`UnsafeTargetError` outside the fence (nothing is
+        sent) and :class:`LinkLostError` without a recent heartbeat.
+        """
+        goal = _finite3(position_ned, "position_ned")
+        if not math.isfinite(yaw_ned):
+            raise UnsafeTargetError(f"yaw must be finite, got {yaw_ned}")
+        if not (math.isfinite(speed_m_s) and speed_m_s > 0):
+            raise UnsafeTargetError(f"speed must be finite and > 0, got {speed_m_s}")
+        self.fence.check(goal, "setpoint")
+        self._require_link()
+        speed = min(speed_m_s, MAX_SPEED_M_S)
+        if self.commanded_setpoint() is None:
+            start = self._measured_position()
+            self.fence.check(start, "current position")
+        with self._condition:
+            if self._setpoint is None:
+                self._setpoint = _Setpoint(goal, start, yaw_ned, speed)
+            else:
+                self._setpoint = _Setpoint(goal, self._setpoint.commanded, yaw_ned, speed)
+
+    def hold(self) -> None:
+        """Freeze the setpoint where it is now (the measured position if none streams)."""
+        with self._condition:
+            if self._setpoint is not None:
+                here = self._setpoint.commanded.copy()
+                self._setpoint = _Setpoint(here, here, self._setpoint.yaw, self._setpoint.speed)
+                return
+        position = self._measured_position()
+        self.fence.check(position, "current position")
+        yaw = self.wait_for_state().yaw
+        with self._condition:
+            self._setpoint = _Setpoint(position, position.copy(), yaw, MAX_SPEED_M_S)
+
+    def commanded_setpoint(self) -> tuple[np.ndarray, float] | None:
+        """The position and yaw being streamed now, or None."""
+        with self._condition:
+            if self._setpoint is None:
+                return None
+            return self._setpoint.commanded.copy(), self._setpoint.yaw
+
+    # -- the grasp approach ----------------------------------------------------------
+
+    def approach(
+        self,
+        target_ned: Sequence[float],
+        yaw_ned: float,
+        config: ApproachConfig | None = None,
+        *,
+        on_phase: Callable[[str], None] | None = None,
+    ) -> ApproachReport:
+        """Bring the end-effector onto ``target_ned`` as in the paper and close the gripper.
+
+        Holds the standoff (``config.standoff_m`` before the target along the heading
+        ``yaw_ned``), moves forward until the measured end-effector error stayed below
+        ``config.tolerance_m`` for ``config.dwell_s``, then closes the gripper.
+
+        Raises
+        ------
+        UnsafeTargetError
+            A point of the approach leaves the fence; nothing was sent.
+        VehicleNotReadyError
+            Not armed in the guided mode, or no telemetry; nothing was sent.
+        LinkLostError
+            No recent heartbeat at the start; nothing was sent.
+
+        Returns
+        -------
+        ApproachReport
+            ``ok`` with the measured error at closure, or the reason it gave up (link lost,
+            the vehicle left the guided mode or was disarmed, timeout); then the setpoint is
+            frozen and the vehicle left holding.
+        """
+        config = config or ApproachConfig()
+        plan = plan_approach(target_ned, yaw_ned, config)
+        check_plan(plan, self.fence)
+        self._require_link()
+        if not (self.armed and self.in_guided_mode):
+            raise VehicleNotReadyError("the vehicle must be armed and in its guided mode")
+        self.wait_for_state()
+        started = time.monotonic()
+        deadline = started + config.timeout_s
+
+        def report(ok: bool, error: float | None, reason: str) -> ApproachReport:
+            if not ok:
+                self.hold()
+            return ApproachReport(ok, error, reason, time.monotonic() - started)
+
+        def phase(name: str) -> None:
+            if on_phase is not None:
+                on_phase(name)
+
+        phase("standoff")
+        self.goto(plan.standoff_ned, plan.yaw_ned, config.transit_speed_m_s)
+        while True:
+            outcome = self._watch(deadline)
+            if outcome is not None:
+                return report(False, None, outcome)
+            state = self.state()
+            close = (
+                np.linalg.norm(state.position_ned - plan.standoff_ned)
+                <= config.standoff_tolerance_m
+            )
+            slow = np.linalg.norm(state.velocity_ned) <= config.settle_speed_m_s
+            if close and slow and self._setpoint_reached():
+                break
+
+        phase("final")
+        self.goto(plan.final_ned, plan.yaw_ned, config.approach_speed_m_s)
+        within_since: float | None = None
+        while True:
+            outcome = self._watch(deadline)
+            if outcome is not None:
+                return report(False, None, outcome)
+            state = self.state()
+            error = self._end_effector_error(state, plan, config)
+            if error > config.tolerance_m or not self._setpoint_reached():
+                within_since = None
+                continue
+            within_since = within_since if within_since is not None else state.received_at
+            if state.received_at - within_since >= config.dwell_s:
+                break
+
+        phase("close")
+        self._require_link()
+        self.set_gripper(True)
+        return report(True, error, "closed")
+
+    def _watch(self, deadline: float) -> str | None:
+        """Wait for fresh telemetry; a reason to give up, or None to carry on."""
+        seen = self._inbox.position_at
+        self._wait_for(lambda: self._inbox.position_at > seen, 0.1)
+        if not self.link_ok():
+            return "link lost"
+        if not (self.armed and self.in_guided_mode):
+            return "left guided mode"  # a pilot or a failsafe took over: do not fight it
+        if time.monotonic() > deadline:
+            return "timeout"
+        return None
+
+    def _setpoint_reached(self) -> bool:
+        with self._condition:
+            setpoint = self._setpoint
+            return setpoint is not None and bool(np.all(setpoint.commanded == setpoint.goal))
+
+    @staticmethod
+    def _end_effector_error(state: VehicleState, plan: ApproachPlan, config: ApproachConfig):
+        where = end_effector_ned(
+            state.position_ned, state.roll, state.pitch, state.yaw, config.end_effector_frd
+        )
+        return float(np.linalg.norm(where - plan.target_ned))
+
+    # -- threads ---------------------------------------------------------------------
+
+    def _receive_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                message = self._connection.recv_match(blocking=True, timeout=0.1)
+            except (OSError, ValueError):  # closed underneath us
+                if self._stop.is_set():
+                    return
+                time.sleep(0.05)
+                continue
+            if message is not None:
+                self._dispatch(message)
+
+    def _dispatch(self, message: object) -> None:
+        kind = message.get_type()
+        now = time.monotonic()
+        with self._condition:
+            inbox = self._inbox
+            if kind == "HEARTBEAT":
+                if message.type == mavlink.MAV_TYPE_GCS or (
+                    message.autopilot == mavlink.MAV_AUTOPILOT_INVALID
+                ):
+                    return  # another ground station or a peripheral, not the vehicle
+                if inbox.autopilot is None:
+                    inbox.system = message.get_srcSystem()
+                    inbox.component = message.get_srcComponent()
+                if message.get_srcSystem() != inbox.system:
+                    return
+                inbox.heartbeat_at = now
+                inbox.autopilot = message.autopilot
+                inbox.custom_mode = message.custom_mode
+                inbox.base_mode = message.base_mode
+            elif message.get_srcSystem() != inbox.system:
+                return
+            elif kind == "LOCAL_POSITION_NED":
+                inbox.position = np.array([message.x, message.y, message.z])
+                inbox.velocity = np.array([message.vx, message.vy, message.vz])
+                inbox.position_at = now
+            elif kind == "ATTITUDE":
+                inbox.attitude = (message.roll, message.pitch, message.yaw)
+                inbox.attitude_at = now
+            elif kind == "COMMAND_ACK":
+                inbox.acks.append((message.command, message.result))
+            else:
+                return
+            self._condition.notify_all()
+
+    def _heartbeat_loop(self) -> None:
+        while not self._stop.is_set():
+            self._send_from_thread(
+                lambda conn: conn.mav.heartbeat_send(
+                    mavlink.MAV_TYPE_GCS,
+                    mavlink.MAV_AUTOPILOT_INVALID,
+                    0,
+                    0,
+                    mavlink.MAV_STATE_ACTIVE,
+                )
+            )
+            self._stop.wait(1.0)
+
+    def _stream_loop(self) -> None:
+        period = 1.0 / self.link.setpoint_rate_hz
+        started = time.monotonic()
+        last = started
+        while not self._stop.wait(period):
+            now = time.monotonic()
+            # A stalled thread must not make the setpoint jump: cap the step at 3 periods.
+            elapsed = min(now - last, 3 * period)
+            last = now
+            if not self.link_ok():
+                continue  # no command without a recent heartbeat; the vehicle holds
+            with self._condition:
+                setpoint = self._setpoint
+                if setpoint is None:
+                    continue
+                offset = setpoint.goal - setpoint.commanded
+                distance = float(np.linalg.norm(offset))
+                step = setpoint.speed * elapsed
+                if distance <= step:
+                    setpoint.commanded = setpoint.goal.copy()
+                else:
+                    setpoint.commanded = setpoint.commanded + offset * (step / distance)
+                x, y, z = setpoint.commanded
+                yaw = setpoint.yaw
+            boot_ms = int((now - started) * 1000) & 0xFFFFFFFF
+            self._send_from_thread(
+                lambda conn, x=x, y=y, z=z, yaw=yaw, t=boot_ms: (
+                    conn.mav.set_position_target_local_ned_send(
+                        t,
+                        self._inbox.system,
+                        self._inbox.component,
+                        mavlink.MAV_FRAME_LOCAL_NED,
+                        POSITION_YAW_TYPE_MASK,
+                        x,
+                        y,
+                        z,
+                        0.0,
+                        0.0,
+                        0.0,
+                        0.0,
+                        0.0,
+                        0.0,
+                        yaw,
+                        0.0,
+                    )
+                )
+            )
+
+    # -- helpers ---------------------------------------------------------------------
+
+    def _send(self, write: Callable[[mavutil.mavfile], None]) -> None:
+        with self._send_lock:
+            if self._connection is None:
+                raise MavlinkError("not connected")
+            write(self._connection)
+
+    def _send_from_thread(self, write: Callable[[mavutil.mavfile], None]) -> None:
+        """Send from a background loop: a failed write must not end the loop, and a link
+        that stays broken shows up as a stale heartbeat, which stops everything else."""
+        with contextlib.suppress(OSError, MavlinkError):
+            self._send(write)
+
+    def _require_link(self) -> None:
+        if self._connection is None:
+            raise MavlinkError("not connected")
+        if not self.link_ok():
+            raise LinkLostError(
+                f"no vehicle heartbeat for {self.heartbeat_age():.1f} s "
+                f"(limit {self.link.link_loss_s} s); nothing sent"
+            )
+
+    def _measured_position(self) -> np.ndarray:
+        return self.wait_for_state().position_ned
+
+    def _wait_for(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        with self._condition:
+            while not predicate():
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._condition.wait(min(remaining, 0.1))
+            return True
+
+    def _pop_ack(self, command: int, deadline: float) -> int | None:
+        with self._condition:
+            while True:
+                for index, (acked, result) in enumerate(self._inbox.acks):
+                    if acked == command:
+                        del self._inbox.acks[index]
+                        return result
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return None
+                self._condition.wait(min(remaining, 0.1))
+
+    def _sleep_checking_link(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while (remaining := end - time.monotonic()) > 0:
+            self._require_link()
+            self._stop.wait(min(remaining, 0.1))

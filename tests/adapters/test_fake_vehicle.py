@@ -1,0 +1,268 @@
+"""The fake hexarotor, driven by a bare pymavlink ground station over loopback UDP."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from adapters.fake_vehicle import (
+    ARDUPILOT_MODES,
+    POSITION_YAW_TYPE_MASK,
+    PX4_MAIN_OFFBOARD,
+    Disturbance,
+    Dynamics,
+    FakeVehicle,
+    free_udp_port,
+    mavlink,
+    mavutil,
+    px4_custom_mode,
+    step_dynamics,
+)
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+TIMEOUT_S = 10.0
+"""Generous for a loaded 2-core machine; the waits end as soon as the condition holds."""
+
+QUIET = Disturbance(gust_std_m_s2=0.0, position_noise_m=0.0, attitude_noise_rad=0.0)
+
+
+class GroundStation:
+    """A minimal pymavlink peer listening with ``udpin:`` as the adapter does."""
+
+    def __init__(self, port: int) -> None:
+        self.connection = mavutil.mavlink_connection(
+            f"udpin:127.0.0.1:{port}", source_system=255, source_component=190
+        )
+        self.first_heartbeat = None
+
+    def receive(self, kind: str, condition: Callable[[object], bool] = lambda m: True):
+        deadline = time.monotonic() + TIMEOUT_S
+        while time.monotonic() < deadline:
+            message = self.connection.recv_match(type=kind, blocking=True, timeout=0.2)
+            if message is not None and condition(message):
+                return message
+        raise AssertionError(f"no matching {kind} within {TIMEOUT_S} s")
+
+    def command(self, command: int, *params: float) -> int:
+        padded = list(params) + [0.0] * (7 - len(params))
+        self.connection.mav.command_long_send(1, 1, command, 0, *padded)
+        return self.receive("COMMAND_ACK", lambda m: m.command == command).result
+
+    def setpoint(self, north: float, east: float, down: float, yaw: float = 0.0, mask=None):
+        self.connection.mav.set_position_target_local_ned_send(
+            0,
+            1,
+            1,
+            mavlink.MAV_FRAME_LOCAL_NED,
+            POSITION_YAW_TYPE_MASK if mask is None else mask,
+            north,
+            east,
+            down,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            yaw,
+            0,
+        )
+
+
+def wait_until(condition: Callable[[], bool], what: str, action: Callable[[], None] | None = None):
+    deadline = time.monotonic() + TIMEOUT_S
+    while time.monotonic() < deadline:
+        if action is not None:
+            action()
+        if condition():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+@pytest.fixture
+def link_pair() -> Iterator[Callable[..., tuple[FakeVehicle, GroundStation]]]:
+    started: list[tuple[FakeVehicle, GroundStation]] = []
+
+    def start(**options) -> tuple[FakeVehicle, GroundStation]:
+        port = free_udp_port()
+        station = GroundStation(port)
+        vehicle = FakeVehicle(f"udpout:127.0.0.1:{port}", **options).start()
+        started.append((vehicle, station))
+        station.first_heartbeat = station.receive("HEARTBEAT")  # learns the vehicle's address
+        return vehicle, station
+
+    yield start
+    for vehicle, station in started:
+        vehicle.stop()
+        station.connection.close()
+
+
+def test_heartbeat_announces_an_ardupilot_hexarotor(link_pair) -> None:
+    _, station = link_pair(autopilot="ardupilot")
+    beat = station.first_heartbeat
+    assert beat.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+    assert beat.type == mavlink.MAV_TYPE_HEXAROTOR
+    assert beat.custom_mode == ARDUPILOT_MODES["LOITER"]
+    assert not beat.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    assert beat.get_msgbuf()[0] == 0xFD  # MAVLink 2 framing
+
+
+def test_heartbeat_announces_a_px4_hexarotor(link_pair) -> None:
+    _, station = link_pair(autopilot="px4")
+    beat = station.first_heartbeat
+    assert beat.autopilot == mavlink.MAV_AUTOPILOT_PX4
+    assert (beat.custom_mode >> 16) & 0xFF == 3  # POSCTL
+
+
+def test_telemetry_streams_position_and_attitude(link_pair) -> None:
+    _, station = link_pair(start_ned=(1.0, 2.0, -3.0), disturbance=QUIET)
+    position = station.receive("LOCAL_POSITION_NED")
+    attitude = station.receive("ATTITUDE")
+    assert (position.x, position.y, position.z) == pytest.approx((1.0, 2.0, -3.0))
+    assert attitude.roll == pytest.approx(0.0)
+
+
+def test_mode_and_arming_commands_are_acknowledged(link_pair) -> None:
+    vehicle, station = link_pair(autopilot="ardupilot")
+    custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    assert station.command(mavlink.MAV_CMD_DO_SET_MODE, custom, 4) == mavlink.MAV_RESULT_ACCEPTED
+    assert station.command(mavlink.MAV_CMD_DO_SET_MODE, custom, 77) == mavlink.MAV_RESULT_DENIED
+    assert station.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_ACCEPTED
+    beat = station.receive("HEARTBEAT", lambda m: m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+    assert beat.custom_mode == ARDUPILOT_MODES["GUIDED"]
+    assert vehicle.armed and vehicle.guided
+    assert station.command(mavlink.MAV_CMD_NAV_TAKEOFF) == mavlink.MAV_RESULT_UNSUPPORTED
+
+
+def test_px4_refuses_offboard_until_setpoints_have_streamed(link_pair) -> None:
+    vehicle, station = link_pair(autopilot="px4", offboard_warmup_s=0.3)
+    custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    offboard = (mavlink.MAV_CMD_DO_SET_MODE, custom, PX4_MAIN_OFFBOARD, 0)
+    assert station.command(*offboard) == mavlink.MAV_RESULT_DENIED
+    stream_started = time.monotonic()
+    while time.monotonic() - stream_started < 0.6:
+        station.setpoint(0.0, 0.0, -1.0)
+        time.sleep(0.05)
+    station.setpoint(0.0, 0.0, -1.0)
+    assert station.command(*offboard) == mavlink.MAV_RESULT_ACCEPTED
+    assert vehicle.custom_mode == px4_custom_mode(PX4_MAIN_OFFBOARD)
+
+
+def test_follows_position_setpoints_and_ignores_other_masks(link_pair) -> None:
+    vehicle, station = link_pair(disturbance=QUIET)
+    custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    station.command(mavlink.MAV_CMD_DO_SET_MODE, custom, ARDUPILOT_MODES["GUIDED"])
+    station.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    station.setpoint(0.0, 0.0, -1.0, mask=0x0FF8)  # velocity fields not masked: refused
+    wait_until(lambda: vehicle.rejected_setpoints == 1, "the refusal")
+    target = np.array([0.5, -0.3, -1.0])
+    wait_until(
+        lambda: np.linalg.norm(vehicle.true_position - target) < 0.01,
+        "the vehicle to reach the setpoint",
+        action=lambda: station.setpoint(*target, yaw=0.5),
+    )
+    wait_until(lambda: abs(vehicle.true_yaw - 0.5) < 0.01, "the yaw")
+
+
+def test_holds_where_it_is_when_setpoints_stop(link_pair) -> None:
+    vehicle, station = link_pair(disturbance=QUIET)
+    custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    station.command(mavlink.MAV_CMD_DO_SET_MODE, custom, ARDUPILOT_MODES["GUIDED"])
+    station.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    far = (4.0, 0.0, -1.0)
+    wait_until(
+        lambda: vehicle.true_position[0] > 0.3,
+        "the vehicle to get going",
+        action=lambda: station.setpoint(*far),
+    )
+    # Setpoints stop: the fake brakes and holds well short of the far target.
+    wait_until(lambda: np.linalg.norm(vehicle.true_velocity) < 0.01, "the vehicle to stop")
+    stopped = vehicle.true_position
+    assert stopped[0] < 3.0
+    assert vehicle.guided  # ArduPilot stays in GUIDED and holds
+
+
+def test_gripper_command_records_the_ground_truth(link_pair) -> None:
+    vehicle, station = link_pair(
+        disturbance=QUIET, start_ned=(1.0, 0.0, -1.0), end_effector_frd=(0.4, 0.0, 0.2)
+    )
+    result = station.command(mavlink.MAV_CMD_DO_GRIPPER, 1, mavlink.GRIPPER_ACTION_GRAB)
+    assert result == mavlink.MAV_RESULT_ACCEPTED
+    (event,) = vehicle.gripper_events
+    assert event.grab
+    assert event.end_effector_ned == pytest.approx((1.4, 0.0, -0.8))
+
+
+def test_a_cut_link_sends_and_hears_nothing(link_pair) -> None:
+    vehicle, station = link_pair()
+    vehicle.set_link(False)
+    time.sleep(0.2)  # let anything already in flight arrive, then drain it
+    while station.connection.recv_match(blocking=False) is not None:
+        pass
+    assert station.connection.recv_match(blocking=True, timeout=0.5) is None
+    vehicle.set_link(True)
+    station.receive("LOCAL_POSITION_NED")
+
+
+def test_step_dynamics_bounds_the_acceleration() -> None:
+    dynamics = Dynamics(max_accel_m_s2=2.0)
+    position, velocity = np.zeros(3), np.zeros(3)
+    target = np.array([10.0, 0.0, 0.0])
+    dt = 0.005
+    for _ in range(400):
+        previous = velocity
+        position, velocity, _ = step_dynamics(position, velocity, 0.0, target, 0.0, dt, dynamics)
+        assert np.linalg.norm(velocity - previous) / dt <= 2.0 + 1e-9
+        assert np.linalg.norm(velocity) <= dynamics.max_speed_m_s + 1e-9
+
+
+def test_step_dynamics_settles_on_the_target_and_stops_at_the_ground() -> None:
+    dynamics = Dynamics()
+    position, velocity, yaw = np.array([0.0, 0.0, -0.5]), np.zeros(3), 0.0
+    target = np.array([1.0, -1.0, 0.3])  # below ground: it must stop at z = 0
+    for _ in range(4000):
+        position, velocity, yaw = step_dynamics(
+            position, velocity, yaw, target, 3.0, 0.005, dynamics
+        )
+        assert position[2] <= 0.0
+    assert position[:2] == pytest.approx([1.0, -1.0], abs=1e-3)
+    assert yaw == pytest.approx(3.0)
+
+
+def test_invalid_settings_are_refused() -> None:
+    with pytest.raises(ValueError, match="autopilot"):
+        FakeVehicle("udpout:127.0.0.1:1", autopilot="betaflight")
+    with pytest.raises(ValueError, match="gust_std_m_s2"):
+        Disturbance(gust_std_m_s2=-1.0)
+    with pytest.raises(ValueError, match="telemetry_hz"):
+        Dynamics(telemetry_hz=0.0)
+
+
+def test_runs_as_a_separate_process() -> None:
+    port = free_udp_port()
+    station = GroundStation(port)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "adapters.fake_vehicle", "--url", f"udpout:127.0.0.1:{port}"],
+        cwd=REPO_ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 30.0  # interpreter start-up on a loaded machine
+        beat = None
+        while beat is None and time.monotonic() < deadline and process.poll() is None:
+            beat = station.connection.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
+        assert beat is not None, process.stderr.read() if process.poll() is not None else ""
+        assert beat.type == mavlink.MAV_TYPE_HEXAROTOR
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+        station.connection.close()
