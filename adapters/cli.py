@@ -1,60 +1,180 @@
-"""``dlo grasp``: plan a grasp from a detection (dry run) or pick it with a UR3.
+"""``dlo ur3``: plan a grasp on a detected cable (a dry run) or pick it with a UR3.
 
-A typer sub-app; ``service/cli.py`` registers it with
-``app.add_typer(grasp_app, name="grasp")``.
+A typer sub-app; ``service/cli.py`` registers :data:`ur3_app` with
+``app.add_typer(ur3_app, name="ur3")``. Tests build their own with
+:func:`build_ur3_app` and a fake robot's ``connect``.
 
-stdout carries the JSON result only; errors go to stderr as ``error: <problem>``.
-Exit status: 0 done, 1 the pick failed mid-sequence, 2 a usage error, an
-unplannable grasp, or a refusal before any motion.
+The input is an image (detected here, with the default parameters unless told) or a
+Detection JSON written by ``dlo detect`` (``.json``). stdout carries the JSON result
+only; errors go to stderr as ``error: <problem>``. Exit status: 0 done (a plan was
+printed, or the pick succeeded), 1 the pick failed mid-sequence, 2 a usage error, an
+unreadable input or camera file, an unplannable grasp, or a refusal before any motion.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, NoReturn
 
 import typer
 from pydantic import ValidationError
 
-from adapters.grasp import GraspPlanningError, plan_grasp
-from adapters.ur3 import RobotNotReadyError, UnsafeTargetError, UR3Config, UR3Picker, plan_motions
-from schemas import CameraModel, Detection, GraspSelector, GraspTarget
-
-grasp_app = typer.Typer(
-    name="grasp",
-    help="Plan a grasp on a detected cable and pick it with a UR3.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
+from adapters.grasp import GraspPlanningError
+from adapters.pick_plan import plan_pick
+from adapters.ur3 import (
+    ConnectFactory,
+    RobotNotReadyError,
+    UnsafeTargetError,
+    UR3Picker,
 )
+from adapters.ur3 import connect as connect_ur_rtde
+from schemas import CameraModel, Detection, GraspSelector
+from schemas.grasp import GraspPlan
+from service.batch import InvalidParametersError, build_params, failure_message, process_file
+from service.console import EXIT_FAILED, EXIT_USAGE, print_error, print_warning, stderr_console
+from service.perception import InvalidInputError
 
-DetectionOption = Annotated[
-    Path, typer.Option("--detection", "-d", help="Detection JSON (dlo detect output).")
+DETECTION_SUFFIX = ".json"
+"""An input with this suffix is a saved Detection; anything else is an image to detect."""
+
+InputArgument = Annotated[
+    Path,
+    typer.Argument(
+        metavar="IMAGE",
+        help="Image to detect the cables in, or a Detection JSON (.json) from `dlo detect`.",
+        show_default=False,
+    ),
 ]
 CameraOption = Annotated[
-    Path, typer.Option("--camera", "-c", help="Camera model, JSON (YAML with PyYAML).")
+    Path,
+    typer.Option(
+        "--camera",
+        "-c",
+        metavar="CAMERA",
+        help="Camera model file, .json or .yaml (intrinsics, pose in the base frame, table).",
+        show_default=False,
+    ),
 ]
-ChainOption = Annotated[str, typer.Option(help="Chain id, or 'longest'.")]
+ChainOption = Annotated[
+    str, typer.Option(metavar="ID", help="Chain id, or 'longest' (ties: the lowest id).")
+]
 FractionOption = Annotated[
-    float | None, typer.Option(help="Point at this fraction (0..1) of the arc length.")
+    float | None,
+    typer.Option(
+        metavar="F",
+        help="Point at this fraction (0..1) of the arc length; the default point.",
+        show_default="0.5",
+    ),
 ]
-SegmentOption = Annotated[int | None, typer.Option(help="Midpoint of this segment.")]
+SegmentOption = Annotated[int | None, typer.Option(metavar="K", help="Midpoint of segment K.")]
 PixelOption = Annotated[
-    tuple[float, float] | None, typer.Option(help="Point nearest to this pixel X Y.")
+    tuple[float, float] | None,
+    typer.Option(metavar="X Y", help="Point of the chain nearest to this pixel."),
 ]
-EndOption = Annotated[str | None, typer.Option(help="'start' or 'end' of the chain.")]
+EndOption = Annotated[
+    str | None, typer.Option(metavar="start|end", help="First or last point of the chain.")
+]
 InferredOption = Annotated[
     bool, typer.Option("--allow-inferred", help="Allow a point on an inferred segment.")
 ]
+SegmentLengthOption = Annotated[
+    float | None,
+    typer.Option(metavar="PX", help="Segment length for detecting an image (as dlo detect)."),
+]
+ExpectedCountOption = Annotated[
+    int | None,
+    typer.Option(metavar="N", help="Number of cables in view, for detecting an image."),
+]
+
+POINT_OPTIONS = ("--fraction", "--segment", "--pixel", "--end")
 
 
-def _fail(message: str, status: int = 2) -> NoReturn:
-    typer.echo(f"error: {message}", err=True)
+def build_ur3_app(connect: ConnectFactory = connect_ur_rtde) -> typer.Typer:
+    """The ``dlo ur3`` sub-app, opening robot connections with ``connect``.
+
+    Parameters
+    ----------
+    connect
+        ``connect(robot_ip) -> (control, receive, io)``: ur_rtde by default, a fake's
+        ``connect`` in tests.
+    """
+    app = typer.Typer(
+        name="ur3",
+        help="Plan a grasp on a detected cable and pick it with a UR3.",
+        no_args_is_help=True,
+        add_completion=False,
+        pretty_exceptions_enable=False,
+    )
+
+    @app.command("plan")
+    def plan_command(
+        input_path: InputArgument,
+        camera: CameraOption,
+        chain: ChainOption = "longest",
+        fraction: FractionOption = None,
+        segment: SegmentOption = None,
+        pixel: PixelOption = None,
+        end: EndOption = None,
+        allow_inferred: InferredOption = False,
+        segment_length: SegmentLengthOption = None,
+        expected_count: ExpectedCountOption = None,
+    ) -> None:
+        """Print the grasp target and the motions a pick would send, as JSON. No robot.
+
+        The same as `dlo ur3 pick --dry-run`.
+        """
+        selector = selector_from_options(chain, fraction, segment, pixel, end, allow_inferred)
+        plan = plan_from_files(input_path, camera, selector, segment_length, expected_count)
+        print_plan(plan)
+
+    @app.command("pick")
+    def pick_command(
+        input_path: InputArgument,
+        camera: CameraOption,
+        robot_ip: Annotated[
+            str | None,
+            typer.Option("--robot-ip", metavar="IP", help="UR3 controller address."),
+        ] = None,
+        dry_run: Annotated[
+            bool,
+            typer.Option(
+                "--dry-run", help="Print the target and motions as JSON; no robot needed."
+            ),
+        ] = False,
+        chain: ChainOption = "longest",
+        fraction: FractionOption = None,
+        segment: SegmentOption = None,
+        pixel: PixelOption = None,
+        end: EndOption = None,
+        allow_inferred: InferredOption = False,
+        segment_length: SegmentLengthOption = None,
+        expected_count: ExpectedCountOption = None,
+    ) -> None:
+        """Detect, plan, check the robot and the workspace, then pick: MOVES THE ROBOT.
+
+        Prints the pick report as JSON. With --dry-run, prints the plan instead and
+        moves nothing.
+        """
+        selector = selector_from_options(chain, fraction, segment, pixel, end, allow_inferred)
+        if robot_ip is None and not dry_run:
+            fail("--robot-ip is required to pick (or give --dry-run to only plan)")
+        plan = plan_from_files(input_path, camera, selector, segment_length, expected_count)
+        if dry_run:
+            print_plan(plan)
+            return
+        assert robot_ip is not None
+        pick(plan, robot_ip, connect)
+
+    return app
+
+
+def fail(message: str, status: int = EXIT_USAGE) -> NoReturn:
+    """Print ``error: <message>`` on stderr and exit with ``status``."""
+    print_error(stderr_console(), message)
     raise typer.Exit(status)
 
 
-def _selector(
+def selector_from_options(
     chain: str,
     fraction: float | None,
     segment: int | None,
@@ -62,10 +182,22 @@ def _selector(
     end: str | None,
     allow_inferred: bool,
 ) -> GraspSelector:
-    options = {"fraction": fraction, "segment": segment, "pixel": pixel, "end": end}
-    given = [name for name, value in options.items() if value is not None]
-    if len(given) > 1:
-        _fail(f"give at most one of --fraction, --segment, --pixel, --end (got {given})")
+    """The :class:`GraspSelector` of the command-line options (exit 2 when they conflict).
+
+    At most one of ``--fraction``, ``--segment``, ``--pixel`` and ``--end`` may be
+    given; none means the middle of the chain (fraction 0.5).
+    """
+    chosen = [
+        name
+        for name, value in zip(POINT_OPTIONS, (fraction, segment, pixel, end), strict=True)
+        if value is not None
+    ]
+    if len(chosen) > 1:
+        fail(f"give at most one of {', '.join(POINT_OPTIONS)}; got {' and '.join(chosen)}")
+    if end is not None and end not in ("start", "end"):
+        fail(f"--end: must be 'start' or 'end', got {end!r}")
+    if chain != "longest" and not chain.isdigit():
+        fail(f"--chain: must be a chain id (0, 1, ...) or 'longest', got {chain!r}")
     if fraction is not None:
         point = {"kind": "fraction", "value": fraction}
     elif segment is not None:
@@ -80,80 +212,110 @@ def _selector(
     try:
         return GraspSelector(chain=chain_choice, point=point, allow_inferred=allow_inferred)
     except ValidationError as error:
-        _fail(f"invalid grasp selection: {_first_error(error)}")
+        option = {"fraction": "--fraction", "segment": "--segment", "pixel": "--pixel"}
+        fail(f"{option.get(point['kind'], 'grasp selection')}: {describe(error)}")
 
 
-def _first_error(error: ValidationError) -> str:
-    first = error.errors()[0]
-    where = ".".join(str(part) for part in first["loc"])
-    return f"{where}: {first['msg']}" if where else first["msg"]
+def plan_from_files(
+    input_path: Path,
+    camera_path: Path,
+    selector: GraspSelector,
+    segment_length: float | None = None,
+    expected_count: int | None = None,
+) -> GraspPlan:
+    """Load the camera, detect (or load) the chains and plan the pick; exit 2 on any problem.
 
-
-def _plan(
-    detection_path: Path, camera_path: Path, selector: GraspSelector
-) -> tuple[GraspTarget, CameraModel]:
+    The camera is read first, so that a bad camera file is reported before the
+    detection runs.
+    """
+    camera = load_camera(camera_path)
+    detection = load_or_detect(input_path, segment_length, expected_count)
     try:
-        detection = Detection.model_validate_json(detection_path.read_text(encoding="utf-8"))
-    except (OSError, ValidationError) as error:
-        _fail(f"{detection_path}: {error}")
-    try:
-        camera = CameraModel.from_file(camera_path)
-    except (OSError, ValueError) as error:
-        _fail(f"{camera_path}: {error}")
-    try:
-        return plan_grasp(detection, camera, selector), camera
+        return plan_pick(detection, camera, selector)
     except GraspPlanningError as error:
-        _fail(str(error))
+        fail(str(error))
 
 
-@grasp_app.command("plan")
-def plan_command(
-    detection: DetectionOption,
-    camera: CameraOption,
-    chain: ChainOption = "longest",
-    fraction: FractionOption = None,
-    segment: SegmentOption = None,
-    pixel: PixelOption = None,
-    end: EndOption = None,
-    allow_inferred: InferredOption = False,
-) -> None:
-    """Print the grasp target and the UR3 motions it would take (a dry run: no robot)."""
-    selector = _selector(chain, fraction, segment, pixel, end, allow_inferred)
-    target, _ = _plan(detection, camera, selector)
-    motions = plan_motions(target, UR3Config())
-    result = {
-        "target": target.model_dump(mode="json"),
-        "motions": [motion.model_dump(mode="json", exclude_none=True) for motion in motions],
-    }
-    typer.echo(json.dumps(result, indent=2))
+def load_camera(path: Path) -> CameraModel:
+    """:meth:`CameraModel.from_file`, with a one-line error naming the file (exit 2)."""
+    try:
+        return CameraModel.from_file(path)
+    except OSError as error:
+        fail(f"camera file {path}: {error.strerror or error}")
+    except ValidationError as error:
+        fail(f"camera file {path}: {describe(error)}")
+    except ValueError as error:  # unknown suffix, YAML syntax, not UTF-8
+        fail(f"camera file {path}: {str(error).removeprefix(f'{path}: ')}")
 
 
-@grasp_app.command("pick")
-def pick_command(
-    detection: DetectionOption,
-    camera: CameraOption,
-    robot_ip: Annotated[str, typer.Option("--robot-ip", help="UR3 controller address.")],
-    chain: ChainOption = "longest",
-    fraction: FractionOption = None,
-    segment: SegmentOption = None,
-    pixel: PixelOption = None,
-    end: EndOption = None,
-    allow_inferred: InferredOption = False,
-) -> None:
-    """Plan the grasp, check the robot and workspace, then pick: MOVES THE ROBOT."""
-    selector = _selector(chain, fraction, segment, pixel, end, allow_inferred)
-    target, _ = _plan(detection, camera, selector)
-    picker = UR3Picker(robot_ip)
+def load_or_detect(
+    path: Path, segment_length: float | None, expected_count: int | None
+) -> Detection:
+    """A saved Detection (``.json``), or the detection of the image at ``path`` (exit 2)."""
+    if path.suffix.lower() == DETECTION_SUFFIX:
+        if segment_length is not None or expected_count is not None:
+            fail(
+                "--segment-length and --expected-count apply to an image; "
+                f"{path} is a saved detection"
+            )
+        try:
+            return Detection.model_validate_json(path.read_text(encoding="utf-8"))
+        except OSError as error:
+            fail(f"{path}: {error.strerror or error}")
+        except ValidationError as error:
+            fail(f"{path}: not a Detection: {describe(error)}")
+        except ValueError as error:  # not UTF-8
+            fail(f"{path}: {error}")
+    try:
+        params = build_params(segment_length=segment_length, expected_count=expected_count)
+    except InvalidParametersError as error:
+        fail(str(error))
+    try:
+        return process_file(path, params, out_dir=None)
+    except InvalidInputError as error:
+        fail(failure_message(path, error))
+
+
+def describe(error: ValidationError) -> str:
+    """Every problem of a pydantic error on one line: ``field: message; ...``."""
+    problems = []
+    for detail in error.errors(include_url=False):
+        message = str(detail["msg"]).removeprefix("Value error, ")
+        where = ".".join(str(part) for part in detail["loc"])
+        problems.append(f"{where}: {message}" if where else message)
+    return "; ".join(problems)
+
+
+def print_plan(plan: GraspPlan) -> None:
+    """The plan as indented JSON on stdout; a warning on stderr when a pick would refuse it."""
+    typer.echo(plan.model_dump_json(indent=2, exclude_none=True))
+    if not plan.within_workspace:
+        print_warning(stderr_console(), f"a pick would refuse this plan: {plan.refusal}")
+
+
+def pick(plan: GraspPlan, robot_ip: str, connect: ConnectFactory) -> None:
+    """Pick ``plan.target`` with the UR3 at ``robot_ip`` and print the report.
+
+    Nothing is sent when the workspace or the robot's pre-checks refuse (exit 2); a
+    failure during the sequence prints the report and exits 1.
+    """
+    if not plan.within_workspace:
+        fail(f"refused, nothing sent: {plan.refusal}")
+    picker = UR3Picker(robot_ip, connect=connect)
     try:
         picker.open()
     except Exception as error:  # ur_rtde raises RuntimeError on a refused connection
-        _fail(f"could not connect to the robot at {robot_ip}: {error}")
+        picker.close()
+        fail(f"could not connect to the robot at {robot_ip}: {error}")
     try:
-        report = picker.pick(target)
+        report = picker.pick(plan.target)
     except (UnsafeTargetError, RobotNotReadyError) as error:
-        _fail(f"refused, nothing sent: {error}")
+        fail(f"refused, nothing sent: {error}")
     finally:
         picker.close()
     typer.echo(report.model_dump_json(indent=2))
     if not report.ok:
-        _fail(f"pick failed: {report.reason}", status=1)
+        fail(f"pick failed: {report.reason}", status=EXIT_FAILED)
+
+
+ur3_app = build_ur3_app()

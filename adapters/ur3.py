@@ -536,12 +536,24 @@ class UR3Picker:
         )
 
     def _stop(self, control: ControlPort) -> bool:
-        """Send stopL; True when it went out on a link that is still up."""
+        """Send stopL; True when it went out on a link that is still up.
+
+        ur_rtde's ``stopL`` returns nothing and is silently dropped when its control
+        script is not running (after a lost link ur_rtde itself stops the script while
+        reconnecting), so the script must be running too for the stop to count as sent.
+        That is judged from ur_rtde's cached state, which right after its own reconnect
+        can be a package out of date: the flag is the client's best knowledge.
+        """
         try:
             control.stopL(self.config.stop_deceleration_m_s2)
         except Exception:
             return False
-        return _is_connected(control)
+        if not _is_connected(control):
+            return False
+        try:
+            return bool(control.isProgramRunning())
+        except Exception:
+            return False
 
 
 def _is_connected(interface: Any) -> bool:

@@ -88,13 +88,16 @@ class CameraModel(BaseModel):
 
     @classmethod
     def from_file(cls, path: str | Path) -> CameraModel:
-        """Load a camera model from ``.json``, or ``.yaml``/``.yml`` when PyYAML is installed.
+        """Load a camera model from a ``.json``, ``.yaml`` or ``.yml`` file (YAML: PyYAML).
 
         Raises
         ------
         ValueError
-            On an unknown extension, when PyYAML is needed but missing, or when the
-            content is not a valid camera model (a pydantic ``ValidationError``).
+            On an unknown extension, YAML that does not parse, when PyYAML is needed but
+            missing, or when the content is not a valid camera model (a pydantic
+            ``ValidationError``).
+        OSError
+            When the file cannot be read.
         """
         path = Path(path)
         suffix = path.suffix.lower()
@@ -109,7 +112,11 @@ class CameraModel(BaseModel):
                     f"{path}: reading YAML needs PyYAML, which is not installed; "
                     "install pyyaml or give the camera model as JSON"
                 ) from error
-            data: Any = yaml.safe_load(text)
+            try:
+                data: Any = yaml.safe_load(text)
+            except yaml.YAMLError as error:
+                # A ValueError, like every other bad content, so callers catch one type.
+                raise ValueError(f"{path}: not valid YAML: {_one_line(str(error))}") from None
             return cls.model_validate(data)
         raise ValueError(f"{path}: camera model must be .json, .yaml or .yml, not {suffix!r}")
 
@@ -234,6 +241,28 @@ class Motion(BaseModel):
         return self
 
 
+class GraspPlan(BaseModel):
+    """A pick planned without a robot: the target, the motions, and the offline safety check.
+
+    ``within_workspace`` and ``refusal`` tell whether :meth:`adapters.ur3.UR3Picker.pick`
+    would refuse the motions because of the configured workspace (reach, table clearance,
+    keep-out cylinder). The checks that need the robot (``isPoseWithinSafetyLimits``,
+    protective and emergency stops, the path from the current tool position) are not run.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    target: GraspTarget
+    motions: list[Motion] = Field(description="What a pick sends, in order.")
+    within_workspace: bool = Field(
+        description="Every moveL position lies inside the workspace; a pick would not refuse "
+        "them on that ground."
+    )
+    refusal: str | None = Field(
+        None, description="Why a pick would refuse the motions; None when within the workspace."
+    )
+
+
 class PickStep(BaseModel):
     """What happened when one planned motion was sent."""
 
@@ -258,3 +287,7 @@ class PickReport(BaseModel):
     stop_sent: bool = Field(False, description="stopL was sent after a failure.")
     reconnect_attempted: bool = False
     reconnected: bool = False
+
+
+def _one_line(text: str) -> str:
+    return " ".join(line.strip() for line in text.splitlines() if line.strip())

@@ -1,28 +1,37 @@
-"""From an HTTP request to the inputs of one detection: image, optional mask, parameters.
+"""From an HTTP request to the inputs of one detection (image, optional mask, parameters)
+or of one grasp plan (those, or a saved detection, plus a camera model and a selector).
 
 Everything here runs on the event loop and is cheap: reading the body (bounded), parsing
-the multipart form and the query, and reading image sizes from PNG and JPEG headers.
-Decoding, which is CPU work, happens in the worker pool (:mod:`service.http.jobs`).
-Every problem becomes a :class:`RequestError` carrying the HTTP status and a one-line
-message saying what is wrong.
+the multipart form, its small JSON fields and the query, and reading image sizes from PNG
+and JPEG headers. Decoding and validating large bodies, which is CPU work, happens in the
+worker pool (:mod:`service.http.jobs`). Every problem becomes a :class:`RequestError`
+carrying the HTTP status and a one-line message saying what is wrong.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, get_origin
+from typing import Any, TypeVar, get_origin
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from starlette.datastructures import QueryParams, UploadFile
 from starlette.requests import Request
 
-from schemas import DetectParams
+from schemas import CameraModel, Detection, DetectParams, GraspSelector
 
 RAW_IMAGE_TYPES = ("image/jpeg", "image/png")
 """Content types accepted for an image sent as the whole request body."""
 MULTIPART_TYPE = "multipart/form-data"
+JSON_TYPE = "application/json"
 FORM_FIELDS = ("image", "mask")
+"""The multipart fields of ``/v1/detect``: image and mask files."""
+GRASP_FORM_FIELDS = ("image", "mask", "camera", "selector")
+"""The multipart fields of ``/v1/grasp``: image and mask files, camera and selector JSON."""
+SHOWN_INPUT_CHARS = 80
+"""How much of an offending value a validation message quotes."""
+
+ModelT = TypeVar("ModelT", bound=BaseModel)
 
 _TUPLE_FIELDS = frozenset(
     name for name, info in DetectParams.model_fields.items() if get_origin(info.annotation) is tuple
@@ -51,6 +60,28 @@ class Frame:
     mask: bytes | None = None
 
 
+class GraspRequest(BaseModel):
+    """The ``application/json`` body of ``POST /v1/grasp``: plan on a saved detection."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    detection: Detection = Field(description="The chains, as `/v1/detect` or `dlo detect` give.")
+    camera: CameraModel = Field(description="Intrinsics, pose in the robot base frame, table.")
+    selector: GraspSelector = Field(
+        default_factory=GraspSelector,
+        description="Which chain and point; default: the middle of the longest chain.",
+    )
+
+
+@dataclass(frozen=True)
+class GraspFrame:
+    """A multipart ``/v1/grasp`` request: the image to detect, the camera and the selector."""
+
+    frame: Frame
+    camera: CameraModel
+    selector: GraspSelector
+
+
 async def read_frame(request: Request, max_body_bytes: int) -> Frame:
     """Read the image (raw body or multipart ``image``), the optional mask and the query.
 
@@ -73,11 +104,90 @@ async def read_frame(request: Request, max_body_bytes: int) -> Frame:
         )
     body = await read_body(request, max_body_bytes)
     if media_type == MULTIPART_TYPE:
-        image, mask = await _parse_form(request, body, max_body_bytes)
-        return Frame(image=image, mask=mask, params=params)
+        parts = await _parse_form(
+            request,
+            body,
+            max_body_bytes,
+            FORM_FIELDS,
+            "the file field 'image' and optionally 'mask'",
+        )
+        return Frame(image=parts["image"], mask=parts["mask"], params=params)
     if not body:
         raise RequestError(422, "invalid_image", "image: empty body (0 bytes)")
     return Frame(image=body, params=params)
+
+
+async def read_grasp_request(request: Request, max_body_bytes: int) -> GraspFrame | bytes:
+    """Read a ``/v1/grasp`` request: a multipart form with an image, or a JSON body.
+
+    Returns
+    -------
+    GraspFrame or bytes
+        For ``multipart/form-data`` (file ``image``, optional file ``mask``, JSON fields
+        ``camera`` and optional ``selector``; detection parameters in the query), the
+        frame with the camera and selector already validated. For ``application/json``
+        the raw body, a :class:`GraspRequest` validated in the worker pool since a
+        detection may be large.
+
+    Raises
+    ------
+    RequestError
+        415 for another content type, 413 for a body over ``max_body_bytes``, 422 for
+        a missing, unexpected or invalid field, bad parameters, or query parameters
+        with a JSON body (they only apply to detecting an image).
+    """
+    media_type = content_type(request)
+    if media_type == JSON_TYPE:
+        if request.query_params:
+            names = ", ".join(dict.fromkeys(request.query_params.keys()))
+            raise RequestError(
+                422,
+                "invalid_parameters",
+                f"query parameters ({names}) set up detecting an image; a JSON body "
+                "carries a detection already",
+            )
+        body = await read_body(request, max_body_bytes)
+        if not body:
+            raise RequestError(422, "invalid_body", "empty body (0 bytes): send a JSON object")
+        return body
+    if media_type != MULTIPART_TYPE:
+        shown = media_type or "none"
+        raise RequestError(
+            415,
+            "unsupported_media_type",
+            f"Content-Type {shown} is not accepted: send multipart/form-data (file 'image', "
+            "JSON fields 'camera' and optionally 'selector') or application/json "
+            '({"detection": ..., "camera": ..., "selector": ...})',
+        )
+    params = parse_params(request.query_params)
+    body = await read_body(request, max_body_bytes)
+    parts = await _parse_form(
+        request,
+        body,
+        max_body_bytes,
+        GRASP_FORM_FIELDS,
+        "the file field 'image', optionally 'mask', and the JSON fields 'camera' and "
+        "optionally 'selector'",
+    )
+    if parts["camera"] is None:
+        raise RequestError(422, "invalid_camera", "multipart body has no 'camera' field")
+    camera = parse_json_field(CameraModel, "camera", parts["camera"])
+    selector = (
+        GraspSelector()
+        if parts["selector"] is None
+        else parse_json_field(GraspSelector, "selector", parts["selector"])
+    )
+    frame = Frame(image=parts["image"], mask=parts["mask"], params=params)
+    return GraspFrame(frame=frame, camera=camera, selector=selector)
+
+
+def parse_json_field(model: type[ModelT], name: str, data: bytes) -> ModelT:
+    """Validate the JSON ``data`` of form field ``name``; 422 ``invalid_<name>`` if wrong."""
+    try:
+        return model.model_validate_json(data)
+    except ValidationError as exc:
+        problems = describe_fields(exc)
+        raise RequestError(422, f"invalid_{name}", f"{name}: " + "; ".join(problems)) from None
 
 
 def content_type(request: Request) -> str:
@@ -111,8 +221,13 @@ def _body_too_large(size: int | None, limit: int) -> RequestError:
     )
 
 
-async def _parse_form(request: Request, body: bytes, limit: int) -> tuple[bytes, bytes | None]:
-    """The ``image`` and ``mask`` file fields of a multipart body already read."""
+async def _parse_form(
+    request: Request, body: bytes, limit: int, fields: tuple[str, ...], expected: str
+) -> dict[str, bytes | None]:
+    """The ``fields`` of a multipart body already read (None when absent); ``image`` required.
+
+    ``expected`` describes the fields for the message about an unexpected one.
+    """
     delivered = False
 
     async def replay() -> dict[str, Any]:
@@ -129,16 +244,15 @@ async def _parse_form(request: Request, body: bytes, limit: int) -> tuple[bytes,
         detail = getattr(exc, "detail", None) or getattr(exc, "message", None) or exc
         raise RequestError(422, "invalid_form", f"malformed multipart body: {detail}") from None
     try:
-        unexpected = sorted(set(form.keys()) - set(FORM_FIELDS))
+        unexpected = sorted(set(form.keys()) - set(fields))
         if unexpected:
             raise RequestError(
                 422,
                 "invalid_form",
-                f"unexpected form field(s) {', '.join(unexpected)}: "
-                "send the file field 'image' and optionally 'mask'",
+                f"unexpected form field(s) {', '.join(unexpected)}: send {expected}",
             )
-        parts = {}
-        for name in FORM_FIELDS:
+        parts: dict[str, bytes | None] = {}
+        for name in fields:
             values = form.getlist(name)
             if len(values) > 1:
                 raise RequestError(422, "invalid_form", f"form field '{name}' is given twice")
@@ -149,7 +263,7 @@ async def _parse_form(request: Request, body: bytes, limit: int) -> tuple[bytes,
             raise RequestError(422, "invalid_image", "image: empty file (0 bytes)")
         if parts["mask"] is not None and not parts["mask"]:
             raise RequestError(422, "invalid_mask", "mask: empty file (0 bytes)")
-        return parts["image"], parts["mask"]
+        return parts
     finally:
         await form.close()
 
@@ -197,6 +311,22 @@ def _describe(error: ValidationError) -> list[str]:
         name = str(location[0])
         name += "".join(f"[{index}]" for index in location[1:])
         problems.append(f"{name}: {message} (got {detail.get('input')!r})")
+    return problems
+
+
+def describe_fields(error: ValidationError) -> list[str]:
+    """Each problem of a nested model as ``a.b.0.c: message (got <value, shortened>)``."""
+    problems = []
+    for detail in error.errors(include_url=False):
+        message = str(detail["msg"]).removeprefix("Value error, ")
+        where = ".".join(str(part) for part in detail["loc"])
+        if not where or detail["type"] in ("missing", "json_invalid", "json_type"):
+            problems.append(f"{where}: {message}" if where else message)
+            continue
+        shown = repr(detail.get("input"))
+        if len(shown) > SHOWN_INPUT_CHARS:
+            shown = shown[: SHOWN_INPUT_CHARS - 3] + "..."
+        problems.append(f"{where}: {message} (got {shown})")
     return problems
 
 

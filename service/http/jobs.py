@@ -1,4 +1,5 @@
-"""The CPU-bound work of one request, run in a worker thread: decode, check, detect, render.
+"""The CPU-bound work of one request, run in a worker thread: decode, check, detect, render,
+plan a grasp.
 
 Plain functions of bytes and parameters, so that any front end (HTTP now, a message bus
 later) can run them in its pool. Client mistakes raise :class:`RequestError`; anything
@@ -7,13 +8,25 @@ else raised here is a failure of the service.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import cv2
 import numpy as np
+from pydantic import ValidationError
 
-from schemas import Detection, DetectParams
-from service.http.inputs import Frame, RequestError, image_size
+from adapters.grasp import GraspPlanningError, InferredSegmentError
+from adapters.pick_plan import plan_pick
+from schemas import CameraModel, Detection, DetectParams, GraspSelector
+from schemas.grasp import GraspPlan
+from service.http.inputs import (
+    Frame,
+    GraspFrame,
+    GraspRequest,
+    RequestError,
+    describe_fields,
+    image_size,
+)
 from service.imageio import ImageFileError, decode_image, decode_mask
 from service.perception import InvalidInputError, render_overlay
 from service.perception import detect as detect_dlos
@@ -83,6 +96,72 @@ def run_overlay(frame: Frame, detect: DetectFunction, max_pixels: int) -> tuple[
     if not encoded_ok:
         raise RuntimeError("OpenCV could not encode the overlay as PNG")
     return encoded.tobytes(), detection
+
+
+def run_grasp(
+    request: GraspFrame, detect: DetectFunction, max_pixels: int
+) -> tuple[GraspPlan, Detection]:
+    """Detect the DLOs in the request's image, then plan the grasp; returns both."""
+    _, detection = run_detection(request.frame, detect, max_pixels)
+    return plan_or_refuse(detection, request.camera, request.selector), detection
+
+
+def plan_from_json(body: bytes) -> GraspPlan:
+    """Validate a :class:`GraspRequest` JSON body and plan the grasp it asks for.
+
+    Raises
+    ------
+    RequestError
+        422 ``invalid_detection``, ``invalid_camera`` or ``invalid_selector`` after the
+        part that failed first (``invalid_body`` for malformed JSON or unknown keys),
+        and as :func:`plan_or_refuse`.
+    """
+    try:
+        request = GraspRequest.model_validate_json(body)
+    except ValidationError as exc:
+        part = next((str(error["loc"][0]) for error in exc.errors() if error["loc"]), "")
+        code = f"invalid_{part}" if part in GraspRequest.model_fields else "invalid_body"
+        raise RequestError(422, code, "; ".join(describe_fields(exc))) from None
+    return plan_or_refuse(request.detection, request.camera, request.selector)
+
+
+def plan_or_refuse(detection: Detection, camera: CameraModel, selector: GraspSelector) -> GraspPlan:
+    """:func:`adapters.pick_plan.plan_pick`, its refusals turned into 422 answers.
+
+    A target outside the workspace is not refused: the plan says so
+    (``within_workspace``, ``refusal``), since no robot is moved here.
+
+    Raises
+    ------
+    RequestError
+        422 ``inferred_segment`` when the point lies on an inferred segment that was not
+        allowed; 422 ``ungraspable`` for every other reason there is no grasp: no chain,
+        no such chain id or segment, image size other than the camera's, a ray that
+        misses the table, or coordinates so extreme the arithmetic overflows.
+    """
+    try:
+        plan = plan_pick(detection, camera, selector)
+    except InferredSegmentError as exc:
+        raise RequestError(422, "inferred_segment", str(exc)) from None
+    except GraspPlanningError as exc:
+        raise RequestError(422, "ungraspable", str(exc)) from None
+    except (ArithmeticError, ValueError, cv2.error) as exc:
+        # Finite but absurd numbers in a valid detection or camera (say 1e300 px) overflow
+        # on the way; that is the client's input, not a failure of the service.
+        raise RequestError(
+            422,
+            "ungraspable",
+            f"no grasp can be computed from these values: {type(exc).__name__}: "
+            f"{' '.join(str(exc).split())}",
+        ) from None
+    if not all(math.isfinite(value) for value in plan.target.position_m):
+        raise RequestError(
+            422,
+            "ungraspable",
+            f"the grasp point {list(plan.target.position_m)} is not finite: the ray through "
+            f"pixel {list(plan.target.pixel)} meets the table too far away",
+        )
+    return plan
 
 
 def warm_up(detect: DetectFunction) -> Detection:

@@ -7,10 +7,26 @@ from typing import Any
 from fastapi import APIRouter, Request, Response
 from fastapi.responses import JSONResponse
 from prometheus_client import CONTENT_TYPE_LATEST
+from pydantic import BaseModel
 
 from schemas import Detection, DetectParams
-from service.http.inputs import RAW_IMAGE_TYPES, RequestError, read_frame
-from service.http.jobs import check_declared_size, run_detection, run_overlay
+from schemas.grasp import GraspPlan
+from service.http.inputs import (
+    JSON_TYPE,
+    RAW_IMAGE_TYPES,
+    GraspFrame,
+    GraspRequest,
+    RequestError,
+    read_frame,
+    read_grasp_request,
+)
+from service.http.jobs import (
+    check_declared_size,
+    plan_from_json,
+    run_detection,
+    run_grasp,
+    run_overlay,
+)
 from service.http.state import AppState, PoolBusyError
 
 router = APIRouter()
@@ -21,23 +37,34 @@ def app_state(request: Request) -> AppState:
     return request.app.state.dlo
 
 
-def _query_parameters() -> list[dict[str, Any]]:
-    """OpenAPI query parameters, one per :class:`DetectParams` field, from its JSON schema."""
-    schema = DetectParams.model_json_schema()
-    definitions = schema.get("$defs", {})
+def inline_schema(model: type[BaseModel]) -> dict[str, Any]:
+    """The JSON schema of ``model`` with every ``$ref`` replaced by its definition.
+
+    OpenAPI ``openapi_extra`` cannot point into the model's own ``$defs``. Discriminator
+    mappings are ``$ref`` strings too, so they are dropped: the ``kind`` constants of
+    the ``oneOf`` branches already tell the variants apart.
+    """
+    schema = model.model_json_schema()
+    definitions = schema.pop("$defs", {})
 
     def inline(node: Any) -> Any:
         if isinstance(node, dict):
-            if "$ref" in node:
-                return inline(definitions[node["$ref"].rsplit("/", 1)[-1]])
-            return {key: inline(value) for key, value in node.items()}
+            if "$ref" in node:  # the field's own keys (its description) win over the model's
+                siblings = {key: value for key, value in node.items() if key != "$ref"}
+                return {**inline(definitions[node["$ref"].rsplit("/", 1)[-1]]), **siblings}
+            return {key: inline(value) for key, value in node.items() if key != "discriminator"}
         if isinstance(node, list):
             return [inline(item) for item in node]
         return node
 
+    return inline(schema)
+
+
+def _query_parameters() -> list[dict[str, Any]]:
+    """OpenAPI query parameters, one per :class:`DetectParams` field, from its JSON schema."""
+    schema = inline_schema(DetectParams)
     parameters = []
     for name, field_schema in schema["properties"].items():
-        field_schema = inline(field_schema)
         description = field_schema.pop("description", "")
         field_schema.pop("title", None)
         if name.startswith("hsv_"):
@@ -77,6 +104,45 @@ _DETECT_OPENAPI = {
 }
 
 
+_GRASP_OPENAPI = {
+    "parameters": _query_parameters(),
+    "requestBody": {
+        "required": True,
+        "description": "Either a multipart form: the file field `image` (optionally `mask`), "
+        "the field `camera` holding a CameraModel as JSON, and optionally `selector` holding "
+        "a GraspSelector as JSON (default: the middle of the longest chain); the query sets "
+        "up the detection as for `/v1/detect`. Or a JSON body with a saved `detection`, the "
+        "`camera` and the optional `selector`; no query parameters then.",
+        "content": {
+            JSON_TYPE: {"schema": inline_schema(GraspRequest)},
+            "multipart/form-data": {
+                "schema": {
+                    "type": "object",
+                    "required": ["image", "camera"],
+                    "properties": {
+                        "image": _BINARY,
+                        "mask": _BINARY,
+                        "camera": {
+                            "type": "string",
+                            "description": "CameraModel as JSON, e.g. docs/examples/camera.json.",
+                        },
+                        "selector": {
+                            "type": "string",
+                            "description": 'GraspSelector as JSON, e.g. {"chain": "longest", '
+                            '"point": {"kind": "fraction", "value": 0.5}}.',
+                        },
+                    },
+                },
+                "encoding": {
+                    "camera": {"contentType": JSON_TYPE},
+                    "selector": {"contentType": JSON_TYPE},
+                },
+            },
+        },
+    },
+}
+
+
 def _error(description: str) -> dict[str, Any]:
     return {
         "description": description,
@@ -102,14 +168,33 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
 }
 
 
+_GRASP_ERRORS: dict[int | str, dict[str, Any]] = {
+    **_ERRORS,
+    415: _error("Content type other than multipart/form-data or application/json."),
+    422: _error(
+        "Unreadable image or mask, invalid camera, selector, detection or parameters "
+        "(`invalid_*`); a point on an inferred segment not allowed (`inferred_segment`); "
+        "no grasp: no chain, unknown chain id or segment, image size other than the "
+        "camera's, a ray missing the table (`ungraspable`)."
+    ),
+}
+
+
 async def _run(request: Request, job: Any) -> Any:
     """Read the request, then run ``job`` in the pool (503 at once when it is full)."""
     state = app_state(request)
     settings = state.settings
     frame = await read_frame(request, settings.max_body_bytes)
     check_declared_size(frame.image, settings.max_pixels)
+    result = await _in_pool(state, job, frame, state.detect, settings.max_pixels)
+    state.metrics.observe_detection(result[1])
+    return result
+
+
+async def _in_pool(state: AppState, job: Any, *args: Any) -> Any:
+    """``job(*args)`` in the worker pool: 503 at once when it is full; failures counted."""
     try:
-        result = await state.pool.run(job, frame, state.detect, settings.max_pixels)
+        return await state.pool.run(job, *args)
     except PoolBusyError:
         state.metrics.frames_dropped.inc()
         raise RequestError(
@@ -124,8 +209,6 @@ async def _run(request: Request, job: Any) -> Any:
     except Exception:
         state.metrics.detection_failures.inc()
         raise  # logged and answered with a 500 by RequestContextMiddleware
-    state.metrics.observe_detection(result[1])
-    return result
 
 
 @router.post(
@@ -153,6 +236,38 @@ async def detect_overlay(request: Request) -> Response:
     """The image with the chains drawn on it (inferred segments dashed), as PNG."""
     png, _ = await _run(request, run_overlay)
     return Response(png, media_type="image/png")
+
+
+@router.post(
+    "/v1/grasp",
+    summary="Plan a grasp on a detected cable and the UR3 motions to pick it (no robot moves)",
+    response_model=None,
+    responses={
+        200: {"model": GraspPlan, "description": "The grasp target and the motions."},
+        **_GRASP_ERRORS,
+    },
+    openapi_extra=_GRASP_OPENAPI,
+)
+async def grasp(request: Request) -> Response:
+    """Where to grasp (robot base frame) and the moves a UR3 pick would send; never moves.
+
+    `within_workspace` is false, with the reason in `refusal`, when `dlo ur3 pick` would
+    refuse the motions for the default workspace; the checks that need the robot itself
+    (safety limits, stops) are not made here.
+    """
+    state = app_state(request)
+    settings = state.settings
+    inputs = await read_grasp_request(request, settings.max_body_bytes)
+    if isinstance(inputs, GraspFrame):
+        check_declared_size(inputs.frame.image, settings.max_pixels)
+        plan, detection = await _in_pool(
+            state, run_grasp, inputs, state.detect, settings.max_pixels
+        )
+        state.metrics.observe_detection(detection)
+    else:
+        # Validating a large detection is CPU work too: the pool, not the event loop.
+        plan = await _in_pool(state, plan_from_json, inputs)
+    return Response(plan.model_dump_json(exclude_none=True), media_type="application/json")
 
 
 @router.get("/healthz", summary="Liveness: the process answers")

@@ -299,33 +299,3 @@ def test_camera_model_from_yaml_when_pyyaml_is_installed(tmp_path):
     path = tmp_path / "camera.yml"
     path.write_text(yaml.safe_dump(cam.model_dump(mode="json")))
     assert CameraModel.from_file(path) == cam
-
-
-# --- dlo grasp plan (dry run) -------------------------------------------------------------
-
-
-def test_grasp_plan_cli_prints_target_and_motions(tmp_path):
-    import json
-
-    import typer
-    from typer.testing import CliRunner
-
-    from adapters.cli import grasp_app
-
-    app = typer.Typer()
-    app.add_typer(grasp_app, name="grasp")
-    cam = camera(origin=(0.3, 0.1, 0.5), plane_z=0.0)
-    cam.to_json_file(tmp_path / "camera.json")
-    det = detection(chain([(CX - 50, CY), (CX + 50, CY)], inferred=[True]))
-    (tmp_path / "det.json").write_text(det.model_dump_json())
-    args = ["grasp", "plan", "-d", str(tmp_path / "det.json"), "-c", str(tmp_path / "camera.json")]
-    runner = CliRunner()
-    refused = runner.invoke(app, args)
-    assert refused.exit_code == 2 and "was inferred" in refused.stderr
-    result = runner.invoke(app, [*args, "--allow-inferred", "--fraction", "0.5"])
-    assert result.exit_code == 0, result.stderr
-    out = json.loads(result.stdout)
-    assert out["target"]["position_m"] == pytest.approx([0.3, 0.1, 0.0], abs=TOL)
-    assert [m["label"] for m in out["motions"]] == ["approach", "descend", "close_gripper", "lift"]
-    both = runner.invoke(app, [*args, "--fraction", "0.5", "--end", "start"])
-    assert both.exit_code == 2 and "at most one of" in both.stderr
