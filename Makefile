@@ -1,12 +1,18 @@
-# dlo-service: `make run` runs the demo, `make test` the test suite.
+# dlo-service: `make run` starts the detection service (HTTP + zenoh), `make demo` runs the
+# demo on a generated scene, `make test` the test suite.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 INSTALLED := $(VENV)/.installed
 
-.PHONY: run test lint venv clean distclean
+.PHONY: run demo test lint venv clean distclean
 
+# Host, port, workers and zenoh come from the DLO_* environment (see the README), e.g.
+# `DLO_PORT=8080 make run`; the defaults listen on 127.0.0.1:8000.
 run: venv
+	$(BIN)/dlo serve
+
+demo: venv
 	$(BIN)/dlo demo --out-dir out/demo
 
 test: venv

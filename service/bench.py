@@ -70,14 +70,26 @@ def bench_command(
     repeats: Annotated[
         int, typer.Option(min=1, metavar="N", help="Detections timed per generated scene.")
     ] = 3,
+    service: Annotated[
+        bool,
+        typer.Option(
+            "--service",
+            help="Time the service instead: HTTP and zenoh latency against bare detection "
+            "(service/bench_service.py).",
+        ),
+    ] = False,
 ) -> None:
     """Time the detector per stage on one thread: photographs, generated scenes, scaling."""
     if os.environ.get(CHILD_FLAG) == "1":
+        if service:
+            from service.bench_service import run_service_bench
+
+            raise typer.Exit(run_service_bench(quick, as_json))
         raise typer.Exit(_run(quick, as_json, dataset, frames, repeats))
     env = dict(os.environ, **dict.fromkeys(THREAD_VARIABLES, "1"), **{CHILD_FLAG: "1"})
     args = [sys.executable, "-m", "service.bench", "--dataset", str(dataset)]
     args += ["--frames", str(frames), "--repeats", str(repeats)]
-    args += ["--quick"] * quick + ["--json"] * as_json
+    args += ["--quick"] * quick + ["--json"] * as_json + ["--service"] * service
     raise typer.Exit(subprocess.call(args, env=env))
 
 

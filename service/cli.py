@@ -25,7 +25,8 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from adapters.cli import grasp_app
+from adapters.cli import ur3_app
+from adapters.hexa_cli import feasibility, hexa_app
 from schemas import Detection, DetectParams, SegmentationMethod
 from service.batch import (
     OUTPUT_KINDS,
@@ -334,11 +335,13 @@ def version() -> None:
 app.command("eval")(eval_command)
 
 # Commands that live beside their own packages: the HTTP service, the benchmark and
-# the robot adapters' grasp planning.
+# the UR3 robot cell (grasp planning and picking).
 app.command("serve")(serve_command)
 app.command("router")(router_command)
 app.command("bench")(bench_command)
-app.add_typer(grasp_app, name="grasp")
+app.add_typer(ur3_app, name="ur3")
+app.add_typer(hexa_app, name="hexa")
+app.command()(feasibility)
 
 
 def main() -> None:
