@@ -161,15 +161,14 @@ def thin_padded(padded, first_table, second_table, staircase_table):
     offsets = np.empty(8, np.int64)
     for k in range(8):
         offsets[k] = _ZS_DR[k] * width + _ZS_DC[k]
-    total = 0
-    for i in range(flat.size):
-        total += flat[i] != 0
+    foreground = nonzero_flat(flat)
+    total = foreground.size
     listed = np.empty(total, np.int64)
     age = np.empty(total, np.uint8)
     n_listed = 0
-    for i in range(flat.size):
-        if flat[i] and _zs_pattern(flat, i, offsets) != 255:
-            listed[n_listed] = i
+    for j in range(total):
+        if _zs_pattern(flat, foreground[j], offsets) != 255:
+            listed[n_listed] = foreground[j]
             age[n_listed] = 0
             n_listed += 1
     queued = np.zeros(flat.size, np.uint8)
@@ -211,10 +210,13 @@ def thin_padded(padded, first_table, second_table, staircase_table):
         listed, next_listed = next_listed, listed
         age, next_age = next_age, age
         n_listed = n_next
-    # The staircase pass: one raster scan, each pixel judged on the image as it is.
-    for i in range(flat.size):
-        if flat[i] and staircase_table[_zs_pattern(flat, i, offsets)]:
-            flat[i] = 0
+    # The staircase pass: the survivors in raster order, each judged on the image as
+    # it is (a removal only ever clears pixels, so the list stays valid).
+    survivors = nonzero_flat(flat)
+    for j in range(survivors.size):
+        index = survivors[j]
+        if flat[index] and staircase_table[_zs_pattern(flat, index, offsets)]:
+            flat[index] = 0
 
 
 @njit(cache=True, nogil=True)
@@ -974,6 +976,106 @@ def end_fit(backwards, skip, span):
     )
 
 
+@njit(cache=True, nogil=True)
+def _put_segment(out, n, ax, ay, bx, by, step, skip_first):
+    """Append the samples of the segment a-b (``step`` apart at most) to ``out[n:]``."""
+    count = max(2, int(np.ceil(np.hypot(bx - ax, by - ay) / step)) + 1)
+    fractions = np.linspace(0.0, 1.0, count)
+    for k in range(1 if skip_first else 0, count):
+        out[n, 0] = ax + fractions[k] * (bx - ax)
+        out[n, 1] = ay + fractions[k] * (by - ay)
+        n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def natural_curve_kernel(start, leaving, end, arriving, step):
+    """Samples of the natural curve between two chain ends (see merging.natural_curve)."""
+    gap_x = end[0] - start[0]
+    gap_y = end[1] - start[1]
+    distance = np.hypot(gap_x, gap_y)
+    if distance < 1e-9:
+        out = np.empty((2, 2))
+        out[0] = start
+        out[1] = end
+        return out
+    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
+    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+    turn = np.arctan2(cross, dot)
+    heading_x = gap_x / distance
+    heading_y = gap_y / distance
+    if abs(cross) < 1e-6:
+        cosine = min(max(leaving[0] * heading_x + leaving[1] * heading_y, -1.0), 1.0)
+        if dot > 0 and np.arccos(cosine) < 1e-3:
+            out = np.empty((max(2, int(np.ceil(distance / step)) + 1), 2))
+            n = _put_segment(out, 0, start[0], start[1], end[0], end[1], step, False)
+            return out[:n]
+    else:
+        # start + t_a * leaving = end - t_b * arriving
+        matrix = np.empty((2, 2))
+        matrix[0, 0] = leaving[0]
+        matrix[0, 1] = arriving[0]
+        matrix[1, 0] = leaving[1]
+        matrix[1, 1] = arriving[1]
+        rhs = np.empty(2)
+        rhs[0] = gap_x
+        rhs[1] = gap_y
+        solution = np.linalg.solve(matrix, rhs)
+        t_a = solution[0]
+        t_b = solution[1]
+        if t_a > 0 and t_b > 0:
+            tangent = min(t_a, t_b)
+            corner_x = start[0] + t_a * leaving[0]
+            corner_y = start[1] + t_a * leaving[1]
+            arc_start_x = corner_x - tangent * leaving[0]
+            arc_start_y = corner_y - tangent * leaving[1]
+            arc_radius = tangent / np.tan(abs(turn) / 2.0)
+            sign = 1.0 if turn >= 0 else -1.0
+            centre_x = arc_start_x + arc_radius * sign * -leaving[1]
+            centre_y = arc_start_y + arc_radius * sign * leaving[0]
+            offset_x = arc_start_x - centre_x
+            offset_y = arc_start_y - centre_y
+            arc_count = max(2, int(np.ceil(abs(turn) * arc_radius / step)) + 1)
+            angles = np.linspace(0.0, turn, arc_count)
+            arc_x = centre_x + (np.cos(angles) * offset_x - np.sin(angles) * offset_y)
+            arc_y = centre_y + (np.sin(angles) * offset_x + np.cos(angles) * offset_y)
+            first = max(
+                2, int(np.ceil(np.hypot(arc_start_x - start[0], arc_start_y - start[1]) / step)) + 1
+            )
+            last = max(2, int(np.ceil(np.hypot(end[0] - arc_x[-1], end[1] - arc_y[-1]) / step)) + 1)
+            curve = np.empty((first + arc_count + last, 2))
+            n = _put_segment(curve, 0, start[0], start[1], arc_start_x, arc_start_y, step, False)
+            for k in range(1, arc_count):
+                curve[n, 0] = arc_x[k]
+                curve[n, 1] = arc_y[k]
+                n += 1
+            n = _put_segment(curve, n, arc_x[-1], arc_y[-1], end[0], end[1], step, True)
+            curve[n - 1, 0] = end[0]
+            curve[n - 1, 1] = end[1]
+            # Drop points that repeat their predecessor (a straight part of zero length).
+            kept = 1
+            for k in range(1, n):
+                if np.hypot(curve[k, 0] - curve[k - 1, 0], curve[k, 1] - curve[k - 1, 1]) > 1e-9:
+                    curve[kept] = curve[k]
+                    kept += 1
+            return curve[:kept]
+    handle = 0.4 * distance
+    count = max(4, int(np.ceil(1.3 * distance / step)) + 1)
+    t = np.linspace(0.0, 1.0, count)
+    out = np.empty((count, 2))
+    for axis in range(2):
+        p0 = start[axis]
+        p1 = start[axis] + handle * leaving[axis]
+        p2 = end[axis] - handle * arriving[axis]
+        p3 = end[axis]
+        for k in range(count):
+            u = t[k]
+            out[k, axis] = (
+                (1 - u) ** 3 * p0 + 3 * (1 - u) ** 2 * u * p1 + 3 * (1 - u) * u**2 * p2 + u**3 * p3
+            )
+    return out
+
+
 # --------------------------------------------------------------------------- segmentation
 
 # The 8 neighbours and, first, the 4 orthogonal ones (for 4-connected fills).
@@ -983,16 +1085,32 @@ _FILL_DC = np.array([1, 0, -1, 0, 1, -1, -1, 1], np.int64)
 
 @njit(cache=True, nogil=True)
 def brightness_histogram(image_bgr):
-    """Brightness (largest channel) of a BGR ``uint8`` image and its 256-level histogram."""
+    """Brightness (largest channel) of a BGR ``uint8`` image and its 256-level histogram.
+
+    Two loops, not one: the channel maximum over flat memory vectorizes, and four
+    interleaved histograms keep consecutive pixels of one level from waiting on each
+    other's increment.
+    """
     height, width = image_bgr.shape[:2]
-    brightness = np.empty((height, width), np.uint8)
-    hist = np.zeros(256, np.int64)
-    for r in range(height):
-        for c in range(width):
-            value = max(image_bgr[r, c, 0], image_bgr[r, c, 1], image_bgr[r, c, 2])
-            brightness[r, c] = value
-            hist[value] += 1
-    return brightness, hist
+    flat = image_bgr.reshape(-1)
+    count = height * width
+    brightness = np.empty(count, np.uint8)
+    for i in range(count):
+        blue = flat[3 * i]
+        green = flat[3 * i + 1]
+        red = flat[3 * i + 2]
+        larger = blue if blue > green else green
+        brightness[i] = larger if larger > red else red
+    partial = np.zeros((4, 256), np.int64)
+    whole = count - count % 4
+    for i in range(0, whole, 4):
+        partial[0, brightness[i]] += 1
+        partial[1, brightness[i + 1]] += 1
+        partial[2, brightness[i + 2]] += 1
+        partial[3, brightness[i + 3]] += 1
+    for i in range(whole, count):
+        partial[0, brightness[i]] += 1
+    return brightness.reshape(height, width), partial.sum(axis=0)
 
 
 @njit(cache=True, nogil=True)
@@ -1072,9 +1190,13 @@ _UNSEEN, _SMALL_HOLE, _OPEN = 0, 1, 2
 
 
 @njit(cache=True, nogil=True)
-def fill_small_holes(mask, max_hole_area):
-    """Fill, in place, the 4-connected background components of at most ``max_hole_area``
-    pixels that do not touch the image border.
+def _fill_holes_next_to(mask, foreground, n_foreground, max_hole_area):
+    """Fill, in place, the small holes next to the listed foreground pixels.
+
+    A hole is a 4-connected background component of at most ``max_hole_area`` pixels
+    that does not touch the image border; ``foreground[:n_foreground]`` (flat indices)
+    must include every foreground pixel that borders one, and holes are whole
+    components, so the order of the fills does not matter.
 
     Every hole borders the foreground, so fills start only from background pixels next
     to it. A fill stops as soon as its component is known not to be a hole: more than
@@ -1086,51 +1208,119 @@ def fill_small_holes(mask, max_hole_area):
     state = np.zeros((height, width), np.uint8)
     # A fill stops before it holds more than ``max_hole_area`` pixels.
     members = np.empty(max_hole_area + 1, np.int64)
-    for r0 in range(height):
-        for c0 in range(width):
-            if not mask[r0, c0]:
+    for i0 in range(n_foreground):
+        r0 = foreground[i0] // width
+        c0 = foreground[i0] - r0 * width
+        for k0 in range(4):
+            rs = r0 + _FILL_DR[k0]
+            cs = c0 + _FILL_DC[k0]
+            if not (0 <= rs < height and 0 <= cs < width):
                 continue
-            for k0 in range(4):
-                rs = r0 + _FILL_DR[k0]
-                cs = c0 + _FILL_DC[k0]
-                if not (0 <= rs < height and 0 <= cs < width):
-                    continue
-                if mask[rs, cs] or state[rs, cs] != _UNSEEN:
-                    continue
-                state[rs, cs] = _SMALL_HOLE
-                members[0] = rs * width + cs
-                count = 1
-                head = 0
-                is_hole = True
-                while head < count and is_hole:
-                    r = members[head] // width
-                    c = members[head] - r * width
-                    head += 1
-                    if r == 0 or c == 0 or r == height - 1 or c == width - 1:
+            if mask[rs, cs] or state[rs, cs] != _UNSEEN:
+                continue
+            state[rs, cs] = _SMALL_HOLE
+            members[0] = rs * width + cs
+            count = 1
+            head = 0
+            is_hole = True
+            while head < count and is_hole:
+                r = members[head] // width
+                c = members[head] - r * width
+                head += 1
+                if r == 0 or c == 0 or r == height - 1 or c == width - 1:
+                    is_hole = False
+                    break
+                for k in range(4):
+                    rr = r + _FILL_DR[k]
+                    cc = c + _FILL_DC[k]
+                    if mask[rr, cc]:
+                        continue
+                    if state[rr, cc] == _OPEN:
                         is_hole = False
                         break
-                    for k in range(4):
-                        rr = r + _FILL_DR[k]
-                        cc = c + _FILL_DC[k]
-                        if mask[rr, cc]:
-                            continue
-                        if state[rr, cc] == _OPEN:
+                    if state[rr, cc] == _UNSEEN:
+                        if count >= max_hole_area:
                             is_hole = False
                             break
-                        if state[rr, cc] == _UNSEEN:
-                            if count >= max_hole_area:
-                                is_hole = False
-                                break
-                            state[rr, cc] = _SMALL_HOLE
-                            members[count] = rr * width + cc
-                            count += 1
+                        state[rr, cc] = _SMALL_HOLE
+                        members[count] = rr * width + cc
+                        count += 1
+            for i in range(count):
+                r = members[i] // width
+                c = members[i] - r * width
+                if is_hole:
+                    mask[r, c] = 1
+                else:
+                    state[r, c] = _OPEN
+
+
+@njit(cache=True, nogil=True)
+def fill_small_holes(mask, max_hole_area):
+    """Fill, in place, the 4-connected background components of at most ``max_hole_area``
+    pixels that do not touch the image border (see _fill_holes_next_to)."""
+    flat = mask.ravel()
+    foreground = np.empty(np.count_nonzero(flat), np.int64)
+    n = 0
+    for i in range(flat.size):
+        if flat[i]:
+            foreground[n] = i
+            n += 1
+    _fill_holes_next_to(mask, foreground, n, max_hole_area)
+
+
+@njit(cache=True, nogil=True)
+def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
+    """Hysteresis threshold, speck removal and hole filling in one pass over the result.
+
+    The same mask as ``clean_mask(hysteresis_kernel(cue, low, high), min_area,
+    max_hole_area)``: each flood fill of the hysteresis is a whole 8-connected
+    component of the result (two floods never touch, or they would be one), so a flood
+    of fewer than ``min_area`` pixels is exactly a speck; the kept floods list every
+    foreground pixel, so the holes are found next to them without a scan.
+    ``weak_count`` is the number of pixels above ``low`` (from the histogram).
+    """
+    height, width = cue.shape
+    result = np.zeros((height, width), np.uint8)
+    # Kept components fill ``members`` from the front, removed ones from the back.
+    members = np.empty(max(weak_count, 1), np.int64)
+    speck = np.empty(max(min_area, 1), np.int64)
+    kept = 0
+    removed = 0
+    for r0 in range(height):
+        for c0 in range(width):
+            if result[r0, c0] or not (cue[r0, c0] > high and cue[r0, c0] > low):
+                continue
+            result[r0, c0] = 1
+            members[kept] = r0 * width + c0
+            count = 1
+            head = 0
+            while head < count:
+                r = members[kept + head] // width
+                c = members[kept + head] - r * width
+                head += 1
+                for k in range(8):
+                    rr = r + _FILL_DR[k]
+                    cc = c + _FILL_DC[k]
+                    inside = 0 <= rr < height and 0 <= cc < width
+                    if inside and not result[rr, cc] and cue[rr, cc] > low:
+                        result[rr, cc] = 1
+                        members[kept + count] = rr * width + cc
+                        count += 1
+            if count >= min_area:
+                kept += count
+            else:
+                # Still marked in ``result`` so no pixel of it seeds again; cleared below.
+                # Through a buffer: the two stretches of ``members`` may overlap.
+                speck[:count] = members[kept : kept + count]
                 for i in range(count):
-                    r = members[i] // width
-                    c = members[i] - r * width
-                    if is_hole:
-                        mask[r, c] = 1
-                    else:
-                        state[r, c] = _OPEN
+                    members[members.size - 1 - removed - i] = speck[i]
+                removed += count
+    for i in range(removed):
+        index = members[members.size - 1 - i]
+        result[index // width, index - (index // width) * width] = 0
+    if max_hole_area > 0:
+        _fill_holes_next_to(result, members, kept, max_hole_area)
+    return result
 
 
 # --------------------------------------------------------------------------- warm-up
@@ -1148,6 +1338,7 @@ def warm_up() -> None:
     from service.perception.crossings import find_intersections
     from service.perception.fitting import fit_chains, junction_zones
     from service.perception.geometry import end_tangent, resample
+    from service.perception.merging import natural_curve
     from service.perception.pruning import prune_overlaps
     from service.perception.segmentation import clean_mask, segment
     from service.perception.skeleton import (
@@ -1182,5 +1373,10 @@ def warm_up() -> None:
     ]
     resample(strands[0], 2.0)
     end_tangent(strands[0], True, 10.0, 1.0)
+    # The three shapes of the natural curve: straight, arc, Bezier.
+    east, north = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    natural_curve(strands[0][0], east, strands[0][-1], east)
+    natural_curve(strands[0][0], east, np.array([20.0, 20.0]), north)
+    natural_curve(strands[0][0], east, np.array([-9.0, 9.0]), north)
     find_intersections(strands)
     inferred_segments(np.array([0, 1, 2]), np.array([1.0, 0.0, 2.0]), np.array([True, False, True]))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from service.perception import _kernels
@@ -15,7 +17,10 @@ def unit(vector: np.ndarray) -> np.ndarray:
 
 def angle_between(a: np.ndarray, b: np.ndarray) -> float:
     """Unsigned angle between two unit vectors, in radians (0..pi)."""
-    return float(np.arccos(np.clip(a[0] * b[0] + a[1] * b[1], -1.0, 1.0)))
+    # Plain floats and math: this runs thousands of times per frame on scalars, where
+    # NumPy's per-call overhead is most of the cost (same libm acos, same result).
+    cosine = float(a[0]) * float(b[0]) + float(a[1]) * float(b[1])
+    return math.acos(min(max(cosine, -1.0), 1.0))
 
 
 def end_tangent(

@@ -230,9 +230,9 @@ def detect_full(
     chains = [
         Chain(
             id=index,
-            points=[(float(x), float(y)) for x, y in joints],
+            points=joints.tolist(),
             radius=chain_radius,
-            inferred=[bool(flag) for flag in inferred_flags[index]],
+            inferred=inferred_flags[index].tolist(),
         )
         for index, (joints, _, chain_radius) in enumerate(finals)
     ]

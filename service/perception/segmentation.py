@@ -149,7 +149,9 @@ def _cable_like(
     return separability >= THIN_SEPARABILITY and share <= THIN_FOREGROUND_SHARE
 
 
-def segment_auto(image_bgr: np.ndarray) -> np.ndarray:
+def segment_auto(
+    image_bgr: np.ndarray, min_component_area: int = 0, max_hole_area: int = 0
+) -> np.ndarray:
     """Foreground mask from brightness, or from colourfulness when brightness fails.
 
     Brightness thresholded by Otsu's method (with hysteresis) is used whenever it
@@ -158,6 +160,9 @@ def segment_auto(image_bgr: np.ndarray) -> np.ndarray:
     JPEG chroma subsampling smears. Otherwise (a colourful cable on a light surface)
     colourfulness is used if it looks like cables; if neither does, the image is taken
     to show no cable and the mask is empty.
+
+    The mask is cleaned as :func:`clean_mask` would clean it; on the brightness path
+    in the same pass as the threshold.
     """
     # No blur: it moves the border of thin cables more than it removes noise, and
     # the clean-up afterwards removes the specks noise leaves.
@@ -172,12 +177,16 @@ def segment_auto(image_bgr: np.ndarray) -> np.ndarray:
         below_sum = (hist[: level + 1] * np.arange(level + 1, dtype=np.float64)).sum()
         background = float(below_sum / below_count) if below_count else 0.0
         low = background + HYSTERESIS_FRACTION * (threshold - background)
-        return hysteresis_threshold(brightness, low, threshold)
+        # Pixels above ``low``: the levels from the first whole level above it.
+        weak_count = int(hist[max(int(np.floor(low)) + 1, 0) :].sum())
+        return _kernels.threshold_and_clean(
+            brightness, low, threshold, weak_count, int(min_component_area), int(max_hole_area)
+        ).view(np.bool_)
     colourfulness = cue_images(image_bgr)[1]
     colour_hist = _histogram(colourfulness)
     colour_threshold, colour_separability = _otsu(colourfulness, colour_hist)
     if _cable_like(colourfulness, colour_threshold, colour_separability, colour_hist):
-        return colourfulness > colour_threshold
+        return clean_mask(colourfulness > colour_threshold, min_component_area, max_hole_area)
     # Neither cue looks like cables: an empty table, or cables this method cannot
     # tell from their background. Reporting nothing is safer for a robot than chains
     # traced through texture; such scenes need a mask or an HSV range.
@@ -243,6 +252,5 @@ def segment(image_bgr: np.ndarray, params: DetectParams) -> np.ndarray:
     """
     if params.segmentation is SegmentationMethod.hsv:
         raw = segment_hsv(image_bgr, params.hsv_low, params.hsv_high)
-    else:
-        raw = segment_auto(image_bgr)
-    return clean_mask(raw, params.min_component_area, params.max_hole_area)
+        return clean_mask(raw, params.min_component_area, params.max_hole_area)
+    return segment_auto(image_bgr, params.min_component_area, params.max_hole_area)

@@ -24,6 +24,7 @@ from service.perception.fitting import (
     split_contour,
     walk_joints,
 )
+from service.perception.geometry import angle_between
 from service.perception.pruning import prune_overlaps
 from service.perception.skeleton import (
     _BRANCH_COUNT,
@@ -318,6 +319,70 @@ def _assert_steps_match(mask, segment_length=10.0):
     _assert_same_chains(prune_overlaps(fast_pieces, mask.shape), kept)
 
 
+def _reference_arc(start: np.ndarray, heading: np.ndarray, turn: float, radius: float, step: float):
+    """Points of a circular arc leaving ``start`` along ``heading`` and turning ``turn`` rad."""
+    sign = 1.0 if turn >= 0 else -1.0
+    normal = sign * np.array([-heading[1], heading[0]])
+    centre = start + radius * normal
+    offset = start - centre
+    count = max(2, int(np.ceil(abs(turn) * radius / step)) + 1)
+    angles = np.linspace(0.0, turn, count)
+    cos, sin = np.cos(angles), np.sin(angles)
+    rotated_x = cos * offset[0] - sin * offset[1]
+    rotated_y = sin * offset[0] + cos * offset[1]
+    return centre + np.stack([rotated_x, rotated_y], axis=1)
+
+
+def _reference_without_repeats(points: np.ndarray) -> np.ndarray:
+    """Drop points that repeat their predecessor (a straight part of zero length)."""
+    steps = np.hypot(*np.diff(points, axis=0).T)
+    keep = np.concatenate([[True], steps > 1e-9])
+    return points[keep]
+
+
+def _reference_segment(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:
+    count = max(2, int(np.ceil(np.hypot(*(b - a)) / step)) + 1)
+    return a + np.linspace(0.0, 1.0, count)[:, None] * (b - a)
+
+
+def _reference_natural_curve(start, leaving, end, arriving, step=1.0):
+    gap = end - start
+    distance = float(np.hypot(*gap))
+    if distance < 1e-9:
+        return np.array([start, end])
+    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
+    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+    turn = float(np.arctan2(cross, dot))
+    heading = gap / distance
+    if abs(cross) < 1e-6:
+        if dot > 0 and angle_between(leaving, heading) < 1e-3:
+            return _reference_segment(start, end, step)
+    else:
+        # start + t_a * leaving = end - t_b * arriving
+        matrix = np.array([[leaving[0], arriving[0]], [leaving[1], arriving[1]]])
+        t_a, t_b = np.linalg.solve(matrix, gap)
+        if t_a > 0 and t_b > 0:
+            corner = start + t_a * leaving
+            tangent = min(t_a, t_b)
+            arc_start = corner - tangent * leaving
+            arc_radius = tangent / np.tan(abs(turn) / 2.0)
+            arc = _reference_arc(arc_start, leaving, turn, arc_radius, step)
+            parts = [
+                _reference_segment(start, arc_start, step),
+                arc[1:],
+                _reference_segment(arc[-1], end, step)[1:],
+            ]
+            curve = np.concatenate(parts)
+            curve[-1] = end
+            return _reference_without_repeats(curve)
+    handle = 0.4 * distance
+    control = np.array([start, start + handle * leaving, end - handle * arriving, end])
+    count = max(4, int(np.ceil(1.3 * distance / step)) + 1)
+    t = np.linspace(0.0, 1.0, count)[:, None]
+    weights = [(1 - t) ** 3, 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t**2, t**3]
+    return sum(w * c for w, c in zip(weights, control, strict=True))
+
+
 # --------------------------------------------------------------------------- tests
 
 
@@ -566,6 +631,41 @@ def test_brightness_and_cleaning_equal_the_reference_on_scenes(seed):
         np.testing.assert_array_equal(
             clean_mask(mask, min_area, max_hole), _reference_clean_mask(mask, min_area, max_hole)
         )
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_threshold_and_clean_equals_hysteresis_then_clean_mask(seed):
+    rng = np.random.default_rng(seed)
+    cue = cv2.GaussianBlur((rng.random((80, 110)) * 255).astype(np.uint8), (5, 5), 0)
+    counts = np.bincount(cue.ravel(), minlength=256)
+    for low, high in ((120.0, 135.0), (127.5, 127.5), (130.0, 125.0), (0.0, 10.0)):
+        weak_count = int(counts[max(int(np.floor(low)) + 1, 0) :].sum())
+        for min_area, max_hole in ((0, 0), (1, 1), (30, 12), (120, 60), (5000, 5)):
+            fused = _kernels.threshold_and_clean(cue, low, high, weak_count, min_area, max_hole)
+            expected = _reference_clean_mask(
+                _reference_hysteresis(cue, low, high), min_area, max_hole
+            )
+            np.testing.assert_array_equal(fused.view(bool), expected)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_natural_curve_kernel_equals_the_reference(seed):
+    from service.perception.merging import natural_curve
+
+    rng = np.random.default_rng(seed)
+    cases = 0
+    for _ in range(400):
+        start, end = rng.uniform(0, 300, 2), rng.uniform(0, 300, 2)
+        leaving, arriving = (v / np.linalg.norm(v) for v in rng.normal(size=(2, 2)))
+        if rng.random() < 0.1:  # aligned ends: the straight case
+            leaving = arriving = (end - start) / np.linalg.norm(end - start)
+        step = float(rng.choice([0.5, 1.0, 3.0]))
+        fast = natural_curve(start, leaving, end, arriving, step)
+        expected = _reference_natural_curve(start, leaving, end, arriving, step)
+        assert fast.shape == expected.shape
+        np.testing.assert_allclose(fast, expected, rtol=0, atol=1e-9)
+        cases += 1
+    assert cases == 400
 
 
 @pytest.mark.parametrize("seed", range(4))
