@@ -9,6 +9,7 @@ The fake speaks only the Python method names, not the RTDE network protocol.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -60,6 +61,15 @@ class FakeRobot:
         What ``reconnect`` does once the link dropped.
     move_fails
         ``moveL`` returns False without moving (the controller refused).
+    block_moves_after
+        After this many ``moveL`` calls have completed, every later ``moveL`` is logged
+        and then blocks until ``release_blocked_moves`` is set, as ur_rtde's synchronous
+        ``moveL`` does on a link that died without the client noticing; once released
+        it returns False without moving (the command was lost with the link). The link
+        stays "connected" meanwhile, so only a deadline can tell. None: never blocks.
+    release_blocked_moves
+        Set it to let blocked ``moveL`` calls return (tests set it when they finish,
+        so no thread stays blocked).
     """
 
     tcp_pose: list[float] = field(default_factory=lambda: [0.3, 0.0, 0.3, 3.14159, 0.0, 0.0])
@@ -71,10 +81,13 @@ class FakeRobot:
     disconnect_raises: bool = True
     reconnect_succeeds: bool = True
     move_fails: bool = False
+    block_moves_after: int | None = None
+    release_blocked_moves: threading.Event = field(default_factory=threading.Event)
     connected: bool = True
     calls: list[Call] = field(default_factory=list)
     digital_outputs: dict[tuple[str, int], bool] = field(default_factory=dict)
     commands_sent: int = 0
+    moves_completed: int = 0
 
     def __post_init__(self) -> None:
         self.control = FakeControl(self)
@@ -148,9 +161,13 @@ class FakeControl:
         robot = self._robot
         if not robot._enter("control", "moveL", (list(pose), speed, acceleration, asynchronous)):
             return False
+        if robot.block_moves_after is not None and robot.moves_completed >= robot.block_moves_after:
+            robot.release_blocked_moves.wait()
+            return False
         if robot.move_fails or robot.protective_stopped or robot.emergency_stopped:
             return False
         robot.tcp_pose = [float(v) for v in pose]
+        robot.moves_completed += 1
         return True
 
     def stopL(self, a: float = 10.0, asynchronous: bool = False) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 
 import cv2
 import numpy as np
@@ -19,8 +20,10 @@ from adapters.ur3 import (
     UR3Config,
     UR3Picker,
     Workspace,
+    motion_deadline_s,
     plan_motions,
     tool_down_rotation_vector,
+    trapezoid_duration_s,
 )
 from schemas import GraspTarget
 
@@ -262,15 +265,127 @@ def test_refused_move_stops_without_reconnecting():
     assert robot.sent()[-1].args == (2.0, False)
 
 
+# --- deadlines ------------------------------------------------------------------------------
+
+# Deadlines small enough to keep these tests fast, large enough that a fake call that
+# returns at once never misses one on a loaded machine.
+SHORT_DEADLINES = UR3Config(
+    motion_timeout_factor=0.01,
+    motion_timeout_margin_s=0.5,
+    command_timeout_s=0.5,
+    reconnect_timeout_s=0.5,
+)
+
+
+@pytest.mark.parametrize(
+    ("distance", "expected_s"),
+    [(0.0, 0.0), (0.1, 2 * math.sqrt(0.1 / 0.5)), (0.125, 1.0), (0.3, 0.3 / 0.25 + 0.25 / 0.5)],
+)
+def test_trapezoid_duration(distance, expected_s):
+    # 0.25 m/s and 0.5 m/s^2 reach full speed after 0.0625 m: 0.125 m is the last triangle.
+    assert trapezoid_duration_s(distance, 0.25, 0.5) == pytest.approx(expected_s)
+
+
+def test_motion_deadline_is_factor_times_profile_plus_margin():
+    config = UR3Config(motion_timeout_factor=3.0, motion_timeout_margin_s=1.5)
+    approach, descend = plan_motions(target(yaw=0.3), config)[:2]
+    # The descent: 0.1 m straight down, no turn.
+    expected = 3.0 * trapezoid_duration_s(0.1, 0.25, 0.5) + 1.5
+    assert motion_deadline_s(list(approach.pose), descend, config) == pytest.approx(expected)
+    # A turn of 0.3 rad on the spot is paced like 0.3 m.
+    start = [*approach.pose[:3], *tool_down_rotation_vector(0.0)]
+    expected = 3.0 * trapezoid_duration_s(0.3, 0.25, 0.5) + 1.5
+    assert motion_deadline_s(start, approach, config) == pytest.approx(expected)
+    with pytest.raises(ValueError, match="motion_timeout_factor must be a positive number"):
+        UR3Config(motion_timeout_factor=0.0)
+    with pytest.raises(ValueError, match="motion_timeout_margin_s must be >= 0"):
+        UR3Config(motion_timeout_margin_s=-1.0)
+
+
+def test_move_that_never_returns_misses_its_deadline_stops_reconnects_once_and_fails():
+    robot = FakeRobot(block_moves_after=1)  # the descent blocks, the link looks up
+    p, sleeps = picker(robot, SHORT_DEADLINES)
+    try:
+        report = p.pick(target())
+        assert not report.ok
+        assert report.reason.startswith("descend: moveL did not return within"), report.reason
+        assert "treated as lost" in report.reason
+        assert [s.ok for s in report.steps] == [True, False]
+        methods = robot.methods()
+        blocked_move = [i for i, m in enumerate(methods) if m == "moveL"][1]
+        after = methods[blocked_move + 1 :]
+        assert after.index("stopL") < after.index("reconnect")
+        # The control link reported itself up, yet it is the one reconnected, once.
+        assert [c.interface for c in robot.calls if c.method == "reconnect"] == ["control"]
+        assert report.stop_sent and report.reconnect_attempted and report.reconnected
+        assert "setToolDigitalOut" not in after and sleeps == []
+
+        # The picker sends nothing more, even on a link that reconnected.
+        calls_before = len(robot.calls)
+        with pytest.raises(RobotNotReadyError, match="moveL missed its deadline"):
+            p.pick(target())
+        assert robot.calls[calls_before:] == []
+        p.close()
+        assert "disconnect" not in robot.methods()  # retired, see UR3Picker.close
+    finally:
+        robot.release_blocked_moves.set()
+    assert robot.methods().count("moveL") == 2
+    assert robot.tcp_pose == pytest.approx(report.steps[0].motion.pose)
+
+
+def test_stop_that_never_returns_counts_as_not_sent():
+    robot = FakeRobot(move_fails=True)
+    release = threading.Event()
+    robot.control.stopL = lambda *args: release.wait()
+    p, _ = picker(robot, SHORT_DEADLINES)
+    try:
+        report = p.pick(target())
+    finally:
+        release.set()
+    assert not report.ok and "moveL was not completed" in report.reason
+    assert not report.stop_sent and not report.reconnect_attempted
+    assert robot.methods().count("moveL") == 1
+    with pytest.raises(RobotNotReadyError, match="stopL missed its deadline"):
+        p.pick(target())
+
+
+def test_close_disconnects_healthy_links_and_retires_doubtful_ones():
+    healthy = FakeRobot()
+    with picker(healthy)[0] as p:
+        assert p.pick(target()).ok
+    assert healthy.methods()[-3:] == ["disconnect"] * 3
+
+    protective = FakeRobot()
+    original = protective.control.moveL
+
+    def stop_on_descent(*args):
+        protective.protective_stopped = len(protective.motions()) >= 1
+        return original(*args)
+
+    protective.control.moveL = stop_on_descent
+    with picker(protective)[0] as p:
+        assert not p.pick(target()).ok
+    # A failure the robot's stop explains leaves the links trusted.
+    assert protective.methods()[-3:] == ["disconnect"] * 3
+
+    dropped = FakeRobot(disconnect_after=1)
+    with picker(dropped)[0] as p:
+        assert not p.pick(target()).ok
+    assert "disconnect" not in dropped.methods()
+
+
 # --- live robot (opt-in) ------------------------------------------------------------------
 
 
 @pytest.mark.ur_live
+@pytest.mark.usefixtures("hang_guard")
 def test_live_pick_on_a_real_ur3():
     """Runs the full pick on UR_ROBOT_IP at UR_LIVE_TARGET="x,y,z[,yaw]" (metres, radians).
 
     Both must be set; the target must be a free spot on the table, since the arm goes
-    down to it and closes the gripper.
+    down to it and closes the gripper. The picker's deadlines bound every command; the
+    hang guard also ends the session if a ur_rtde call blocks while holding the GIL
+    (the constructors do), so a dropped link cannot hang CI.
     """
     robot_ip = os.environ.get("UR_ROBOT_IP")
     spot = os.environ.get("UR_LIVE_TARGET")
