@@ -18,12 +18,14 @@ imported, and ``dlo`` imports NumPy before any command runs, so ``dlo bench``
 re-executes itself (``python -m service.bench``) with ``OMP_NUM_THREADS``,
 ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS`` and ``NUMBA_NUM_THREADS`` set to 1,
 and there also calls ``cv2.setNumThreads(1)`` and ``numba.set_num_threads(1)``.
-The peak resident memory of that process (``ru_maxrss``) is reported too.
+The peak resident memory of that process (``ru_maxrss``) is reported too. Each scene
+is generated just before it is timed and dropped after (photographs are read likewise),
+so the process never holds more than one image of a case at a time.
 """
 
 from __future__ import annotations
 
-import contextlib
+import itertools
 import json
 import os
 import subprocess
@@ -123,18 +125,31 @@ def _run(quick: bool, as_json: bool, dataset: Path, frames: int, repeats: int) -
         photo_limit = None
 
     def scenes(width, height, n_cables, count):
-        found, seed = [], 0
-        while len(found) < count and seed < 10 * count + 20:
-            # RuntimeError: the layout rules cannot be met with this seed; try the next.
-            with contextlib.suppress(RuntimeError):
-                found.append(make_scene(width, height, n_cables, seed=seed, occluders=OCCLUDERS))
-            seed += 1
-        return found
+        """Yield up to ``count`` generated images, each with its number of true crossings.
+
+        Each scene is made only when the previous one is done with, and only its image is
+        kept: a 3840x2160 scene with its ground truth takes about 50 MB, so holding a
+        case's scenes at once would set the process's peak memory, not the detector.
+        """
+        made = 0
+        for seed in range(10 * count + 20):
+            if made == count:
+                return
+            try:
+                scene = make_scene(width, height, n_cables, seed=seed, occluders=OCCLUDERS)
+            except RuntimeError:
+                continue  # the layout rules cannot be met with this seed; try the next
+            made += 1
+            image, true_crossings = scene.image, len(scene.crossings)
+            del scene
+            yield image, true_crossings
+            del image  # before the next scene is made
 
     def time_frames(images, times_each):
+        """Time ``detect`` on ``(image, true crossings)`` pairs; also count crossings found."""
         samples = {stage: [] for stage in (*STAGES, "wall")}
-        crossings = []
-        for image in images:
+        found, truth = [], []
+        for image, true_crossings in images:
             for _ in range(times_each):
                 started = time.perf_counter()
                 detection = detect(image)
@@ -142,8 +157,11 @@ def _run(quick: bool, as_json: bool, dataset: Path, frames: int, repeats: int) -
                 for stage, value in detection.timings_ms.model_dump().items():
                     samples[stage].append(value)
                 samples["wall"].append(wall)
-            crossings.append(len(detection.crossings))
-        return samples, crossings
+            found.append(len(detection.crossings))
+            truth.append(true_crossings)
+            # Let go of this frame before the generator makes the next one.
+            del image, detection
+        return samples, found, truth
 
     def summary(name, width, height, samples, extra=None):
         stats = {
@@ -167,9 +185,9 @@ def _run(quick: bool, as_json: bool, dataset: Path, frames: int, repeats: int) -
         }
 
     # Warm-up: a few detections so that caches, allocators and branch predictors settle.
-    for scene in scenes(*base, 2, 2):
+    for image, _ in scenes(*base, 2, 2):
         for _ in range(2):
-            detect(scene.image)
+            detect(image)
 
     results: dict[str, Any] = {
         "settings": {
@@ -197,34 +215,40 @@ def _run(quick: bool, as_json: bool, dataset: Path, frames: int, repeats: int) -
     if photos:
         if photo_limit is not None:
             photos = photos[:photo_limit]
-        images = [cv2.imread(str(path), cv2.IMREAD_COLOR) for path in photos]
-        images = [image for image in images if image is not None]
-        height, width = images[0].shape[:2]
-        samples, _ = time_frames(images, 1)
-        results["cases"].append(summary(f"photographs ({dataset.name})", width, height, samples))
+        # Read one at a time, like the generated scenes: all 150 at once would be 270 MB.
+        read = (cv2.imread(str(path), cv2.IMREAD_COLOR) for path in photos)
+        images = (image for image in read if image is not None)
+        first = next(images, None)
+        if first is None:
+            results["notes"].append(f"no photographs timed: none readable in {dataset}")
+        else:
+            height, width = first.shape[:2]
+            pairs = ((image, 0) for image in itertools.chain([first], images))
+            del first
+            samples, _, _ = time_frames(pairs, 1)
+            name = f"photographs ({dataset.name})"
+            results["cases"].append(summary(name, width, height, samples))
     else:
         results["notes"].append(f"no photographs timed: {dataset} not found")
 
     for n_cables in (1, 2, 3):
-        samples, _ = time_frames([s.image for s in scenes(*base, n_cables, frames)], repeats)
+        samples, _, _ = time_frames(scenes(*base, n_cables, frames), repeats)
         name = f"generated {base[0]}x{base[1]}, {n_cables} cable(s)"
         results["cases"].append(summary(name, *base, samples))
-    samples, _ = time_frames([s.image for s in scenes(*big, 3, frames)], repeats)
+    samples, _, _ = time_frames(scenes(*big, 3, frames), repeats)
     results["cases"].append(summary(f"generated {big[0]}x{big[1]}, 3 cables", *big, samples))
 
     results["scaling_area"] = []
     for width, height in areas:
         count = max(1, frames // 3) if width * height > 4_000_000 else frames
-        samples, _ = time_frames([s.image for s in scenes(width, height, 3, count)], repeats)
+        samples, _, _ = time_frames(scenes(width, height, 3, count), repeats)
         row = summary(f"{width}x{height}", width, height, samples)
         row["megapixels"] = width * height / 1e6
         results["scaling_area"].append(row)
 
     results["scaling_cables"] = []
     for n_cables in cable_counts:
-        made = scenes(*base, n_cables, frames)
-        samples, found = time_frames([s.image for s in made], repeats)
-        truth = [len(s.crossings) for s in made]
+        samples, found, truth = time_frames(scenes(*base, n_cables, frames), repeats)
         row = summary(f"{n_cables} cable(s)", *base, samples)
         row.update(
             cables=n_cables,

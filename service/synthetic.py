@@ -237,27 +237,28 @@ def make_scene(
     )
     rng = np.random.default_rng(seed)
 
-    canvas, background_level = _draw_background(rng, width, height, background)
+    grey, tint, background_level = _draw_background(rng, width, height, background)
     curves, raw_crossings = _place_cables(rng, width, height, n_cables, radius_range, loops, margin)
     colours = _pick_colours(rng, n_cables)
     depths = rng.permutation(n_cables)
     rects = _place_occluders(rng, occluders, curves, raw_crossings, width, height)
 
+    # Cables and occluders are painted as lists of pixels and their colours, and only
+    # laid over the background band by band in _compose: a whole float canvas and its
+    # noise would take 24 bytes a pixel, 200 MB at 3840x2160.
     labels = np.zeros((height, width), dtype=np.uint16)
+    paints: list[_Paint] = []
     for index in np.argsort(depths):
         loop_splits = [
             (crossing.first_arc + crossing.second_arc) / 2.0
             for crossing in raw_crossings
             if crossing.first == crossing.second == index
         ]
-        _draw_cable(canvas, labels, curves[index], colours[index], index + 1, loop_splits)
+        paints += _draw_cable(labels, curves[index], colours[index], index + 1, loop_splits)
     for rect in rects:
-        _draw_occluder(rng, canvas, labels, rect, background_level)
-
-    if noise_sigma > 0:
-        canvas += _gaussian_noise(rng, canvas.shape, noise_sigma)
-    canvas += 0.5  # so that truncating to uint8 rounds to nearest
-    image = np.clip(canvas, 0.0, 255.0, out=canvas).astype(np.uint8)
+        paints.append(_draw_occluder(rng, labels, rect, background_level))
+    image = _compose(rng, grey, tint, paints, noise_sigma)
+    del grey  # 4 bytes a pixel: free it before the mask is made
 
     cables = [
         SyntheticCable(
@@ -888,17 +889,39 @@ def _hidden_samples(points, rects):
 
 # --------------------------------------------------------------------------- drawing
 
+# Pixels per band when the image is composed (_compose): about 3 MB of float32 BGR.
+_BAND_PIXELS = 1 << 18
+
+
+@dataclass(frozen=True, eq=False)
+class _Paint:
+    """Pixels to set, ``image[rows, cols] = bgr``, over what lies below."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    bgr: np.ndarray  # shape (N, 3), float32
+
 
 def _draw_background(rng, width, height, kind):
-    """A dark, low-saturation float32 BGR background and its mean grey level."""
+    """A dark, low-saturation background: grey levels and a BGR tint, and the mean level.
+
+    Returns
+    -------
+    grey : ndarray, shape (H, W), float32
+    tint : ndarray, shape (3,), float32
+        The background's BGR values are ``grey[:, :, None] * tint``.
+    level : float
+    """
     direction = rng.uniform(0.0, 2.0 * math.pi)
     if kind == "plain":
         level = rng.uniform(45.0, 70.0)
         x = np.arange(width, dtype=np.float32)[None, :]
         y = np.arange(height, dtype=np.float32)[:, None]
-        along = x * np.float32(math.cos(direction)) + y * np.float32(math.sin(direction))
+        grey = x * np.float32(math.cos(direction)) + y * np.float32(math.sin(direction))
         slope = rng.uniform(4.0, 10.0) * 2.0 / math.hypot(width, height)
-        grey = np.float32(level) + np.float32(slope) * along
+        # level + slope * along, in place: no whole-image temporaries.
+        grey *= np.float32(slope)
+        grey += np.float32(level)
     else:
         level = rng.uniform(40.0, 70.0)
         # The texture has no detail finer than a few pixels, so it is made at half size
@@ -925,16 +948,43 @@ def _draw_background(rng, width, height, kind):
             column_on_line = np.mod(np.arange(width), spacing) < 1.5
             row_on_line = np.mod(np.arange(height), spacing) < 1.5
             on_line = column_on_line[None, :] | row_on_line[:, None]
-            grey += np.float32(rng.uniform(4.0, 7.0)) * on_line
+            # Adding the line strength only where on_line is the same as adding
+            # ``strength * on_line`` everywhere, without a whole-image float temporary.
+            np.add(grey, np.float32(rng.uniform(4.0, 7.0)), out=grey, where=on_line)
     tint = (1.0 + rng.uniform(-0.04, 0.04, 3)).astype(np.float32)
-    canvas = grey[:, :, None] * tint[None, None, :]
-    return np.ascontiguousarray(canvas, dtype=np.float32), float(level)
+    return np.ascontiguousarray(grey, dtype=np.float32), tint, float(level)
 
 
-def _gaussian_noise(rng, shape, sigma):
-    """Zero-mean float32 noise with standard deviation ``sigma`` (see ``_NOISE_LEVELS``)."""
+def _compose(rng, grey, tint, paints, noise_sigma):
+    """The uint8 BGR image: background, paints in order, sensor noise, rounded.
+
+    Made in bands of rows, so that only one band is ever held in float32; every pixel
+    goes through the same float32 operations in the same order as if the whole image
+    were made at once, and the noise bytes are drawn in the same order.
+    """
+    height, width = grey.shape
+    image = np.empty((height, width, 3), dtype=np.uint8)
+    # A multiple of 4 rows makes every band's noise a whole number of the 4-byte words
+    # rng.bytes draws, so the bands together draw exactly the bytes of one big call.
+    band_rows = max(4, _BAND_PIXELS // width // 4 * 4)
+    noise_levels = _NOISE_LEVELS * np.float32(noise_sigma)
+    for top in range(0, height, band_rows):
+        bottom = min(top + band_rows, height)
+        band = grey[top:bottom, :, None] * tint[None, None, :]
+        for paint in paints:
+            inside = (paint.rows >= top) & (paint.rows < bottom)
+            band[paint.rows[inside] - top, paint.cols[inside]] = paint.bgr[inside]
+        if noise_sigma > 0:
+            band += _gaussian_noise(rng, band.shape, noise_levels)
+        band += 0.5  # so that truncating to uint8 rounds to nearest
+        image[top:bottom] = np.clip(band, 0.0, 255.0, out=band).astype(np.uint8)
+    return image
+
+
+def _gaussian_noise(rng, shape, noise_levels):
+    """Zero-mean float32 noise: ``noise_levels`` (scaled ``_NOISE_LEVELS``) looked up."""
     random_bytes = np.frombuffer(rng.bytes(math.prod(shape)), dtype=np.uint8).reshape(shape)
-    return cv2.LUT(random_bytes, _NOISE_LEVELS * np.float32(sigma))
+    return cv2.LUT(random_bytes, noise_levels)
 
 
 def _smooth_noise(rng, width, height, feature_size):
@@ -955,9 +1005,10 @@ def _pick_colours(rng, n_cables):
     return colours
 
 
-def _draw_cable(canvas, labels, curve, colour, label, loop_splits):
-    """Paint a shaded tube of ``curve.radius`` around the centreline and label its pixels.
+def _draw_cable(labels, curve, colour, label, loop_splits):
+    """Label the pixels of a tube of ``curve.radius`` around the centreline; shade them.
 
+    Returns the shaded pixels as one paint per layer, to lay on the background in order.
     A cable that crosses itself is drawn in layers split half-way round each loop, later
     layers on top, so the later part lies over the earlier one at the crossing. Each layer
     is measured against its stretch plus a little overlap, but paints only the pixels whose
@@ -967,6 +1018,7 @@ def _draw_cable(canvas, labels, curve, colour, label, loop_splits):
     overlap = radius + 2.0
     colour = np.array(colour, dtype=np.float32)
     bounds = [-math.inf, *sorted(loop_splits), math.inf]
+    paints = []
     for low, high in pairwise(bounds):
         if len(bounds) == 2:
             points, arc, tree = curve.points, curve.arc, curve.tree
@@ -982,8 +1034,9 @@ def _draw_cable(canvas, labels, curve, colour, label, loop_splits):
         distance, foot, foot_arc = _nearest_on_polyline(points, arc, tree, centres, radius + 1.5)
         keep = (distance <= radius) & (foot_arc >= low) & (foot_arc <= high)
         rows, cols = rows[keep], cols[keep]
-        canvas[rows, cols] = _shade(colour, (centres[keep] - foot[keep]) / radius)
+        paints.append(_Paint(rows, cols, _shade(colour, (centres[keep] - foot[keep]) / radius)))
         labels[rows, cols] = label
+    return paints
 
 
 def _band_pixels(points, radius, shape):
@@ -1055,8 +1108,8 @@ def _shade(colour, outward):
     return (shaded + 255.0 * highlight[:, None]).astype(np.float32)
 
 
-def _draw_occluder(rng, canvas, labels, rect, background_level):
-    """Paint a dull, textured grey rectangle and clear the labels under it."""
+def _draw_occluder(rng, labels, rect, background_level):
+    """Clear the labels under the rectangle and return it painted dull, textured grey."""
     height, width = labels.shape
     corners = rect.corners()
     x0, y0 = np.maximum(np.floor(corners.min(axis=0)).astype(int), 0)
@@ -1073,5 +1126,5 @@ def _draw_occluder(rng, canvas, labels, rect, background_level):
     rim = np.minimum(rect.half_length - np.abs(u), rect.half_width - np.abs(v))
     value = (grey + 4.0 * texture) * (0.8 + 0.2 * np.clip(rim / 2.0, 0.0, 1.0))
     tint = 1.0 + rng.uniform(-0.05, 0.05, 3)
-    canvas[rows, cols] = (value[:, None] * tint[None, :]).astype(np.float32)
     labels[rows, cols] = 0
+    return _Paint(rows, cols, (value[:, None] * tint[None, :]).astype(np.float32))
