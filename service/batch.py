@@ -224,7 +224,7 @@ def process_file(
     if out_dir is not None:
         paths = OutputPaths.for_input(path, out_dir)
         if "labels" in outputs:
-            write_png(paths.labels_png, render_labels(result.detection, result.mask))
+            write_png(paths.labels_png, render_labels(result.detection, result.mask, image))
         if "overlay" in outputs:
             write_png(paths.overlay_png, render_overlay(image, result.detection))
         if "json" in outputs:

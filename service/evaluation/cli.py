@@ -338,7 +338,7 @@ def _run_synthetic(
 
                     stem = out_dir / f"scene_{seed}"
                     write_png(stem.with_name(f"{stem.name}.png"), scene.image)
-                    predicted = render_labels(result.detection, result.mask)
+                    predicted = render_labels(result.detection, result.mask, scene.image)
                     _write_outputs(stem, scene.image, result, predicted)
             except Exception as exc:  # one line per failed scene; the run goes on
                 print_error(errors, _failure(f"scene seed {seed}", exc))

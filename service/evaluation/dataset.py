@@ -353,9 +353,12 @@ def score_crossing_order(
 
 
 def score_detection(
-    result: DetectionResult, truth: np.ndarray
+    result: DetectionResult, truth: np.ndarray, image: np.ndarray | None = None
 ) -> tuple[float, CrossingOrderScore, np.ndarray]:
     """Instance DICE and crossing order of one detection against its label image.
+
+    ``image`` (BGR), when given, lets the label image split crossings by colour, as
+    ``dlo detect`` does (:func:`service.perception.render_labels`).
 
     Returns
     -------
@@ -369,7 +372,7 @@ def score_detection(
             f"labels are {truth.shape[1]}x{truth.shape[0]} but the image is "
             f"{result.mask.shape[1]}x{result.mask.shape[0]}"
         )
-    predicted = render_labels(result.detection, result.mask)
+    predicted = render_labels(result.detection, result.mask, image)
     dice = instance_dice(truth, predicted)
     return dice, score_crossing_order(result.detection, truth, predicted), predicted
 
@@ -422,7 +425,7 @@ def evaluate_image(
     started = time.perf_counter()
     result = detect_full(image, params, mask=mask)
     elapsed_ms = (time.perf_counter() - started) * 1000.0
-    dice, crossings, predicted = score_detection(result, truth)
+    dice, crossings, predicted = score_detection(result, truth, image)
     score = ImageScore(
         subset=subset,
         image=name,

@@ -396,7 +396,7 @@ def score_scene(scene: SyntheticScene, result: DetectionResult, seed: int, ms: f
     chain_ids = tuple(
         detection.chains[match].id if match is not None else None for match in frame.matches
     )
-    predicted = render_labels(detection, result.mask)
+    predicted = render_labels(detection, result.mask, scene.image)
     return SceneScore(
         seed=seed,
         frame=frame,

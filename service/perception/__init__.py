@@ -6,7 +6,7 @@ detect(image, params=None, mask=None) -> Detection
     The whole six-step pipeline.
 detect_full(image, params=None, mask=None) -> DetectionResult
     The same, also returning the foreground mask it used (for ``render_labels``).
-render_labels(detection, mask) -> np.ndarray (uint16)
+render_labels(detection, mask, image=None) -> np.ndarray (uint16)
 render_overlay(image, detection) -> np.ndarray (BGR uint8)
 """
 

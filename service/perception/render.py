@@ -31,7 +31,16 @@ def _pixel_polyline(points) -> np.ndarray:
     return np.rint(np.asarray(points, dtype=np.float64)).astype(np.int32).reshape(-1, 1, 2)
 
 
-def render_labels(detection: Detection, mask: np.ndarray) -> np.ndarray:
+# Near a crossing of two cables whose colours differ by at least this much (Lab chroma
+# distance), each mask pixel goes to the cable whose colour it has.
+COLOUR_SPLIT_MIN_DISTANCE = 10.0
+# How far from a crossing (in radii of the strand on top) colour decides.
+COLOUR_SPLIT_RADII = 2.5
+
+
+def render_labels(
+    detection: Detection, mask: np.ndarray, image: np.ndarray | None = None
+) -> np.ndarray:
     """Instance label image: every mask pixel labelled with the chain it belongs to.
 
     Parameters
@@ -39,6 +48,10 @@ def render_labels(detection: Detection, mask: np.ndarray) -> np.ndarray:
     detection : Detection
     mask : ndarray of bool
         ``(H, W)`` foreground mask the detection was made from.
+    image : ndarray, optional
+        The ``(H, W, 3)`` BGR image. With it, mask pixels near a crossing of two
+        differently coloured cables go to the cable whose colour they have (see
+        :func:`split_crossings_by_colour`).
 
     Returns
     -------
@@ -88,6 +101,8 @@ def render_labels(detection: Detection, mask: np.ndarray) -> np.ndarray:
         thickness = max(1, round(2 * over.radius))
         cv2.polylines(tube, [_pixel_polyline(over.points[first : last + 1])], False, 1, thickness)
         labels[(tube > 0) & mask] = over.id + 1
+    if image is not None and detection.crossings:
+        split_crossings_by_colour(labels, detection, mask, image)
     hidden = np.zeros((height, width), np.uint16)
     for chain in detection.chains:
         thickness = max(1, round(2 * chain.radius + 1))
@@ -105,6 +120,53 @@ def render_labels(detection: Detection, mask: np.ndarray) -> np.ndarray:
     free = (labels == 0) & (hidden > 0) & ~mask
     labels[free] = hidden[free]
     return labels
+
+
+def split_crossings_by_colour(
+    labels: np.ndarray, detection: Detection, mask: np.ndarray, image: np.ndarray
+) -> None:
+    """Relabel, in place, the mask pixels near crossings of differently coloured cables.
+
+    The tube of the strand on top is drawn with the chain's typical radius, so where
+    the top cable is a little wider its rim goes to the strand underneath. When the
+    two cables' colours differ clearly, colour is the better witness: within
+    :data:`COLOUR_SPLIT_RADII` radii of the crossing, each pixel labelled with either
+    strand goes to the one whose colour (Lab chroma, which shading changes least) is
+    nearer. A cable's colour is the median over its centreline pixels away from every
+    crossing. Crossings of a chain with itself, and of cables of similar colour, keep
+    the geometric labels.
+    """
+    height, width = mask.shape
+    if image.ndim != 3 or image.shape[2] < 3:
+        return  # no colour to go by
+    if image.shape[:2] != (height, width):
+        raise ValueError(f"image is {image.shape[:2]} but the mask is {mask.shape}")
+    chroma = cv2.cvtColor(image[:, :, :3], cv2.COLOR_BGR2LAB)[:, :, 1:].astype(np.float32) - 128.0
+    near_crossing = np.zeros((height, width), np.uint8)
+    for crossing in detection.crossings:
+        reach = round(4.0 * max(detection.chain(crossing.over).radius, 1.0))
+        cv2.circle(near_crossing, (round(crossing.x), round(crossing.y)), reach, 1, -1)
+    colours = {}
+    for chain in detection.chains:
+        line = np.zeros((height, width), np.uint8)
+        cv2.polylines(line, [_pixel_polyline(chain.points)], False, 1, 1)
+        own = (line > 0) & mask & (near_crossing == 0)
+        if np.count_nonzero(own) >= 10:
+            colours[chain.id] = np.median(chroma[own], axis=0)
+    for crossing in detection.crossings:
+        over, under = crossing.over, crossing.under
+        if over == under or over not in colours or under not in colours:
+            continue
+        if np.linalg.norm(colours[over] - colours[under]) < COLOUR_SPLIT_MIN_DISTANCE:
+            continue
+        disc = np.zeros((height, width), np.uint8)
+        reach = round(COLOUR_SPLIT_RADII * detection.chain(over).radius + 2.0)
+        cv2.circle(disc, (round(crossing.x), round(crossing.y)), reach, 1, -1)
+        selected = (disc > 0) & mask & ((labels == over + 1) | (labels == under + 1))
+        pixels = chroma[selected]
+        to_over = np.linalg.norm(pixels - colours[over], axis=1)
+        to_under = np.linalg.norm(pixels - colours[under], axis=1)
+        labels[selected] = np.where(to_over <= to_under, over + 1, under + 1)
 
 
 def render_overlay(image: np.ndarray, detection: Detection) -> np.ndarray:
