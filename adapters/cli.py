@@ -5,10 +5,12 @@ A typer sub-app; ``service/cli.py`` registers :data:`ur3_app` with
 :func:`build_ur3_app` and a fake robot's ``connect``.
 
 The input is an image (detected here, with the default parameters unless told) or a
-Detection JSON written by ``dlo detect`` (``.json``). stdout carries the JSON result
-only; errors go to stderr as ``error: <problem>``. Exit status: 0 done (a plan was
-printed, or the pick succeeded), 1 the pick failed mid-sequence, 2 a usage error, an
-unreadable input or camera file, an unplannable grasp, or a refusal before any motion.
+Detection JSON written by ``dlo detect`` (``.json``). A camera whose surface is a depth
+image needs ``--depth`` (a 16-bit PNG, or a ``.npy`` array) aligned with the image.
+stdout carries the JSON result only; errors go to stderr as ``error: <problem>``. Exit
+status: 0 done (a plan was printed, or the pick succeeded), 1 the pick failed
+mid-sequence, 2 a usage error, an unreadable input, camera or depth file, an unplannable
+grasp, or a refusal before any motion.
 """
 
 from __future__ import annotations
@@ -16,10 +18,16 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, NoReturn
 
+import numpy as np
 import typer
 from pydantic import ValidationError
 
-from adapters.grasp import GraspPlanningError
+from adapters.grasp import (
+    DepthImageError,
+    GraspPlanningError,
+    check_depth_image,
+    decode_depth_image,
+)
 from adapters.pick_plan import plan_pick
 from adapters.ur3 import (
     ConnectFactory,
@@ -28,7 +36,7 @@ from adapters.ur3 import (
     UR3Picker,
 )
 from adapters.ur3 import connect as connect_ur_rtde
-from schemas import CameraModel, Detection, GraspSelector
+from schemas import CameraModel, DepthSurface, Detection, GraspSelector
 from schemas.grasp import GraspPlan
 from service.batch import InvalidParametersError, build_params, failure_message, process_file
 from service.console import EXIT_FAILED, EXIT_USAGE, print_error, print_warning, stderr_console
@@ -36,6 +44,8 @@ from service.perception import InvalidInputError
 
 DETECTION_SUFFIX = ".json"
 """An input with this suffix is a saved Detection; anything else is an image to detect."""
+NUMPY_SUFFIX = ".npy"
+"""A depth file with this suffix is a NumPy array; anything else an image (16-bit PNG)."""
 
 InputArgument = Annotated[
     Path,
@@ -51,7 +61,17 @@ CameraOption = Annotated[
         "--camera",
         "-c",
         metavar="CAMERA",
-        help="Camera model file, .json or .yaml (intrinsics, pose in the base frame, table).",
+        help="Camera model file, .json or .yaml (intrinsics, pose in the base frame, surface).",
+        show_default=False,
+    ),
+]
+DepthOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--depth",
+        metavar="DEPTH",
+        help="Depth image aligned with IMAGE, for a camera whose surface is 'depth': a "
+        "16-bit PNG or a .npy array, in units of the surface's depth_scale.",
         show_default=False,
     ),
 ]
@@ -110,6 +130,7 @@ def build_ur3_app(connect: ConnectFactory = connect_ur_rtde) -> typer.Typer:
     def plan_command(
         input_path: InputArgument,
         camera: CameraOption,
+        depth: DepthOption = None,
         chain: ChainOption = "longest",
         fraction: FractionOption = None,
         segment: SegmentOption = None,
@@ -124,13 +145,14 @@ def build_ur3_app(connect: ConnectFactory = connect_ur_rtde) -> typer.Typer:
         The same as `dlo ur3 pick --dry-run`.
         """
         selector = selector_from_options(chain, fraction, segment, pixel, end, allow_inferred)
-        plan = plan_from_files(input_path, camera, selector, segment_length, expected_count)
+        plan = plan_from_files(input_path, camera, selector, segment_length, expected_count, depth)
         print_plan(plan)
 
     @app.command("pick")
     def pick_command(
         input_path: InputArgument,
         camera: CameraOption,
+        depth: DepthOption = None,
         robot_ip: Annotated[
             str | None,
             typer.Option("--robot-ip", metavar="IP", help="UR3 controller address."),
@@ -158,7 +180,7 @@ def build_ur3_app(connect: ConnectFactory = connect_ur_rtde) -> typer.Typer:
         selector = selector_from_options(chain, fraction, segment, pixel, end, allow_inferred)
         if robot_ip is None and not dry_run:
             fail("--robot-ip is required to pick (or give --dry-run to only plan)")
-        plan = plan_from_files(input_path, camera, selector, segment_length, expected_count)
+        plan = plan_from_files(input_path, camera, selector, segment_length, expected_count, depth)
         if dry_run:
             print_plan(plan)
             return
@@ -222,16 +244,18 @@ def plan_from_files(
     selector: GraspSelector,
     segment_length: float | None = None,
     expected_count: int | None = None,
+    depth_path: Path | None = None,
 ) -> GraspPlan:
-    """Load the camera, detect (or load) the chains and plan the pick; exit 2 on any problem.
+    """Load the camera and depth, detect (or load) the chains and plan; exit 2 on any problem.
 
-    The camera is read first, so that a bad camera file is reported before the
-    detection runs.
+    The camera and the depth image are read first, so that a bad file is reported before
+    the detection runs.
     """
     camera = load_camera(camera_path)
+    depth = load_depth(depth_path, camera)
     detection = load_or_detect(input_path, segment_length, expected_count)
     try:
-        return plan_pick(detection, camera, selector)
+        return plan_pick(detection, camera, selector, depth=depth)
     except GraspPlanningError as error:
         fail(str(error))
 
@@ -246,6 +270,40 @@ def load_camera(path: Path) -> CameraModel:
         fail(f"camera file {path}: {describe(error)}")
     except ValueError as error:  # unknown suffix, YAML syntax, not UTF-8
         fail(f"camera file {path}: {str(error).removeprefix(f'{path}: ')}")
+
+
+def load_depth(path: Path | None, camera: CameraModel) -> np.ndarray | None:
+    """The depth image at ``path`` checked against ``camera``; None for a plane (exit 2).
+
+    ``.npy``: a NumPy array (uint16 or float); anything else: an image file OpenCV reads
+    unchanged, a single-channel 16-bit PNG. Refused: no ``--depth`` for a depth surface,
+    a ``--depth`` for a plane, and a file that is unreadable, of another size than the
+    camera's, with more than one channel or of another sample type.
+    """
+    if not isinstance(camera.surface, DepthSurface):
+        if path is not None:
+            fail(
+                f"--depth: the camera's surface is the plane z = {camera.surface.plane_z} m; "
+                'a depth image needs the surface {"kind": "depth", "depth_scale": ...}'
+            )
+        return None
+    if path is None:
+        fail(
+            "the camera's surface is a depth image (kind 'depth'): give --depth DEPTH "
+            "(a 16-bit PNG or a .npy array aligned with the image)"
+        )
+    try:
+        if path.suffix.lower() == NUMPY_SUFFIX:
+            depth = np.load(path, allow_pickle=False)
+        else:
+            depth = decode_depth_image(path.read_bytes())
+        return check_depth_image(camera, depth)
+    except OSError as error:
+        fail(f"depth file {path}: {error.strerror or error}")
+    except DepthImageError as error:
+        fail(f"depth file {path}: {error}")
+    except (ValueError, EOFError) as error:  # np.load: not an .npy file, or cut short
+        fail(f"depth file {path}: not a NumPy .npy array: {' '.join(str(error).split())}")
 
 
 def load_or_detect(

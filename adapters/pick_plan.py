@@ -7,6 +7,8 @@ the path from the current tool position) are left to :meth:`UR3Picker.pick`.
 
 from __future__ import annotations
 
+import numpy as np
+
 from adapters.grasp import plan_grasp
 from adapters.ur3 import UnsafeTargetError, UR3Config, check_workspace, plan_motions
 from schemas import CameraModel, Detection, GraspSelector
@@ -18,6 +20,7 @@ def plan_pick(
     camera: CameraModel,
     selector: GraspSelector,
     config: UR3Config | None = None,
+    depth: np.ndarray | None = None,
 ) -> GraspPlan:
     """Plan the grasp and the motions a UR3 pick would send, and check them against the workspace.
 
@@ -25,6 +28,9 @@ def plan_pick(
     ----------
     detection, camera, selector
         As for :func:`adapters.grasp.plan_grasp`.
+    depth
+        The depth image, for a camera whose surface is a depth image (as
+        :func:`adapters.grasp.plan_grasp`).
     config
         Heights, speeds and workspace of the pick; :class:`UR3Config` defaults when None.
 
@@ -37,10 +43,11 @@ def plan_pick(
     Raises
     ------
     GraspPlanningError
-        As :func:`adapters.grasp.plan_grasp` (including ``InferredSegmentError``).
+        As :func:`adapters.grasp.plan_grasp` (including ``InferredSegmentError`` and
+        ``DepthImageError``).
     """
     config = UR3Config() if config is None else config
-    target = plan_grasp(detection, camera, selector)
+    target = plan_grasp(detection, camera, selector, depth)
     motions = plan_motions(target, config)
     try:
         check_workspace(motions, config.workspace)

@@ -7,6 +7,7 @@ is one of these models, so producers and consumers validate the same way.
 from schemas.detection import Chain, Crossing, Detection, StageTimings
 from schemas.grasp import (
     CameraModel,
+    DepthSurface,
     EndPoint,
     FractionPoint,
     GraspSelector,
@@ -24,6 +25,7 @@ __all__ = [
     "CameraModel",
     "Chain",
     "Crossing",
+    "DepthSurface",
     "DetectParams",
     "Detection",
     "EndPoint",

@@ -6,6 +6,8 @@ Frames and units
   of the top-left pixel), which is also OpenCV's convention.
 * The camera frame is OpenCV's: ``+z`` along the optical axis, ``+x`` towards growing
   columns, ``+y`` towards growing rows.
+* Depth, in a depth image, is the camera-frame ``z`` of the point seen at a pixel
+  (distance along the optical axis), as depth cameras report it.
 * The base frame is the robot base frame; every length in it is in metres and every
   angle in radians.
 """
@@ -17,7 +19,15 @@ import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    field_validator,
+    model_validator,
+)
 
 Matrix4 = tuple[
     tuple[float, float, float, float],
@@ -30,6 +40,9 @@ ROTATION_TOLERANCE = 1e-4
 """Largest entry of ``R^T R - I`` (and deviation of ``det R`` from 1) accepted in
 ``T_base_camera``: loose enough for a calibration written out with 5 decimals."""
 
+MAX_DEPTH_WINDOW = 101
+"""Largest fill window, pixels: beyond it the median would describe another surface."""
+
 
 class PlaneSurface(BaseModel):
     """The surface the cables lie on: the horizontal plane ``z = plane_z`` of the base frame."""
@@ -38,6 +51,85 @@ class PlaneSurface(BaseModel):
 
     kind: Literal["plane"] = "plane"
     plane_z: float = Field(description="Height of the table plane in the base frame, metres.")
+
+
+class DepthSurface(BaseModel):
+    """The surface the cables lie on, measured by a depth image aligned with the colour image.
+
+    The depth image itself is data sent next to the camera model (a 16-bit PNG or a
+    ``.npy`` array); this says how to read it. It has the camera's ``width`` x ``height``
+    and holds, for each pixel, the distance along the camera's optical axis (the camera
+    frame's ``z``, not the length of the ray) in units of ``depth_scale`` metres. A
+    sample is valid when it is finite, positive and inside ``[min_depth_m, max_depth_m]``;
+    a missing one (0 or NaN, as depth cameras write) at a pixel that is needed is filled
+    with the median of the valid samples in the ``window`` x ``window`` square around it.
+
+    Examples
+    --------
+    ``{"kind": "depth", "depth_scale": 0.001}``: uint16 millimetres (RealSense, Azure
+    Kinect); ``{"kind": "depth", "depth_scale": 1.0}``: float32 metres.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    kind: Literal["depth"]
+    depth_scale: float = Field(
+        gt=0,
+        allow_inf_nan=False,
+        description="Metres per depth unit: 0.001 for uint16 millimetres, 1.0 for float metres.",
+    )
+    min_depth_m: float | None = Field(
+        None, ge=0, allow_inf_nan=False, description="Nearer samples are missing, metres."
+    )
+    max_depth_m: float | None = Field(
+        None, gt=0, allow_inf_nan=False, description="Farther samples are missing, metres."
+    )
+    window: int = Field(
+        5,
+        ge=1,
+        le=MAX_DEPTH_WINDOW,
+        description="Side of the square (odd, pixels) around a pixel whose depth is missing "
+        "in which the median of the valid samples fills it.",
+    )
+
+    @field_validator("window")
+    @classmethod
+    def _odd_window(cls, value: int) -> int:
+        if value % 2 == 0:
+            raise ValueError(f"window must be odd so that it centres on the pixel, got {value}")
+        return value
+
+    @model_validator(mode="after")
+    def _range_not_empty(self) -> DepthSurface:
+        if (
+            self.min_depth_m is not None
+            and self.max_depth_m is not None
+            and self.min_depth_m >= self.max_depth_m
+        ):
+            raise ValueError(
+                f"min_depth_m ({self.min_depth_m}) must be less than max_depth_m "
+                f"({self.max_depth_m})"
+            )
+        return self
+
+
+def _surface_kind(value: Any) -> str | None:
+    # Camera files written before depth surfaces existed say {"plane_z": ...} without a kind.
+    if isinstance(value, dict):
+        return value.get("kind", "plane")
+    return getattr(value, "kind", None)
+
+
+Surface = Annotated[
+    Annotated[PlaneSurface, Tag("plane")] | Annotated[DepthSurface, Tag("depth")],
+    Discriminator(
+        _surface_kind,
+        custom_error_type="surface_kind",
+        custom_error_message="surface must be an object whose kind is 'plane' (the default) "
+        "or 'depth'",
+    ),
+]
+"""A :class:`PlaneSurface` (``kind`` may be left out) or a :class:`DepthSurface`."""
 
 
 class CameraModel(BaseModel):
@@ -62,7 +154,10 @@ class CameraModel(BaseModel):
     T_base_camera: Matrix4 = Field(
         description="4x4 rigid transform from camera to base frame, row-major, metres."
     )
-    surface: PlaneSurface = Field(description="Where the cables lie (depth images: not yet).")
+    surface: Surface = Field(
+        description="Where the cables lie: the table plane, or a depth image aligned with "
+        "the colour image."
+    )
 
     @field_validator("T_base_camera")
     @classmethod

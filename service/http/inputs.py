@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from starlette.datastructures import QueryParams, UploadFile
 from starlette.requests import Request
 
-from schemas import CameraModel, Detection, DetectParams, GraspSelector
+from schemas import CameraModel, DepthSurface, Detection, DetectParams, GraspSelector
 
 RAW_IMAGE_TYPES = ("image/jpeg", "image/png")
 """Content types accepted for an image sent as the whole request body."""
@@ -26,8 +26,10 @@ MULTIPART_TYPE = "multipart/form-data"
 JSON_TYPE = "application/json"
 FORM_FIELDS = ("image", "mask")
 """The multipart fields of ``/v1/detect``: image and mask files."""
-GRASP_FORM_FIELDS = ("image", "mask", "camera", "selector")
-"""The multipart fields of ``/v1/grasp``: image and mask files, camera and selector JSON."""
+GRASP_FORM_FIELDS = ("image", "mask", "camera", "selector", "depth")
+"""The multipart fields of ``/v1/grasp``: image and mask files, camera and selector JSON,
+and the depth image file for a camera whose surface is a depth image."""
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 SHOWN_INPUT_CHARS = 80
 """How much of an offending value a validation message quotes."""
 
@@ -75,11 +77,16 @@ class GraspRequest(BaseModel):
 
 @dataclass(frozen=True)
 class GraspFrame:
-    """A multipart ``/v1/grasp`` request: the image to detect, the camera and the selector."""
+    """A multipart ``/v1/grasp`` request: the image to detect, the camera and the selector.
+
+    ``depth`` is the encoded depth image (16-bit PNG), present exactly when the camera's
+    surface is a depth image.
+    """
 
     frame: Frame
     camera: CameraModel
     selector: GraspSelector
+    depth: bytes | None = None
 
 
 async def read_frame(request: Request, max_body_bytes: int) -> Frame:
@@ -124,8 +131,10 @@ async def read_grasp_request(request: Request, max_body_bytes: int) -> GraspFram
     -------
     GraspFrame or bytes
         For ``multipart/form-data`` (file ``image``, optional file ``mask``, JSON fields
-        ``camera`` and optional ``selector``; detection parameters in the query), the
-        frame with the camera and selector already validated. For ``application/json``
+        ``camera`` and optional ``selector``, file ``depth`` when the camera's surface is
+        a depth image; detection parameters in the query), the frame with the camera and
+        selector already validated and the depth image's presence and declared size
+        checked. For ``application/json``
         the raw body, a :class:`GraspRequest` validated in the worker pool since a
         detection may be large.
 
@@ -133,8 +142,10 @@ async def read_grasp_request(request: Request, max_body_bytes: int) -> GraspFram
     ------
     RequestError
         415 for another content type, 413 for a body over ``max_body_bytes``, 422 for
-        a missing, unexpected or invalid field, bad parameters, or query parameters
-        with a JSON body (they only apply to detecting an image).
+        a missing, unexpected or invalid field, bad parameters, query parameters with a
+        JSON body (they only apply to detecting an image), or a depth image missing for
+        a depth surface, given for a plane, empty or declaring another size than the
+        camera's (``invalid_depth``).
     """
     media_type = content_type(request)
     if media_type == JSON_TYPE:
@@ -156,7 +167,8 @@ async def read_grasp_request(request: Request, max_body_bytes: int) -> GraspFram
             415,
             "unsupported_media_type",
             f"Content-Type {shown} is not accepted: send multipart/form-data (file 'image', "
-            "JSON fields 'camera' and optionally 'selector') or application/json "
+            "JSON fields 'camera' and optionally 'selector', file 'depth' for a depth "
+            "surface) or application/json "
             '({"detection": ..., "camera": ..., "selector": ...})',
         )
     params = parse_params(request.query_params)
@@ -166,8 +178,8 @@ async def read_grasp_request(request: Request, max_body_bytes: int) -> GraspFram
         body,
         max_body_bytes,
         GRASP_FORM_FIELDS,
-        "the file field 'image', optionally 'mask', and the JSON fields 'camera' and "
-        "optionally 'selector'",
+        "the file field 'image', optionally 'mask', the JSON fields 'camera' and "
+        "optionally 'selector', and the file field 'depth' for a depth surface",
     )
     if parts["camera"] is None:
         raise RequestError(422, "invalid_camera", "multipart body has no 'camera' field")
@@ -177,8 +189,50 @@ async def read_grasp_request(request: Request, max_body_bytes: int) -> GraspFram
         if parts["selector"] is None
         else parse_json_field(GraspSelector, "selector", parts["selector"])
     )
+    check_depth_part(camera, parts["depth"])
     frame = Frame(image=parts["image"], mask=parts["mask"], params=params)
-    return GraspFrame(frame=frame, camera=camera, selector=selector)
+    return GraspFrame(frame=frame, camera=camera, selector=selector, depth=parts["depth"])
+
+
+def check_depth_part(camera: CameraModel, depth: bytes | None) -> None:
+    """422 ``invalid_depth`` unless the ``depth`` part fits the camera's surface.
+
+    Required for a depth surface and refused for a plane; a PNG whose header declares the
+    camera's size (the header is read, not the image: a wrong-sized one is never decoded).
+    """
+    surface = camera.surface
+    if not isinstance(surface, DepthSurface):
+        if depth is not None:
+            raise RequestError(
+                422,
+                "invalid_depth",
+                f"depth: the camera's surface is the plane z = {surface.plane_z} m; a depth "
+                'image needs the surface {"kind": "depth", "depth_scale": ...}',
+            )
+        return
+    if depth is None:
+        raise RequestError(
+            422,
+            "invalid_depth",
+            "the camera's surface is a depth image (kind 'depth'): send it as the file field "
+            "'depth', a 16-bit PNG aligned with the image",
+        )
+    if not depth:
+        raise RequestError(422, "invalid_depth", "depth: empty file (0 bytes)")
+    if not depth.startswith(PNG_SIGNATURE):
+        # PNG only: its header declares the size, so nothing larger than the camera's
+        # image is ever decompressed.
+        raise RequestError(
+            422, "invalid_depth", "depth: not a PNG file; send a single-channel 16-bit PNG"
+        )
+    declared = image_size(depth)
+    if declared is not None and declared != (camera.width, camera.height):
+        raise RequestError(
+            422,
+            "invalid_depth",
+            f"depth: image is {declared[0]}x{declared[1]} px but the camera model is "
+            f"{camera.width}x{camera.height} px",
+        )
 
 
 def parse_json_field(model: type[ModelT], name: str, data: bytes) -> ModelT:
@@ -239,7 +293,7 @@ async def _parse_form(
 
     form_request = Request(request.scope, replay)
     try:
-        form = await form_request.form(max_files=4, max_fields=8, max_part_size=limit)
+        form = await form_request.form(max_files=5, max_fields=8, max_part_size=limit)
     except Exception as exc:  # the multipart parser's own error types vary between versions
         detail = getattr(exc, "detail", None) or getattr(exc, "message", None) or exc
         raise RequestError(422, "invalid_form", f"malformed multipart body: {detail}") from None
@@ -336,7 +390,7 @@ def image_size(data: bytes) -> tuple[int, int] | None:
     Lets a huge image be refused (413) before it is decoded. Other formats, and headers
     this does not understand, are checked after decoding instead.
     """
-    if data.startswith(b"\x89PNG\r\n\x1a\n") and data[12:16] == b"IHDR" and len(data) >= 24:
+    if data.startswith(PNG_SIGNATURE) and data[12:16] == b"IHDR" and len(data) >= 24:
         return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
     if data.startswith(b"\xff\xd8"):
         return _jpeg_size(data)

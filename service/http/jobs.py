@@ -15,9 +15,14 @@ import cv2
 import numpy as np
 from pydantic import ValidationError
 
-from adapters.grasp import GraspPlanningError, InferredSegmentError
+from adapters.grasp import (
+    DepthImageError,
+    GraspPlanningError,
+    InferredSegmentError,
+    decode_depth_image,
+)
 from adapters.pick_plan import plan_pick
-from schemas import CameraModel, Detection, DetectParams, GraspSelector
+from schemas import CameraModel, DepthSurface, Detection, DetectParams, GraspSelector
 from schemas.grasp import GraspPlan
 from service.http.inputs import (
     Frame,
@@ -101,9 +106,20 @@ def run_overlay(frame: Frame, detect: DetectFunction, max_pixels: int) -> tuple[
 def run_grasp(
     request: GraspFrame, detect: DetectFunction, max_pixels: int
 ) -> tuple[GraspPlan, Detection]:
-    """Detect the DLOs in the request's image, then plan the grasp; returns both."""
+    """Decode the depth image (if any), detect the DLOs in the image, then plan the grasp.
+
+    Returns the plan and the detection. The depth image is decoded first so that a bad
+    one is refused (422 ``invalid_depth``) before the detection is paid for.
+    """
+    depth = None
+    if request.depth is not None:
+        try:
+            depth = decode_depth_image(request.depth)
+        except DepthImageError as exc:
+            raise RequestError(422, "invalid_depth", f"depth: {exc}") from None
     _, detection = run_detection(request.frame, detect, max_pixels)
-    return plan_or_refuse(detection, request.camera, request.selector), detection
+    plan = plan_or_refuse(detection, request.camera, request.selector, depth)
+    return plan, detection
 
 
 def plan_from_json(body: bytes) -> GraspPlan:
@@ -122,10 +138,22 @@ def plan_from_json(body: bytes) -> GraspPlan:
         part = next((str(error["loc"][0]) for error in exc.errors() if error["loc"]), "")
         code = f"invalid_{part}" if part in GraspRequest.model_fields else "invalid_body"
         raise RequestError(422, code, "; ".join(describe_fields(exc))) from None
+    if isinstance(request.camera.surface, DepthSurface):
+        raise RequestError(
+            422,
+            "invalid_depth",
+            "the camera's surface is a depth image (kind 'depth'), which a JSON body cannot "
+            "carry: send multipart/form-data with the image and the file field 'depth'",
+        )
     return plan_or_refuse(request.detection, request.camera, request.selector)
 
 
-def plan_or_refuse(detection: Detection, camera: CameraModel, selector: GraspSelector) -> GraspPlan:
+def plan_or_refuse(
+    detection: Detection,
+    camera: CameraModel,
+    selector: GraspSelector,
+    depth: np.ndarray | None = None,
+) -> GraspPlan:
     """:func:`adapters.pick_plan.plan_pick`, its refusals turned into 422 answers.
 
     A target outside the workspace is not refused: the plan says so
@@ -134,13 +162,17 @@ def plan_or_refuse(detection: Detection, camera: CameraModel, selector: GraspSel
     Raises
     ------
     RequestError
-        422 ``inferred_segment`` when the point lies on an inferred segment that was not
-        allowed; 422 ``ungraspable`` for every other reason there is no grasp: no chain,
-        no such chain id or segment, image size other than the camera's, a ray that
-        misses the table, or coordinates so extreme the arithmetic overflows.
+        422 ``invalid_depth`` when the depth image does not fit the camera (size,
+        channels, sample type; missing or not wanted); 422 ``inferred_segment`` when the
+        point lies on an inferred segment that was not allowed; 422 ``ungraspable`` for
+        every other reason there is no grasp: no chain, no such chain id or segment,
+        image size other than the camera's, a ray that misses the table, no valid depth
+        around the grasp point, or coordinates so extreme the arithmetic overflows.
     """
     try:
-        plan = plan_pick(detection, camera, selector)
+        plan = plan_pick(detection, camera, selector, depth=depth)
+    except DepthImageError as exc:
+        raise RequestError(422, "invalid_depth", f"depth: {exc}") from None
     except InferredSegmentError as exc:
         raise RequestError(422, "inferred_segment", str(exc)) from None
     except GraspPlanningError as exc:

@@ -109,10 +109,12 @@ _GRASP_OPENAPI = {
     "requestBody": {
         "required": True,
         "description": "Either a multipart form: the file field `image` (optionally `mask`), "
-        "the field `camera` holding a CameraModel as JSON, and optionally `selector` holding "
-        "a GraspSelector as JSON (default: the middle of the longest chain); the query sets "
-        "up the detection as for `/v1/detect`. Or a JSON body with a saved `detection`, the "
-        "`camera` and the optional `selector`; no query parameters then.",
+        "the field `camera` holding a CameraModel as JSON, optionally `selector` holding "
+        "a GraspSelector as JSON (default: the middle of the longest chain), and the file "
+        "field `depth` when the camera's surface is a depth image; the query sets up the "
+        "detection as for `/v1/detect`. Or a JSON body with a saved `detection`, the "
+        "`camera` (its surface a plane: a JSON body cannot carry a depth image) and the "
+        "optional `selector`; no query parameters then.",
         "content": {
             JSON_TYPE: {"schema": inline_schema(GraspRequest)},
             "multipart/form-data": {
@@ -130,6 +132,13 @@ _GRASP_OPENAPI = {
                             "type": "string",
                             "description": 'GraspSelector as JSON, e.g. {"chain": "longest", '
                             '"point": {"kind": "fraction", "value": 0.5}}.',
+                        },
+                        "depth": {
+                            **_BINARY,
+                            "description": "Depth image aligned with `image`, a single-channel "
+                            "16-bit PNG of the camera's size in units of the surface's "
+                            "`depth_scale` metres (0 = not measured). Required when the "
+                            'camera\'s surface is {"kind": "depth", ...}, refused otherwise.',
                         },
                     },
                 },
@@ -173,9 +182,11 @@ _GRASP_ERRORS: dict[int | str, dict[str, Any]] = {
     415: _error("Content type other than multipart/form-data or application/json."),
     422: _error(
         "Unreadable image or mask, invalid camera, selector, detection or parameters "
-        "(`invalid_*`); a point on an inferred segment not allowed (`inferred_segment`); "
+        "(`invalid_*`); a depth image missing for a depth surface, given for a plane, "
+        "unreadable, not 16-bit single-channel or of another size than the camera's "
+        "(`invalid_depth`); a point on an inferred segment not allowed (`inferred_segment`); "
         "no grasp: no chain, unknown chain id or segment, image size other than the "
-        "camera's, a ray missing the table (`ungraspable`)."
+        "camera's, a ray missing the table, no valid depth around the point (`ungraspable`)."
     ),
 }
 
@@ -260,6 +271,8 @@ async def grasp(request: Request) -> Response:
     inputs = await read_grasp_request(request, settings.max_body_bytes)
     if isinstance(inputs, GraspFrame):
         check_declared_size(inputs.frame.image, settings.max_pixels)
+        if inputs.depth is not None:
+            check_declared_size(inputs.depth, settings.max_pixels)
         plan, detection = await _in_pool(
             state, run_grasp, inputs, state.detect, settings.max_pixels
         )

@@ -18,7 +18,7 @@ from typer.testing import CliRunner
 
 from adapters.cli import build_ur3_app
 from adapters.fakes import FakeRobot
-from schemas import CameraModel, Chain, Detection
+from schemas import CameraModel, Chain, DepthSurface, Detection
 from service.synthetic import make_scene
 
 W, H = 640, 480
@@ -294,3 +294,100 @@ def test_dlo_registers_ur3_and_no_longer_grasp():
     assert runner.invoke(app, ["ur3", "--help"]).exit_code == 0
     assert "pick" in runner.invoke(app, ["ur3", "--help"]).stdout
     assert runner.invoke(app, ["grasp", "--help"]).exit_code == 2
+
+
+# --- a depth-image surface ----------------------------------------------------------------------
+
+
+def depth_camera(depth_scale=0.001) -> CameraModel:
+    """:func:`camera` 0.5 m above the table, its surface a depth image."""
+    return camera().model_copy(
+        update={"surface": DepthSurface(kind="depth", depth_scale=depth_scale)}
+    )
+
+
+@pytest.fixture
+def depth_files(tmp_path, files) -> dict[str, Path]:
+    """A depth camera, and the depth of a 5 cm box under the chain as PNG (mm) and .npy (m)."""
+    depth_camera().to_json_file(tmp_path / "depth_camera.json")
+    depth_camera(depth_scale=1.0).to_json_file(tmp_path / "depth_camera_m.json")
+    millimetres = np.full((H, W), 500, np.uint16)
+    millimetres[200:280, 280:360] = 450  # the box top, around the principal point
+    millimetres[238:243, 318:323] = 0  # a hole right at the grasp point, filled by the window
+    assert cv2.imwrite(str(tmp_path / "depth.png"), millimetres)
+    np.save(tmp_path / "depth.npy", millimetres.astype(np.float32) / 1000)
+    return {
+        **files,
+        "depth_camera": tmp_path / "depth_camera.json",
+        "depth_camera_m": tmp_path / "depth_camera_m.json",
+        "png": tmp_path / "depth.png",
+        "npy": tmp_path / "depth.npy",
+    }
+
+
+@pytest.mark.parametrize(
+    ("command", "camera_key", "depth_key"),
+    [
+        (["plan"], "depth_camera", "png"),
+        (["pick", "--dry-run"], "depth_camera_m", "npy"),
+    ],
+)
+def test_a_depth_image_puts_the_grasp_on_the_box(depth_files, command, camera_key, depth_key):
+    args = [*command, str(depth_files["detection"]), "-c", str(depth_files[camera_key])]
+    result = invoke(*args, "--depth", str(depth_files[depth_key]), "--fraction", "0.75")
+    assert result.exit_code == 0, result.stderr
+    target = json.loads(result.stdout)["target"]
+    # Pixel (CX + 30, CY) on the box top 0.45 m below the camera, 0.05 m above the table.
+    assert target["position_m"] == pytest.approx([0.3 + 30 * 0.45 / FX, 0.1, 0.05], abs=TOL)
+    assert target["yaw_rad"] == pytest.approx(np.pi / 2)
+
+
+def test_a_flat_depth_image_plans_as_the_plane(tmp_path, files):
+    depth_camera().to_json_file(tmp_path / "depth_camera.json")
+    assert cv2.imwrite(str(tmp_path / "flat.png"), np.full((H, W), 500, np.uint16))
+    args = ["plan", str(files["detection"]), "--fraction", "0.3"]
+    on_plane = invoke(*args, "-c", str(files["camera"]))
+    on_depth = invoke(
+        *args, "-c", str(tmp_path / "depth_camera.json"), "--depth", str(tmp_path / "flat.png")
+    )
+    assert on_depth.exit_code == 0, on_depth.stderr
+    plane_plan, depth_plan = json.loads(on_plane.stdout), json.loads(on_depth.stdout)
+    assert depth_plan["target"]["position_m"] == pytest.approx(
+        plane_plan["target"]["position_m"], abs=TOL
+    )
+    for from_depth, from_plane in zip(depth_plan["motions"], plane_plan["motions"], strict=True):
+        assert from_depth.get("pose") == pytest.approx(from_plane.get("pose"), abs=TOL)
+
+
+def test_depth_file_problems_are_one_line_usage_errors(tmp_path, depth_files):
+    (tmp_path / "noise.png").write_bytes(b"not a png")
+    (tmp_path / "noise.npy").write_bytes(b"not numpy")
+    assert cv2.imwrite(str(tmp_path / "eight.png"), np.full((H, W), 50, np.uint8))
+    assert cv2.imwrite(str(tmp_path / "small.png"), np.full((240, 320), 500, np.uint16))
+    np.save(tmp_path / "colour.npy", np.ones((H, W, 3), np.float32))
+    detection_path, depth_cam = str(depth_files["detection"]), str(depth_files["depth_camera"])
+    cases = [
+        (depth_cam, None, ["surface is a depth image", "--depth"]),
+        (str(depth_files["camera"]), depth_files["png"], ["--depth", "surface is the plane"]),
+        (depth_cam, tmp_path / "missing.png", ["depth file", "No such file"]),
+        (depth_cam, tmp_path, ["depth file", "Is a directory"]),
+        (depth_cam, tmp_path / "noise.png", ["depth file", "not an image"]),
+        (depth_cam, tmp_path / "noise.npy", ["depth file", "not a NumPy .npy array"]),
+        (depth_cam, tmp_path / "eight.png", ["depth file", "8-bit samples"]),
+        (depth_cam, tmp_path / "small.png", ["320x240 px but the camera model is 640x480 px"]),
+        (depth_cam, tmp_path / "colour.npy", ["depth file", "one channel, not 3 channels"]),
+    ]
+    for camera_path, depth_path, words in cases:
+        depth_args = [] if depth_path is None else ["--depth", str(depth_path)]
+        result = invoke("plan", detection_path, "-c", camera_path, *depth_args)
+        assert_usage_error(result, *words)
+        assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+
+
+def test_a_depth_hole_wider_than_the_window_is_no_grasp(tmp_path, depth_files):
+    holed = np.full((H, W), 500, np.uint16)
+    holed[200:280, 280:360] = 0
+    assert cv2.imwrite(str(tmp_path / "holed.png"), holed)
+    args = ["plan", str(depth_files["detection"]), "-c", str(depth_files["depth_camera"])]
+    result = invoke(*args, "--depth", str(tmp_path / "holed.png"))
+    assert_usage_error(result, "no valid depth at pixel (320.0, 240.0)", "5x5 px window")

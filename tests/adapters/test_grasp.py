@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 
@@ -11,9 +12,11 @@ import pytest
 from pydantic import ValidationError
 
 from adapters.grasp import (
+    DepthImageError,
     GraspPlanningError,
     InferredSegmentError,
     closing_yaw,
+    decode_depth_image,
     normalize_half_turn,
     pixel_to_plane,
     plan_grasp,
@@ -21,11 +24,13 @@ from adapters.grasp import (
 from schemas import (
     CameraModel,
     Chain,
+    DepthSurface,
     Detection,
     EndPoint,
     FractionPoint,
     GraspSelector,
     PixelPoint,
+    PlaneSurface,
     SegmentPoint,
 )
 
@@ -299,3 +304,241 @@ def test_camera_model_from_yaml_when_pyyaml_is_installed(tmp_path):
     path = tmp_path / "camera.yml"
     path.write_text(yaml.safe_dump(cam.model_dump(mode="json")))
     assert CameraModel.from_file(path) == cam
+
+
+# --- depth surface ------------------------------------------------------------------------
+
+
+def depth_camera(rotation=DOWN, origin=(0.4, 0.05, 0.6), depth_scale=1.0, **surface):
+    """As :func:`camera`, with a depth-image surface instead of the table plane."""
+    plane = camera(rotation=rotation, origin=origin)
+    return plane.model_copy(
+        update={"surface": DepthSurface(kind="depth", depth_scale=depth_scale, **surface)}
+    )
+
+
+def plane_depth(rotation, origin, plane_z, dtype=np.float32) -> np.ndarray:
+    """The depth image (metres along the optical axis) of the plane ``z = plane_z``.
+
+    The ray of pixel (u, v) is ``(a, b, 1)`` in the camera; in the base frame it rises
+    ``R[2] . (a, b, 1)`` per unit of depth, so it meets the plane at that depth.
+    """
+    u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
+    a, b = (u - CX) / FX, (v - CY) / FY
+    rotation = np.asarray(rotation)
+    rise = rotation[2, 0] * a + rotation[2, 1] * b + rotation[2, 2]
+    return ((plane_z - origin[2]) / rise).astype(dtype)
+
+
+CABLE = chain([(200.0, 150.0), (260.0, 190.0), (330.0, 230.0), (400.0, 300.0)])
+"""Joints on whole pixels, so the nearest depth sample is the joint's own."""
+SELECTORS = [
+    GraspSelector(point=SegmentPoint(index=1)),  # (295, 210): a whole pixel too
+    GraspSelector(point=EndPoint(end="start")),
+    GraspSelector(point=PixelPoint(x=330, y=230)),
+]
+
+
+@pytest.mark.parametrize("selector", SELECTORS)
+def test_depth_of_a_flat_table_seen_straight_down_equals_the_plane(selector):
+    origin, table = (0.4, 0.05, 0.6), 0.02
+    depth = np.full((H, W), origin[2] - table, np.float32)
+    from_depth = plan_grasp(detection(CABLE), depth_camera(origin=origin), selector, depth)
+    from_plane = plan_grasp(detection(CABLE), camera(origin=origin, plane_z=table), selector)
+    np.testing.assert_allclose(from_depth.position_m, from_plane.position_m, atol=TOL)
+    assert from_depth.yaw_rad == pytest.approx(from_plane.yaw_rad, abs=1e-6)
+    assert from_depth.model_dump(exclude={"position_m", "yaw_rad"}) == from_plane.model_dump(
+        exclude={"position_m", "yaw_rad"}
+    )
+
+
+@pytest.mark.parametrize("selector", SELECTORS)
+def test_depth_of_a_plane_seen_by_a_tilted_camera_equals_the_plane(selector):
+    rotation = rot_x(math.radians(30)) @ DOWN
+    origin, table = (0.35, -0.1, 0.5), 0.01
+    depth = plane_depth(rotation, origin, table)
+    cam = depth_camera(rotation=rotation, origin=origin)
+    from_depth = plan_grasp(detection(CABLE), cam, selector, depth)
+    plane = camera(rotation=rotation, origin=origin, plane_z=table)
+    from_plane = plan_grasp(detection(CABLE), plane, selector)
+    np.testing.assert_allclose(from_depth.position_m, from_plane.position_m, atol=TOL)
+    assert from_depth.position_m[2] == pytest.approx(table, abs=TOL)
+    assert from_depth.yaw_rad == pytest.approx(from_plane.yaw_rad, abs=1e-6)
+
+
+def test_the_grasp_lands_on_top_of_a_box():
+    origin, table, box_top = (0.4, 0.05, 0.6), 0.0, 0.05
+    depth = np.full((H, W), origin[2] - table, np.float32)
+    depth[180:280, 240:360] = origin[2] - box_top  # a box under the middle of the image
+    on_box = chain([(250.0, 230.0), (350.0, 230.0)])  # along image x, on the box
+    target = plan_grasp(detection(on_box), depth_camera(origin=origin), GraspSelector(), depth)
+    height = origin[2] - box_top
+    expected = (origin[0] + (300 - CX) / FX * height, origin[1] - (230 - CY) / FY * height, box_top)
+    np.testing.assert_allclose(target.position_m, expected, atol=TOL)
+    assert target.yaw_rad == pytest.approx(math.pi / 2)  # across a cable along base x
+    # The same chain beside the box lies on the table.
+    beside = chain([(450.0, 400.0), (550.0, 400.0)])
+    target = plan_grasp(detection(beside), depth_camera(origin=origin), GraspSelector(), depth)
+    assert target.position_m[2] == pytest.approx(table, abs=TOL)
+
+
+def test_a_cable_off_the_box_edge_takes_its_joints_from_their_own_depths():
+    # A straight-down camera: the yaw only depends on the joints' x-y, which each depth
+    # scales about the optical axis; joints at different depths tilt the tangent.
+    origin = (0.4, 0.05, 0.6)
+    depth = np.full((H, W), 0.6, np.float32)
+    depth[:, 320:] = 0.5  # the right half is a 10 cm step up
+    c = chain([(220.0, 140.0), (420.0, 340.0)])  # starts on the floor, ends on the step
+    target = plan_grasp(detection(c), depth_camera(origin=origin), GraspSelector(), depth)
+    start = (origin[0] + (220 - CX) / FX * 0.6, origin[1] - (140 - CY) / FY * 0.6)
+    end = (origin[0] + (420 - CX) / FX * 0.5, origin[1] - (340 - CY) / FY * 0.5)
+    expected = closing_yaw(end[0] - start[0], end[1] - start[1])
+    assert target.yaw_rad == pytest.approx(expected, abs=1e-6)
+    # The grasp pixel (320, 240) falls on the step: nearest sample, no blend across the edge.
+    assert target.position_m[2] == pytest.approx(0.1, abs=TOL)
+
+
+def test_missing_depth_is_filled_with_the_median_of_the_window():
+    origin = (0.4, 0.05, 0.6)
+    depth = np.full((H, W), 0.58, np.float32)
+    c = chain([(300.0, 240.0), (340.0, 240.0)])  # grasp pixel (320, 240)
+    depth[237:244, 317:324] = np.nan  # a 7x7 hole around it
+    cam = depth_camera(origin=origin, window=9)
+    target = plan_grasp(detection(c), cam, GraspSelector(), depth)
+    assert target.position_m == pytest.approx((0.4, 0.05, 0.02), abs=TOL)
+    # The median, not the mean: within a 3x3 window, 5 valid samples 0.50 0.50 0.55 0.70 0.70.
+    depth = np.zeros((H, W), np.uint16)  # 0 = no measurement, as depth cameras write
+    ring = {(239, 319): 500, (239, 320): 500, (239, 321): 550, (241, 319): 700, (241, 321): 700}
+    for (row, column), millimetres in ring.items():
+        depth[row, column] = millimetres
+    depth[230:250, 310:319] = 580  # outside the 3x3 window: ignored
+    cam = depth_camera(origin=origin, depth_scale=0.001, window=3)
+    target = plan_grasp(detection(c), cam, GraspSelector(), depth)
+    assert target.position_m == pytest.approx((0.4, 0.05, 0.6 - 0.55), abs=TOL)
+
+
+def test_a_window_without_any_valid_depth_refuses_the_grasp():
+    depth = np.full((H, W), 0.58, np.float32)
+    depth[235:246, 315:326] = np.nan  # 11x11 hole: wider than the 5 px window
+    c = chain([(300.0, 240.0), (340.0, 240.0)])
+    with pytest.raises(GraspPlanningError, match=r"no valid depth at pixel \(320.0, 240.0\)"):
+        plan_grasp(detection(c), depth_camera(), GraspSelector(), depth)
+    # A wider window reaches the valid samples around the hole.
+    target = plan_grasp(detection(c), depth_camera(window=13), GraspSelector(), depth)
+    assert target.position_m[2] == pytest.approx(0.02, abs=TOL)
+
+
+def test_a_joint_without_depth_falls_back_to_the_grasp_points_depth():
+    origin = (0.4, 0.05, 0.6)
+    depth = np.full((H, W), 0.5, np.float32)
+    depth[:, 400:] = np.nan  # nothing measured on the right
+    c = chain([(250.0, 100.0), (450.0, 300.0)])  # grasp at (350, 200); end joint unmeasured
+    target = plan_grasp(detection(c), depth_camera(origin=origin), GraspSelector(), depth)
+    # Both joints at 0.5 m: the tangent is the image diagonal scaled alike.
+    expected = closing_yaw(200 / FX, -200 / FY)
+    assert target.yaw_rad == pytest.approx(expected, abs=1e-6)
+    assert target.position_m[2] == pytest.approx(0.1, abs=TOL)
+
+
+def test_depth_outside_the_valid_range_counts_as_missing():
+    depth = np.full((H, W), 0.58, np.float32)
+    depth[240, 320] = 0.2  # a speck of dust on the lens side
+    c = chain([(300.0, 240.0), (340.0, 240.0)])
+    speck = plan_grasp(detection(c), depth_camera(), GraspSelector(), depth)
+    assert speck.position_m[2] == pytest.approx(0.6 - 0.2, abs=TOL)
+    ranged = depth_camera(min_depth_m=0.3, max_depth_m=1.0)
+    target = plan_grasp(detection(c), ranged, GraspSelector(), depth)
+    assert target.position_m[2] == pytest.approx(0.02, abs=TOL)
+    with pytest.raises(GraspPlanningError, match=r"valid: finite, >= 0.6 m and <= 1.0 m"):
+        plan_grasp(
+            detection(c), depth_camera(min_depth_m=0.6, max_depth_m=1.0), GraspSelector(), depth
+        )
+
+
+@pytest.mark.parametrize(
+    ("samples", "scale"),
+    [
+        (np.full((H, W), 580, np.uint16), 0.001),  # millimetres, as a 16-bit PNG holds them
+        (np.full((H, W), 0.58, np.float32), 1.0),  # metres, as a .npy holds them
+        (np.full((H, W), 0.58, np.float64), 1.0),
+        (np.full((H, W, 1), 580, np.uint16), 0.001),  # a trailing channel axis
+    ],
+)
+def test_uint16_millimetres_and_float_metres_give_the_same_point(samples, scale):
+    c = chain([(100.0, 400.0), (140.0, 380.0)])
+    target = plan_grasp(detection(c), depth_camera(depth_scale=scale), GraspSelector(), samples)
+    expected = plan_grasp(detection(c), camera(plane_z=0.02), GraspSelector())
+    np.testing.assert_allclose(target.position_m, expected.position_m, atol=TOL)
+
+
+@pytest.mark.parametrize(
+    ("depth", "words"),
+    [
+        (np.full((240, 320), 0.5, np.float32), "depth image is 320x240 px but the camera model"),
+        (np.full((H, W, 3), 500, np.uint16), "one channel, not 3 channels"),
+        (np.full((H, W), 50, np.uint8), "not uint8"),
+        (None, "no depth image was given"),
+    ],
+)
+def test_unusable_depth_images_are_refused(depth, words):
+    c = chain([(100.0, 400.0), (140.0, 380.0)])
+    with pytest.raises(DepthImageError, match=words):
+        plan_grasp(detection(c), depth_camera(), GraspSelector(), depth)
+
+
+def test_a_depth_image_with_a_plane_surface_is_refused():
+    c = chain([(100.0, 400.0), (140.0, 380.0)])
+    with pytest.raises(DepthImageError, match=r"surface is the plane z = 0\.02 m"):
+        plan_grasp(detection(c), camera(), GraspSelector(), np.ones((H, W), np.float32))
+
+
+def test_depth_surface_schema():
+    surface = depth_camera(depth_scale=0.001).surface
+    assert surface == DepthSurface(kind="depth", depth_scale=0.001, window=5)
+    # Camera files without a surface kind are planes, as before depth surfaces existed.
+    assert isinstance(camera().surface, PlaneSurface)
+    data = depth_camera().model_dump(mode="json")
+    assert CameraModel.model_validate_json(json.dumps(data)) == depth_camera()
+    for bad, words in [
+        ({"kind": "depth"}, "depth_scale"),
+        ({"kind": "depth", "depth_scale": 0}, "greater than 0"),
+        ({"kind": "depth", "depth_scale": 1, "window": 4}, "window must be odd"),
+        ({"kind": "depth", "depth_scale": 1, "min_depth_m": 2, "max_depth_m": 1}, "less than"),
+        ({"kind": "sphere"}, r"kind is 'plane' \(the default\) or 'depth'"),
+        ({"kind": "plane", "plane_z": 0, "depth_scale": 1}, "Extra inputs"),
+    ]:
+        with pytest.raises(ValidationError, match=words):
+            CameraModel.model_validate({**data, "surface": bad})
+
+
+def test_the_depth_camera_example_loads():
+    from pathlib import Path
+
+    examples = Path(__file__).resolve().parents[2] / "docs" / "examples"
+    cam = CameraModel.from_file(examples / "camera_depth.json")
+    assert isinstance(cam.surface, DepthSurface) and cam.surface.depth_scale == 0.001
+
+
+@pytest.mark.parametrize("dtype", [np.uint16, np.float32])
+def test_decode_depth_image_keeps_the_samples(dtype):
+    samples = (np.arange(W * H).reshape(H, W) % 4000 + 1).astype(dtype)
+    suffix = ".png" if dtype == np.uint16 else ".tiff"
+    encoded_ok, encoded = cv2.imencode(suffix, samples)
+    assert encoded_ok
+    decoded = decode_depth_image(encoded.tobytes())
+    assert decoded.dtype == dtype
+    np.testing.assert_array_equal(decoded, samples)
+
+
+def test_decode_depth_image_refuses_what_is_not_a_depth_image():
+    png16 = cv2.imencode(".png", np.full((4, 4), 500, np.uint16))[1].tobytes()
+    cases = [
+        (b"", "empty"),
+        (b"not an image", "not an image"),
+        (png16[: len(png16) // 2], "truncated or corrupt PNG"),
+        (cv2.imencode(".png", np.zeros((4, 4), np.uint8))[1].tobytes(), "8-bit samples"),
+        (cv2.imencode(".png", np.zeros((4, 4, 3), np.uint16))[1].tobytes(), "3 channels"),
+    ]
+    for data, words in cases:
+        with pytest.raises(DepthImageError, match=words):
+            decode_depth_image(data)

@@ -301,3 +301,99 @@ def test_openapi_documents_both_request_shapes(server) -> None:
     assert content["multipart/form-data"]["schema"]["required"] == ["image", "camera"]
     assert "$ref" not in json.dumps(content)
     assert {"200", "415", "422", "503"} <= set(operation["responses"])
+
+
+# --- multipart/form-data with a depth image -------------------------------------------------
+
+
+def depth_camera(**surface) -> dict:
+    """:func:`camera` with a depth-image surface in millimetres."""
+    model = camera()
+    model["surface"] = {"kind": "depth", "depth_scale": 0.001, **surface}
+    return model
+
+
+def depth_png(millimetres: int = 300, width: int = W, height: int = H) -> bytes:
+    return encode(np.full((height, width), millimetres, np.uint16))
+
+
+def post_depth(base: str, png: bytes, depth: bytes | None, model: dict) -> httpx.Response:
+    files = {"image": ("cell.png", png, "image/png")}
+    if depth is not None:
+        files["depth"] = ("depth.png", depth, "image/png")
+    fields = {"camera": json.dumps(model), "selector": '{"allow_inferred": true}'}
+    return httpx.post(f"{base}/v1/grasp", files=files, data=fields, timeout=30)
+
+
+def test_a_flat_depth_image_plans_as_the_table_plane(server, png) -> None:
+    on_plane = post_form(
+        server, png, {"camera": json.dumps(camera()), "selector": '{"allow_inferred": true}'}
+    )
+    on_depth = post_depth(server, png, depth_png(300), depth_camera())
+    assert on_depth.status_code == 200, on_depth.text
+    plane_target, depth_target = on_plane.json()["target"], on_depth.json()["target"]
+    assert depth_target["position_m"] == pytest.approx(plane_target["position_m"], abs=TOL)
+    assert depth_target["yaw_rad"] == pytest.approx(plane_target["yaw_rad"], abs=1e-6)
+
+
+def test_a_raised_depth_lifts_the_grasp_along_its_ray(server, png) -> None:
+    plane_target = post_form(
+        server, png, {"camera": json.dumps(camera()), "selector": '{"allow_inferred": true}'}
+    ).json()["target"]
+    response = post_depth(server, png, depth_png(250), depth_camera())  # 5 cm above the table
+    assert response.status_code == 200, response.text
+    target = response.json()["target"]
+    x, y, _ = plane_target["position_m"]
+    # Straight down from (0.25, 0, 0.3): the same pixel at 0.25 m instead of 0.3 m.
+    expected = [0.25 + (x - 0.25) * 0.25 / 0.3, y * 0.25 / 0.3, 0.05]
+    assert target["position_m"] == pytest.approx(expected, abs=TOL)
+
+
+def test_depth_problems_are_422_invalid_depth(server, png) -> None:
+    truncated = depth_png()[:200]
+    cases = [
+        (None, depth_camera(), "invalid_depth", ["surface is a depth image", "'depth'"]),
+        (depth_png(), camera(), "invalid_depth", ["surface is the plane z = 0.0 m"]),
+        (b"", depth_camera(), "invalid_depth", ["depth: empty file"]),
+        (b"not a png", depth_camera(), "invalid_depth", ["depth: not a png file"]),
+        (truncated, depth_camera(), "invalid_depth", ["depth: truncated or corrupt png"]),
+        (encode(np.full((H, W), 30, np.uint8)), depth_camera(), "invalid_depth", ["8-bit"]),
+        (
+            encode(np.full((H, W, 3), 300, np.uint16)),
+            depth_camera(),
+            "invalid_depth",
+            ["3 channels"],
+        ),
+        (
+            depth_png(width=W // 2),
+            depth_camera(),
+            "invalid_depth",
+            ["240x320 px but the camera model is 480x320 px"],
+        ),
+        (depth_png(0), depth_camera(), "ungraspable", ["no valid depth at pixel"]),
+        (depth_png(300), depth_camera(max_depth_m=0.2), "ungraspable", ["<= 0.2 m"]),
+    ]
+    for depth, model, code, words in cases:
+        response = post_depth(server, png, depth, model)
+        assert assert_error(response, 422, *words)["error"] == code
+
+
+def test_a_json_body_cannot_carry_a_depth_surface(server) -> None:
+    response = post_json(server, {"detection": detection(), "camera": depth_camera()})
+    body = assert_error(response, 422, "depth image", "multipart/form-data", "'depth'")
+    assert body["error"] == "invalid_depth"
+
+
+def test_openapi_documents_the_depth_part(server) -> None:
+    schema = httpx.get(f"{server}/openapi.json").json()
+    form = schema["paths"]["/v1/grasp"]["post"]["requestBody"]["content"]["multipart/form-data"]
+    depth = form["schema"]["properties"]["depth"]
+    assert depth["format"] == "binary" and "16-bit PNG" in depth["description"]
+    camera_schema = schema["paths"]["/v1/grasp"]["post"]["requestBody"]["content"][
+        "application/json"
+    ]["schema"]["properties"]["camera"]
+    kinds = {
+        json.dumps(option["properties"]["kind"])
+        for option in camera_schema["properties"]["surface"]["oneOf"]
+    }
+    assert any('"depth"' in kind for kind in kinds) and any('"plane"' in kind for kind in kinds)
