@@ -25,6 +25,10 @@ END_FIT_SPAN_RADII = 6.0
 # Thinning stops about a radius from the edge of the picture; an end this much
 # further in still counts as at the edge.
 BORDER_MARGIN_PX = 2.0
+# An end joint is narrow (part of a cut end) below this fraction of the full half width;
+# at most this many joints at an end are left out of its fit for being narrow.
+FULL_WIDTH_FRACTION = 0.8
+NARROW_END_JOINTS = 4
 
 
 @dataclass(frozen=True)
@@ -65,14 +69,48 @@ class MergeResult:
     joins: list[Join]
 
 
-def chain_ends(pieces: list[np.ndarray], span: float, skip: float = 0.0) -> list[ChainEnd]:
-    """Both ends of every piece with their outward directions (piece i: ends 2i, 2i+1)."""
+def chain_ends(
+    pieces: list[np.ndarray],
+    span: float,
+    skip: float = 0.0,
+    distance: np.ndarray | None = None,
+    full_width: float = 0.0,
+) -> list[ChainEnd]:
+    """Both ends of every piece with their outward directions (piece i: ends 2i, 2i+1).
+
+    The end fit leaves out the last ``skip`` of arc length, and with ``distance`` (the
+    mask's distance transform) also every joint at the end where the cable is narrower
+    than ``full_width``: where an occluder cuts a cable at a slant, thinning bends the
+    end toward the cut's far corner over more than one radius, and that stretch would
+    tilt the end's direction.
+    """
     ends = []
     for index, points in enumerate(pieces):
         for at_start in (True, False):
-            position, direction = end_tangent(points, at_start, span, skip)
+            end_skip = skip
+            if distance is not None:
+                end_skip = max(skip, _narrow_end_length(points, at_start, distance, full_width))
+            position, direction = end_tangent(points, at_start, span, end_skip)
             ends.append(ChainEnd(index, at_start, position, direction))
     return ends
+
+
+def _narrow_end_length(points, at_start, distance, full_width, limit=NARROW_END_JOINTS):
+    """Arc length from the tip to the first joint where the cable has its full width.
+
+    0 when none of the first ``limit`` joints reaches it (a thin piece throughout).
+    """
+    ordered = points if at_start else points[::-1]
+    height, width = distance.shape
+    length = 0.0
+    for k in range(min(len(ordered), limit + 1)):
+        if k:
+            length += float(np.hypot(*(ordered[k] - ordered[k - 1])))
+        col = min(max(round(float(ordered[k][0])), 0), width - 1)
+        row = min(max(round(float(ordered[k][1])), 0), height - 1)
+        if distance[row, col] >= full_width:
+            return length
+    return 0.0
 
 
 def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> float:
@@ -434,6 +472,7 @@ def merge_chains(
     params: DetectParams,
     radius: float,
     zones: np.ndarray | None = None,
+    distance: np.ndarray | None = None,
 ) -> MergeResult:
     """Step 6 of the pipeline: join pieces into whole DLOs and fill the gaps.
 
@@ -447,6 +486,8 @@ def merge_chains(
     zones : ndarray of bool, optional
         Junction zones from fitting: the ends that meet in one zone are paired
         together first.
+    distance : ndarray, optional
+        Distance transform of the mask: end fits then leave out narrow (cut) ends.
 
     Returns
     -------
@@ -456,7 +497,10 @@ def merge_chains(
     # End tangents are fitted over a few cable widths: long enough to average out
     # the pixel steps of the skeleton, short enough to follow a bending cable.
     span = max(END_FIT_SPAN_PX, END_FIT_SPAN_RADII * radius)
-    ends = chain_ends(pieces, span, skip=radius)
+    # The distance transform counts to the nearest background pixel centre, half a
+    # pixel beyond the border: the full half width is radius + 0.5.
+    full_width = FULL_WIDTH_FRACTION * (radius + 0.5)
+    ends = chain_ends(pieces, span, skip=radius, distance=distance, full_width=full_width)
     junction_of_end, dropped = absorb_shared_pieces(pieces, junctions_of_ends(ends, zones), radius)
     at_border = None
     if zones is not None:

@@ -207,7 +207,7 @@ def detect_full(
     watch.lap("pruning")
 
     # 6. Merging across gaps and crossings, then crossings and their order.
-    merged = merge_chains(pieces, params, radius, zones)
+    merged = merge_chains(pieces, params, radius, zones, distance)
     finals = []
     for path in merged.paths:
         if polyline_length(path.vertices) < params.min_chain_length:

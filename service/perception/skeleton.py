@@ -223,7 +223,10 @@ def estimate_radius(
     """
     skeleton = as_uint8(skeleton)
     if distance is not None:
-        values = distance[skeleton.view(np.bool_)]
+        # Gathered at the skeleton's pixels (found 8 bytes at a time), not through a
+        # boolean index over the whole image.
+        indices = _kernels.nonzero_flat(skeleton.reshape(-1))
+        values = np.ascontiguousarray(distance).reshape(-1)[indices]
     else:
         values = _kernels.distances_on_skeleton(as_uint8(mask), skeleton)
     if values.size == 0:

@@ -295,3 +295,21 @@ def test_labels_keep_the_geometry_for_cables_of_one_colour_or_a_grey_image():
     np.testing.assert_array_equal(
         render_labels(detection, mask, image[:, :, 0]), render_labels(detection, mask)
     )
+
+
+def test_end_directions_leave_out_a_cut_end_where_the_cable_narrows():
+    from service.perception.merging import chain_ends
+
+    # A straight cable along y = 50 whose last joints bend toward a slanted cut's corner.
+    piece = np.array([[x, 50.0] for x in range(0, 100, 10)] + [[100.0, 53.0], [108.0, 58.0]])
+    mask = np.zeros((100, 140), np.uint8)
+    cv2.line(mask, (0, 50), (96, 50), 1, 13)  # half width 6, ends before the hook
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    radius = 6.0
+    plain = chain_ends([piece], span=40.0, skip=radius)[1]
+    adaptive = chain_ends(
+        [piece], span=40.0, skip=radius, distance=distance, full_width=0.8 * (radius + 0.5)
+    )[1]
+    # The hook tilts the plain fit; leaving out the narrow joints keeps the cable's axis.
+    assert abs(plain.direction[1]) > 0.1
+    assert abs(adaptive.direction[1]) < 0.02 and adaptive.direction[0] > 0.99
