@@ -80,16 +80,26 @@ def chain_ends(
 
     The end fit leaves out the last ``skip`` of arc length, and with ``distance`` (the
     mask's distance transform) also every joint at the end where the cable is narrower
-    than ``full_width``: where an occluder cuts a cable at a slant, thinning bends the
-    end toward the cut's far corner over more than one radius, and that stretch would
-    tilt the end's direction.
+    than its full width (``full_width``, or more for a piece whose joints are typically
+    wider): where an occluder cuts a cable at a slant, thinning bends the end toward the
+    cut's far corner over more than one radius, and that stretch would tilt the end's
+    direction.
     """
     ends = []
     for index, points in enumerate(pieces):
+        piece_full = full_width
+        if distance is not None and len(points) >= 3:
+            # Cables differ in width: a piece's own full width is the typical distance
+            # to the border at its joints.
+            height, width = distance.shape
+            cols = np.clip(np.rint(points[:, 0]).astype(int), 0, width - 1)
+            rows = np.clip(np.rint(points[:, 1]).astype(int), 0, height - 1)
+            own_width = FULL_WIDTH_FRACTION * float(np.median(distance[rows, cols]))
+            piece_full = max(full_width, own_width)
         for at_start in (True, False):
             end_skip = skip
             if distance is not None:
-                end_skip = max(skip, _narrow_end_length(points, at_start, distance, full_width))
+                end_skip = max(skip, _narrow_end_length(points, at_start, distance, piece_full))
             position, direction = end_tangent(points, at_start, span, end_skip)
             ends.append(ChainEnd(index, at_start, position, direction))
     return ends
