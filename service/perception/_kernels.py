@@ -1076,6 +1076,32 @@ def natural_curve_kernel(start, leaving, end, arriving, step):
     return out
 
 
+@njit(cache=True, nogil=True)
+def median_distance_per_piece(distance, points, starts):
+    """Median of ``distance`` at the rounded joints of each piece (as ``np.median``).
+
+    ``points`` holds every piece's joints one after another; piece ``k`` is
+    ``points[starts[k]:starts[k + 1]]``. Joints are rounded half to even and clipped to
+    the image, as ``np.rint`` and ``np.clip`` would.
+    """
+    height, width = distance.shape
+    medians = np.empty(starts.size - 1)
+    for k in range(starts.size - 1):
+        count = starts[k + 1] - starts[k]
+        values = np.empty(count, np.float32)
+        for i in range(count):
+            col = min(max(int(np.rint(points[starts[k] + i, 0])), 0), width - 1)
+            row = min(max(int(np.rint(points[starts[k] + i, 1])), 0), height - 1)
+            values[i] = distance[row, col]
+        values.sort()
+        middle = count // 2
+        if count % 2:
+            medians[k] = values[middle]
+        else:
+            medians[k] = (values[middle - 1] + values[middle]) / np.float32(2.0)
+    return medians
+
+
 # --------------------------------------------------------------------------- segmentation
 
 # The 8 neighbours and, first, the 4 orthogonal ones (for 4-connected fills).
@@ -1373,6 +1399,7 @@ def warm_up() -> None:
     ]
     resample(strands[0], 2.0)
     end_tangent(strands[0], True, 10.0, 1.0)
+    median_distance_per_piece(distance, np.concatenate(strands), np.array([0, 4, 8]))
     # The three shapes of the natural curve: straight, arc, Bezier.
     east, north = np.array([1.0, 0.0]), np.array([0.0, 1.0])
     natural_curve(strands[0][0], east, strands[0][-1], east)

@@ -86,16 +86,19 @@ def chain_ends(
     direction.
     """
     ends = []
+    medians = None
+    if distance is not None and pieces:
+        # Cables differ in width: a piece's own full width is the typical distance to
+        # the border at its joints.
+        starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
+        joints = np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64)
+        medians = _kernels.median_distance_per_piece(
+            np.ascontiguousarray(distance, np.float32), joints, starts
+        )
     for index, points in enumerate(pieces):
         piece_full = full_width
-        if distance is not None and len(points) >= 3:
-            # Cables differ in width: a piece's own full width is the typical distance
-            # to the border at its joints.
-            height, width = distance.shape
-            cols = np.clip(np.rint(points[:, 0]).astype(int), 0, width - 1)
-            rows = np.clip(np.rint(points[:, 1]).astype(int), 0, height - 1)
-            own_width = FULL_WIDTH_FRACTION * float(np.median(distance[rows, cols]))
-            piece_full = max(full_width, own_width)
+        if medians is not None and len(points) >= 3:
+            piece_full = max(full_width, FULL_WIDTH_FRACTION * float(medians[index]))
         for at_start in (True, False):
             end_skip = skip
             if distance is not None:

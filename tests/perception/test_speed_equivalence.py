@@ -668,6 +668,19 @@ def test_natural_curve_kernel_equals_the_reference(seed):
     assert cases == 400
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_median_distance_per_piece_equals_numpy(seed):
+    rng = np.random.default_rng(seed)
+    distance = (rng.random((60, 80)) * 9).astype(np.float32)
+    pieces = [rng.uniform(-5, 85, (int(rng.integers(1, 30)), 2)) for _ in range(8)]
+    starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
+    medians = _kernels.median_distance_per_piece(distance, np.concatenate(pieces), starts)
+    for points, median in zip(pieces, medians, strict=True):
+        cols = np.clip(np.rint(points[:, 0]).astype(int), 0, 79)
+        rows = np.clip(np.rint(points[:, 1]).astype(int), 0, 59)
+        assert float(np.median(distance[rows, cols])) == float(median)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_resample_kernel_equals_the_reference(seed):
     from service.perception.geometry import resample
