@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from schemas import Chain, Crossing, Detection, DetectParams, StageTimings
@@ -62,8 +63,10 @@ def _extend_end(points: np.ndarray, at_start: bool, mask, radius: float, span: f
     """Push a chain end out to where the cable ends in the mask, less one radius.
 
     Thinning stops about one radius short of a square-cut cable end; a grasp at "the
-    end" should still be on the cable, so the end is placed one radius inside. A cable
-    that runs out of the picture does not end there: its chain goes to the edge.
+    end" should still be on the cable, so the end is placed one radius inside: along
+    the end's direction to where the mask stops, or, when it is farther, toward the
+    farthest pixel of the cable within 35 degrees ahead. A cable that runs out of the
+    picture does not end there: its chain goes to the edge.
     """
     direction = end_direction(points, at_start, span)
     tip = points[0] if at_start else points[-1]
@@ -81,10 +84,57 @@ def _extend_end(points: np.ndarray, at_start: bool, mask, radius: float, span: f
             break
         reach += 1.0
     extension = reach if leaves_image else reach - radius
+    if not leaves_image:
+        # A curving end, or one whose tip fork fell to spur removal, leaves the straight
+        # walk through the side of the cap: the farthest pixel of the cable ahead marks
+        # the end better.
+        far = _farthest_ahead(tip, direction, mask, TIP_SEARCH_RADII * radius + 2.0)
+        if far is not None:
+            offset = far - tip
+            length = float(np.hypot(*offset))
+            if length - radius > extension:
+                direction = offset / length
+                extension = length - radius
     if extension < 1.0:
         return points
     new_tip = tip + extension * direction
     return np.vstack([new_tip, points]) if at_start else np.vstack([points, new_tip])
+
+
+# How far ahead of a free chain end (in radii) and within which angle of its direction
+# the cable's farthest pixel is looked for.
+TIP_SEARCH_RADII = 5.0
+TIP_SEARCH_COS = float(np.cos(np.radians(35.0)))
+FAR_RIM_PX = 2.0
+
+
+def _farthest_ahead(tip, direction, mask, limit, cos_half_angle=TIP_SEARCH_COS):
+    """The middle of the mask's farthest rim from ``tip``: the pixels at most ``limit``
+    px away, within the cone of ``cos_half_angle`` round ``direction`` and connected to
+    the tip through the mask near it, that lie within FAR_RIM_PX of the largest
+    distance. None when there is none."""
+    height, width = mask.shape
+    r = int(np.ceil(limit))
+    col, row = round(float(tip[0])), round(float(tip[1]))
+    x0, y0 = max(col - r, 0), max(row - r, 0)
+    x1, y1 = min(col + r + 1, width), min(row + r + 1, height)
+    window = mask[y0:y1, x0:x1].astype(np.uint8)
+    ty, tx = row - y0, col - x0
+    if not (0 <= ty < window.shape[0] and 0 <= tx < window.shape[1]) or not window[ty, tx]:
+        return None
+    _, labels = cv2.connectedComponents(window, connectivity=8)
+    ys, xs = np.nonzero(labels == labels[ty, tx])
+    vx = xs + x0 - tip[0]
+    vy = ys + y0 - tip[1]
+    dist = np.hypot(vx, vy)
+    ahead = vx * direction[0] + vy * direction[1] >= cos_half_angle * dist
+    ok = (dist <= limit) & (dist > 0) & ahead
+    if not ok.any():
+        return None
+    # The middle of the farthest rim, not one pixel of it: the corners of a square-cut
+    # end are equally far and would pull the end sideways.
+    far = ok & (dist >= dist[ok].max() - FAR_RIM_PX)
+    return np.array([tip[0] + vx[far].mean(), tip[1] + vy[far].mean()])
 
 
 def _finalise_path(path: MergedPath, mask, distance, params: DetectParams, radius: float):
