@@ -1102,6 +1102,70 @@ def median_distance_per_piece(distance, points, starts):
     return medians
 
 
+@njit(cache=True, nogil=True)
+def farthest_rim_ahead(mask, col, row, tip_x, tip_y, dir_x, dir_y, limit, cos_half_angle, rim):
+    """See pipeline._farthest_ahead: ``(found, x, y)`` of the middle of the farthest rim.
+
+    The 8-connected component of the pixel (``row``, ``col``) is flood-filled within the
+    square window of half size ceil(limit) round it, as cv2.connectedComponents on that
+    window would label it.
+    """
+    height, width = mask.shape
+    r = int(np.ceil(limit))
+    x0 = max(col - r, 0)
+    y0 = max(row - r, 0)
+    x1 = min(col + r + 1, width)
+    y1 = min(row + r + 1, height)
+    if not (x0 <= col < x1 and y0 <= row < y1) or not mask[row, col]:
+        return False, 0.0, 0.0
+    w = x1 - x0
+    h = y1 - y0
+    seen = np.zeros((h, w), np.uint8)
+    queue = np.empty(h * w, np.int64)
+    queue[0] = (row - y0) * w + (col - x0)
+    seen[row - y0, col - x0] = 1
+    count = 1
+    head = 0
+    far = -1.0
+    while head < count:
+        qr = queue[head] // w
+        qc = queue[head] - qr * w
+        head += 1
+        for k in range(8):
+            rr = qr + _FILL_DR[k]
+            cc = qc + _FILL_DC[k]
+            if 0 <= rr < h and 0 <= cc < w and not seen[rr, cc] and mask[y0 + rr, x0 + cc]:
+                seen[rr, cc] = 1
+                queue[count] = rr * w + cc
+                count += 1
+    # Two passes over the component: the farthest distance in the cone, then the rim.
+    for i in range(count):
+        qr = queue[i] // w
+        qc = queue[i] - qr * w
+        vx = qc + x0 - tip_x
+        vy = qr + y0 - tip_y
+        dist = np.hypot(vx, vy)
+        if 0 < dist <= limit and vx * dir_x + vy * dir_y >= cos_half_angle * dist:
+            far = max(far, dist)
+    if far < 0:
+        return False, 0.0, 0.0
+    sum_x = 0.0
+    sum_y = 0.0
+    n = 0
+    for i in range(count):
+        qr = queue[i] // w
+        qc = queue[i] - qr * w
+        vx = qc + x0 - tip_x
+        vy = qr + y0 - tip_y
+        dist = np.hypot(vx, vy)
+        inside = 0 < dist <= limit and vx * dir_x + vy * dir_y >= cos_half_angle * dist
+        if inside and dist >= far - rim:
+            sum_x += vx
+            sum_y += vy
+            n += 1
+    return True, tip_x + sum_x / n, tip_y + sum_y / n
+
+
 # --------------------------------------------------------------------------- segmentation
 
 # The 8 neighbours and, first, the 4 orthogonal ones (for 4-connected fills).
@@ -1368,6 +1432,7 @@ def warm_up() -> None:
     from service.perception.pruning import prune_overlaps
     from service.perception.segmentation import clean_mask, segment
     from service.perception.skeleton import (
+        as_uint8,
         branch_counts,
         distance_transform,
         estimate_radius,
@@ -1400,6 +1465,7 @@ def warm_up() -> None:
     resample(strands[0], 2.0)
     end_tangent(strands[0], True, 10.0, 1.0)
     median_distance_per_piece(distance, np.concatenate(strands), np.array([0, 4, 8]))
+    farthest_rim_ahead(as_uint8(mask), 24, 20, 24.0, 20.0, 1.0, 0.0, 10.0, 0.8, 2.0)
     # The three shapes of the natural curve: straight, arc, Bezier.
     east, north = np.array([1.0, 0.0]), np.array([0.0, 1.0])
     natural_curve(strands[0][0], east, strands[0][-1], east)

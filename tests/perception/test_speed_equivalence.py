@@ -383,6 +383,35 @@ def _reference_natural_curve(start, leaving, end, arriving, step=1.0):
     return sum(w * c for w, c in zip(weights, control, strict=True))
 
 
+def _reference_farthest_ahead(tip, direction, mask, limit, cos_half_angle, rim):
+    """The middle of the mask's farthest rim from ``tip``: the pixels at most ``limit``
+    px away, within the cone of ``cos_half_angle`` round ``direction`` and connected to
+    the tip through the mask near it, that lie within FAR_RIM_PX of the largest
+    distance. None when there is none."""
+    height, width = mask.shape
+    r = int(np.ceil(limit))
+    col, row = round(float(tip[0])), round(float(tip[1]))
+    x0, y0 = max(col - r, 0), max(row - r, 0)
+    x1, y1 = min(col + r + 1, width), min(row + r + 1, height)
+    window = mask[y0:y1, x0:x1].astype(np.uint8)
+    ty, tx = row - y0, col - x0
+    if not (0 <= ty < window.shape[0] and 0 <= tx < window.shape[1]) or not window[ty, tx]:
+        return None
+    _, labels = cv2.connectedComponents(window, connectivity=8)
+    ys, xs = np.nonzero(labels == labels[ty, tx])
+    vx = xs + x0 - tip[0]
+    vy = ys + y0 - tip[1]
+    dist = np.hypot(vx, vy)
+    ahead = vx * direction[0] + vy * direction[1] >= cos_half_angle * dist
+    ok = (dist <= limit) & (dist > 0) & ahead
+    if not ok.any():
+        return None
+    # The middle of the farthest rim, not one pixel of it: the corners of a square-cut
+    # end are equally far and would pull the end sideways.
+    far = ok & (dist >= dist[ok].max() - rim)
+    return np.array([tip[0] + vx[far].mean(), tip[1] + vy[far].mean()])
+
+
 # --------------------------------------------------------------------------- tests
 
 
@@ -679,6 +708,35 @@ def test_median_distance_per_piece_equals_numpy(seed):
         cols = np.clip(np.rint(points[:, 0]).astype(int), 0, 79)
         rows = np.clip(np.rint(points[:, 1]).astype(int), 0, 59)
         assert float(np.median(distance[rows, cols])) == float(median)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_farthest_rim_ahead_equals_the_reference(seed):
+    from service.perception.pipeline import FAR_RIM_PX, TIP_SEARCH_COS, _farthest_ahead
+
+    rng = np.random.default_rng(seed)
+    found = 0
+    for _ in range(100):
+        mask = np.zeros((90, 120), np.uint8)
+        for _ in range(3):
+            start = tuple(int(v) for v in rng.integers(0, 120, 2))
+            end = tuple(int(v) for v in rng.integers(0, 90, 2))
+            cv2.line(mask, start, end, 1, int(rng.integers(5, 15)))
+        rows, cols = np.nonzero(mask)
+        pick = rng.integers(rows.size)
+        tip = np.array([cols[pick], rows[pick]]) + rng.uniform(-0.4, 0.4, 2)
+        direction = rng.normal(size=2)
+        direction /= np.linalg.norm(direction)
+        limit = float(rng.uniform(5, 40))
+        fast = _farthest_ahead(tip, direction, mask > 0, limit)
+        expected = _reference_farthest_ahead(
+            tip, direction, mask > 0, limit, TIP_SEARCH_COS, FAR_RIM_PX
+        )
+        assert (fast is None) == (expected is None)
+        if fast is not None:
+            np.testing.assert_allclose(fast, expected, rtol=0, atol=1e-9)
+            found += 1
+    assert found > 50
 
 
 @pytest.mark.parametrize("seed", range(4))
