@@ -19,7 +19,7 @@ from schemas.grasp import (
     PlaneSurface,
     SegmentPoint,
 )
-from schemas.params import DetectParams, SegmentationMethod
+from schemas.params import DetectParams, GapCurve, SegmentationMethod
 
 __all__ = [
     "CameraModel",
@@ -30,6 +30,7 @@ __all__ = [
     "Detection",
     "EndPoint",
     "FractionPoint",
+    "GapCurve",
     "GraspSelector",
     "GraspTarget",
     "Motion",

@@ -7,6 +7,18 @@ from enum import StrEnum
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 
+class GapCurve(StrEnum):
+    """The curve that fills a gap or crossing between two joined chain ends."""
+
+    smooth = "smooth"
+    """A cubic whose handles follow both end directions and would trace a circular arc
+    between symmetric ends: the turning is spread over the whole gap, as an elastic
+    cable bends."""
+    natural = "natural"
+    """Keipour et al.'s natural curve: straight along the end directions, then one
+    constant-rate arc (a cubic where no single arc fits)."""
+
+
 class SegmentationMethod(StrEnum):
     """How the foreground mask is found when the caller gives none."""
 
@@ -55,6 +67,9 @@ class DetectParams(BaseModel):
     )
     max_gap: float = Field(
         250.0, ge=0, le=10_000, description="Largest gap (occlusion) merging will bridge."
+    )
+    gap_curve: GapCurve = Field(
+        GapCurve.smooth, description="Curve drawn across gaps, occlusions and crossings."
     )
     merge_cost_threshold: float = Field(
         0.6,

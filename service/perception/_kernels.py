@@ -1166,6 +1166,47 @@ def farthest_rim_ahead(mask, col, row, tip_x, tip_y, dir_x, dir_y, limit, cos_ha
     return True, tip_x + sum_x / n, tip_y + sum_y / n
 
 
+@njit(cache=True, nogil=True)
+def smooth_curve_kernel(start, leaving, end, arriving, step):
+    """Samples of the smooth gap curve (see merging.natural_curve, shape "smooth").
+
+    A cubic Bezier from ``start`` along ``leaving`` to ``end`` along ``arriving`` whose
+    handle length, for a total turn theta between the end directions, is
+    (2/3) d tan(theta / 4) / sin(theta / 2) with d the gap: the cubic that best follows
+    a circular arc when the ends are symmetric, d / 3 (a straight line) when they are
+    aligned. theta is capped at 0.95 pi so a reversing gap gets finite handles.
+    """
+    gap_x = end[0] - start[0]
+    gap_y = end[1] - start[1]
+    distance = np.hypot(gap_x, gap_y)
+    if distance < 1e-9:
+        out = np.empty((2, 2))
+        out[0] = start
+        out[1] = end
+        return out
+    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
+    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+    theta = min(abs(np.arctan2(cross, dot)), 0.95 * np.pi)
+    if theta < 1e-6:
+        handle = distance / 3.0
+    else:
+        handle = (2.0 / 3.0) * distance * np.tan(theta / 4.0) / np.sin(theta / 2.0)
+    count = max(4, int(np.ceil(1.3 * distance / step)) + 1)
+    t = np.linspace(0.0, 1.0, count)
+    out = np.empty((count, 2))
+    for axis in range(2):
+        p0 = start[axis]
+        p1 = start[axis] + handle * leaving[axis]
+        p2 = end[axis] - handle * arriving[axis]
+        p3 = end[axis]
+        for k in range(count):
+            u = t[k]
+            out[k, axis] = (
+                (1 - u) ** 3 * p0 + 3 * (1 - u) ** 2 * u * p1 + 3 * (1 - u) * u**2 * p2 + u**3 * p3
+            )
+    return out
+
+
 # --------------------------------------------------------------------------- segmentation
 
 # The 8 neighbours and, first, the 4 orthogonal ones (for 4-connected fills).
@@ -1471,5 +1512,6 @@ def warm_up() -> None:
     natural_curve(strands[0][0], east, strands[0][-1], east)
     natural_curve(strands[0][0], east, np.array([20.0, 20.0]), north)
     natural_curve(strands[0][0], east, np.array([-9.0, 9.0]), north)
+    natural_curve(strands[0][0], east, np.array([20.0, 20.0]), north, shape="smooth")
     find_intersections(strands)
     inferred_segments(np.array([0, 1, 2]), np.array([1.0, 0.0, 2.0]), np.array([True, False, True]))

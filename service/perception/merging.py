@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from schemas import DetectParams
+from schemas import DetectParams, GapCurve
 from service.perception import _kernels
 from service.perception.geometry import angle_between, end_tangent, polyline_length
 
@@ -160,15 +160,27 @@ def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> 
 
 
 def natural_curve(
-    start: np.ndarray, leaving: np.ndarray, end: np.ndarray, arriving: np.ndarray, step: float = 1.0
+    start: np.ndarray,
+    leaving: np.ndarray,
+    end: np.ndarray,
+    arriving: np.ndarray,
+    step: float = 1.0,
+    shape: GapCurve | str = GapCurve.natural,
 ) -> np.ndarray:
-    """The "natural" curve that bridges a gap between two chain ends.
+    """The curve that bridges a gap between two chain ends.
 
-    It leaves ``start`` along ``leaving``, goes straight while that still helps, turns
-    with one constant rate (the gentlest arc tangent to both end directions), and
-    arrives at ``end`` heading along ``arriving``. When the two end rays do not meet
-    ahead of both ends (an S-shaped or backward gap), no single arc fits, and a
-    cubic Bezier with tangents along both directions is used instead.
+    With ``shape="natural"`` (Keipour et al.), it leaves ``start`` along ``leaving``,
+    goes straight while that still helps, turns with one constant rate (the gentlest
+    arc tangent to both end directions), and arrives at ``end`` heading along
+    ``arriving``. When the two end rays do not meet ahead of both ends (an S-shaped or
+    backward gap), no single arc fits, and a cubic Bezier with tangents along both
+    directions is used instead.
+
+    With ``shape="smooth"``, it is a cubic Bezier along both end directions whose
+    handles would trace a circular arc between symmetric ends: the turning is spread
+    over the whole gap instead of following a straight stretch, as an elastic cable
+    bends. It is the default of :class:`schemas.DetectParams` (``gap_curve``): on
+    generated scenes its bridges follow hidden stretches more closely.
 
     Parameters
     ----------
@@ -178,15 +190,21 @@ def natural_curve(
         Unit headings at ``start`` and at ``end``.
     step : float
         Spacing of the returned samples.
+    shape : {"natural", "smooth"}
 
     Returns
     -------
     ndarray
         ``(M, 2)`` samples from ``start`` to ``end`` inclusive.
     """
-    # Compiled (_kernels.natural_curve_kernel): a frame bridges hundreds of gaps and
-    # crossings. The plain version is the reference in tests/perception.
-    return _kernels.natural_curve_kernel(
+    # Compiled (_kernels): a frame bridges hundreds of gaps and crossings. The plain
+    # versions are the references in tests/perception.
+    kernel = (
+        _kernels.smooth_curve_kernel
+        if GapCurve(shape) is GapCurve.smooth
+        else _kernels.natural_curve_kernel
+    )
+    return kernel(
         np.asarray(start, np.float64),
         np.asarray(leaving, np.float64),
         np.asarray(end, np.float64),
@@ -442,9 +460,13 @@ def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -
 
 
 def assemble_paths(
-    pieces: list[np.ndarray], ends: list[ChainEnd], joins: list[tuple[int, int, float]]
+    pieces: list[np.ndarray],
+    ends: list[ChainEnd],
+    joins: list[tuple[int, int, float]],
+    curve: GapCurve | str = GapCurve.natural,
 ) -> list[MergedPath]:
-    """Walk every group of joined pieces from one free end to the other."""
+    """Walk every group of joined pieces from one free end to the other; each join is
+    bridged by :func:`natural_curve` of the given ``curve`` shape."""
     partner = np.full(len(ends), -1)
     for i, j, _ in joins:
         partner[i], partner[j] = j, i
@@ -472,6 +494,7 @@ def assemble_paths(
                 ends[exit_end].direction,
                 ends[next_entry].position,
                 -ends[next_entry].direction,
+                shape=curve,
             )
             vertices.append(bridge[1:-1])
             filled.append(np.ones(len(bridge) - 1, bool))
@@ -528,6 +551,7 @@ def merge_chains(
         )
     joins = choose_joins(ends, len(pieces), params, radius, junction_of_end, at_border)
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
-    paths = [p for p in assemble_paths(pieces, ends, joins) if p.pieces[0] not in dropped]
+    assembled = assemble_paths(pieces, ends, joins, params.gap_curve)
+    paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])

@@ -412,6 +412,24 @@ def _reference_farthest_ahead(tip, direction, mask, limit, cos_half_angle, rim):
     return np.array([tip[0] + vx[far].mean(), tip[1] + vy[far].mean()])
 
 
+def _reference_smooth_curve(start, leaving, end, arriving, step=1.0):
+    distance = float(np.hypot(*(end - start)))
+    if distance < 1e-9:
+        return np.array([start, end])
+    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
+    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+    theta = min(abs(float(np.arctan2(cross, dot))), 0.95 * np.pi)
+    if theta < 1e-6:
+        handle = distance / 3.0
+    else:
+        handle = (2.0 / 3.0) * distance * np.tan(theta / 4.0) / np.sin(theta / 2.0)
+    control = np.array([start, start + handle * leaving, end - handle * arriving, end])
+    count = max(4, int(np.ceil(1.3 * distance / step)) + 1)
+    t = np.linspace(0.0, 1.0, count)[:, None]
+    weights = [(1 - t) ** 3, 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t**2, t**3]
+    return sum(w * c for w, c in zip(weights, control, strict=True))
+
+
 # --------------------------------------------------------------------------- tests
 
 
@@ -691,6 +709,10 @@ def test_natural_curve_kernel_equals_the_reference(seed):
         step = float(rng.choice([0.5, 1.0, 3.0]))
         fast = natural_curve(start, leaving, end, arriving, step)
         expected = _reference_natural_curve(start, leaving, end, arriving, step)
+        assert fast.shape == expected.shape
+        np.testing.assert_allclose(fast, expected, rtol=0, atol=1e-9)
+        fast = natural_curve(start, leaving, end, arriving, step, shape="smooth")
+        expected = _reference_smooth_curve(start, leaving, end, arriving, step)
         assert fast.shape == expected.shape
         np.testing.assert_allclose(fast, expected, rtol=0, atol=1e-9)
         cases += 1

@@ -313,3 +313,22 @@ def test_end_directions_leave_out_a_cut_end_where_the_cable_narrows():
     # The hook tilts the plain fit; leaving out the narrow joints keeps the cable's axis.
     assert abs(plain.direction[1]) > 0.1
     assert abs(adaptive.direction[1]) < 0.02 and adaptive.direction[0] > 0.99
+
+
+def test_smooth_curve_follows_an_arc_between_symmetric_ends_and_is_straight_when_aligned():
+    radius = 80.0
+    angles = (0.3, 1.4)
+    start, end = (np.array([radius * np.cos(a), radius * np.sin(a)]) for a in angles)
+    leaving, arriving = (np.array([-np.sin(a), np.cos(a)]) for a in angles)
+    curve = natural_curve(start, leaving, end, arriving, step=0.5, shape="smooth")
+    # The cubic stays within a small fraction of a pixel of the circle it approximates.
+    assert np.abs(np.hypot(curve[:, 0], curve[:, 1]) - radius).max() < 0.05
+    np.testing.assert_allclose(curve[[0, -1]], [start, end])
+    straight = natural_curve(
+        np.array([0.0, 0.0]),
+        np.array([1.0, 0.0]),
+        np.array([30.0, 0.0]),
+        np.array([1.0, 0.0]),
+        shape="smooth",
+    )
+    assert np.abs(straight[:, 1]).max() < 1e-9
