@@ -989,6 +989,26 @@ def _put_segment(out, n, ax, ay, bx, by, step, skip_first):
 
 
 @njit(cache=True, nogil=True)
+def _bezier_samples(start, leaving, end, arriving, handle, distance, step):
+    """Samples of the cubic Bezier from ``start`` along ``leaving`` to ``end`` along
+    ``arriving`` with both handles ``handle`` long (1.3 samples per ``step`` of gap)."""
+    count = max(4, int(np.ceil(1.3 * distance / step)) + 1)
+    t = np.linspace(0.0, 1.0, count)
+    out = np.empty((count, 2))
+    for axis in range(2):
+        p0 = start[axis]
+        p1 = start[axis] + handle * leaving[axis]
+        p2 = end[axis] - handle * arriving[axis]
+        p3 = end[axis]
+        for k in range(count):
+            u = t[k]
+            out[k, axis] = (
+                (1 - u) ** 3 * p0 + 3 * (1 - u) ** 2 * u * p1 + 3 * (1 - u) * u**2 * p2 + u**3 * p3
+            )
+    return out
+
+
+@njit(cache=True, nogil=True)
 def natural_curve_kernel(start, leaving, end, arriving, step):
     """Samples of the natural curve between two chain ends (see merging.natural_curve)."""
     gap_x = end[0] - start[0]
@@ -1060,20 +1080,7 @@ def natural_curve_kernel(start, leaving, end, arriving, step):
                     kept += 1
             return curve[:kept]
     handle = 0.4 * distance
-    count = max(4, int(np.ceil(1.3 * distance / step)) + 1)
-    t = np.linspace(0.0, 1.0, count)
-    out = np.empty((count, 2))
-    for axis in range(2):
-        p0 = start[axis]
-        p1 = start[axis] + handle * leaving[axis]
-        p2 = end[axis] - handle * arriving[axis]
-        p3 = end[axis]
-        for k in range(count):
-            u = t[k]
-            out[k, axis] = (
-                (1 - u) ** 3 * p0 + 3 * (1 - u) ** 2 * u * p1 + 3 * (1 - u) * u**2 * p2 + u**3 * p3
-            )
-    return out
+    return _bezier_samples(start, leaving, end, arriving, handle, distance, step)
 
 
 @njit(cache=True, nogil=True)
@@ -1191,20 +1198,7 @@ def smooth_curve_kernel(start, leaving, end, arriving, step):
         handle = distance / 3.0
     else:
         handle = (2.0 / 3.0) * distance * np.tan(theta / 4.0) / np.sin(theta / 2.0)
-    count = max(4, int(np.ceil(1.3 * distance / step)) + 1)
-    t = np.linspace(0.0, 1.0, count)
-    out = np.empty((count, 2))
-    for axis in range(2):
-        p0 = start[axis]
-        p1 = start[axis] + handle * leaving[axis]
-        p2 = end[axis] - handle * arriving[axis]
-        p3 = end[axis]
-        for k in range(count):
-            u = t[k]
-            out[k, axis] = (
-                (1 - u) ** 3 * p0 + 3 * (1 - u) ** 2 * u * p1 + 3 * (1 - u) * u**2 * p2 + u**3 * p3
-            )
-    return out
+    return _bezier_samples(start, leaving, end, arriving, handle, distance, step)
 
 
 # --------------------------------------------------------------------------- segmentation
@@ -1245,50 +1239,12 @@ def brightness_histogram(image_bgr):
 
 
 @njit(cache=True, nogil=True)
-def hysteresis_kernel(cue, low, high):
-    """Pixels of ``cue`` above ``low`` 8-connected to one above ``high`` (0/1 ``uint8``).
-
-    Every pixel above ``high`` seeds a flood fill through the pixels above ``low``;
-    each pixel is filled once, so the cost is one scan plus the size of the result.
-    """
-    height, width = cue.shape
-    result = np.zeros((height, width), np.uint8)
-    # Room for every pixel above ``low`` up front: growing the stack inside the loop
-    # makes numba count references on every step, which costs more than the fill.
-    weak = 0
-    for r in range(height):
-        for c in range(width):
-            weak += cue[r, c] > low
-    stack = np.empty(weak, np.int64)
-    for r0 in range(height):
-        for c0 in range(width):
-            # A seed must be above ``low`` too: the stack only has room for those.
-            if result[r0, c0] or not (cue[r0, c0] > high and cue[r0, c0] > low):
-                continue
-            result[r0, c0] = 1
-            stack[0] = r0 * width + c0
-            top = 1
-            while top:
-                top -= 1
-                r = stack[top] // width
-                c = stack[top] - r * width
-                for k in range(8):
-                    rr = r + _FILL_DR[k]
-                    cc = c + _FILL_DC[k]
-                    inside = 0 <= rr < height and 0 <= cc < width
-                    if inside and not result[rr, cc] and cue[rr, cc] > low:
-                        result[rr, cc] = 1
-                        stack[top] = rr * width + cc
-                        top += 1
-    return result
-
-
-@njit(cache=True, nogil=True)
 def remove_small_components(mask, min_area):
     """Clear, in place, the 8-connected foreground components of fewer than ``min_area`` px."""
     height, width = mask.shape
     seen = np.zeros((height, width), np.uint8)
-    # Room for the largest possible component up front (see hysteresis_kernel).
+    # Room for the largest possible component up front: growing an array inside the
+    # loop makes numba count references on every step, which costs more than the fill.
     members = np.empty(max(np.count_nonzero(mask), 1), np.int64)
     for r0 in range(height):
         for c0 in range(width):
@@ -1403,7 +1359,7 @@ def fill_small_holes(mask, max_hole_area):
 def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
     """Hysteresis threshold, speck removal and hole filling in one pass over the result.
 
-    The same mask as ``clean_mask(hysteresis_kernel(cue, low, high), min_area,
+    The same mask as ``clean_mask(hysteresis_threshold(cue, low, high), min_area,
     max_hole_area)``: each flood fill of the hysteresis is a whole 8-connected
     component of the result (two floods never touch, or they would be one), so a flood
     of fewer than ``min_area`` pixels is exactly a speck; the kept floods list every

@@ -124,7 +124,10 @@ HYSTERESIS_FRACTION = 0.85
 
 def hysteresis_threshold(cue: np.ndarray, low: float, high: float) -> np.ndarray:
     """Pixels above ``low`` that are 8-connected to a pixel above ``high``."""
-    return _kernels.hysteresis_kernel(np.ascontiguousarray(cue), float(low), float(high)).view(
+    cue = np.ascontiguousarray(cue)
+    weak_count = int(np.count_nonzero(cue > low))
+    # The fused kernel with no clean-up is the plain hysteresis.
+    return _kernels.threshold_and_clean(cue, float(low), float(high), weak_count, 0, 0).view(
         np.bool_
     )
 
