@@ -156,6 +156,14 @@ def end_effector_ned(
     )
 
 
+def _require_positive(config: object, names: Sequence[str]) -> None:
+    """Raise ValueError unless each named field of ``config`` is finite and > 0."""
+    for name in names:
+        value = getattr(config, name)
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be finite and > 0, got {value}")
+
+
 def _finite3(values: Sequence[float], name: str) -> np.ndarray:
     vector = np.asarray(values, dtype=float)
     if vector.shape != (3,) or not np.all(np.isfinite(vector)):
@@ -225,16 +233,16 @@ class LinkConfig:
             raise ValueError(
                 f"setpoint_rate_hz must be >= {MIN_SETPOINT_RATE_HZ}, got {self.setpoint_rate_hz}"
             )
-        for name in (
-            "heartbeat_timeout_s",
-            "link_loss_s",
-            "command_timeout_s",
-            "offboard_warmup_s",
-            "mode_timeout_s",
-        ):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be finite and > 0, got {value}")
+        _require_positive(
+            self,
+            (
+                "heartbeat_timeout_s",
+                "link_loss_s",
+                "command_timeout_s",
+                "offboard_warmup_s",
+                "mode_timeout_s",
+            ),
+        )
         if self.command_attempts < 1:
             raise ValueError(f"command_attempts must be >= 1, got {self.command_attempts}")
 
@@ -264,18 +272,18 @@ class ApproachConfig:
 
     def __post_init__(self) -> None:
         _finite3(self.end_effector_frd, "end_effector_frd")
-        for name in (
-            "standoff_m",
-            "tolerance_m",
-            "standoff_tolerance_m",
-            "settle_speed_m_s",
-            "transit_speed_m_s",
-            "approach_speed_m_s",
-            "timeout_s",
-        ):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be finite and > 0, got {value}")
+        _require_positive(
+            self,
+            (
+                "standoff_m",
+                "tolerance_m",
+                "standoff_tolerance_m",
+                "settle_speed_m_s",
+                "transit_speed_m_s",
+                "approach_speed_m_s",
+                "timeout_s",
+            ),
+        )
         if not (math.isfinite(self.dwell_s) and self.dwell_s >= 0):
             raise ValueError(f"dwell_s must be finite and >= 0, got {self.dwell_s}")
         for name in ("transit_speed_m_s", "approach_speed_m_s"):
