@@ -23,7 +23,8 @@ class SegmentationMethod(StrEnum):
     """How the foreground mask is found when the caller gives none."""
 
     auto = "auto"
-    """Otsu with hysteresis on brightness; colourfulness when brightness is not two-class."""
+    """Otsu with hysteresis on brightness (again per cable once the chains are known);
+    colourfulness when brightness is not two-class."""
     hsv = "hsv"
     """Fixed HSV range ``hsv_low`` .. ``hsv_high`` (OpenCV ranges: H 0-179, S and V 0-255)."""
 

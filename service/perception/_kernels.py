@@ -1413,6 +1413,98 @@ def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
 # --------------------------------------------------------------------------- warm-up
 
 
+@njit(cache=True, nogil=True)
+def _clear_of(x, y, avoid_xy, avoid_reach):
+    """Is ``(x, y)`` outside every disc ``avoid_reach[k]`` round ``avoid_xy[k]``?"""
+    for k in range(avoid_xy.shape[0]):
+        ex, ey = x - avoid_xy[k, 0], y - avoid_xy[k, 1]
+        if ex * ex + ey * ey < avoid_reach[k] * avoid_reach[k]:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def profile_histogram(cue, points, seen, avoid_xy, avoid_reach, span, stride):
+    """Histogram of ``cue`` across a polyline: profiles ``foot + t * normal``, ``|t| <= span``.
+
+    Each segment has ``ceil(length)`` feet, evenly spread from its start, so feet are
+    at most one pixel apart. Every ``stride``-th foot (counted over the whole polyline)
+    on a ``seen`` segment and outside every disc ``avoid_reach[k]`` round
+    ``avoid_xy[k]`` is used. Profile points go to the nearest pixel (halves up); those
+    off the image are left out. Returns the ``float64`` counts of the 256 levels and
+    the number of feet used.
+    """
+    height, width = cue.shape
+    hist = np.zeros(256, np.float64)
+    used = 0
+    foot = 0
+    for segment in range(points.shape[0] - 1):
+        x0, y0 = points[segment, 0], points[segment, 1]
+        dx, dy = points[segment + 1, 0] - x0, points[segment + 1, 1] - y0
+        length = np.sqrt(dx * dx + dy * dy)
+        count = max(int(np.ceil(length)), 1)
+        if not seen[segment] or length <= 1e-9:
+            foot += count
+            continue
+        nx, ny = -dy / length, dx / length
+        for step in range(count):
+            foot += 1
+            if (foot - 1) % stride:
+                continue
+            x, y = x0 + dx * (step / count), y0 + dy * (step / count)
+            if not _clear_of(x, y, avoid_xy, avoid_reach):
+                continue
+            used += 1
+            for t in range(-span, span + 1):
+                col = int(np.floor(x + t * nx + 0.5))
+                row = int(np.floor(y + t * ny + 0.5))
+                if 0 <= col < width and 0 <= row < height:
+                    hist[cue[row, col]] += 1.0
+    return hist, used
+
+
+@njit(cache=True, nogil=True)
+def grow_along_profiles(cue, before, grown, points, seen, avoid_xy, avoid_reach, start, reach, low):
+    """Walk out, both ways, from feet at most half a pixel apart along the ``seen`` segments.
+
+    The feet are those of :func:`profile_histogram`, twice as dense (``ceil(2 *
+    length)`` a segment): a slanted rim is a staircase with up to 1.4 pixels per pixel
+    of length, and walks one pixel apart would miss some of its steps. A walk begins
+    ``start`` pixels out when that pixel is in ``before`` (the cable's inside need not
+    be walked), else at the foot. It sets ``grown`` while its pixel is in ``before``
+    or its cue is above ``low``, for at most ``reach`` pixels beyond the foot, and
+    stops at the image's edge. ``before`` and ``grown`` are ``uint8`` masks; only
+    ``grown`` changes.
+    """
+    height, width = cue.shape
+    for segment in range(points.shape[0] - 1):
+        x0, y0 = points[segment, 0], points[segment, 1]
+        dx, dy = points[segment + 1, 0] - x0, points[segment + 1, 1] - y0
+        length = np.sqrt(dx * dx + dy * dy)
+        if not seen[segment] or length <= 1e-9:
+            continue
+        nx, ny = -dy / length, dx / length
+        count = max(int(np.ceil(2.0 * length)), 1)
+        for step in range(count):
+            x, y = x0 + dx * (step / count), y0 + dy * (step / count)
+            if not _clear_of(x, y, avoid_xy, avoid_reach):
+                continue
+            for sign in (1.0, -1.0):
+                first = 0
+                col = int(np.floor(x + sign * start * nx + 0.5))
+                row = int(np.floor(y + sign * start * ny + 0.5))
+                if 0 <= col < width and 0 <= row < height and before[row, col]:
+                    first = start
+                for t in range(first, reach + 1):
+                    col = int(np.floor(x + sign * t * nx + 0.5))
+                    row = int(np.floor(y + sign * t * ny + 0.5))
+                    if not (0 <= col < width and 0 <= row < height):
+                        break
+                    if before[row, col] == 0 and not cue[row, col] > low:
+                        break
+                    grown[row, col] = 1
+
+
 def warm_up() -> None:
     """Load (or, on a machine's very first run, compile) every kernel.
 
@@ -1427,7 +1519,7 @@ def warm_up() -> None:
     from service.perception.geometry import end_tangent, resample
     from service.perception.merging import natural_curve
     from service.perception.pruning import prune_overlaps
-    from service.perception.segmentation import clean_mask, segment
+    from service.perception.segmentation import clean_mask, grow_by_own_thresholds, segment
     from service.perception.skeleton import (
         as_uint8,
         branch_counts,
@@ -1445,6 +1537,8 @@ def warm_up() -> None:
     image = np.repeat((mask * 200 + 20).astype(np.uint8)[:, :, None], 3, axis=2)
     segment(image, DetectParams())
     clean_mask(mask, 2, 2)
+    line = np.array([[2.0, 20.0], [45.0, 20.0]])
+    grow_by_own_thresholds(image[:, :, 0], mask, [line], [3.0], [np.array([False])], [])
     skeleton = skeletonize(mask)
     distance = distance_transform(mask)
     radius = max(estimate_radius(mask, skeleton), 1.0)

@@ -16,7 +16,13 @@ from service.perception.fitting import fit_chains, junction_zones
 from service.perception.geometry import end_direction, polyline_length, resample
 from service.perception.merging import Join, MergedPath, merge_chains
 from service.perception.pruning import prune_overlaps
-from service.perception.segmentation import as_bgr, clean_mask, segment, validate_mask
+from service.perception.segmentation import (
+    as_bgr,
+    clean_mask,
+    grow_by_own_thresholds,
+    segment_with_cue,
+    validate_mask,
+)
 from service.perception.skeleton import (
     as_uint8,
     distance_transform,
@@ -215,12 +221,13 @@ def detect_full(
     height, width = shape
 
     # 1. Segmentation (the caller's mask gets the same clean-up as our own).
+    cue, image_low = None, np.inf
     if mask is not None:
         foreground = clean_mask(
             validate_mask(mask, shape), params.min_component_area, params.max_hole_area
         )
     else:
-        foreground = segment(image_bgr, params)
+        foreground, cue, image_low = segment_with_cue(image_bgr, params)
     watch.lap("segmentation")
     if not foreground.any():
         return _empty(width, height, params, watch, foreground, foreground)
@@ -270,6 +277,20 @@ def detect_full(
         near = np.hypot(midpoints[:, 0] - crossing.x, midpoints[:, 1] - crossing.y) < reach
         inferred_flags[crossing.under][near] = True
     watch.lap("merging")
+
+    if cue is not None and joint_arrays:
+        # Back to step 1 with the chains known: a cable dimmer than the rest gets the
+        # rims the image-wide threshold cut off (the caller's own mask is kept as is).
+        foreground = grow_by_own_thresholds(
+            cue,
+            foreground,
+            joint_arrays,
+            radii,
+            inferred_flags,
+            [(c.x, c.y, c.over, c.under) for c in found],
+            image_low,
+        )
+        watch.lap("segmentation")
 
     chains = [
         Chain(

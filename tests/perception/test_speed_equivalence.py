@@ -430,6 +430,67 @@ def _reference_smooth_curve(start, leaving, end, arriving, step=1.0):
     return sum(w * c for w, c in zip(weights, control, strict=True))
 
 
+def _reference_profile_feet(points, seen, avoid_xy, avoid_reach, per_pixel):
+    """Feet ``per_pixel`` to a pixel along each seen segment (the first at its start),
+    with their unit normals, and whether each is clear of every avoided disc."""
+    feet, normals, clear = [], [], []
+    for k in range(len(points) - 1):
+        a, b = points[k], points[k + 1]
+        length = float(np.hypot(*(b - a)))
+        count = max(int(np.ceil(per_pixel * length)), 1)
+        for step in range(count):
+            ok = bool(seen[k]) and length > 1e-9
+            if ok:
+                foot = a + (b - a) * (step / count)
+                ok = all(
+                    np.hypot(*(foot - c)) >= r for c, r in zip(avoid_xy, avoid_reach, strict=True)
+                )
+            feet.append(foot if ok else np.zeros(2))
+            normals.append(np.array([-(b - a)[1], (b - a)[0]]) / length if ok else np.zeros(2))
+            clear.append(ok)
+    return np.array(feet).reshape(-1, 2), np.array(normals).reshape(-1, 2), np.array(clear)
+
+
+def _reference_pixel(value):
+    return int(np.floor(value + 0.5))
+
+
+def _reference_profile_histogram(cue, points, seen, avoid_xy, avoid_reach, span, stride):
+    feet, normals, clear = _reference_profile_feet(points, seen, avoid_xy, avoid_reach, 1)
+    hist = np.zeros(256)
+    used = 0
+    for index in range(0, len(feet), stride):
+        if not clear[index]:
+            continue
+        used += 1
+        for t in range(-span, span + 1):
+            col = _reference_pixel(feet[index, 0] + t * normals[index, 0])
+            row = _reference_pixel(feet[index, 1] + t * normals[index, 1])
+            if 0 <= row < cue.shape[0] and 0 <= col < cue.shape[1]:
+                hist[cue[row, col]] += 1
+    return hist, used
+
+
+def _reference_grow(cue, before, points, seen, avoid_xy, avoid_reach, start, reach, low):
+    feet, normals, clear = _reference_profile_feet(points, seen, avoid_xy, avoid_reach, 2)
+    grown = before.copy()
+    for foot, normal in zip(feet[clear], normals[clear], strict=True):
+        for sign in (1, -1):
+            col = _reference_pixel(foot[0] + sign * start * normal[0])
+            row = _reference_pixel(foot[1] + sign * start * normal[1])
+            inside = 0 <= row < cue.shape[0] and 0 <= col < cue.shape[1]
+            first = start if inside and before[row, col] else 0
+            for t in range(first, reach + 1):
+                col = _reference_pixel(foot[0] + sign * t * normal[0])
+                row = _reference_pixel(foot[1] + sign * t * normal[1])
+                if not (0 <= row < cue.shape[0] and 0 <= col < cue.shape[1]):
+                    break
+                if not before[row, col] and not cue[row, col] > low:
+                    break
+                grown[row, col] = True
+    return grown
+
+
 # --------------------------------------------------------------------------- tests
 
 
@@ -832,3 +893,29 @@ def test_inferred_segments_kernel_equals_the_reference(seed):
             _kernels.inferred_segments(source_edge, edge_lengths, hidden_edge),
             _reference_inferred(source_edge, edge_lengths, hidden_edge),
         )
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_own_threshold_kernels_equal_the_reference(seed):
+    rng = np.random.default_rng(seed)
+    height, width = 60, 80
+    cue = cv2.GaussianBlur(rng.integers(0, 256, (height, width)).astype(np.uint8), (5, 5), 0)
+    before = cue > np.percentile(cue, 70)
+    points = np.cumsum(rng.normal(0.0, 6.0, (7, 2)), axis=0) + np.array([width, height]) / 2
+    points[3] = points[2]  # a zero-length segment
+    seen = rng.random(len(points) - 1) > 0.25
+    avoid_xy = rng.uniform(0, [width, height], (2, 2))
+    avoid_reach = rng.uniform(3.0, 12.0, 2)
+    span, stride, start, reach = 7, 1 + seed % 3, seed % 3, 4
+    low = float(rng.integers(60, 200))
+    hist, feet = _kernels.profile_histogram(cue, points, seen, avoid_xy, avoid_reach, span, stride)
+    want_hist, want_feet = _reference_profile_histogram(
+        cue, points, seen, avoid_xy, avoid_reach, span, stride
+    )
+    assert feet == want_feet and np.array_equal(hist, want_hist)
+    grown = before.view(np.uint8).copy()
+    _kernels.grow_along_profiles(
+        cue, before.view(np.uint8), grown, points, seen, avoid_xy, avoid_reach, start, reach, low
+    )
+    want = _reference_grow(cue, before, points, seen, avoid_xy, avoid_reach, start, reach, low)
+    assert np.array_equal(grown.view(bool), want)

@@ -332,3 +332,78 @@ def test_smooth_curve_follows_an_arc_between_symmetric_ends_and_is_straight_when
         shape="smooth",
     )
     assert np.abs(straight[:, 1]).max() < 1e-9
+
+
+def _dim_and_bright_cables():
+    """Two horizontal cables on black: a bright one, and a dim one with shaded rims."""
+    cue = np.zeros((80, 120), np.uint8)
+    cue[16:25, :] = 200  # bright cable, hard edges
+    cue[52:65, :] = 60  # dim cable's shaded rims, two pixels each side ...
+    cue[54:63, :] = 120  # ... round its lit core
+    lines = [np.array([[0.0, 20.0], [119.0, 20.0]]), np.array([[0.0, 58.0], [119.0, 58.0]])]
+    return cue, lines
+
+
+def test_own_thresholds_give_a_dim_cable_its_shaded_rims():
+    from service.perception.segmentation import grow_by_own_thresholds
+
+    cue, lines = _dim_and_bright_cables()
+    # A threshold for the whole image sits between the background and both cables.
+    mask = cue >= 100
+    grown = grow_by_own_thresholds(cue, mask, lines, [4.5, 4.5], image_low=90.0)
+    assert np.array_equal(grown[:40], mask[:40])  # the bright cable keeps its mask
+    assert grown[52:65, 5:115].all()  # the dim cable gains its rims ...
+    assert not grown[66:, :].any() and not grown[40:51, :].any()  # ... and no background
+    assert (grown >= mask).all()  # only ever adds
+    # A cable whose own weak threshold is not below the image's gains nothing.
+    assert np.array_equal(
+        grow_by_own_thresholds(cue, mask, lines, [4.5, 4.5], image_low=10.0), mask
+    )
+
+
+def test_own_thresholds_leave_out_hidden_segments_and_crossings():
+    from service.perception.segmentation import grow_by_own_thresholds
+
+    cue, _ = _dim_and_bright_cables()
+    mask = cue >= 100
+    dim = [np.array([[0.0, 58.0], [60.0, 58.0], [119.0, 58.0]])]
+    # With its only seen half next to a crossing, the cable is not judged at all ...
+    hidden = [np.array([True, False])]
+    crossing = [(90.0, 58.0, 0, 0)]
+    same = grow_by_own_thresholds(cue, mask, dim, [4.5], hidden, crossing, image_low=90.0)
+    assert np.array_equal(same, mask)
+    # ... while with the seen half in the open, only that half grows.
+    grown = grow_by_own_thresholds(cue, mask, dim, [4.5], hidden, image_low=90.0)
+    assert grown[52:65, 62:118].all() and np.array_equal(grown[:, :58], mask[:, :58])
+
+
+def test_a_callers_mask_is_not_grown():
+    from service.perception import detect_full
+
+    image = np.zeros((80, 120, 3), np.uint8)
+    image[16:25, :] = 200
+    image[52:65, :] = 60
+    image[54:63, :] = 120
+    mask = image[:, :, 0] >= 100
+    assert np.array_equal(detect_full(image, mask=mask).mask, mask)
+    # From the image alone, the dim cable's rims are part of the mask.
+    assert detect_full(image).mask[52:65, 10:110].all()
+
+
+@pytest.mark.parametrize("angle", [0.0, 17.0, 30.0, 45.0, 60.0, 90.0, 135.0])
+def test_own_thresholds_grow_whole_rims_at_any_angle(angle):
+    from service.perception.segmentation import grow_by_own_thresholds
+
+    cue = np.zeros((160, 160), np.uint8)
+    direction = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
+    ends = np.rint([[80.0, 80.0] - 70 * direction, [80.0, 80.0] + 70 * direction])
+    line = [ends.astype(np.int32).reshape(-1, 1, 2)]
+    cv2.polylines(cue, line, False, 60, 13)  # shaded rims ...
+    cv2.polylines(cue, line, False, 120, 9)  # ... round a lit core
+    mask = cue >= 100
+    grown = grow_by_own_thresholds(cue, mask, [ends], [4.5], image_low=90.0)
+    # Away from the ends, every rim pixel joins and nothing else does.
+    x, y = np.meshgrid(np.arange(160), np.arange(160))
+    along = np.abs((x - 80) * direction[0] + (y - 80) * direction[1])
+    middle = along < 55
+    assert np.array_equal(grown[middle], (cue > 0)[middle])
