@@ -1410,7 +1410,7 @@ def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
     return result
 
 
-# --------------------------------------------------------------------------- warm-up
+# --------------------------------------------------------------------------- own thresholds
 
 
 @njit(cache=True, nogil=True)
@@ -1503,6 +1503,9 @@ def grow_along_profiles(cue, before, grown, points, seen, avoid_xy, avoid_reach,
                     if before[row, col] == 0 and not cue[row, col] > low:
                         break
                     grown[row, col] = 1
+
+
+# --------------------------------------------------------------------------- warm-up
 
 
 def warm_up() -> None:
