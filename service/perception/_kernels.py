@@ -1209,6 +1209,50 @@ _FILL_DC = np.array([1, 0, -1, 0, 1, -1, -1, 1], np.int64)
 
 
 @njit(cache=True, nogil=True)
+def otsu_kernel(hist):
+    """Otsu's threshold of a 256-level histogram and its separability (0..1).
+
+    Between-class variance at every level; with an empty stretch of the histogram
+    between the classes every threshold in it is equally good, and the middle one
+    (within a relative 1e-12 of the best) keeps the most margin to both classes. A
+    histogram of one level gives ``(255.0, 0.0)``.
+    """
+    total = 0.0
+    level_sum = 0.0
+    for level in range(256):
+        total += hist[level]
+        level_sum += hist[level] * level
+    mean_all = level_sum / total
+    var_sum = 0.0
+    for level in range(256):
+        offset = level - mean_all
+        var_sum += hist[level] * (offset * offset)
+    var_all = var_sum / total
+    if var_all <= 1e-9:
+        return 255.0, 0.0
+    between = np.zeros(256)
+    count_low = 0.0
+    sum_low = 0.0
+    peak = 0.0
+    for level in range(256):
+        count_low += hist[level]
+        sum_low += hist[level] * level
+        weight_low = count_low / total
+        weight_high = 1.0 - weight_low
+        if weight_low > 0 and weight_high > 0:
+            gap = mean_all * weight_low - sum_low / total
+            between[level] = gap * gap / (weight_low * weight_high)
+            peak = max(peak, between[level])
+    best_levels = np.empty(256, np.int64)
+    n_best = 0
+    for level in range(256):
+        if between[level] >= peak * (1.0 - 1e-12):
+            best_levels[n_best] = level
+            n_best += 1
+    return float(best_levels[n_best // 2]), peak / var_all
+
+
+@njit(cache=True, nogil=True)
 def brightness_histogram(image_bgr):
     """Brightness (largest channel) of a BGR ``uint8`` image and its 256-level histogram.
 
@@ -1469,7 +1513,8 @@ def grow_along_profiles(cue, before, grown, points, seen, avoid_xy, avoid_reach,
 
     The feet are those of :func:`profile_histogram`, twice as dense (``ceil(2 *
     length)`` a segment): a slanted rim is a staircase with up to 1.4 pixels per pixel
-    of length, and walks one pixel apart would miss some of its steps. A walk begins
+    of length, and walks one pixel apart miss about one rim pixel in 80 (half a pixel
+    apart, about one in 5,000, on straight cables at every angle). A walk begins
     ``start`` pixels out when that pixel is in ``before`` (the cable's inside need not
     be walked), else at the foot. It sets ``grown`` while its pixel is in ``before``
     or its cue is above ``low``, for at most ``reach`` pixels beyond the foot, and

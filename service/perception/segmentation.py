@@ -76,29 +76,10 @@ def _histogram(feature: np.ndarray) -> np.ndarray:
 
 
 def _otsu(feature: np.ndarray, hist: np.ndarray | None = None) -> tuple[float, float]:
-    """Otsu threshold of a ``uint8`` image and its separability (0..1)."""
+    """Otsu threshold of a ``uint8`` image (or of its histogram) and its separability (0..1)."""
     if hist is None:
         hist = _histogram(feature)
-    total = hist.sum()
-    levels = np.arange(256, dtype=np.float64)
-    mean_all = (hist * levels).sum() / total
-    var_all = (hist * (levels - mean_all) ** 2).sum() / total
-    if var_all <= 1e-9:
-        return 255.0, 0.0
-    weight_low = np.cumsum(hist) / total
-    mean_low_sum = np.cumsum(hist * levels) / total
-    weight_high = 1.0 - weight_low
-    valid = (weight_low > 0) & (weight_high > 0)
-    between = np.zeros(256)
-    between[valid] = (mean_all * weight_low[valid] - mean_low_sum[valid]) ** 2 / (
-        weight_low[valid] * weight_high[valid]
-    )
-    # With an empty stretch of the histogram between the classes every threshold in it
-    # is equally good; the middle one keeps the most margin to both classes.
-    peak = between.max()
-    best_levels = np.flatnonzero(between >= peak * (1.0 - 1e-12))
-    best = int(best_levels[len(best_levels) // 2])
-    return float(best), float(peak / var_all)
+    return _kernels.otsu_kernel(np.ascontiguousarray(hist, np.float64))
 
 
 def cue_images(image_bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

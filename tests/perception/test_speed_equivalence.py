@@ -491,6 +491,29 @@ def _reference_grow(cue, before, points, seen, avoid_xy, avoid_reach, start, rea
     return grown
 
 
+def _reference_otsu(hist):
+    """Otsu's threshold over a 256-level histogram, in plain NumPy: the middle of the
+    levels whose between-class variance is within 1e-12 of the best, and the best
+    over the total variance."""
+    total = hist.sum()
+    levels = np.arange(256, dtype=np.float64)
+    mean_all = (hist * levels).sum() / total
+    var_all = (hist * (levels - mean_all) ** 2).sum() / total
+    if var_all <= 1e-9:
+        return 255.0, 0.0
+    weight_low = np.cumsum(hist) / total
+    mean_low_sum = np.cumsum(hist * levels) / total
+    weight_high = 1.0 - weight_low
+    valid = (weight_low > 0) & (weight_high > 0)
+    between = np.zeros(256)
+    between[valid] = (mean_all * weight_low[valid] - mean_low_sum[valid]) ** 2 / (
+        weight_low[valid] * weight_high[valid]
+    )
+    peak = between.max()
+    best_levels = np.flatnonzero(between >= peak * (1.0 - 1e-12))
+    return float(best_levels[len(best_levels) // 2]), float(peak / var_all)
+
+
 # --------------------------------------------------------------------------- tests
 
 
@@ -919,3 +942,24 @@ def test_own_threshold_kernels_equal_the_reference(seed):
     )
     want = _reference_grow(cue, before, points, seen, avoid_xy, avoid_reach, start, reach, low)
     assert np.array_equal(grown.view(bool), want)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_otsu_kernel_equals_the_reference(seed):
+    rng = np.random.default_rng(seed)
+    hists = [
+        rng.integers(0, 1000, 256).astype(np.float64),
+        np.bincount(rng.integers(0, 256, 5000), minlength=256).astype(np.float64),
+    ]
+    # Two classes with an empty stretch between them (a plateau of equal thresholds),
+    # and a histogram of one level.
+    gapped = np.zeros(256)
+    gapped[rng.integers(0, 60, 300)] += 1
+    gapped[rng.integers(150, 256, 100)] += 1
+    single = np.zeros(256)
+    single[rng.integers(0, 256)] = 7
+    for hist in [*hists, gapped, single]:
+        threshold, separability = _kernels.otsu_kernel(hist)
+        want_threshold, want_separability = _reference_otsu(hist)
+        assert threshold == want_threshold
+        assert separability == pytest.approx(want_separability, rel=1e-12, abs=1e-15)
