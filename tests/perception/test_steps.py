@@ -407,3 +407,16 @@ def test_own_thresholds_grow_whole_rims_at_any_angle(angle):
     along = np.abs((x - 80) * direction[0] + (y - 80) * direction[1])
     middle = along < 55
     assert np.array_equal(grown[middle], (cue > 0)[middle])
+
+
+def test_an_hsv_mask_is_not_grown():
+    from service.perception import detect_full
+
+    image = np.zeros((80, 120, 3), np.uint8)
+    image[16:25, :] = (0, 0, 200)  # a red cable
+    image[52:65, :] = (0, 0, 60)  # a dim red one with shaded rims
+    image[54:63, :] = (0, 0, 120)
+    params = DetectParams(
+        segmentation=SegmentationMethod.hsv, hsv_low=(0, 100, 100), hsv_high=(10, 255, 255)
+    )
+    assert np.array_equal(detect_full(image, params).mask, segment(image, params))
