@@ -29,7 +29,7 @@ import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any, TextIO
+from typing import TYPE_CHECKING, Annotated, Any, TextIO
 
 import typer
 from rich.console import Console
@@ -37,6 +37,9 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from service.console import EXIT_FAILED, exit_usage, print_error
+
+if TYPE_CHECKING:
+    from schemas import DetectParams
 
 SYNTHETIC_SIZE = (1280, 720)
 SYNTHETIC_CABLES = "1-3"
@@ -125,11 +128,22 @@ def eval_command(
         bool,
         typer.Option("--json", help="Print the results as JSON instead of a table."),
     ] = False,
+    params_text: Annotated[
+        str | None,
+        typer.Option(
+            "--params",
+            metavar="JSON|FILE",
+            help="Detection parameters other than the defaults, as a JSON object such as "
+            '\'{"gap_curve": "natural"}\' or a file holding one.',
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Score the detector on a labelled data set, or on synthetic scenes (--synthetic N)."""
     errors = Console(stderr=True)
     if worst < 0:
         exit_usage(errors, "--worst must be 0 or more")
+    params = _parse_params(errors, params_text)
     synthetic_options = {
         "--seed": seed,
         "--occluders": occluders,
@@ -143,7 +157,9 @@ def eval_command(
         given = [name for name, value in synthetic_options.items() if value is not None]
         if given:
             exit_usage(errors, f"{', '.join(given)} apply only with --synthetic N")
-        _run_dataset(errors, dataset_dir, mask_from_labels, csv_file, out_dir, worst, json_output)
+        _run_dataset(
+            errors, dataset_dir, mask_from_labels, csv_file, out_dir, worst, json_output, params
+        )
     else:
         if dataset_dir is not None:
             exit_usage(errors, "give either a DATASET_DIR or --synthetic N, not both")
@@ -160,7 +176,45 @@ def eval_command(
             out_dir,
             worst,
             json_output,
+            params,
         )
+
+
+def _parse_params(errors: Console, text: str | None) -> DetectParams | None:
+    """``--params``: a JSON object of DetectParams fields, or a file holding one."""
+    from pydantic import ValidationError
+
+    from schemas import DetectParams
+
+    if text is None:
+        return None
+    source = text
+    if not text.lstrip().startswith("{"):
+        path = Path(text)
+        if not path.is_file():
+            exit_usage(errors, f"--params: {text!r} is neither a JSON object nor a file")
+        try:
+            source = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            exit_usage(errors, f"--params: cannot read {text}: {exc}")
+    try:
+        return DetectParams.model_validate_json(source)
+    except ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join(str(part) for part in error['loc']) or 'value'}: {error['msg']}"
+            for error in exc.errors(include_url=False)
+        )
+        exit_usage(errors, f"--params: {problems}")
+
+
+def _params_json(params: DetectParams | None) -> dict[str, Any]:
+    """The parameters that differ from the defaults (empty for the defaults)."""
+    return {} if params is None else params.model_dump(mode="json", exclude_defaults=True)
+
+
+def _params_note(params: DetectParams | None) -> str:
+    changed = _params_json(params)
+    return f", parameters {json.dumps(changed)}" if changed else ""
 
 
 # --------------------------------------------------------------------------- data set
@@ -174,6 +228,7 @@ def _run_dataset(
     out_dir: Path | None,
     worst: int,
     json_output: bool,
+    params: DetectParams | None = None,
 ) -> None:
     from service.evaluation import dataset
     from service.imageio import read_image
@@ -204,6 +259,7 @@ def _run_dataset(
                     truth,
                     subset=item.subset,
                     name=item.name,
+                    params=params,
                     mask_from_labels=mask_from_labels,
                 )
                 if out_dir is not None:
@@ -220,11 +276,13 @@ def _run_dataset(
     if scores:
         per_subset, overall = dataset.summarise_by_subset(scores, worst)
         mode = "mask from labels" if mask_from_labels else "segmented from the image"
+        mode += _params_note(params)
         if json_output:
             _print_json(
                 {
                     "dataset": str(root),
                     "mask_from_labels": mask_from_labels,
+                    "params": _params_json(params),
                     "subsets": [_subset_json(s) for s in per_subset],
                     "all": _subset_json(overall),
                     "failed": failed,
@@ -304,6 +362,7 @@ def _run_synthetic(
     out_dir: Path | None,
     worst: int,
     json_output: bool,
+    params: DetectParams | None = None,
 ) -> None:
     from service.evaluation import synthetic_eval
     from service.perception import _kernels
@@ -335,7 +394,7 @@ def _run_synthetic(
                 n_cables = synthetic_eval.cables_for_seed(seed, low, high)
                 scene = make_scene(width, height, n_cables, seed=seed, occluders=occluders)
                 score, result = synthetic_eval.evaluate_scene(
-                    scene, seed, mask_from_labels=mask_from_labels
+                    scene, seed, params, mask_from_labels=mask_from_labels
                 )
                 if out_dir is not None:
                     from service.imageio import write_png
@@ -366,6 +425,7 @@ def _run_synthetic(
             "cables": f"{low}-{high}" if low != high else str(low),
             "occluders": occluders,
             "mask_from_labels": mask_from_labels,
+            "params": _params_json(params),
         }
         if json_output:
             _print_json(_synthetic_json(setup, summary, lowest, failed))
@@ -424,6 +484,7 @@ def _print_synthetic_table(setup: dict[str, Any], summary, lowest) -> None:
         f"{setup['cables']} cable(s), {setup['occluders']} occluder(s), "
         f"seeds {setup['first_seed']}-{last_seed}"
         + (", mask from labels" if setup["mask_from_labels"] else "")
+        + (f", parameters {json.dumps(setup['params'])}" if setup["params"] else "")
     )
     table = Table(title=title, title_justify="left")
     table.add_column("")

@@ -331,6 +331,22 @@ def test_dlo_eval_synthetic_json_is_machine_readable() -> None:
     assert data["paper_accuracy"]["frames"] == 83.7
 
 
+def test_dlo_eval_params_reach_the_detector(tmp_path) -> None:
+    rows = tmp_path / "scenes.csv"
+    params = tmp_path / "params.json"
+    params.write_text('{"expected_count": 1}')
+    result = run_dlo(
+        "eval", "--synthetic", 2, "--seed", 4, "--width", 640, "--height", 360,
+        "--cables", "2", "--occluders", "0", "--json", "--csv", rows, "--params", params,
+    )  # fmt: skip
+
+    assert result.exit_code == 0, result.stderr
+    assert json.loads(result.stdout)["setup"]["params"] == {"expected_count": 1}
+    # Told there is one cable, merging joins the two into one chain in every scene.
+    chains = [line.split(",")[2] for line in rows.read_text().splitlines()[1:]]
+    assert chains == ["1", "1"]
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -340,6 +356,9 @@ def test_dlo_eval_synthetic_json_is_machine_readable() -> None:
         (("--synthetic", "0"), "--synthetic must be 1 or more"),
         (("--synthetic", "2", "--cables", "0-2"), "--cables"),
         (("--synthetic", "2", "--width", "20"), "--width"),
+        (("--synthetic", "2", "--params", '{"gap_curve": "wiggly"}'), "--params: gap_curve"),
+        (("--synthetic", "2", "--params", '{"segment_length": '), "--params: value: Invalid JSON"),
+        (("--synthetic", "2", "--params", "no_such_file.json"), "neither a JSON object nor a file"),
     ],
 )
 def test_usage_errors_are_one_line_and_exit_2(args, message) -> None:
