@@ -503,6 +503,40 @@ def assemble_paths(
     return paths
 
 
+def ends_through_short_pieces(
+    pieces: list[np.ndarray],
+    ends: list[ChainEnd],
+    joins: list[tuple[int, int, float]],
+    shorter_than: float,
+) -> list[ChainEnd]:
+    """Ends for bridging, with short pieces taken along the line between their partners.
+
+    A piece shorter than the end-fit span (say a stretch of cable seen between two
+    occluders, cut at a slant at both ends) shows where the cable is, but its own end
+    directions are poor: thinning bends both of its ends toward the cuts' corners.
+    When it is joined at both ends, the cable runs through it from one partner end to
+    the other, so both of its ends point along the line between those two ends. The
+    joins themselves, and their costs, are left as they were.
+    """
+    partner = np.full(len(ends), -1)
+    for i, j, _ in joins:
+        partner[i], partner[j] = j, i
+    adjusted = list(ends)
+    for piece, points in enumerate(pieces):
+        before, after = partner[2 * piece], partner[2 * piece + 1]
+        if before < 0 or after < 0 or polyline_length(points) >= shorter_than:
+            continue
+        axis = ends[after].position - ends[before].position
+        length = float(np.hypot(*axis))
+        if length < 1e-9:
+            continue
+        axis = axis / length
+        start, end = ends[2 * piece], ends[2 * piece + 1]
+        adjusted[2 * piece] = ChainEnd(start.piece, start.at_start, start.position, -axis)
+        adjusted[2 * piece + 1] = ChainEnd(end.piece, end.at_start, end.position, axis)
+    return adjusted
+
+
 def merge_chains(
     pieces: list[np.ndarray],
     params: DetectParams,
@@ -551,7 +585,8 @@ def merge_chains(
         )
     joins = choose_joins(ends, len(pieces), params, radius, junction_of_end, at_border)
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
-    assembled = assemble_paths(pieces, ends, joins, params.gap_curve)
+    bridging_ends = ends_through_short_pieces(pieces, ends, joins, span)
+    assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])

@@ -420,3 +420,32 @@ def test_an_hsv_mask_is_not_grown():
         segmentation=SegmentationMethod.hsv, hsv_low=(0, 100, 100), hsv_high=(10, 255, 255)
     )
     assert np.array_equal(detect_full(image, params).mask, segment(image, params))
+
+
+def test_a_short_piece_joined_on_both_sides_is_bridged_along_its_partners_line():
+    from service.perception.merging import (
+        assemble_paths,
+        chain_ends,
+        ends_through_short_pieces,
+    )
+
+    # A straight cable along y = 50 seen in three pieces: the middle one, between two
+    # occluders, is short and its thinned line is tilted (cut at a slant at both ends).
+    pieces = [
+        np.array([[0.0, 50.0], [10.0, 50.0], [20.0, 50.0], [30.0, 50.0], [40.0, 50.0]]),
+        np.array([[60.0, 48.0], [66.0, 52.0]]),
+        np.array([[90.0, 50.0], [100.0, 50.0], [110.0, 50.0], [120.0, 50.0], [130.0, 50.0]]),
+    ]
+    ends = chain_ends(pieces, 40.0)
+    joins = [(1, 2, 0.1), (3, 4, 0.1)]  # end of piece 0 to piece 1, piece 1 to piece 2
+    adjusted = ends_through_short_pieces(pieces, ends, joins, 40.0)
+    np.testing.assert_allclose(adjusted[2].direction, [-1.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(adjusted[3].direction, [1.0, 0.0], atol=1e-9)
+    assert adjusted[0] is ends[0] and adjusted[5] is ends[5]  # long pieces keep theirs
+
+    def worst_offset(which):
+        (path,) = assemble_paths(pieces, which, joins, "smooth")
+        return float(np.abs(path.vertices[:, 1] - 50.0).max())
+
+    # The piece's own tilted directions throw the bridges well off the line.
+    assert worst_offset(adjusted) <= 2.5 < worst_offset(ends)
