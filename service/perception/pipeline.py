@@ -107,6 +107,8 @@ def _extend_end(points: np.ndarray, at_start: bool, mask, radius: float, span: f
     return np.vstack([new_tip, points]) if at_start else np.vstack([points, new_tip])
 
 
+# At most this many extensions of a free end, each from where the last one stopped.
+END_EXTENSION_ROUNDS = 3
 # How far ahead of a free chain end (in radii) and within which angle of its direction
 # the cable's farthest pixel is looked for.
 TIP_SEARCH_RADII = 5.0
@@ -141,15 +143,18 @@ def _finalise_path(path: MergedPath, mask, distance, params: DetectParams, radiu
     """Resample a merged path to joints exactly ``l_s`` apart, with per-segment flags."""
     vertices, filled = path.vertices, path.filled
     span = max(2.0 * params.segment_length, 3.0 * radius)
-    # End extensions are seen cable (they lie on the mask).
-    extended = _extend_end(vertices, True, mask, radius, span)
-    if len(extended) > len(vertices):
-        filled = np.concatenate([[False], filled])
-    vertices = extended
-    extended = _extend_end(vertices, False, mask, radius, span)
-    if len(extended) > len(vertices):
-        filled = np.concatenate([filled, [False]])
-    vertices = extended
+    # End extensions are seen cable (they lie on the mask). An extension that ends at its
+    # search limit still inside the cable (a thin cable whose skeleton stopped several
+    # widths short of its tip) goes on from its new tip; once at the end it adds nothing.
+    for at_start in (True, False):
+        for _ in range(END_EXTENSION_ROUNDS):
+            extended = _extend_end(vertices, at_start, mask, radius, span)
+            added = len(extended) - len(vertices)
+            if added == 0:
+                break
+            flags = np.zeros(added, bool)
+            filled = np.concatenate([flags, filled] if at_start else [filled, flags])
+            vertices = extended
     height, width = mask.shape
     # A filled edge across foreground (a crossing) is seen; across background, hidden.
     midpoints = 0.5 * (vertices[:-1] + vertices[1:])

@@ -449,3 +449,21 @@ def test_a_short_piece_joined_on_both_sides_is_bridged_along_its_partners_line()
 
     # The piece's own tilted directions throw the bridges well off the line.
     assert worst_offset(adjusted) <= 2.5 < worst_offset(ends)
+
+
+def test_a_chain_far_short_of_a_thin_cables_end_is_taken_to_it():
+    from service.perception.merging import MergedPath
+    from service.perception.pipeline import _finalise_path
+    from service.perception.skeleton import distance_transform
+
+    # A thin cable (radius 3) from x = 0 to x = 99 whose chain stops at x = 70, ten
+    # radii short: one extension reaches only a few radii, so the end is pushed on from
+    # where it stops.
+    mask = np.zeros((40, 140), bool)
+    mask[17:24, 0:100] = True
+    path = MergedPath(np.array([[5.0, 20.0], [70.0, 20.0]]), np.array([False]))
+    joints, inferred, _ = _finalise_path(
+        path, mask, distance_transform(mask), DetectParams(), radius=3.0
+    )
+    assert 94.0 <= joints[-1][0] <= 97.5  # one radius inside the cable's end
+    assert abs(joints[-1][1] - 20.0) < 1.0 and not inferred.any()
