@@ -122,6 +122,17 @@ def parse_outputs(text: str) -> frozenset[str]:
     return frozenset(names)
 
 
+def describe_json_validation_error(error: ValidationError, whole: str) -> str:
+    """Summarise a pydantic validation error of a JSON object on one line, fields as keys.
+
+    ``whole`` names the object itself, for errors that belong to no field (bad JSON).
+    """
+    return "; ".join(
+        f"{'.'.join(str(part) for part in detail['loc']) or whole}: {detail['msg']}"
+        for detail in error.errors(include_url=False)
+    )
+
+
 def describe_validation_error(error: ValidationError) -> str:
     """Summarise a pydantic validation error on one line, fields as option names."""
     parts = []

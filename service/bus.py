@@ -31,6 +31,7 @@ import zenoh
 from pydantic import ValidationError
 
 from schemas import DetectParams
+from service.batch import describe_json_validation_error
 from service.http.inputs import Frame, RequestError
 from service.http.jobs import DetectFunction, check_declared_size, default_detect, run_detection
 from service.http.metrics import Metrics
@@ -89,10 +90,7 @@ def params_from_attachment(attachment: zenoh.ZBytes | None) -> DetectParams:
     try:
         return DetectParams.model_validate_json(attachment.to_bytes())
     except ValidationError as exc:
-        problems = "; ".join(
-            f"{'.'.join(str(part) for part in error['loc']) or 'attachment'}: {error['msg']}"
-            for error in exc.errors(include_url=False)
-        )
+        problems = describe_json_validation_error(exc, "attachment")
         raise RequestError(422, "invalid_params", f"parameters: {problems}") from None
 
 

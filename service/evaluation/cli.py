@@ -185,6 +185,7 @@ def _parse_params(errors: Console, text: str | None) -> DetectParams | None:
     from pydantic import ValidationError
 
     from schemas import DetectParams
+    from service.batch import describe_json_validation_error
 
     if text is None:
         return None
@@ -200,11 +201,7 @@ def _parse_params(errors: Console, text: str | None) -> DetectParams | None:
     try:
         return DetectParams.model_validate_json(source)
     except ValidationError as exc:
-        problems = "; ".join(
-            f"{'.'.join(str(part) for part in error['loc']) or 'value'}: {error['msg']}"
-            for error in exc.errors(include_url=False)
-        )
-        exit_usage(errors, f"--params: {problems}")
+        exit_usage(errors, f"--params: {describe_json_validation_error(exc, 'value')}")
 
 
 def _params_json(params: DetectParams | None) -> dict[str, Any]:

@@ -989,6 +989,26 @@ def _put_segment(out, n, ax, ay, bx, by, step, skip_first):
 
 
 @njit(cache=True, nogil=True)
+def _gap_geometry(start, leaving, end, arriving):
+    """The gap between two chain ends: its vector, its length, and the cross and dot
+    products of the two end headings."""
+    gap_x = end[0] - start[0]
+    gap_y = end[1] - start[1]
+    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
+    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+    return gap_x, gap_y, np.hypot(gap_x, gap_y), cross, dot
+
+
+@njit(cache=True, nogil=True)
+def _ends_only(start, end):
+    """The curve across a gap of no length: its two ends."""
+    out = np.empty((2, 2))
+    out[0] = start
+    out[1] = end
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _bezier_samples(start, leaving, end, arriving, handle, distance, step):
     """Samples of the cubic Bezier from ``start`` along ``leaving`` to ``end`` along
     ``arriving`` with both handles ``handle`` long (1.3 samples per ``step`` of gap)."""
@@ -1011,16 +1031,9 @@ def _bezier_samples(start, leaving, end, arriving, handle, distance, step):
 @njit(cache=True, nogil=True)
 def natural_curve_kernel(start, leaving, end, arriving, step):
     """Samples of the natural curve between two chain ends (see merging.natural_curve)."""
-    gap_x = end[0] - start[0]
-    gap_y = end[1] - start[1]
-    distance = np.hypot(gap_x, gap_y)
+    gap_x, gap_y, distance, cross, dot = _gap_geometry(start, leaving, end, arriving)
     if distance < 1e-9:
-        out = np.empty((2, 2))
-        out[0] = start
-        out[1] = end
-        return out
-    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
-    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+        return _ends_only(start, end)
     turn = np.arctan2(cross, dot)
     heading_x = gap_x / distance
     heading_y = gap_y / distance
@@ -1183,16 +1196,9 @@ def smooth_curve_kernel(start, leaving, end, arriving, step):
     a circular arc when the ends are symmetric, d / 3 (a straight line) when they are
     aligned. theta is capped at 0.95 pi so a reversing gap gets finite handles.
     """
-    gap_x = end[0] - start[0]
-    gap_y = end[1] - start[1]
-    distance = np.hypot(gap_x, gap_y)
+    _, _, distance, cross, dot = _gap_geometry(start, leaving, end, arriving)
     if distance < 1e-9:
-        out = np.empty((2, 2))
-        out[0] = start
-        out[1] = end
-        return out
-    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
-    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+        return _ends_only(start, end)
     theta = min(abs(np.arctan2(cross, dot)), 0.95 * np.pi)
     if theta < 1e-6:
         handle = distance / 3.0
