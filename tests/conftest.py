@@ -9,3 +9,11 @@ they spawn (which inherit the environment).
 import os
 
 os.environ["DLO_ZENOH_MULTICAST"] = "false"
+
+import sys
+from pathlib import Path
+
+# `from tests.helpers import ...` from any test module (pytest runs with --import-mode=importlib).
+_ROOT = str(Path(__file__).resolve().parents[1])
+if _ROOT not in sys.path:
+    sys.path.insert(0, _ROOT)
