@@ -1,17 +1,47 @@
-"""Terminal output shared by the ``dlo`` commands: one-line errors on stderr, exit codes."""
+"""Terminal conventions shared by every ``dlo`` command, including the robot CLIs in
+``adapters/``: the exit-code table, the Typer factory, one-line errors on stderr.
+
+Exit statuses (the same for every command):
+
+=====  ==========================================================================
+0      everything worked
+1      at least one input could not be processed (:data:`EXIT_FAILED`)
+2      the command line itself is wrong, or a robot refused before moving (:data:`EXIT_USAGE`)
+130    Ctrl-C stopped the run before anything was processed (:data:`EXIT_INTERRUPTED`)
+=====  ==========================================================================
+"""
 
 from __future__ import annotations
 
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import typer
 from rich.console import Console
 from rich.text import Text
 
+EXIT_OK = 0
+"""Everything worked."""
 EXIT_FAILED = 1
 """At least one input could not be processed."""
 EXIT_USAGE = 2
 """The command line itself is wrong (options, parameters)."""
+EXIT_INTERRUPTED = 130
+"""Ctrl-C before anything was processed (128 + SIGINT, as shells report it)."""
+
+
+def typer_app(**settings: Any) -> typer.Typer:
+    """A :class:`typer.Typer` set up as every ``dlo`` command (group) is.
+
+    Help when called without arguments, no shell-completion options, and no rich
+    tracebacks: ``dlo`` reports failures on one line (see :func:`print_error`).
+    ``settings`` (``name``, ``help``, ``cls`` ...) are passed on to Typer.
+    """
+    defaults: dict[str, Any] = {
+        "no_args_is_help": True,
+        "add_completion": False,
+        "pretty_exceptions_enable": False,
+    }
+    return typer.Typer(**{**defaults, **settings})
 
 
 def stderr_console() -> Console:

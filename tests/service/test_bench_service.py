@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from service.bench_service import Row, _print_table
+from service.bench.overhead import Row, _print_table
 
 DLO = [sys.executable, "-c", "from service.cli import main; main()"]
 PATHS = {

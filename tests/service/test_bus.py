@@ -19,7 +19,8 @@ import numpy as np
 import zenoh
 
 from schemas import Detection, DetectParams
-from service.bus import QUERY_KEY, DetectionBus, make_config
+from service.bus.config import QUERY_KEY, make_config
+from service.bus.detection import DetectionBus
 from service.http import Settings
 from service.perception import detect as real_detect
 from service.synthetic import make_scene

@@ -23,7 +23,8 @@ import yaml
 import zenoh
 
 from schemas import Detection
-from service.bus import DetectionBus, make_config
+from service.bus.config import make_config
+from service.bus.detection import DetectionBus
 from service.synthetic import make_scene
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"

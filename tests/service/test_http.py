@@ -22,8 +22,8 @@ import uvicorn
 
 from schemas import Detection, DetectParams
 from service.http import Settings, create_app
-from service.http.inputs import image_size
 from service.perception import detect as real_detect
+from service.runtime.frames import image_size
 from service.synthetic import make_scene
 
 WIDTH, HEIGHT = 480, 320

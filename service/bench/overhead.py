@@ -137,9 +137,9 @@ def _sequential_paths(
 ) -> dict[str, Timing]:
     """The ways to get a Detection of the image, one request at a time."""
     from schemas import DetectParams
-    from service.http.inputs import Frame
-    from service.http.jobs import default_detect, run_detection
     from service.imageio import decode_image
+    from service.runtime.frames import Frame
+    from service.runtime.jobs import default_detect, run_detection
 
     frame = Frame(jpeg, DetectParams())
     image = decode_image(jpeg)  # what the service sees: the JPEG's pixels, not the scene's
@@ -340,7 +340,7 @@ class _ZenohClient:
     def __enter__(self) -> _ZenohClient:
         import zenoh
 
-        from service.bus import chains_key, make_config
+        from service.bus.config import chains_key, make_config
 
         config = make_config(mode="client", multicast=False, connect=[self.endpoint])
         self.session = zenoh.open(config)
@@ -368,7 +368,7 @@ class _ZenohClient:
 
     def query(self, jpeg: bytes) -> float:
         """Ask ``dlo/detect`` for the Detection of one frame; its ``timings_ms.total``."""
-        from service.bus import QUERY_KEY
+        from service.bus.config import QUERY_KEY
 
         replies = list(self.session.get(QUERY_KEY, payload=jpeg, timeout=60))
         if len(replies) != 1 or replies[0].ok is None:
