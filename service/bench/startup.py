@@ -49,9 +49,9 @@ def dlo_command() -> list[str]:
     return [sys.executable, "-m", "service.cli"]
 
 
-def run_startup_bench(dataset: Path, runs: int, as_json: bool) -> int:
-    """Time the commands ``runs`` times each; print a table (or JSON); the exit status."""
-    dlo = dlo_command()
+def run_startup_bench(dlo: list[str], dataset: Path, runs: int, as_json: bool) -> int:
+    """Time the commands, started with ``dlo``, ``runs`` times each; print a table (or
+    JSON); the exit status of ``dlo bench --startup``."""
     with tempfile.TemporaryDirectory(prefix="dlo-startup-") as folder:
         image, image_note = _image(dataset, Path(folder))
         out_dir = Path(folder) / "out"

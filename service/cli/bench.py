@@ -9,6 +9,7 @@ start-up benchmark runs ``dlo`` processes as a user would, with the environment 
 from __future__ import annotations
 
 import os
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -69,15 +70,27 @@ def bench(
             "dlo detect, with a warm kernel cache (service/bench/startup.py).",
         ),
     ] = False,
+    dlo: Annotated[
+        str | None,
+        typer.Option(
+            metavar="COMMAND",
+            help="With --startup: the command line that starts dlo, e.g. another "
+            "checkout's (default: the dlo beside this Python).",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Time the detector per stage on one thread: photographs, generated scenes, scaling."""
     if service and startup:
         exit_usage(stderr_console(), "--service and --startup time different things: give one")
+    if dlo is not None and not startup:
+        exit_usage(stderr_console(), "--dlo applies only with --startup")
     if startup:
-        from service.bench.startup import run_startup_bench
+        from service.bench.startup import dlo_command, run_startup_bench
 
         runs = repeats or (STARTUP_QUICK_RUNS if quick else STARTUP_RUNS)
-        raise typer.Exit(run_startup_bench(dataset, runs, as_json))
+        command = dlo_command() if dlo is None else shlex.split(dlo)
+        raise typer.Exit(run_startup_bench(command, dataset, runs, as_json))
     repeats = repeats or 3
     if os.environ.get(CHILD_FLAG) == "1":
         if service:
