@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 STAGES = ("segmentation", "skeleton", "contours", "fitting", "pruning", "merging", "total")
-# The stages whose code is compiled (service/perception/_kernels.py).
+# The stages whose code is compiled (service/perception/_*_kernels.py).
 KERNEL_STAGES = ("skeleton", "contours", "fitting", "pruning")
 THREAD_VARIABLES = (
     "OMP_NUM_THREADS",
@@ -58,12 +58,12 @@ def run_detector_bench(quick: bool, as_json: bool, dataset: Path, frames: int, r
     import numba
     import numpy as np
 
-    from service.perception import _kernels, detect
+    from service.perception import detect, warm_up
     from service.synthetic import make_scene
 
     cv2.setNumThreads(1)
     numba.set_num_threads(1)
-    _kernels.warm_up()
+    warm_up()
 
     if quick:
         frames, repeats = 1, 1
@@ -148,7 +148,7 @@ def run_detector_bench(quick: bool, as_json: bool, dataset: Path, frames: int, r
             "environment": {name: os.environ.get(name) for name in THREAD_VARIABLES},
             "cv2_threads": cv2.getNumThreads(),
             "numba_threads": numba.get_num_threads(),
-            "warm_up": "kernels loaded (_kernels.warm_up) and 4 detections before timing",
+            "warm_up": "kernels loaded (perception.warm_up) and 4 detections before timing",
             "quick": quick,
             "frames_per_case": frames,
             "repeats_per_frame": repeats,

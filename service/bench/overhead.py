@@ -98,12 +98,12 @@ def run_service_bench(quick: bool, as_json: bool) -> int:
     """Measure, then print a table (or JSON); the exit status of ``dlo bench --service``."""
     import cv2
 
-    from service.perception import _kernels
+    from service.perception import warm_up
     from service.synthetic import make_scene
 
     counts = Counts(sequential=20, concurrent=40, warm_up=5, refusals=20) if quick else Counts()
     cv2.setNumThreads(1)
-    _kernels.warm_up()
+    warm_up()
 
     def encoded_scene(width: int, height: int) -> bytes:
         scene = make_scene(width, height, CABLES, seed=0, occluders=1)

@@ -229,7 +229,7 @@ def _run_dataset(
 ) -> None:
     from service.evaluation import dataset
     from service.imageio import read_image
-    from service.perception import _kernels
+    from service.perception import warm_up
 
     try:
         items, unlabelled = dataset.find_labelled_images(root)
@@ -240,7 +240,7 @@ def _run_dataset(
     _make_out_dir(errors, out_dir)
 
     # Load the compiled kernels first, so that ms/image is the detection alone.
-    _kernels.warm_up()
+    warm_up()
     scores = []
     failed = len(unlabelled)
     with (
@@ -362,7 +362,7 @@ def _run_synthetic(
     params: DetectParams | None = None,
 ) -> None:
     from service.evaluation import synthetic_eval
-    from service.perception import _kernels
+    from service.perception import warm_up
     from service.synthetic import make_scene
 
     if count < 1:
@@ -373,7 +373,7 @@ def _run_synthetic(
         exit_usage(errors, "--occluders must be 0 or more")
     if width < MIN_SIDE or height < MIN_SIDE:
         exit_usage(errors, f"--width and --height must be {MIN_SIDE} or more")
-    _kernels.warm_up()  # ms per scene is the detection alone
+    warm_up()  # ms per scene is the detection alone
     try:
         low, high = synthetic_eval.parse_cable_counts(cables)
     except ValueError as exc:
