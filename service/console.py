@@ -44,6 +44,27 @@ def typer_app(**settings: Any) -> typer.Typer:
     return typer.Typer(**{**defaults, **settings})
 
 
+FIRST_RUN_NOTICE = "compiling the detection kernels, once per machine, about 20 s"
+
+
+def load_kernels(console: Console) -> None:
+    """Load the detector's compiled kernels before the first detection is timed.
+
+    On a machine's first run numba compiles them (tens of seconds): say so on one line of
+    ``console`` first. Either way the next detection's ``timings_ms`` are detection time
+    alone, not compiling or loading machine code. Ctrl-C meanwhile exits with
+    :data:`EXIT_INTERRUPTED` (nothing was processed yet).
+    """
+    from service.perception import kernels_cached, warm_up
+
+    if not kernels_cached():
+        console.print(FIRST_RUN_NOTICE, markup=False, highlight=False, soft_wrap=True)
+    try:
+        warm_up()
+    except KeyboardInterrupt:
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+
+
 def stderr_console() -> Console:
     """A rich console on stderr, so stdout carries only results."""
     return Console(stderr=True)

@@ -58,12 +58,13 @@ def run_detector_bench(quick: bool, as_json: bool, dataset: Path, frames: int, r
     import numba
     import numpy as np
 
-    from service.perception import detect, warm_up
+    from service.console import load_kernels, stderr_console
+    from service.perception import detect
     from service.synthetic import make_scene
 
     cv2.setNumThreads(1)
     numba.set_num_threads(1)
-    warm_up()
+    load_kernels(stderr_console())
 
     if quick:
         frames, repeats = 1, 1

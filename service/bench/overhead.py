@@ -98,12 +98,12 @@ def run_service_bench(quick: bool, as_json: bool) -> int:
     """Measure, then print a table (or JSON); the exit status of ``dlo bench --service``."""
     import cv2
 
-    from service.perception import warm_up
+    from service.console import load_kernels, stderr_console
     from service.synthetic import make_scene
 
     counts = Counts(sequential=20, concurrent=40, warm_up=5, refusals=20) if quick else Counts()
     cv2.setNumThreads(1)
-    warm_up()
+    load_kernels(stderr_console())
 
     def encoded_scene(width: int, height: int) -> bytes:
         scene = make_scene(width, height, CABLES, seed=0, occluders=1)

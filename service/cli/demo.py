@@ -13,7 +13,7 @@ from rich.table import Table
 
 from schemas import Detection, DetectParams
 from service.batch import OutputPaths, failure_message, process_file
-from service.console import EXIT_FAILED, print_error, stderr_console
+from service.console import EXIT_FAILED, load_kernels, print_error, stderr_console
 from service.imageio import write_png
 from service.perception import render_overlay
 from service.synthetic import make_scene
@@ -40,6 +40,7 @@ def demo(
     """Generate the bundled synthetic example scene and detect the cables in it."""
     console = stderr_console()
     width, height = DEMO_SIZE
+    load_kernels(console)
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         scene = make_scene(width, height, DEMO_CABLES, seed=seed, occluders=DEMO_OCCLUDERS)

@@ -36,6 +36,7 @@ from service.console import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
     exit_usage,
+    load_kernels,
     print_error,
     print_warning,
     stderr_console,
@@ -181,6 +182,7 @@ def detect(
         stream_outputs = _stream_outputs(console, outputs, selected, overlay_video)
         _make_out_dir(console, out_dir)
         source = parse_camera(camera)
+        load_kernels(console)
         summary = _run_stream(
             console, lambda: open_camera(source), params, out_dir, stream_outputs, max_frames
         )
@@ -208,6 +210,8 @@ def detect(
     for problem in problems:
         print_error(console, problem)
     failed = len(problems)
+    if files:
+        load_kernels(console)
 
     if out_dir is None:
         if files:

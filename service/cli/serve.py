@@ -10,8 +10,9 @@ import typer
 import uvicorn
 from pydantic import ValidationError
 
-from service.console import EXIT_USAGE
+from service.console import EXIT_USAGE, FIRST_RUN_NOTICE
 from service.http import create_app
+from service.perception import kernels_cached
 from service.runtime.settings import Settings
 
 
@@ -63,6 +64,8 @@ def serve(
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(levelname)s:     %(name)s: %(message)s"
     )
+    if not kernels_cached():  # the app's warm-up compiles them; /readyz waits for it
+        typer.echo(f"{FIRST_RUN_NOTICE}; /readyz answers 503 until then", err=True)
     uvicorn.run(
         create_app(settings),
         host=settings.host,
