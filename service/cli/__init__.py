@@ -11,8 +11,6 @@ Exit statuses and the Typer set-up are those of :mod:`service.console`.
 from __future__ import annotations
 
 import sys
-from importlib.metadata import PackageNotFoundError
-from importlib.metadata import version as installed_version
 
 import typer
 
@@ -79,6 +77,9 @@ def dlo() -> None:
 
 def version() -> None:
     """Print the installed version of dlo-service."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as installed_version
+
     try:
         number = installed_version("dlo-service")
     except PackageNotFoundError:
