@@ -25,8 +25,8 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from adapters.cli import ur3_app
-from adapters.hexa_cli import feasibility, hexa_app
+from adapters.hexarotor.cli import feasibility, hexa_app
+from adapters.ur3.cli import ur3_app
 from schemas import Detection, DetectParams, SegmentationMethod
 from service.batch import (
     OUTPUT_KINDS,

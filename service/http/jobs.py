@@ -15,13 +15,9 @@ import cv2
 import numpy as np
 from pydantic import ValidationError
 
-from adapters.grasp import (
-    DepthImageError,
-    GraspPlanningError,
-    InferredSegmentError,
-    decode_depth_image,
-)
-from adapters.pick_plan import plan_pick
+from adapters.grasp.depth import decode_depth_image
+from adapters.grasp.errors import DepthImageError, GraspPlanningError, InferredSegmentError
+from adapters.grasp.pick import plan_pick
 from schemas import CameraModel, DepthSurface, Detection, DetectParams, GraspSelector
 from schemas.grasp import GraspPlan
 from service.http.inputs import (
@@ -154,7 +150,7 @@ def plan_or_refuse(
     selector: GraspSelector,
     depth: np.ndarray | None = None,
 ) -> GraspPlan:
-    """:func:`adapters.pick_plan.plan_pick`, its refusals turned into 422 answers.
+    """:func:`adapters.grasp.pick.plan_pick`, its refusals turned into 422 answers.
 
     A target outside the workspace is not refused: the plan says so
     (``within_workspace``, ``refusal``), since no robot is moved here.
