@@ -1,5 +1,4 @@
-"""Helpers shared by the test modules: free loopback ports, waiting on a condition, and a
-camera looking straight down at the table.
+"""Helpers shared by the test modules: free loopback ports and waiting on a condition.
 
 Import as ``from tests.helpers import free_port, wait_until`` (the repository root is on
 ``sys.path`` through ``tests/conftest.py``).
@@ -9,11 +8,7 @@ from __future__ import annotations
 
 import socket
 import time
-from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from schemas import CameraModel
+from collections.abc import Callable
 
 DEFAULT_TIMEOUT_S = 15.0
 """Generous for a loaded 2-core machine; a wait ends as soon as its condition holds."""
@@ -53,35 +48,3 @@ def wait_until(
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
         time.sleep(POLL_S)
-
-
-def camera_looking_down(
-    origin: Sequence[float],
-    width: int,
-    height: int,
-    focal: float,
-    principal: tuple[float, float] | None = None,
-) -> CameraModel:
-    """A pinhole camera at ``origin`` (metres, robot base frame) looking straight down.
-
-    Camera x runs along base +x, camera y along base -y, the optical axis along base -z;
-    the table is the plane z = 0. ``principal`` defaults to the image's centre.
-    """
-    import numpy as np
-
-    from schemas import CameraModel
-
-    cx, cy = (width / 2, height / 2) if principal is None else principal
-    transform = np.eye(4)
-    transform[:3, :3] = np.diag([1.0, -1.0, -1.0])
-    transform[:3, 3] = origin
-    return CameraModel(
-        fx=focal,
-        fy=focal,
-        cx=cx,
-        cy=cy,
-        width=width,
-        height=height,
-        T_base_camera=transform.tolist(),
-        surface={"plane_z": 0.0},
-    )

@@ -51,17 +51,17 @@ SUBCOMMANDS = (
     ),
     Subcommand(
         "feasibility",
-        "adapters.hexa_cli:feasibility",
+        "adapters.hexarotor.cli:feasibility",
         "Can a fully-actuated hexarotor pull this hard while hovering with zero net torque?",
     ),
     Subcommand(
         "ur3",
-        "adapters.cli:ur3_app",
+        "adapters.ur3.cli:ur3_app",
         "Plan a grasp on a detected cable and pick it with a UR3.",
     ),
     Subcommand(
         "hexa",
-        "adapters.hexa_cli:hexa_app",
+        "adapters.hexarotor.cli:hexa_app",
         "Fly grasp approaches with a hexarotor over MAVLink (against the built-in fake).",
     ),
 )

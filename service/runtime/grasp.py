@@ -1,7 +1,7 @@
 """Grasp planning as a job of the runtime: detect the cables in a frame (or take a saved
 Detection), then plan where to grasp and the UR3 motions, without moving any robot.
 
-The planning itself is :mod:`adapters.pick_plan`; here its refusals become
+The planning itself is :mod:`adapters.grasp.pick`; here its refusals become
 :class:`~service.runtime.errors.RequestError` answers (422), and the inputs of one plan are
 gathered: :class:`GraspFrame` (an image to detect, with a camera model and a selector) or
 :class:`GraspRequest` (a saved Detection, as JSON).
@@ -16,13 +16,9 @@ import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from adapters.grasp import (
-    DepthImageError,
-    GraspPlanningError,
-    InferredSegmentError,
-    decode_depth_image,
-)
-from adapters.pick_plan import plan_pick
+from adapters.grasp.depth import decode_depth_image
+from adapters.grasp.errors import DepthImageError, GraspPlanningError, InferredSegmentError
+from adapters.grasp.pick import plan_pick
 from schemas import CameraModel, DepthSurface, Detection, GraspSelector
 from schemas.grasp import GraspPlan
 from service.runtime.errors import RequestError, describe_fields
@@ -108,7 +104,7 @@ def plan_or_refuse(
     selector: GraspSelector,
     depth: np.ndarray | None = None,
 ) -> GraspPlan:
-    """:func:`adapters.pick_plan.plan_pick`, its refusals turned into 422 answers.
+    """:func:`adapters.grasp.pick.plan_pick`, its refusals turned into 422 answers.
 
     A target outside the workspace is not refused: the plan says so
     (``within_workspace``, ``refusal``), since no robot is moved here.

@@ -19,7 +19,8 @@ from schemas import Chain, Detection
 from service.http import Settings
 from service.perception import detect as real_detect
 from service.synthetic import make_scene
-from tests.helpers import camera_looking_down, wait_until
+from tests.adapters.builders import looking_down
+from tests.helpers import wait_until
 
 from .test_http import assert_error, encode, metric, running_server
 
@@ -35,7 +36,7 @@ def camera(origin=(0.25, 0.0, 0.3), width=W, height=H) -> dict:
     At 0.3 m the 480x320 image covers x 0.13..0.37 and y -0.08..0.08 around the default
     origin: inside the UR3's default workspace wherever the cable lies.
     """
-    model = camera_looking_down(origin, width, height, F, principal=(W / 2, H / 2))
+    model = looking_down(origin, fx=F, fy=F, cx=W / 2, cy=H / 2, width=width, height=height)
     return model.model_dump(mode="json")
 
 

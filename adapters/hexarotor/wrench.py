@@ -31,7 +31,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linprog
 
 GRAVITY_M_S2 = 9.80665
 ROTORS = 6
@@ -184,6 +183,8 @@ def max_force_along(geometry: HexarotorGeometry, direction: np.ndarray | tuple) 
     ValueError
         On a zero or non-finite direction.
     """
+    from scipy.optimize import linprog  # here: importing the module stays light for the CLI
+
     unit = _unit(direction)
     allocation = allocation_matrix(geometry)
     # Variables [f_0..f_5, p]; equality rows: A f - p [d; 0] = [m g z; 0].

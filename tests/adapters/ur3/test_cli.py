@@ -16,34 +16,23 @@ import typer
 import yaml
 from typer.testing import CliRunner
 
-from adapters.cli import build_ur3_app
-from adapters.fakes import FakeRobot
+from adapters.ur3.cli import build_ur3_app
+from adapters.ur3.fakes import FakeRobot
 from schemas import CameraModel, Chain, DepthSurface, Detection
 from service.synthetic import make_scene
+from tests.adapters.builders import looking_down
 
 W, H = 640, 480
 FX = FY = 800.0
 CX, CY = 320.0, 240.0
 TOL = 1e-4  # 0.1 mm
-EXAMPLES = Path(__file__).resolve().parents[2] / "docs" / "examples"
+EXAMPLES = Path(__file__).resolve().parents[3] / "docs" / "examples"
 LABELS = ["approach", "descend", "close_gripper", "lift"]
 
 
 def camera(origin=(0.3, 0.1, 0.5), width=W, height=H) -> CameraModel:
-    """Straight down: camera x along base +x, camera y along base -y, optical axis down."""
-    transform = np.eye(4)
-    transform[:3, :3] = np.diag([1.0, -1.0, -1.0])
-    transform[:3, 3] = origin
-    return CameraModel(
-        fx=FX,
-        fy=FY,
-        cx=CX,
-        cy=CY,
-        width=width,
-        height=height,
-        T_base_camera=transform.tolist(),
-        surface={"plane_z": 0.0},
-    )
+    """Straight down over the table ``z = 0``."""
+    return looking_down(origin, fx=FX, fy=FY, cx=CX, cy=CY, width=width, height=height)
 
 
 def detection(inferred=(False, False)) -> Detection:

@@ -1,8 +1,9 @@
 """``dlo ur3``: plan a grasp on a detected cable (a dry run) or pick it with a UR3.
 
-A typer sub-app; ``service/cli.py`` registers :data:`ur3_app` with
-``app.add_typer(ur3_app, name="ur3")``. Tests build their own with
-:func:`build_ur3_app` and a fake robot's ``connect``.
+A typer sub-app; the ``dlo`` CLI (:mod:`service.cli`) names :data:`ur3_app` and imports
+this module only when ``dlo ur3`` runs. Tests build their own with
+:func:`build_ur3_app` and a fake robot's ``connect``. Importing this module stays light:
+detection, OpenCV and NumPy are imported by the steps that use them.
 
 The input is an image (detected here, with the default parameters unless told) or a
 Detection JSON written by ``dlo detect`` (``.json``). A camera whose surface is a depth
@@ -16,31 +17,29 @@ grasp, or a refusal before any motion.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import TYPE_CHECKING, Annotated, NoReturn
 
-import numpy as np
 import typer
 from pydantic import ValidationError
 
-from adapters.grasp import (
-    DepthImageError,
-    GraspPlanningError,
-    check_depth_image,
-    decode_depth_image,
-)
-from adapters.pick_plan import plan_pick
-from adapters.ur3 import (
-    ConnectFactory,
-    RobotNotReadyError,
-    UnsafeTargetError,
-    UR3Picker,
-)
-from adapters.ur3 import connect as connect_ur_rtde
+from adapters.errors import UnsafeTargetError
+from adapters.grasp.errors import DepthImageError, GraspPlanningError
+from adapters.ur3.driver import ConnectFactory, RobotNotReadyError, UR3Picker
+from adapters.ur3.driver import connect as connect_ur_rtde
 from schemas import CameraModel, DepthSurface, Detection, GraspSelector
-from schemas.grasp import GraspPlan
-from service.batch import InvalidParametersError, build_params, failure_message, process_file
-from service.console import EXIT_FAILED, EXIT_USAGE, print_error, print_warning, stderr_console
-from service.perception import InvalidInputError
+from service.console import (
+    EXIT_FAILED,
+    EXIT_USAGE,
+    print_error,
+    print_warning,
+    stderr_console,
+    typer_app,
+)
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from schemas.grasp import GraspPlan
 
 DETECTION_SUFFIX = ".json"
 """An input with this suffix is a saved Detection; anything else is an image to detect."""
@@ -118,13 +117,7 @@ def build_ur3_app(connect: ConnectFactory = connect_ur_rtde) -> typer.Typer:
         ``connect(robot_ip) -> (control, receive, io)``: ur_rtde by default, a fake's
         ``connect`` in tests.
     """
-    app = typer.Typer(
-        name="ur3",
-        help="Plan a grasp on a detected cable and pick it with a UR3.",
-        no_args_is_help=True,
-        add_completion=False,
-        pretty_exceptions_enable=False,
-    )
+    app = typer_app(name="ur3", help="Plan a grasp on a detected cable and pick it with a UR3.")
 
     @app.command("plan")
     def plan_command(
@@ -251,6 +244,8 @@ def plan_from_files(
     The camera and the depth image are read first, so that a bad file is reported before
     the detection runs.
     """
+    from adapters.grasp.pick import plan_pick
+
     camera = load_camera(camera_path)
     depth = load_depth(depth_path, camera)
     detection = load_or_detect(input_path, segment_length, expected_count)
@@ -292,6 +287,10 @@ def load_depth(path: Path | None, camera: CameraModel) -> np.ndarray | None:
             "the camera's surface is a depth image (kind 'depth'): give --depth DEPTH "
             "(a 16-bit PNG or a .npy array aligned with the image)"
         )
+    import numpy as np
+
+    from adapters.grasp.depth import check_depth_image, decode_depth_image
+
     try:
         if path.suffix.lower() == NUMPY_SUFFIX:
             depth = np.load(path, allow_pickle=False)
@@ -324,6 +323,14 @@ def load_or_detect(
             fail(f"{path}: not a Detection: {describe(error)}")
         except ValueError as error:  # not UTF-8
             fail(f"{path}: {error}")
+    from service.batch import (
+        InvalidParametersError,
+        build_params,
+        failure_message,
+        process_file,
+    )
+    from service.perception import InvalidInputError
+
     try:
         params = build_params(segment_length=segment_length, expected_count=expected_count)
     except InvalidParametersError as error:

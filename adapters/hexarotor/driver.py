@@ -1,15 +1,7 @@
 """Hexarotor adapter over MAVLink 2 (pymavlink): connect, guided mode, arm, stream setpoints, grasp.
 
-Frames
-------
-* **Local NED** (what the autopilot speaks): ``x`` north, ``y`` east, ``z`` down, metres,
-  origin at the autopilot's local origin; yaw from north towards east, radians.
-* **Robot cell ENU**: ``x`` east, ``y`` north, ``z`` up, metres; this is the base frame of
-  :class:`~schemas.GraspTarget` when the cell is laid out along the compass. Its origin
-  sits at ``cell_origin_ned`` in the local NED frame; :func:`ned_from_enu` and
-  :func:`yaw_ned_from_enu` convert, :func:`enu_from_ned` goes back.
-* **Body FRD**: ``x`` forward, ``y`` right, ``z`` down; the gripper sits at
-  :attr:`ApproachConfig.end_effector_frd` in it.
+The frames (local NED, robot cell ENU, body FRD) and the approach plan are pure and live
+in :mod:`adapters.hexarotor.approach`; this module is the link.
 
 Safety rules
 ------------
@@ -19,7 +11,7 @@ Safety rules
 * Every ``COMMAND_LONG`` waits for its ``COMMAND_ACK``; anything but ``MAV_RESULT_ACCEPTED``
   raises :class:`CommandRejectedError`, silence raises :class:`CommandTimeoutError`.
 * Every setpoint and every point of an approach is checked against the :class:`Geofence`
-  before anything is sent; a refusal raises :class:`UnsafeTargetError`.
+  before anything is sent; a refusal raises :class:`~adapters.errors.UnsafeTargetError`.
 * Streamed setpoints move towards their goal at no more than the requested speed, itself
   capped at :data:`MAX_SPEED_M_S`.
 * A lost link, a mode change away from GUIDED / OFFBOARD, disarming or a timeout during an
@@ -31,7 +23,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -40,25 +31,29 @@ from typing import Literal
 
 import numpy as np
 
-# MAVLink 2 must be chosen before mavutil is imported, or it loads the v1 dialect.
-os.environ["MAVLINK20"] = "1"
-from pymavlink import mavutil
+from adapters.errors import UnsafeTargetError
+from adapters.hexarotor.approach import (
+    MAX_SPEED_M_S,
+    ApproachConfig,
+    ApproachPlan,
+    Geofence,
+    check_plan,
+    end_effector_ned,
+    finite3,
+    plan_approach,
+    require_positive,
+)
+from adapters.hexarotor.protocol import (
+    ARDUPILOT_MODES,
+    POSITION_YAW_TYPE_MASK,
+    PX4_MAIN_OFFBOARD,
+    mavlink,
+    mavutil,
+    px4_main_mode,
+)
 
-if mavutil.mavlink.WIRE_PROTOCOL_VERSION != "2.0":  # mavutil was imported earlier, without it
-    mavutil.set_dialect(mavutil.current_dialect)
-mavlink = mavutil.mavlink
-
-POSITION_YAW_TYPE_MASK = 0x09F8
-"""``type_mask`` of ``SET_POSITION_TARGET_LOCAL_NED`` using position and yaw only."""
-MAX_SPEED_M_S = 2.0
-"""Hard cap on the speed of the streamed setpoints, whatever the caller asks."""
 MIN_SETPOINT_RATE_HZ = 10.0
 """Below this, ArduPilot and PX4 treat the stream as lost."""
-
-ARDUPILOT_GUIDED = 4
-PX4_MAIN_OFFBOARD = 6
-
-Vector3 = tuple[float, float, float]
 
 
 class MavlinkError(RuntimeError):
@@ -85,132 +80,6 @@ class VehicleNotReadyError(MavlinkError):
     """The vehicle is not armed in its guided mode, or sent no position yet."""
 
 
-class UnsafeTargetError(ValueError):
-    """A target lies outside the geofence or the limits; nothing was sent."""
-
-
-# -- frames (pure) ------------------------------------------------------------------------
-
-
-def ned_from_enu(point_enu: Sequence[float], cell_origin_ned: Sequence[float] = (0, 0, 0)):
-    """Convert a point from the robot-cell ENU frame to the local NED frame.
-
-    ``(east, north, up)`` becomes ``(north, east, -up)``, then the cell origin (given in
-    NED) is added: ``p_ned = (y, x, -z) + cell_origin_ned``.
-
-    Parameters
-    ----------
-    point_enu
-        ``(x_east, y_north, z_up)``, metres.
-    cell_origin_ned
-        Where the cell's origin lies in the local NED frame, metres.
-
-    Returns
-    -------
-    ndarray, shape (3,)
-    """
-    x, y, z = _finite3(point_enu, "point_enu")
-    return np.array([y, x, -z]) + _finite3(cell_origin_ned, "cell_origin_ned")
-
-
-def enu_from_ned(point_ned: Sequence[float], cell_origin_ned: Sequence[float] = (0, 0, 0)):
-    """Inverse of :func:`ned_from_enu`: a local NED point in the robot-cell ENU frame."""
-    north, east, down = _finite3(point_ned, "point_ned") - _finite3(
-        cell_origin_ned, "cell_origin_ned"
-    )
-    return np.array([east, north, -down])
-
-
-def yaw_ned_from_enu(yaw_enu: float) -> float:
-    """Heading in NED (from north towards east) of a yaw in ENU (from east towards north).
-
-    ``psi_ned = pi/2 - psi_enu``, wrapped to ``[-pi, pi]``; the map is its own inverse.
-    """
-    return math.remainder(math.pi / 2 - yaw_enu, 2 * math.pi)
-
-
-def body_to_ned(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """Rotation taking body FRD vectors to NED (aerospace Z-Y-X order: yaw, pitch, roll)."""
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-def end_effector_ned(
-    position_ned: Sequence[float],
-    roll: float,
-    pitch: float,
-    yaw: float,
-    end_effector_frd: Sequence[float],
-) -> np.ndarray:
-    """Where the gripper is in NED, given the vehicle's position and attitude."""
-    return np.asarray(position_ned, dtype=float) + body_to_ned(roll, pitch, yaw) @ np.asarray(
-        end_effector_frd, dtype=float
-    )
-
-
-def _require_positive(config: object, names: Sequence[str]) -> None:
-    """Raise ValueError unless each named field of ``config`` is finite and > 0."""
-    for name in names:
-        value = getattr(config, name)
-        if not (math.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be finite and > 0, got {value}")
-
-
-def _finite3(values: Sequence[float], name: str) -> np.ndarray:
-    vector = np.asarray(values, dtype=float)
-    if vector.shape != (3,) or not np.all(np.isfinite(vector)):
-        raise ValueError(f"{name} must be three finite numbers, got {values!r}")
-    return vector
-
-
-# -- configuration, fence and approach planning (pure) ------------------------------------
-
-
-@dataclass(frozen=True)
-class Geofence:
-    """An axis-aligned box in the local NED frame, metres (``down`` < 0 is above the origin).
-
-    The default reaches 10 cm below the origin so that a vehicle standing on the ground
-    at the origin, its position a little noisy, is still inside.
-    """
-
-    north: tuple[float, float] = (-5.0, 5.0)
-    east: tuple[float, float] = (-5.0, 5.0)
-    down: tuple[float, float] = (-3.0, 0.1)
-
-    def __post_init__(self) -> None:
-        for name in ("north", "east", "down"):
-            low, high = getattr(self, name)
-            if not (math.isfinite(low) and math.isfinite(high) and low < high):
-                raise ValueError(f"geofence {name} must be finite with low < high")
-
-    def contains(self, point_ned: Sequence[float]) -> bool:
-        """True when ``point_ned`` lies inside the box (borders included)."""
-        north, east, down = _finite3(point_ned, "point_ned")
-        return (
-            self.north[0] <= north <= self.north[1]
-            and self.east[0] <= east <= self.east[1]
-            and self.down[0] <= down <= self.down[1]
-        )
-
-    def check(self, point_ned: Sequence[float], what: str) -> None:
-        """Raise :class:`UnsafeTargetError` when ``point_ned`` is outside the box."""
-        if not self.contains(point_ned):
-            shown = ", ".join(f"{v:.3f}" for v in np.asarray(point_ned, dtype=float))
-            raise UnsafeTargetError(
-                f"{what} [{shown}] (NED, m) is outside the geofence north {self.north}, "
-                f"east {self.east}, down {self.down}"
-            )
-
-
 @dataclass(frozen=True)
 class LinkConfig:
     """Timing of the MAVLink link."""
@@ -233,7 +102,7 @@ class LinkConfig:
             raise ValueError(
                 f"setpoint_rate_hz must be >= {MIN_SETPOINT_RATE_HZ}, got {self.setpoint_rate_hz}"
             )
-        _require_positive(
+        require_positive(
             self,
             (
                 "heartbeat_timeout_s",
@@ -245,94 +114,6 @@ class LinkConfig:
         )
         if self.command_attempts < 1:
             raise ValueError(f"command_attempts must be >= 1, got {self.command_attempts}")
-
-
-@dataclass(frozen=True)
-class ApproachConfig:
-    """The grasp approach: standoff, final move, closing rule and limits."""
-
-    end_effector_frd: Vector3 = (0.40, 0.0, 0.20)
-    """Gripper position in the body frame (forward, right, down), m."""
-    standoff_m: float = 0.5
-    """Distance of the standoff from the grasp point, against the approach direction."""
-    tolerance_m: float = 0.010
-    """The gripper closes once the end-effector error stayed below this ..."""
-    dwell_s: float = 0.3
-    """... for this long, s."""
-    standoff_tolerance_m: float = 0.05
-    """The final move starts once the vehicle is this close to the standoff ..."""
-    settle_speed_m_s: float = 0.1
-    """... and slower than this."""
-    transit_speed_m_s: float = 1.0
-    """Setpoint speed to the standoff."""
-    approach_speed_m_s: float = 0.25
-    """Setpoint speed of the final move onto the target."""
-    timeout_s: float = 30.0
-    """Give up (and hold) when the approach takes longer."""
-
-    def __post_init__(self) -> None:
-        _finite3(self.end_effector_frd, "end_effector_frd")
-        _require_positive(
-            self,
-            (
-                "standoff_m",
-                "tolerance_m",
-                "standoff_tolerance_m",
-                "settle_speed_m_s",
-                "transit_speed_m_s",
-                "approach_speed_m_s",
-                "timeout_s",
-            ),
-        )
-        if not (math.isfinite(self.dwell_s) and self.dwell_s >= 0):
-            raise ValueError(f"dwell_s must be finite and >= 0, got {self.dwell_s}")
-        for name in ("transit_speed_m_s", "approach_speed_m_s"):
-            if getattr(self, name) > MAX_SPEED_M_S:
-                raise ValueError(f"{name} must be <= {MAX_SPEED_M_S} m/s")
-
-
-@dataclass(frozen=True)
-class ApproachPlan:
-    """Vehicle positions (NED) of the two legs of an approach, and the heading."""
-
-    target_ned: np.ndarray
-    """The grasp point the end-effector must reach."""
-    standoff_ned: np.ndarray
-    """Vehicle position with the end-effector ``standoff_m`` short of the target."""
-    final_ned: np.ndarray
-    """Vehicle position with the end-effector on the target."""
-    yaw_ned: float
-    """Heading of the vehicle; the approach runs along it."""
-
-
-def plan_approach(
-    target_ned: Sequence[float], yaw_ned: float, config: ApproachConfig
-) -> ApproachPlan:
-    """Where the vehicle must be to hold the standoff and to put the gripper on the target.
-
-    The vehicle is level and faces ``yaw_ned``; the approach direction is that heading,
-    horizontal. The end-effector first waits ``standoff_m`` before the target along it,
-    then moves forward onto the target.
-    """
-    target = _finite3(target_ned, "target_ned")
-    if not math.isfinite(yaw_ned):
-        raise ValueError(f"yaw_ned must be finite, got {yaw_ned}")
-    offset = body_to_ned(0.0, 0.0, yaw_ned) @ np.asarray(config.end_effector_frd, dtype=float)
-    heading = np.array([math.cos(yaw_ned), math.sin(yaw_ned), 0.0])
-    final = target - offset
-    return ApproachPlan(
-        target_ned=target,
-        standoff_ned=final - config.standoff_m * heading,
-        final_ned=final,
-        yaw_ned=yaw_ned,
-    )
-
-
-def check_plan(plan: ApproachPlan, fence: Geofence) -> None:
-    """Refuse a plan any point of which (target, standoff, final position) leaves the fence."""
-    fence.check(plan.target_ned, "grasp target")
-    fence.check(plan.standoff_ned, "standoff position")
-    fence.check(plan.final_ned, "final vehicle position")
 
 
 @dataclass(frozen=True)
@@ -433,6 +214,9 @@ class MavlinkVehicle:
         self._setpoint: _Setpoint | None = None
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
+        self.stream_cycles = 0
+        """Cycles of the setpoint stream so far (each sends one setpoint when one streams
+        and the link is up): what a test waits on to know the stream had its chance."""
 
     # -- lifecycle -------------------------------------------------------------------
 
@@ -517,9 +301,9 @@ class MavlinkVehicle:
         if mode is None:
             return False
         if self.autopilot == "ardupilot":
-            return mode == ARDUPILOT_GUIDED
+            return mode == ARDUPILOT_MODES["GUIDED"]
         if self.autopilot == "px4":
-            return (mode >> 16) & 0xFF == PX4_MAIN_OFFBOARD
+            return px4_main_mode(mode) == PX4_MAIN_OFFBOARD
         return False
 
     def state(self) -> VehicleState | None:
@@ -600,7 +384,7 @@ class MavlinkVehicle:
         """
         base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         if self.autopilot == "ardupilot":
-            self.command(mavlink.MAV_CMD_DO_SET_MODE, base, ARDUPILOT_GUIDED)
+            self.command(mavlink.MAV_CMD_DO_SET_MODE, base, ARDUPILOT_MODES["GUIDED"])
         elif self.autopilot == "px4":
             self.hold()
             self._sleep_checking_link(self.link.offboard_warmup_s)
@@ -636,7 +420,7 @@ class MavlinkVehicle:
         none is streaming. Raises :class:`UnsafeTargetError` outside the fence (nothing is
         sent) and :class:`LinkLostError` without a recent heartbeat.
         """
-        goal = _finite3(position_ned, "position_ned")
+        goal = finite3(position_ned, "position_ned")
         if not math.isfinite(yaw_ned):
             raise UnsafeTargetError(f"yaw must be finite, got {yaw_ned}")
         if not (math.isfinite(speed_m_s) and speed_m_s > 0):
@@ -850,6 +634,7 @@ class MavlinkVehicle:
         started = time.monotonic()
         last = started
         while not self._stop.wait(period):
+            self.stream_cycles += 1
             now = time.monotonic()
             # A stalled thread must not make the setpoint jump: cap the step at 3 periods.
             elapsed = min(now - last, 3 * period)

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from adapters.fake_vehicle import Disturbance
-from adapters.hexa_cli import (
+from adapters.hexarotor.approach import Geofence, plan_approach
+from adapters.hexarotor.fake_dynamics import Disturbance
+from adapters.hexarotor.trial import (
     TRIAL_APPROACH,
     TrialOutcome,
     TrialTarget,
@@ -20,10 +21,9 @@ from adapters.hexa_cli import (
     run_trials,
     trial_targets,
 )
-from adapters.mavlink import Geofence, plan_approach
-from adapters.wrench import HexarotorGeometry, max_force_along
-from schemas import GraspTarget
+from adapters.hexarotor.wrench import HexarotorGeometry, max_force_along
 from service.cli import app
+from tests.adapters.builders import grasp_target
 
 runner = CliRunner()
 
@@ -138,14 +138,7 @@ def test_summary_and_table() -> None:
 
 
 def test_one_approach_in_process_reports_the_ground_truth_error() -> None:
-    grasp = GraspTarget(
-        position_m=(0.0, 0.0, 0.0),
-        yaw_rad=0.0,
-        chain_id=0,
-        segment_index=0,
-        inferred=False,
-        pixel=(0.0, 0.0),
-    )
+    grasp = grasp_target(0.0, 0.0, 0.0, yaw=0.0)
     target = TrialTarget(grasp, target_ned=(0.6, 0.0, -0.8), heading_ned=0.0)
     seen: list[tuple[int, float | None, str]] = []
     outcome = run_trials(

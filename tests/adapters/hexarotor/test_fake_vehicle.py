@@ -11,24 +11,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from adapters.fake_vehicle import (
+from adapters.hexarotor.fake_dynamics import Disturbance, Dynamics, step_dynamics
+from adapters.hexarotor.fake_vehicle import FakeVehicle
+from adapters.hexarotor.protocol import (
     ARDUPILOT_MODES,
     POSITION_YAW_TYPE_MASK,
     PX4_MAIN_OFFBOARD,
-    Disturbance,
-    Dynamics,
-    FakeVehicle,
-    free_udp_port,
     mavlink,
     mavutil,
     px4_custom_mode,
-    step_dynamics,
 )
+from tests.helpers import DEFAULT_TIMEOUT_S, free_udp_port, wait_until
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-TIMEOUT_S = 10.0
-"""Generous for a loaded 2-core machine; the waits end as soon as the condition holds."""
-
+REPO_ROOT = Path(__file__).resolve().parents[3]
 QUIET = Disturbance(gust_std_m_s2=0.0, position_noise_m=0.0, attitude_noise_rad=0.0)
 
 
@@ -42,12 +37,12 @@ class GroundStation:
         self.first_heartbeat = None
 
     def receive(self, kind: str, condition: Callable[[object], bool] = lambda m: True):
-        deadline = time.monotonic() + TIMEOUT_S
+        deadline = time.monotonic() + DEFAULT_TIMEOUT_S
         while time.monotonic() < deadline:
             message = self.connection.recv_match(type=kind, blocking=True, timeout=0.2)
             if message is not None and condition(message):
                 return message
-        raise AssertionError(f"no matching {kind} within {TIMEOUT_S} s")
+        raise AssertionError(f"no matching {kind} within {DEFAULT_TIMEOUT_S} s")
 
     def command(self, command: int, *params: float) -> int:
         padded = list(params) + [0.0] * (7 - len(params))
@@ -73,17 +68,6 @@ class GroundStation:
             yaw,
             0,
         )
-
-
-def wait_until(condition: Callable[[], bool], what: str, action: Callable[[], None] | None = None):
-    deadline = time.monotonic() + TIMEOUT_S
-    while time.monotonic() < deadline:
-        if action is not None:
-            action()
-        if condition():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 @pytest.fixture
@@ -203,10 +187,15 @@ def test_gripper_command_records_the_ground_truth(link_pair) -> None:
 def test_a_cut_link_sends_and_hears_nothing(link_pair) -> None:
     vehicle, station = link_pair()
     vehicle.set_link(False)
-    time.sleep(0.2)  # let anything already in flight arrive, then drain it
+    # On loopback a datagram is in our socket once the fake's send returned; so after
+    # whole telemetry periods with the link cut, draining leaves nothing sent before it.
+    cut_at = vehicle.telemetry_cycles
+    wait_until(lambda: vehicle.telemetry_cycles >= cut_at + 2, "telemetry periods while cut")
     while station.connection.recv_match(blocking=False) is not None:
         pass
-    assert station.connection.recv_match(blocking=True, timeout=0.5) is None
+    drained_at = vehicle.telemetry_cycles
+    wait_until(lambda: vehicle.telemetry_cycles >= drained_at + 3, "three more periods")
+    assert station.connection.recv_match(blocking=False) is None
     vehicle.set_link(True)
     station.receive("LOCAL_POSITION_NED")
 
@@ -249,7 +238,13 @@ def test_runs_as_a_separate_process() -> None:
     port = free_udp_port()
     station = GroundStation(port)
     process = subprocess.Popen(
-        [sys.executable, "-m", "adapters.fake_vehicle", "--url", f"udpout:127.0.0.1:{port}"],
+        [
+            sys.executable,
+            "-m",
+            "adapters.hexarotor.fake_vehicle",
+            "--url",
+            f"udpout:127.0.0.1:{port}",
+        ],
         cwd=REPO_ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,

@@ -1,6 +1,6 @@
 """Fixtures for the adapter tests: a fake UR controller in a subprocess, and a hang guard.
 
-The fake (:mod:`adapters.fake_ur_controller`) listens on the controller's fixed ports
+The fake (:mod:`adapters.ur3.fake_controller`) listens on the controller's fixed ports
 (30004, 30003, 29999), so every test gets its own loopback address: Linux routes all
 of 127.0.0.0/8 to the loopback interface. The address mixes in this process id so two
 test sessions on one machine do not collide either.
@@ -23,9 +23,9 @@ from typing import Any
 
 import pytest
 
-from adapters.fake_ur_controller import DEFAULT_CONTROL_PORT
+from adapters.ur3.fake_controller.controller import DEFAULT_CONTROL_PORT
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
+REPO_ROOT = Path(__file__).resolve().parents[3]
 STARTUP_TIMEOUT_S = 20.0
 """Generous: Python start-up on a loaded 2-core machine can take seconds."""
 ADDRESS_ATTEMPTS = 5
@@ -94,7 +94,7 @@ class FakeControllerProcess:
 
 
 def start_fake_controller(tmp_path: Path, *arguments: str) -> FakeControllerProcess:
-    """Start ``python -m adapters.fake_ur_controller`` and wait until it answers.
+    """Start ``python -m adapters.ur3.fake_controller`` and wait until it answers.
 
     Retries on a fresh address when the chosen one is taken.
     """
@@ -106,7 +106,7 @@ def start_fake_controller(tmp_path: Path, *arguments: str) -> FakeControllerProc
                 [
                     sys.executable,
                     "-m",
-                    "adapters.fake_ur_controller",
+                    "adapters.ur3.fake_controller",
                     "--host",
                     host,
                     "--exit-with-parent",

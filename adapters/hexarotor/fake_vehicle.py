@@ -1,7 +1,7 @@
 """A SITL-free fake hexarotor that speaks MAVLink 2 over UDP, for tests and the ``dlo hexa`` trial.
 
 It is neither ArduPilot nor PX4: it imitates what a ground station sees of them, enough
-to exercise :mod:`adapters.mavlink` over real sockets.
+to exercise :mod:`adapters.hexarotor.driver` over real sockets.
 
 * Heartbeat at 1 Hz as an ArduCopter-like (``MAV_AUTOPILOT_ARDUPILOTMEGA``, custom modes
   STABILIZE 0, GUIDED 4, LOITER 5, LAND 9) or a PX4-like (``MAV_AUTOPILOT_PX4``, main mode in
@@ -28,101 +28,45 @@ disarmed it does not move.
 The random streams are seeded, but the simulation follows the wall clock, so two runs
 are statistically alike, not bit for bit.
 
-Run it as a process with ``python -m adapters.fake_vehicle --url udpout:127.0.0.1:14550``.
+Run it as a process with ``python -m adapters.hexarotor.fake_vehicle --url udpout:127.0.0.1:14550``.
+
+The physics (closed position loop, gusts, noise) is :mod:`adapters.hexarotor.fake_dynamics`;
+this module is the MAVLink side.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import os
-import socket
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
-# MAVLink 2 must be chosen before mavutil is imported, or it loads the v1 dialect.
-os.environ["MAVLINK20"] = "1"
-from pymavlink import mavutil
-
-if mavutil.mavlink.WIRE_PROTOCOL_VERSION != "2.0":  # mavutil was imported earlier, without it
-    mavutil.set_dialect(mavutil.current_dialect)
-mavlink = mavutil.mavlink
+from adapters.hexarotor.fake_dynamics import (
+    PHYSICS_STEP_S,
+    Disturbance,
+    Dynamics,
+    RigidState,
+    step_dynamics,
+    wrap_angle,
+    yaw_matrix,
+)
+from adapters.hexarotor.protocol import (
+    ARDUPILOT_MODES,
+    POSITION_YAW_TYPE_MASK,
+    PX4_MAIN_AUTO,
+    PX4_MAIN_OFFBOARD,
+    PX4_MAIN_POSCTL,
+    PX4_SUB_AUTO_LOITER,
+    mavlink,
+    mavutil,
+    px4_custom_mode,
+)
 
 Autopilot = Literal["ardupilot", "px4"]
-
-POSITION_YAW_TYPE_MASK = 0x09F8
-"""``SET_POSITION_TARGET_LOCAL_NED.type_mask`` ignoring velocity, acceleration and yaw rate."""
-
-ARDUPILOT_MODES = {"STABILIZE": 0, "GUIDED": 4, "LOITER": 5, "LAND": 9}
-PX4_MAIN_POSCTL, PX4_MAIN_AUTO, PX4_MAIN_OFFBOARD = 3, 4, 6
-PX4_SUB_AUTO_LOITER = 3
-
-PHYSICS_STEP_S = 0.005
-
-
-def px4_custom_mode(main_mode: int, sub_mode: int = 0) -> int:
-    """PX4's ``custom_mode``: main mode in bits 16-23, sub mode in bits 24-31."""
-    return (main_mode << 16) | (sub_mode << 24)
-
-
-@dataclass(frozen=True)
-class Disturbance:
-    """Wind gusts and sensor noise of the fake (the defaults are the ``dlo hexa trial`` ones).
-
-    Attributes
-    ----------
-    gust_std_m_s2 : float
-        Standard deviation of the gust acceleration per axis, m/s^2; 0.05 m/s^2 on a 3 kg
-        vehicle is a 0.15 N push, a light indoor draught.
-    gust_time_constant_s : float
-        Correlation time of the gusts, s.
-    position_noise_m : float
-        Standard deviation of the reported position per axis, m (motion capture to good
-        visual-inertial odometry).
-    attitude_noise_rad : float
-        Standard deviation of the reported roll, pitch and yaw, rad.
-    """
-
-    gust_std_m_s2: float = 0.05
-    gust_time_constant_s: float = 1.0
-    position_noise_m: float = 0.002
-    attitude_noise_rad: float = 0.002
-
-    def __post_init__(self) -> None:
-        for name in ("gust_std_m_s2", "position_noise_m", "attitude_noise_rad"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if not self.gust_time_constant_s > 0:
-            raise ValueError(f"gust_time_constant_s must be > 0, got {self.gust_time_constant_s}")
-
-
-@dataclass(frozen=True)
-class Dynamics:
-    """Controller gains and limits of the fake's position loop.
-
-    The defaults make a stiff indoor position loop (natural frequency
-    ``sqrt(k_p k_v)`` = 4.6 rad/s, damping 0.76), as on a fully-actuated vehicle under
-    motion capture; a steady push ``d`` leaves an offset of ``d / (k_p k_v)``.
-    """
-
-    position_gain: float = 3.0
-    """1/s: desired speed per metre of position error."""
-    velocity_gain: float = 7.0
-    """1/s: commanded acceleration per m/s of speed error."""
-    max_speed_m_s: float = 2.0
-    max_accel_m_s2: float = 3.0
-    yaw_rate_rad_s: float = 1.5
-    telemetry_hz: float = 40.0
-    setpoint_timeout_s: float = 0.5
-
-    def __post_init__(self) -> None:
-        for name, value in vars(self).items():
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be finite and > 0, got {value}")
 
 
 @dataclass(frozen=True)
@@ -134,23 +78,6 @@ class GripperEvent:
     position_ned: tuple[float, float, float]
     yaw_rad: float
     end_effector_ned: tuple[float, float, float]
-
-
-@dataclass
-class _State:
-    position: np.ndarray
-    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    yaw: float = 0.0
-    gust: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-
-def _wrap(angle: float) -> float:
-    return math.remainder(angle, 2.0 * math.pi)
-
-
-def _clip_norm(vector: np.ndarray, limit: float) -> np.ndarray:
-    norm = float(np.linalg.norm(vector))
-    return vector * (limit / norm) if norm > limit else vector
 
 
 class FakeVehicle:
@@ -203,7 +130,7 @@ class FakeVehicle:
         gust_seed, noise_seed = np.random.SeedSequence(seed).spawn(2)
         self._gust_rng = np.random.default_rng(gust_seed)
         self._noise_rng = np.random.default_rng(noise_seed)
-        self._state = _State(position=np.asarray(start_ned, dtype=float).copy())
+        self._state = RigidState(position=np.asarray(start_ned, dtype=float).copy())
         self._hold_point: np.ndarray | None = self._state.position.copy()
         self._hold_yaw = 0.0
         self._lock = threading.Lock()
@@ -228,6 +155,10 @@ class FakeVehicle:
         self.commands_received: list[int] = []
         self.gripper_events: list[GripperEvent] = []
         self.gcs_heartbeats = 0
+        self.telemetry_cycles = 0
+        """Telemetry periods so far, counted whether or not the link is up."""
+        self.simulated_s = 0.0
+        """Seconds of motion simulated so far."""
         self._last_setpoint_at = -math.inf
         self._stream_started_at = math.inf
 
@@ -300,7 +231,7 @@ class FakeVehicle:
     def true_end_effector(self) -> np.ndarray:
         """Actual gripper position in the local NED frame (the vehicle is level), m."""
         with self._lock:
-            return self._state.position + _yaw_matrix(self._state.yaw) @ self.end_effector_frd
+            return self._state.position + yaw_matrix(self._state.yaw) @ self.end_effector_frd
 
     # -- the loop --------------------------------------------------------------------
 
@@ -326,11 +257,13 @@ class FakeVehicle:
                 self._send_heartbeat()
                 next_heartbeat = now + 1.0
             if now >= next_telemetry:
+                self.telemetry_cycles += 1
                 self._send_telemetry(now)
                 # Skip missed ticks instead of bursting after a stall of the machine.
                 next_telemetry = max(next_telemetry + period, now)
 
     def _advance(self, elapsed: float, now: float) -> None:
+        self.simulated_s += max(elapsed, 0.0)
         steps = max(1, math.ceil(elapsed / PHYSICS_STEP_S))
         dt = elapsed / steps
         if dt <= 0:
@@ -453,7 +386,7 @@ class FakeVehicle:
         with self._lock:
             position = self._state.position.copy()
             yaw = self._state.yaw
-        end_effector = position + _yaw_matrix(yaw) @ self.end_effector_frd
+        end_effector = position + yaw_matrix(yaw) @ self.end_effector_frd
         self.gripper_events.append(
             GripperEvent(
                 grab=grab,
@@ -498,79 +431,18 @@ class FakeVehicle:
             boot_ms,
             attitude_noise[0],
             attitude_noise[1],
-            _wrap(yaw + attitude_noise[2]),
+            wrap_angle(yaw + attitude_noise[2]),
             0.0,
             0.0,
             0.0,
         )
 
 
-def step_dynamics(
-    position: np.ndarray,
-    velocity: np.ndarray,
-    yaw: float,
-    target: np.ndarray,
-    target_yaw: float,
-    dt: float,
-    dynamics: Dynamics,
-    disturbance_m_s2: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, float]:
-    """One semi-implicit Euler step of the fake's closed-loop position dynamics.
-
-    ``v_des = clip(k_p (target - x), v_max)``, ``a = clip(k_v (v_des - v), a_max) + d``;
-    yaw turns towards ``target_yaw`` at no more than ``yaw_rate_rad_s``. The ground
-    (``z = 0`` in NED) stops downward motion.
-
-    Parameters
-    ----------
-    position, velocity : ndarray, shape (3,)
-        NED, m and m/s.
-    yaw, target_yaw : float
-        rad.
-    target : ndarray, shape (3,)
-        Position setpoint, NED, m.
-    dt : float
-        Step, s (> 0).
-    dynamics : Dynamics
-        Gains and limits.
-    disturbance_m_s2 : ndarray, shape (3,), optional
-        External acceleration (gusts) added after the controller's bounded command.
-
-    Returns
-    -------
-    position, velocity, yaw
-        The new state (new arrays).
-    """
-    desired = _clip_norm(dynamics.position_gain * (target - position), dynamics.max_speed_m_s)
-    accel = _clip_norm(dynamics.velocity_gain * (desired - velocity), dynamics.max_accel_m_s2)
-    if disturbance_m_s2 is not None:
-        accel = accel + disturbance_m_s2
-    velocity = velocity + accel * dt
-    position = position + velocity * dt
-    if position[2] > 0.0:  # the ground (NED: z down, ground at z = 0)
-        position[2] = 0.0
-        velocity[2] = min(velocity[2], 0.0)
-    yaw_error = _wrap(target_yaw - yaw)
-    turn = math.copysign(min(abs(yaw_error), dynamics.yaw_rate_rad_s * dt), yaw_error)
-    return position, velocity, _wrap(yaw + turn)
-
-
-def free_udp_port(host: str = "127.0.0.1") -> int:
-    """A UDP port on ``host`` that nothing was bound to a moment ago (for tests and trials)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind((host, 0))
-        return int(probe.getsockname()[1])
-
-
-def _yaw_matrix(yaw: float) -> np.ndarray:
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def main(argv: list[str] | None = None) -> None:
-    """``python -m adapters.fake_vehicle``: run a fake vehicle until Ctrl-C."""
+    """``python -m adapters.hexarotor.fake_vehicle``: run a fake vehicle until Ctrl-C."""
     parser = argparse.ArgumentParser(
-        prog="python -m adapters.fake_vehicle", description=__doc__.splitlines()[0]
+        prog="python -m adapters.hexarotor.fake_vehicle",
+        description="A SITL-free fake hexarotor that speaks MAVLink 2 over UDP.",
     )
     parser.add_argument("--url", default="udpout:127.0.0.1:14550", help="pymavlink URL")
     parser.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from adapters.wrench import (
+from adapters.hexarotor.wrench import (
     GRAVITY_M_S2,
     HexarotorGeometry,
     InfeasibleHoverError,

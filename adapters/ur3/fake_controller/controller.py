@@ -1,373 +1,66 @@
-"""A fake Universal Robots controller on the network, for driving the real ur_rtde client.
+"""The fake controller: the simulated robot behind the RTDE, script and dashboard servers,
+the command log, the armed failure triggers and the JSON control channel for tests.
 
-It listens on one loopback address, on the controller's fixed ports:
-
-* **30004, RTDE**: protocol version 2 (``V``), controller version (``v``), output and
-  input recipe setup (``O``/``I``), start/pause (``S``/``P``), and data packages
-  (``U``) both ways; every package starts with the header ``>HB`` (uint16 size
-  including the header, uint8 command). Output packages are streamed to each started
-  client from the simulated robot state.
-* **30003, script**: accepts the URScript program a client writes. A program that
-  reads the command register (``read_input_integer_register``) is taken to be
-  ur_rtde's control script: the fake then plays that script's side of the register
-  handshake (see :class:`ControlScript`).
-* **29999, dashboard**: the welcome line and the few queries ur_rtde makes.
-* **a JSON control channel** (``--control-port``, default 30999) for tests: read the
-  state and the log of commands received, trigger a protective stop, an emergency
-  stop or a dropped connection, and shut down. One JSON object per line each way.
-
-The simulated robot has a TCP pose that ``moveL`` moves along a straight line with a
-trapezoidal speed profile (optionally faster than real time, ``--time-scale``), robot
-mode, safety mode/status bits, runtime state, digital outputs, protective and
-emergency stops, and a link that can drop.
-
-It must run in its own process: ur_rtde's constructors hold the GIL while they wait
-for the controller, so a fake in a thread of the client's process deadlocks.
-
-Examples
---------
-``python -m adapters.fake_ur_controller --host 127.0.0.2 --time-scale 0.2``
+See :mod:`adapters.ur3.fake_controller` for the ports and what each one does.
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import math
-import os
 import re
-import signal
 import socket
 import struct
 import sys
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
-RTDE_PORT = 30004
+from adapters.ur3.fake_controller.robot import (
+    ROBOT_MODE_POWER_OFF,
+    ROBOT_MODE_RUNNING,
+    LinearMove,
+    RobotState,
+)
+from adapters.ur3.fake_controller.rtde import (
+    DATA_PACKAGE,
+    GET_URCONTROL_VERSION,
+    HEADER,
+    PAUSE,
+    REQUEST_PROTOCOL_VERSION,
+    RTDE_PORT,
+    SETUP_INPUTS,
+    SETUP_OUTPUTS,
+    START,
+    TEXT_MESSAGE,
+    pack_values,
+    package,
+    recv_exactly,
+    unpack_values,
+    variable_type,
+    zero_value,
+)
+from adapters.ur3.fake_controller.script import (
+    ACTUATING_COMMANDS,
+    REGISTER_OFFSET_PATTERN,
+    SCRIPT_COMMANDS,
+    SCRIPT_CYCLE_S,
+    ControlScript,
+)
+
 SCRIPT_PORT = 30003
 DASHBOARD_PORT = 29999
 DEFAULT_CONTROL_PORT = 30999
 
-HEADER = struct.Struct(">HB")
-"""Every RTDE package: total size in bytes (header included), command byte."""
-
-# RTDE command bytes.
-REQUEST_PROTOCOL_VERSION = ord("V")
-GET_URCONTROL_VERSION = ord("v")
-TEXT_MESSAGE = ord("M")
-DATA_PACKAGE = ord("U")
-SETUP_OUTPUTS = ord("O")
-SETUP_INPUTS = ord("I")
-START = ord("S")
-PAUSE = ord("P")
-
-# RTDE type names and their big-endian struct codes.
-TYPE_FORMATS = {
-    "BOOL": "?",
-    "UINT8": "B",
-    "UINT32": "I",
-    "UINT64": "Q",
-    "INT32": "i",
-    "DOUBLE": "d",
-    "VECTOR3D": "3d",
-    "VECTOR6D": "6d",
-    "VECTOR6INT32": "6i",
-    "VECTOR6UINT32": "6I",
-}
-
-# Robot modes, safety modes and runtime states as the RTDE guide numbers them.
-ROBOT_MODE_POWER_OFF, ROBOT_MODE_RUNNING = 3, 7
-SAFETY_NORMAL, SAFETY_PROTECTIVE_STOP, SAFETY_ROBOT_EMERGENCY_STOP = 1, 3, 7
-RUNTIME_STOPPED, RUNTIME_PLAYING, RUNTIME_PAUSED = 1, 2, 4
-
-# Bits of safety_status_bits.
-SAFETY_BIT_NORMAL = 1 << 0
-SAFETY_BIT_PROTECTIVE_STOPPED = 1 << 2
-SAFETY_BIT_ROBOT_EMERGENCY_STOPPED = 1 << 6
-SAFETY_BIT_EMERGENCY_STOPPED = 1 << 7
-SAFETY_BIT_STOPPED_DUE_TO_SAFETY = 1 << 10
-# Bits of robot_status_bits.
-STATUS_BIT_POWER_ON = 1 << 0
-STATUS_BIT_PROGRAM_RUNNING = 1 << 1
 
 MAX_STREAM_HZ = 125.0
 """Output packages are streamed at the client's frequency capped here: Python on a
 shared 2-core machine cannot keep 500 Hz on three links, and ur_rtde only needs fresh
 state, not every controller cycle."""
 
-VECTOR_OUTPUTS = {
-    "target_q",
-    "target_qd",
-    "target_qdd",
-    "target_current",
-    "target_moment",
-    "actual_q",
-    "actual_qd",
-    "actual_current",
-    "actual_current_window",
-    "joint_control_output",
-    "actual_TCP_pose",
-    "actual_TCP_speed",
-    "actual_TCP_force",
-    "target_TCP_pose",
-    "target_TCP_speed",
-    "joint_temperatures",
-    "actual_joint_voltage",
-    "payload_inertia",
-    "ft_raw_wrench",
-    "actual_current_as_torque",
-    "external_force_torque",
-}
-"""RTDE variables of type VECTOR6D."""
-
-TYPED_VARIABLES = {
-    "timestamp": "DOUBLE",
-    "actual_execution_time": "DOUBLE",
-    "robot_mode": "INT32",
-    "joint_mode": "VECTOR6INT32",
-    "safety_mode": "INT32",
-    "safety_status": "INT32",
-    "actual_tool_accelerometer": "VECTOR3D",
-    "speed_scaling": "DOUBLE",
-    "target_speed_fraction": "DOUBLE",
-    "actual_momentum": "DOUBLE",
-    "actual_main_voltage": "DOUBLE",
-    "actual_robot_voltage": "DOUBLE",
-    "actual_robot_current": "DOUBLE",
-    "actual_digital_input_bits": "UINT64",
-    "actual_digital_output_bits": "UINT64",
-    "runtime_state": "UINT32",
-    "elbow_position": "VECTOR3D",
-    "elbow_velocity": "VECTOR3D",
-    "robot_status_bits": "UINT32",
-    "safety_status_bits": "UINT32",
-    "analog_io_types": "UINT32",
-    "standard_analog_input0": "DOUBLE",
-    "standard_analog_input1": "DOUBLE",
-    "standard_analog_output0": "DOUBLE",
-    "standard_analog_output1": "DOUBLE",
-    "io_current": "DOUBLE",
-    "euromap67_input_bits": "UINT32",
-    "euromap67_output_bits": "UINT32",
-    "euromap67_24V_voltage": "DOUBLE",
-    "euromap67_24V_current": "DOUBLE",
-    "tool_mode": "UINT32",
-    "tool_analog_input_types": "UINT32",
-    "tool_analog_input0": "DOUBLE",
-    "tool_analog_input1": "DOUBLE",
-    "tool_output_voltage": "INT32",
-    "tool_output_current": "DOUBLE",
-    "tool_temperature": "DOUBLE",
-    "tcp_force_scalar": "DOUBLE",
-    "output_bit_registers0_to_31": "UINT32",
-    "output_bit_registers32_to_63": "UINT32",
-    "input_bit_registers0_to_31": "UINT32",
-    "input_bit_registers32_to_63": "UINT32",
-    "tool_output_mode": "UINT8",
-    "tool_digital_output0_mode": "UINT8",
-    "tool_digital_output1_mode": "UINT8",
-    "payload": "DOUBLE",
-    "payload_cog": "VECTOR3D",
-    "script_control_line": "UINT32",
-    "joint_position_deviation_ratio": "DOUBLE",
-    "collision_detection_ratio": "DOUBLE",
-    "time_scale_source": "UINT32",
-    # Inputs (client -> controller).
-    "speed_slider_mask": "UINT32",
-    "speed_slider_fraction": "DOUBLE",
-    "standard_digital_output_mask": "UINT8",
-    "standard_digital_output": "UINT8",
-    "configurable_digital_output_mask": "UINT8",
-    "configurable_digital_output": "UINT8",
-    "tool_digital_output_mask": "UINT8",
-    "tool_digital_output": "UINT8",
-    "standard_analog_output_mask": "UINT8",
-    "standard_analog_output_type": "UINT8",
-    "standard_analog_output_0": "DOUBLE",
-    "standard_analog_output_1": "DOUBLE",
-}
-TYPED_VARIABLES.update(dict.fromkeys(VECTOR_OUTPUTS, "VECTOR6D"))
-
-REGISTER_PATTERN = re.compile(r"^(input|output)_(bit|int|double)_register_(\d+)$")
-REGISTER_TYPES = {"bit": "BOOL", "int": "INT32", "double": "DOUBLE"}
-REGISTER_RANGES = {"bit": range(64, 128), "int": range(48), "double": range(48)}
-
-
-def variable_type(name: str) -> str | None:
-    """The RTDE type of a variable name, or None when the controller has no such field."""
-    if name in TYPED_VARIABLES:
-        return TYPED_VARIABLES[name]
-    match = REGISTER_PATTERN.match(name)
-    if match and int(match.group(3)) in REGISTER_RANGES[match.group(2)]:
-        return REGISTER_TYPES[match.group(2)]
-    return None
-
-
-def zero_value(rtde_type: str) -> Any:
-    """The value a field of ``rtde_type`` has before anything sets it."""
-    fmt = TYPE_FORMATS[rtde_type]
-    if fmt[0].isdigit():
-        kind = float if fmt.endswith("d") else int
-        return [kind(0)] * int(fmt[0])
-    return {"?": False, "d": 0.0}.get(fmt, 0)
-
-
-def pack_values(types: list[str], values: list[Any]) -> bytes:
-    """Serialize ``values`` as the fields of a recipe with ``types``, big-endian."""
-    fmt = ">" + "".join(TYPE_FORMATS[t] for t in types)
-    flat: list[Any] = []
-    for value in values:
-        flat.extend(value if isinstance(value, list | tuple) else [value])
-    return struct.pack(fmt, *flat)
-
-
-def unpack_values(types: list[str], payload: bytes) -> list[Any]:
-    """Parse a data package payload (recipe id removed) into one value per field."""
-    flat = list(struct.unpack(">" + "".join(TYPE_FORMATS[t] for t in types), payload))
-    values: list[Any] = []
-    for rtde_type in types:
-        fmt = TYPE_FORMATS[rtde_type]
-        count = int(fmt[0]) if fmt[0].isdigit() else 1
-        chunk, flat = flat[:count], flat[count:]
-        values.append(chunk if count > 1 else chunk[0])
-    return values
-
-
-def package(command: int, payload: bytes = b"") -> bytes:
-    """One RTDE package: the ``>HB`` header then the payload."""
-    return HEADER.pack(HEADER.size + len(payload), command) + payload
-
-
-def trapezoid_duration(distance: float, speed: float, acceleration: float) -> float:
-    """Time to travel ``distance`` from rest to rest with a trapezoidal speed profile."""
-    if distance <= 0:
-        return 0.0
-    ramp = speed * speed / acceleration  # distance spent accelerating plus decelerating
-    if distance <= ramp:
-        return 2.0 * math.sqrt(distance / acceleration)
-    return 2.0 * speed / acceleration + (distance - ramp) / speed
-
-
-def trapezoid_fraction(elapsed: float, distance: float, speed: float, acceleration: float) -> float:
-    """Fraction of ``distance`` covered ``elapsed`` seconds into a trapezoidal move."""
-    total = trapezoid_duration(distance, speed, acceleration)
-    if distance <= 0 or elapsed >= total:
-        return 1.0
-    peak = min(speed, math.sqrt(distance * acceleration))  # triangular when too short
-    ramp_time = peak / acceleration
-    ramp_distance = 0.5 * acceleration * ramp_time**2
-    if elapsed < ramp_time:
-        covered = 0.5 * acceleration * elapsed**2
-    elif elapsed < total - ramp_time:
-        covered = ramp_distance + peak * (elapsed - ramp_time)
-    else:
-        remaining = total - elapsed
-        covered = distance - 0.5 * acceleration * remaining**2
-    return min(max(covered / distance, 0.0), 1.0)
-
-
-@dataclass
-class LinearMove:
-    """A moveL in progress: from ``start`` to ``goal``, begun at monotonic time ``started``."""
-
-    start: list[float]
-    goal: list[float]
-    speed: float
-    acceleration: float
-    started: float
-
-    def pose_at(self, now: float, time_scale: float) -> list[float]:
-        """The interpolated pose (position along the line; orientation snaps at the end)."""
-        distance = math.dist(self.start[:3], self.goal[:3])
-        elapsed = (now - self.started) / time_scale
-        fraction = trapezoid_fraction(elapsed, distance, self.speed, self.acceleration)
-        if fraction >= 1.0:
-            return list(self.goal)
-        position = [
-            a + fraction * (b - a) for a, b in zip(self.start[:3], self.goal[:3], strict=True)
-        ]
-        return position + list(self.start[3:])
-
-
-@dataclass
-class RobotState:
-    """Everything the fake controller simulates, guarded by :attr:`FakeController.lock`."""
-
-    tcp_pose: list[float] = field(default_factory=lambda: [0.3, 0.0, 0.3, math.pi, 0.0, 0.0])
-    joints: list[float] = field(default_factory=lambda: [0.0, -1.57, 1.57, -1.57, -1.57, 0.0])
-    protective_stopped: bool = False
-    emergency_stopped: bool = False
-    program_running: bool = False
-    motion: LinearMove | None = None
-    digital_outputs: int = 0
-    """actual_digital_output_bits: standard 0-7, configurable 8-15, tool 16-17."""
-    inputs: dict[str, Any] = field(default_factory=dict)
-    """The last value the clients wrote to each input field."""
-    outputs: dict[str, Any] = field(default_factory=dict)
-    """Output registers the simulated script wrote."""
-
-    def safety_mode(self) -> int:
-        """``safety_mode`` / ``safety_status``: 1 normal, 3 protective stop, 7 robot e-stop."""
-        if self.emergency_stopped:
-            return SAFETY_ROBOT_EMERGENCY_STOP
-        if self.protective_stopped:
-            return SAFETY_PROTECTIVE_STOP
-        return SAFETY_NORMAL
-
-    def safety_status_bits(self) -> int:
-        """``safety_status_bits``, which ur_rtde's ``isProtectiveStopped`` and
-        ``isEmergencyStopped`` read."""
-        if self.emergency_stopped:
-            return (
-                SAFETY_BIT_ROBOT_EMERGENCY_STOPPED
-                | SAFETY_BIT_EMERGENCY_STOPPED
-                | SAFETY_BIT_STOPPED_DUE_TO_SAFETY
-            )
-        if self.protective_stopped:
-            return SAFETY_BIT_PROTECTIVE_STOPPED | SAFETY_BIT_STOPPED_DUE_TO_SAFETY
-        return SAFETY_BIT_NORMAL
-
-    def robot_status_bits(self) -> int:
-        """``robot_status_bits``: power on, and program running (ur_rtde's
-        ``isProgramRunning``)."""
-        bits = 0 if self.emergency_stopped else STATUS_BIT_POWER_ON
-        return bits | (STATUS_BIT_PROGRAM_RUNNING if self.program_running else 0)
-
-    def runtime_state(self) -> int:
-        """``runtime_state``: stopped, playing, or paused by a protective stop."""
-        if not self.program_running:
-            return RUNTIME_STOPPED
-        return RUNTIME_PAUSED if self.protective_stopped else RUNTIME_PLAYING
-
-
-SCRIPT_COMMANDS = {
-    1: "moveJ",
-    2: "moveJ_IK",
-    3: "moveL",
-    4: "moveL_FK",
-    31: "triggerProtectiveStop",
-    33: "stopL",
-    34: "stopJ",
-    36: "isPoseWithinSafetyLimits",
-    255: "stopScript",
-}
-"""The codes ur_rtde's control script reads from its command register that this fake
-acts on (learned from the script ur_rtde 1.6 uploads). Other codes are logged and
-acknowledged without effect."""
-
-REALTIME_COMMANDS = frozenset({6, 9, 10, 11, 24, 25, 26, 27, 38, 58, 66, 67, 68, 69, 70, 71})
-"""Codes the script answers with "ready" at once instead of "done" (servo/speed
-streaming and fast getters)."""
-
-ACTUATING_COMMANDS = frozenset(
-    {"moveJ", "moveJ_IK", "moveL", "moveL_FK", "stopL", "stopJ", "setStandardDigitalOut"}
-    | {"setToolDigitalOut", "setConfigurableDigitalOut"}
-)
-"""Commands that make the robot do something; triggers count these."""
 
 # Which input fields set which digital outputs: (mask field, value field, log name,
 # first bit in actual_digital_output_bits, number of outputs).
@@ -389,25 +82,10 @@ DROP_SCOPES = ("all", "rtde")
 SCRIPT_QUIET_S = 0.1
 """A program sent to the script port is complete once the sender paused this long:
 ur_rtde writes the whole program at once and keeps the socket open."""
-SCRIPT_CYCLE_S = 0.004
-"""How often the simulated control script polls its command register when nothing
-wakes it (the real one runs every controller cycle, 2 ms)."""
-REGISTER_OFFSET_PATTERN = re.compile(r"reg_offset_int\s*=\s*(?:#[^\n]*\n)?\s*(\d+)")
 
 
 def _log(message: str) -> None:
     print(f"fake-ur {time.monotonic():.3f} {message}", file=sys.stderr, flush=True)
-
-
-def _recv_exactly(sock: socket.socket, size: int) -> bytes:
-    """Read ``size`` bytes; raise ConnectionError when the peer closes first."""
-    chunks = bytearray()
-    while len(chunks) < size:
-        chunk = sock.recv(size - len(chunks))
-        if not chunk:
-            raise ConnectionError("peer closed the connection")
-        chunks.extend(chunk)
-    return bytes(chunks)
 
 
 @dataclass
@@ -426,131 +104,6 @@ class Trigger:
     """For ``"drop"``: whether the controller accepts connections again afterwards."""
     scope: str = "all"
     """For ``"drop"``: ``"all"`` connections or only the ``"rtde"`` ones (30004)."""
-
-
-class ControlScript:
-    """Plays the controller side of ur_rtde's control script.
-
-    The real script loops once per controller cycle: it reads the command register
-    (``input_int_register_<offset>``); 0 means idle, and it answers "ready" (1) in
-    ``output_int_register_<offset>``. A non-zero code is executed once (a blocking
-    ``movel`` for moveL), then the script answers "done" (2) and waits for the client
-    to clear the register. Real-time codes answer "ready" directly. Code 255 ends the
-    script. Arguments come from ``input_double_register_<offset>+0..`` (pose, then
-    speed and acceleration in 6 and 7) and ``input_int_register_<offset>+1``
-    (asynchronous flag); results go to ``output_int_register_<offset>+1``.
-
-    Parameters
-    ----------
-    controller
-        The simulated controller whose registers and robot the script uses.
-    name
-        The program's name (``rtde_control``), for the dashboard's ``programState``.
-    register_offset
-        The script's ``reg_offset_int``: 0, or 24 with ur_rtde's upper register range.
-    """
-
-    def __init__(self, controller: FakeController, name: str, register_offset: int) -> None:
-        self.controller = controller
-        self.name = name
-        self.offset = register_offset
-        self.stopped = threading.Event()
-        self.thread = threading.Thread(target=self._run, name=f"script-{name}", daemon=True)
-
-    def start(self) -> None:
-        self.thread.start()
-
-    def stop(self) -> None:
-        """End the script (a new program, the dashboard ``stop``, an e-stop)."""
-        self.stopped.set()
-        self.controller.wake()
-
-    def _int_in(self, index: int) -> int:
-        return int(self.controller.state.inputs.get(f"input_int_register_{self.offset + index}", 0))
-
-    def _double_in(self, index: int) -> float:
-        key = f"input_double_register_{self.offset + index}"
-        return float(self.controller.state.inputs.get(key, 0.0))
-
-    def _int_out(self, index: int, value: int) -> None:
-        self.controller.state.outputs[f"output_int_register_{self.offset + index}"] = value
-
-    def _run(self) -> None:
-        controller = self.controller
-        with controller.lock:
-            self._int_out(0, 1)  # signal_ready
-        executing = False
-        while not self.stopped.is_set():
-            controller.wait_for_change(SCRIPT_CYCLE_S)
-            with controller.lock:
-                if self.stopped.is_set():
-                    break
-                if controller.state.protective_stopped:
-                    continue  # a protective stop pauses the program
-                code = self._int_in(0)
-                if code in REALTIME_COMMANDS:
-                    self._execute(code)
-                    self._int_out(0, 1)
-                    continue
-                if code == 0:
-                    executing = False
-                    self._int_out(0, 1)
-                    continue
-                if executing:
-                    continue
-                executing = True
-            # Executed outside the lock: a moveL blocks for the duration of the motion.
-            outcome = self._execute(code)
-            # A protective stop pauses the program: "done" only follows a release.
-            while controller.is_protective_stopped() and not self.stopped.is_set():
-                controller.wait_for_change(SCRIPT_CYCLE_S)
-            with controller.lock:
-                if outcome == "end":
-                    break
-                if outcome == "lost":
-                    executing = False  # never arrived: idle again, "ready" next cycle
-                elif not self.stopped.is_set():
-                    self._int_out(0, 2)  # signal_done_with_cmd
-        controller.script_ended(self)
-
-    def _execute(self, code: int) -> str:
-        """Run one command.
-
-        Returns
-        -------
-        str
-            ``"done"``; ``"end"`` when it ends the script; ``"lost"`` when an armed
-            trigger fired as it arrived: the command is then treated as never received
-            (its register is cleared), as a package lost with a dropped link would be.
-        """
-        controller = self.controller
-        name = SCRIPT_COMMANDS.get(code, f"code_{code}")
-        with controller.lock:
-            pose = [self._double_in(i) for i in range(6)]
-            entry: dict[str, Any] = {"command": name, "code": code}
-            if name == "moveL":
-                entry.update(
-                    pose=pose,
-                    speed=self._double_in(6),
-                    acceleration=self._double_in(7),
-                    asynchronous=self._int_in(1) == 1,
-                )
-            elif name in ("stopL", "stopJ"):
-                entry.update(deceleration=self._double_in(0), asynchronous=self._int_in(1) == 1)
-            elif name == "isPoseWithinSafetyLimits":
-                within = controller.pose_within_safety_limits(pose)
-                entry.update(pose=pose, result=within)
-                self._int_out(1, 1 if within else 0)
-            if not controller.receive_command(entry):
-                controller.state.inputs[f"input_int_register_{self.offset}"] = 0
-                return "lost"
-        if name == "moveL":
-            controller.move_linear(entry["pose"], entry["speed"], entry["acceleration"], self)
-        elif name in ("stopL", "stopJ"):
-            controller.halt_motion()
-        elif name == "triggerProtectiveStop":
-            controller.protective_stop()
-        return "end" if name == "stopScript" else "done"
 
 
 class FakeController:
@@ -973,8 +526,8 @@ class FakeController:
 
         try:
             while True:
-                size, command = HEADER.unpack(_recv_exactly(connection, HEADER.size))
-                payload = _recv_exactly(connection, size - HEADER.size)
+                size, command = HEADER.unpack(recv_exactly(connection, HEADER.size))
+                payload = recv_exactly(connection, size - HEADER.size)
                 if command == REQUEST_PROTOCOL_VERSION:
                     (version,) = struct.unpack(">H", payload)
                     send(command, bytes([version == 2]))
@@ -1180,81 +733,3 @@ def _close(sock: socket.socket) -> None:
         sock.shutdown(socket.SHUT_RDWR)
     with contextlib.suppress(OSError):
         sock.close()
-
-
-def _shut_down_when_orphaned(controller: FakeController) -> None:
-    """Shut down once the parent is gone (re-parented), so a crashed test run that
-    could not tear its fixtures down leaves no fake listening behind."""
-    parent = os.getppid()
-    while not controller.shutdown_requested.wait(0.5):
-        if os.getppid() != parent:
-            controller.shutdown_requested.set()
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Command line: start the fake and serve until SIGTERM or a ``shutdown`` request.
-
-    Control channel operations (JSON lines on ``--control-port``): ``state``,
-    ``protective_stop``, ``emergency_stop``, ``release``, ``stop_program``,
-    ``drop`` (``reconnect``: bool, ``scope``: ``"all"``/``"rtde"``), ``restore``, ``arm``
-    (``event``, ``after_commands``, ``reconnect``, ``scope``), ``set`` (``fields``: ``tcp_pose``,
-    ``safety_min_z_m``, ``safety_max_reach_m``, ``refuse_programs``), ``shutdown``.
-    """
-    parser = argparse.ArgumentParser(prog="python -m adapters.fake_ur_controller")
-    parser.add_argument("--host", default="127.0.0.2", help="loopback address to listen on")
-    parser.add_argument("--control-port", type=int, default=DEFAULT_CONTROL_PORT)
-    parser.add_argument(
-        "--time-scale", type=float, default=1.0, help="wall seconds per simulated second"
-    )
-    parser.add_argument("--protective-stop", action="store_true", help="start protective stopped")
-    parser.add_argument("--estop", action="store_true", help="start emergency stopped")
-    parser.add_argument(
-        "--refuse-programs", action="store_true", help="never run an uploaded program"
-    )
-    parser.add_argument(
-        "--drop-after",
-        type=int,
-        metavar="N",
-        help="drop every connection when the (N+1)th actuating command arrives",
-    )
-    parser.add_argument(
-        "--no-reconnect", action="store_true", help="after a drop, refuse new connections"
-    )
-    parser.add_argument(
-        "--drop-scope", choices=DROP_SCOPES, default="all", help="which connections drop"
-    )
-    parser.add_argument("--safety-min-z", type=float, default=-math.inf, metavar="METRES")
-    parser.add_argument("--safety-max-reach", type=float, default=0.5, metavar="METRES")
-    parser.add_argument(
-        "--exit-with-parent",
-        action="store_true",
-        help="shut down when the process that started this one exits (for test fixtures)",
-    )
-    parser.add_argument("--verbose", action="store_true")
-    args = parser.parse_args(argv)
-
-    controller = FakeController(
-        args.host,
-        control_port=args.control_port,
-        time_scale=args.time_scale,
-        safety_max_reach_m=args.safety_max_reach,
-        safety_min_z_m=args.safety_min_z,
-        verbose=args.verbose,
-    )
-    controller.state.protective_stopped = args.protective_stop
-    controller.state.emergency_stopped = args.estop
-    controller.refuse_programs = args.refuse_programs
-    if args.drop_after is not None:
-        controller.triggers.append(
-            Trigger("drop", args.drop_after, not args.no_reconnect, args.drop_scope)
-        )
-    signal.signal(signal.SIGTERM, lambda *_: controller.shutdown_requested.set())
-    signal.signal(signal.SIGINT, lambda *_: controller.shutdown_requested.set())
-    if args.exit_with_parent:
-        threading.Thread(target=_shut_down_when_orphaned, args=(controller,), daemon=True).start()
-    controller.run()
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

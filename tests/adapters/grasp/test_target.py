@@ -11,16 +11,9 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from adapters.grasp import (
-    DepthImageError,
-    GraspPlanningError,
-    InferredSegmentError,
-    closing_yaw,
-    decode_depth_image,
-    normalize_half_turn,
-    pixel_to_plane,
-    plan_grasp,
-)
+from adapters.grasp.depth import decode_depth_image
+from adapters.grasp.errors import DepthImageError, GraspPlanningError, InferredSegmentError
+from adapters.grasp.target import closing_yaw, normalize_half_turn, pixel_to_plane, plan_grasp
 from schemas import (
     CameraModel,
     Chain,
@@ -33,12 +26,10 @@ from schemas import (
     PlaneSurface,
     SegmentPoint,
 )
+from tests.adapters.builders import DOWN, looking_down
 
 FX, FY, CX, CY, W, H = 800.0, 820.0, 320.0, 240.0, 640, 480
 TOL = 1e-4  # 0.1 mm
-
-# A camera looking straight down: its x along base +x, its y along base -y, its z down.
-DOWN = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
 
 
 def rot_x(angle: float) -> np.ndarray:
@@ -47,20 +38,8 @@ def rot_x(angle: float) -> np.ndarray:
 
 
 def camera(rotation=DOWN, origin=(0.4, 0.05, 0.6), plane_z=0.02, dist=(0, 0, 0, 0, 0)):
-    transform = np.eye(4)
-    transform[:3, :3] = rotation
-    transform[:3, 3] = origin
-    return CameraModel(
-        fx=FX,
-        fy=FY,
-        cx=CX,
-        cy=CY,
-        width=W,
-        height=H,
-        dist=dist,
-        T_base_camera=transform.tolist(),
-        surface={"plane_z": plane_z},
-    )
+    """The default 640 x 480 camera (principal point CX, CY) with focal lengths FX, FY."""
+    return looking_down(origin, rotation=rotation, fx=FX, fy=FY, plane_z=plane_z, dist=dist)
 
 
 def detection(*chains: Chain) -> Detection:
@@ -514,7 +493,7 @@ def test_depth_surface_schema():
 def test_the_depth_camera_example_loads():
     from pathlib import Path
 
-    examples = Path(__file__).resolve().parents[2] / "docs" / "examples"
+    examples = Path(__file__).resolve().parents[3] / "docs" / "examples"
     cam = CameraModel.from_file(examples / "camera_depth.json")
     assert isinstance(cam.surface, DepthSurface) and cam.surface.depth_scale == 0.001
 

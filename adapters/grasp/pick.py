@@ -2,15 +2,17 @@
 
 What ``dlo ur3 plan``, ``dlo ur3 pick --dry-run`` and ``POST /v1/grasp`` return. Pure:
 no robot is contacted, so the checks that need one (``isPoseWithinSafetyLimits``, stops,
-the path from the current tool position) are left to :meth:`UR3Picker.pick`.
+the path from the current tool position) are left to
+:meth:`adapters.ur3.driver.UR3Picker.pick`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from adapters.grasp import plan_grasp
-from adapters.ur3 import UnsafeTargetError, UR3Config, check_workspace, plan_motions
+from adapters.errors import UnsafeTargetError
+from adapters.grasp.motions import UR3Config, check_workspace, plan_motions
+from adapters.grasp.target import plan_grasp
 from schemas import CameraModel, Detection, GraspSelector
 from schemas.grasp import GraspPlan
 
@@ -27,10 +29,10 @@ def plan_pick(
     Parameters
     ----------
     detection, camera, selector
-        As for :func:`adapters.grasp.plan_grasp`.
+        As for :func:`adapters.grasp.target.plan_grasp`.
     depth
         The depth image, for a camera whose surface is a depth image (as
-        :func:`adapters.grasp.plan_grasp`).
+        :func:`adapters.grasp.target.plan_grasp`).
     config
         Heights, speeds and workspace of the pick; :class:`UR3Config` defaults when None.
 
@@ -43,7 +45,7 @@ def plan_pick(
     Raises
     ------
     GraspPlanningError
-        As :func:`adapters.grasp.plan_grasp` (including ``InferredSegmentError`` and
+        As :func:`adapters.grasp.target.plan_grasp` (including ``InferredSegmentError`` and
         ``DepthImageError``).
     """
     config = UR3Config() if config is None else config
