@@ -235,7 +235,7 @@ def test_http_app_runs_the_bus(tmp_path: Path) -> None:
         '{ mode: "peer", listen: { endpoints: ["ENDPOINT"] }, // the bus\n'
         "  scouting: { multicast: { enabled: false } } }\n".replace("ENDPOINT", endpoint)
     )
-    app = create_app(Settings(workers=1, zenoh=True, zenoh_config=config_file))
+    app = create_app(Settings(workers=1, zenoh=True, zenoh_config=config_file, zenoh_listen=None))
     with serving(app) as base, client_of(endpoint) as client:
         assert httpx.get(f"{base}/readyz").json() == {"status": "ready"}
         chains = subscribe(client, "dlo/cam7/chains")
@@ -251,7 +251,7 @@ def test_readyz_fails_when_zenoh_cannot_open(tmp_path: Path) -> None:
 
     config_file = tmp_path / "zenoh.json5"
     config_file.write_text('{ mode: "peer", listen: { endpoints: ["nonsense/1.2.3.4:5"] } }')
-    settings = Settings(workers=1, zenoh=True, zenoh_config=config_file)
+    settings = Settings(workers=1, zenoh=True, zenoh_config=config_file, zenoh_listen=None)
     with running_server(settings, wait_ready=False) as base:
         wait_until(
             lambda: httpx.get(f"{base}/readyz").json()["status"] == "failed",
@@ -306,6 +306,7 @@ def test_router_with_two_services(tmp_path: Path) -> None:
         )
     )
     environment = {**os.environ, "DLO_LOG_LEVEL": "WARNING"}
+    environment.pop("DLO_ZENOH_LISTEN")  # clients of the router: they listen nowhere
     processes = [
         subprocess.Popen(
             [*DLO, "router", "--listen", router, "--no-multicast"],
