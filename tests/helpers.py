@@ -38,6 +38,13 @@ def free_udp_port(host: str = "127.0.0.1") -> int:
     return free_port(host, socket.SOCK_DGRAM)
 
 
+def accepts_connections(port: int, host: str = "127.0.0.1") -> bool:
+    """True when a TCP connection to ``host:port`` is accepted (something listens)."""
+    with contextlib.suppress(OSError), socket.create_connection((host, port), 1):
+        return True
+    return False
+
+
 def wait_until(
     condition: Callable[[], bool],
     what: str = "the condition",

@@ -11,10 +11,19 @@ from pathlib import Path
 
 import zenoh
 
-from service.runtime.settings import DEFAULT_ZENOH_LISTEN
+from service.runtime.settings import DEFAULT_ZENOH_LISTEN, IMAGE_KEYS
 
-IMAGE_KEYS = "dlo/*/image"
-"""Where cameras publish their frames; ``*`` is the camera's name."""
+__all__ = [
+    "DEFAULT_ZENOH_LISTEN",
+    "IMAGE_KEYS",
+    "JSON",
+    "QUERY_KEY",
+    "chains_key",
+    "describe_config",
+    "errors_key",
+    "make_config",
+    "service_config",
+]
 QUERY_KEY = "dlo/detect"
 """The queryable: ``get`` with the image as payload."""
 JSON = "application/json"

@@ -51,13 +51,23 @@ def serve(
             "configuration file's, else tcp/127.0.0.1:7447).",
         ),
     ] = None,
+    image_keys: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="KEYEXPR",
+            help="The frames this replica takes, dlo/<camera or pattern>/image, e.g. "
+            "dlo/line1-$*/image for a fixed group of cameras (repeatable; env "
+            "DLO_ZENOH_IMAGE_KEYS, comma separated; default dlo/*/image). Replicas with the "
+            "same keys share the cameras out among themselves.",
+        ),
+    ] = None,
 ) -> None:
     """Serve detection over HTTP (POST /v1/detect; OpenAPI docs at /docs).
 
-    Other settings come from DLO_* environment variables: DLO_QUEUE_SIZE,
-    DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_ZENOH_MULTICAST, DLO_API_TOKEN or
-    DLO_API_TOKEN_FILE (a bearer token required on /v1/*), DLO_PROTECT_METRICS,
-    DLO_LOG_LEVEL (see the README).
+    Other settings come from DLO_* variables (see the README): DLO_QUEUE_SIZE,
+    DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_ZENOH_MULTICAST,
+    DLO_ZENOH_ASSIGNMENT, DLO_API_TOKEN or DLO_API_TOKEN_FILE (a bearer token
+    on /v1/*), DLO_PROTECT_METRICS, DLO_LOG_LEVEL.
     """
     options = {
         "host": host,
@@ -66,6 +76,7 @@ def serve(
         "zenoh": zenoh,
         "zenoh_config": zenoh_config,
         "zenoh_listen": zenoh_listen or None,
+        "zenoh_image_keys": image_keys or None,
     }
     try:
         settings = Settings(**{name: value for name, value in options.items() if value is not None})

@@ -126,6 +126,8 @@ async def _open_bus(state: AppState) -> None:
             metrics=state.metrics,
             max_pixels=settings.max_pixels,
             max_bytes=settings.max_body_bytes,
+            image_keys=settings.zenoh_image_keys,
+            balanced=settings.zenoh_assignment == "balanced",
         )
         state.bus = bus  # before opening: close() then waits for open() to finish
         await asyncio.to_thread(bus.open)
@@ -135,7 +137,9 @@ async def _open_bus(state: AppState) -> None:
         state.bus_error = f"zenoh session failed to open: {type(exc).__name__}: {exc}"
         logger.exception("zenoh session failed to open; /readyz answers 503")
         return
-    logger.info("zenoh session open; serving dlo/*/image and dlo/detect")
+    logger.info(
+        "zenoh session open; serving %s and dlo/detect", ", ".join(settings.zenoh_image_keys)
+    )
 
 
 async def _request_error(request: Request, exc: Exception) -> JSONResponse:

@@ -11,6 +11,8 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 DEFAULT_ZENOH_LISTEN = "tcp/127.0.0.1:7447"
 """Where the embedded zenoh peer listens when nothing else is configured: loopback only."""
+IMAGE_KEYS = "dlo/*/image"
+"""Where cameras publish their frames; ``*`` is the camera's name."""
 
 
 def _comma_separated(value: object) -> object:
@@ -60,6 +62,18 @@ class Settings(BaseSettings):
         "written over the configuration file's; default: the file's, else "
         f"{DEFAULT_ZENOH_LISTEN}.",
     )
+    zenoh_image_keys: Annotated[list[str], NoDecode] = Field(
+        [IMAGE_KEYS],
+        min_length=1,
+        description="Key expressions of the frames this replica takes, comma separated, each "
+        "dlo/<camera or pattern>/image (e.g. dlo/line1-*/image): a static group of cameras.",
+    )
+    zenoh_assignment: Literal["balanced", "rendezvous"] = Field(
+        "balanced",
+        description="How replicas sharing image keys split the cameras: rendezvous hashing "
+        "with loads kept within one camera of each other (balanced), or plain rendezvous "
+        "hashing, which moves fewest cameras when replicas come and go.",
+    )
     zenoh_multicast: bool | None = Field(
         None,
         description="Multicast scouting on/off; default: as the configuration file, else off.",
@@ -87,7 +101,26 @@ class Settings(BaseSettings):
     @field_validator("zenoh_listen", mode="before")
     @classmethod
     def _endpoints(cls, value: object) -> object:
-        return _comma_separated(value)
+        return _comma_separated(value) or None  # an empty variable: as if unset
+
+    @field_validator("zenoh_image_keys", mode="before")
+    @classmethod
+    def _key_list(cls, value: object) -> object:
+        return _comma_separated(value) or [IMAGE_KEYS]  # an empty variable: as if unset
+
+    @field_validator("zenoh_image_keys")
+    @classmethod
+    def _image_keys(cls, keys: list[str]) -> list[str]:
+        for key in keys:
+            chunks = key.split("/")
+            if len(chunks) != 3 or chunks[0] != "dlo" or chunks[2] != "image" or not chunks[1]:
+                raise ValueError(
+                    f"{key!r} is not dlo/<camera>/image (the camera's name or a pattern of "
+                    "them, e.g. dlo/*/image, dlo/line1-$*/image)"
+                )
+            if chunks[1] == "**":
+                raise ValueError(f"{key!r}: the camera is one chunk: use * instead of **")
+        return list(dict.fromkeys(keys))
 
     @field_validator("api_token")
     @classmethod
