@@ -17,7 +17,7 @@ to exercise :mod:`adapters.hexarotor.driver` over real sockets.
 
 Dynamics (a fully-actuated vehicle, so it stays level): a cascaded position controller,
 ``v_des = clip(k_p (x_sp - x), v_max)`` and ``a = clip(k_v (v_des - v), a_max) + gust``,
-integrated in steps of at most 5 ms of wall-clock time. Gusts are an Ornstein-Uhlenbeck
+integrated in steps of at most 5 ms. Gusts are an Ornstein-Uhlenbeck
 acceleration per axis (standard deviation ``gust_std_m_s2``, time constant
 ``gust_time_constant_s``); the reported position and attitude carry white Gaussian noise.
 When setpoints stop for ``setpoint_timeout_s`` the vehicle brakes and holds where it is
@@ -25,8 +25,11 @@ When setpoints stop for ``setpoint_timeout_s`` the vehicle brakes and holds wher
 There is no takeoff procedure: when armed in the guided mode it simply follows setpoints;
 disarmed it does not move.
 
-The random streams are seeded, but the simulation follows the wall clock, so two runs
-are statistically alike, not bit for bit.
+Time: by default the simulation follows the wall clock, so two runs with the same seed are
+statistically alike, not bit for bit. With ``lockstep=True`` it runs on a simulated clock,
+one telemetry period per step, each step answered by the ground station over the link
+(:meth:`FakeVehicle._run_lockstep`): faster than real time, and the same seed and the same
+ground station give the same flight on every run.
 
 Run it as a process with ``python -m adapters.hexarotor.fake_vehicle --url udpout:127.0.0.1:14550``.
 
@@ -68,6 +71,9 @@ from adapters.hexarotor.protocol import (
 
 Autopilot = Literal["ardupilot", "px4"]
 
+SYNC_RESEND_S = 0.5
+"""Lockstep: wall-clock seconds before an unanswered TIMESYNC request is sent again."""
+
 
 @dataclass(frozen=True)
 class GripperEvent:
@@ -103,6 +109,10 @@ class FakeVehicle:
         PX4 flavour: how long setpoints must have streamed before OFFBOARD is accepted.
     system_id
         MAVLink system id of the vehicle.
+    lockstep
+        Step the simulation in lockstep with the ground station instead of following the
+        wall clock (see :meth:`_run_lockstep`): each telemetry period is one step, ended
+        by a ``TIMESYNC`` request the ground station must answer before the next one.
     """
 
     def __init__(
@@ -117,6 +127,7 @@ class FakeVehicle:
         end_effector_frd: tuple[float, float, float] = (0.0, 0.0, 0.0),
         offboard_warmup_s: float = 1.0,
         system_id: int = 1,
+        lockstep: bool = False,
     ) -> None:
         if autopilot not in ("ardupilot", "px4"):
             raise ValueError(f"autopilot must be 'ardupilot' or 'px4', got {autopilot!r}")
@@ -127,6 +138,7 @@ class FakeVehicle:
         self.end_effector_frd = np.asarray(end_effector_frd, dtype=float)
         self.offboard_warmup_s = offboard_warmup_s
         self.system_id = system_id
+        self.lockstep = lockstep
         gust_seed, noise_seed = np.random.SeedSequence(seed).spawn(2)
         self._gust_rng = np.random.default_rng(gust_seed)
         self._noise_rng = np.random.default_rng(noise_seed)
@@ -142,6 +154,8 @@ class FakeVehicle:
         """False silences the heartbeat only (telemetry and commands still flow)."""
         self._heartbeat_due = False
         self._started_at = time.monotonic()
+        self._step = 0
+        self._awaiting_sync: int | None = None
 
         self.armed = False
         self.custom_mode = (
@@ -159,6 +173,8 @@ class FakeVehicle:
         """Telemetry periods so far, counted whether or not the link is up."""
         self.simulated_s = 0.0
         """Seconds of motion simulated so far."""
+        self.sync_answers = 0
+        """Lockstep: steps the ground station has answered."""
         self._last_setpoint_at = -math.inf
         self._stream_started_at = math.inf
 
@@ -235,21 +251,81 @@ class FakeVehicle:
 
     # -- the loop --------------------------------------------------------------------
 
+    @property
+    def sim_time_s(self) -> float:
+        """The vehicle's time: seconds since it started (simulated steps in lockstep)."""
+        return self._time()
+
+    def _time(self) -> float:
+        if self.lockstep:
+            return self._step / self.dynamics.telemetry_hz
+        return time.monotonic() - self._started_at
+
     def _run(self) -> None:
+        if self.lockstep:
+            self._run_lockstep()
+        else:
+            self._run_realtime()
+
+    def _run_lockstep(self) -> None:
+        """Simulate in steps of one telemetry period, each answered by the ground station.
+
+        First a lone ``TIMESYNC`` request at time 0, sent until the ground station answers
+        it: then it is surely listening, and it receives every message of every step from
+        the first on. Each step then advances the physics by one period to time ``t`` and
+        sends the heartbeat (when due) and the telemetry of ``t``, then a ``TIMESYNC``
+        request with ``ts1 = t`` in nanoseconds. Until the answer comes back, every message
+        received is applied at ``t``. As on one link the answer arrives after everything the
+        ground station sent before it, each setpoint and command takes effect at a definite
+        simulated time, and the run depends only on the seed and on what the ground station
+        does. A request is sent again every :data:`SYNC_RESEND_S` of wall-clock time
+        without an answer.
+        """
         period = 1.0 / self.dynamics.telemetry_hz
-        now = time.monotonic()
+        next_heartbeat = period
+        self._await_sync(0)
+        while not self._stop.is_set():
+            self._advance(period, self._time())
+            self._step += 1
+            now = self._time()
+            if now >= next_heartbeat or self._heartbeat_due:
+                self._heartbeat_due = False
+                self._send_heartbeat()
+                next_heartbeat = now + 1.0
+            self.telemetry_cycles += 1
+            self._send_telemetry(now)
+            self._await_sync(round(now * 1e9))
+
+    def _await_sync(self, ts1: int) -> None:
+        """Send a TIMESYNC request and apply what arrives until it is answered (lockstep)."""
+        self._awaiting_sync = ts1
+        while self._awaiting_sync is not None and not self._stop.is_set():
+            self._send_sync_request(ts1)
+            resend_at = time.monotonic() + SYNC_RESEND_S
+            while self._awaiting_sync is not None and time.monotonic() < resend_at:
+                message = self._connection.recv_match(blocking=True, timeout=0.05)
+                if message is not None and self._link_up:
+                    self._handle(message)
+
+    def _send_sync_request(self, ts1: int) -> None:
+        if self._link_up:
+            self._connection.mav.timesync_send(0, ts1)
+
+    def _run_realtime(self) -> None:
+        period = 1.0 / self.dynamics.telemetry_hz
+        now = self._time()
         last_step = now
         next_telemetry = now
         next_heartbeat = now
         while not self._stop.is_set():
-            now = time.monotonic()
+            now = self._time()
             wait = max(0.0, min(next_telemetry, next_heartbeat) - now)
             message = self._connection.recv_match(blocking=True, timeout=min(wait, 0.02))
             while message is not None:
                 if self._link_up:
                     self._handle(message)
                 message = self._connection.recv_match(blocking=False)
-            now = time.monotonic()
+            now = self._time()
             self._advance(now - last_step, now)
             last_step = now
             if now >= next_heartbeat or self._heartbeat_due:
@@ -310,6 +386,10 @@ class FakeVehicle:
         kind = message.get_type()
         if kind == "HEARTBEAT":
             self.gcs_heartbeats += 1
+        elif kind == "TIMESYNC":
+            if message.tc1 != 0 and message.ts1 == self._awaiting_sync:
+                self._awaiting_sync = None
+                self.sync_answers += 1
         elif kind == "SET_POSITION_TARGET_LOCAL_NED":
             self._handle_setpoint(message)
         elif kind == "COMMAND_LONG":
@@ -324,7 +404,7 @@ class FakeVehicle:
         ):
             self.rejected_setpoints += 1
             return
-        now = time.monotonic()
+        now = self._time()
         with self._lock:
             if now - self._last_setpoint_at > self.dynamics.setpoint_timeout_s:
                 self._stream_started_at = now
@@ -376,7 +456,7 @@ class FakeVehicle:
         return mavlink.MAV_RESULT_ACCEPTED
 
     def _setpoints_streaming(self) -> bool:
-        now = time.monotonic()
+        now = self._time()
         with self._lock:
             fresh = now - self._last_setpoint_at <= self.dynamics.setpoint_timeout_s
             return fresh and now - self._stream_started_at >= self.offboard_warmup_s
@@ -390,7 +470,7 @@ class FakeVehicle:
         self.gripper_events.append(
             GripperEvent(
                 grab=grab,
-                time_s=time.monotonic() - self._started_at,
+                time_s=self._time(),
                 position_ned=tuple(float(v) for v in position),
                 yaw_rad=yaw,
                 end_effector_ned=tuple(float(v) for v in end_effector),
@@ -424,7 +504,7 @@ class FakeVehicle:
             yaw = self._state.yaw
         position_noise = self._noise_rng.normal(0.0, dist.position_noise_m, 3)
         attitude_noise = self._noise_rng.normal(0.0, dist.attitude_noise_rad, 3)
-        boot_ms = int((now - self._started_at) * 1000) & 0xFFFFFFFF
+        boot_ms = int(now * 1000) & 0xFFFFFFFF
         x, y, z = position + position_noise
         self._connection.mav.local_position_ned_send(boot_ms, x, y, z, *velocity)
         self._connection.mav.attitude_send(
