@@ -128,6 +128,67 @@ def trial_command(
         raise typer.Exit(EXIT_FAILED)
 
 
+@hexa_app.command("fake-vehicle")
+def fake_vehicle_command(
+    url: Annotated[
+        str,
+        typer.Option(
+            metavar="URL",
+            help="pymavlink URL to send from, e.g. udpout:127.0.0.1:14540 (a ground station "
+            "or MAVSDK listening with udpin there).",
+        ),
+    ] = "udpout:127.0.0.1:14550",
+    autopilot: Annotated[
+        str, typer.Option(help="Behave as ardupilot (ArduCopter) or px4 toward the ground station.")
+    ] = "ardupilot",
+    seed: Annotated[int, typer.Option(help="Seed of the gusts and the sensor noise.")] = 0,
+    home: Annotated[
+        tuple[float, float, float] | None,
+        typer.Option(
+            metavar="LAT LON ALT",
+            help="Home: latitude, longitude (deg) and altitude above sea level (m) of the "
+            "local origin. [default: PX4 SITL's, 47.397742 8.545594 488]",
+            show_default=False,
+        ),
+    ] = None,
+    lockstep: Annotated[
+        bool,
+        typer.Option(
+            "--lockstep",
+            help="Step the simulation in lockstep with the ground station (it must answer "
+            "TIMESYNC requests only when it has caught up, as dlo's LockstepClock does) "
+            "instead of following the wall clock.",
+        ),
+    ] = False,
+) -> None:
+    """Run the SITL-free fake hexarotor until Ctrl-C, for a ground station or MAVSDK.
+
+    It runs on the wall clock by default, as SITL without lockstep: a ground station, MAVSDK
+    or QGroundControl keeps real time, and a simulated clock could only run as fast as it
+    allows.
+    """
+    from adapters.hexarotor.fake_dynamics import Disturbance
+    from adapters.hexarotor.fake_vehicle import DEFAULT_HOME, FakeVehicle, run_until_interrupted
+
+    console = stderr_console()
+    if autopilot not in ("ardupilot", "px4"):
+        exit_usage(console, f"--autopilot must be ardupilot or px4, not {autopilot!r}")
+    try:
+        vehicle = FakeVehicle(
+            url,
+            autopilot=autopilot,
+            seed=seed,
+            disturbance=Disturbance(),
+            home=home or DEFAULT_HOME,
+            lockstep=lockstep,
+        ).start()
+    except (OSError, ValueError) as error:  # a URL pymavlink cannot open
+        exit_usage(console, f"--url {url}: {error}")
+    clock = "in lockstep" if lockstep else "in real time"
+    console.print(f"fake {autopilot} hexarotor on {url}, {clock}; Ctrl-C stops it", highlight=False)
+    run_until_interrupted(vehicle)
+
+
 # -- feasibility ----------------------------------------------------------------------------
 
 

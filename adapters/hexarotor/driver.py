@@ -93,8 +93,12 @@ class LinkConfig:
     command_timeout_s: float = 1.5
     """Wait for each ``COMMAND_ACK``; the command is resent up to ``command_attempts`` times."""
     command_attempts: int = 3
-    offboard_warmup_s: float = 1.2
-    """PX4: how long setpoints stream before OFFBOARD is requested (PX4 wants about 1 s)."""
+    offboard_warmup_s: float = 0.25
+    """PX4: how long setpoints stream before OFFBOARD is requested. PX4 accepts OFFBOARD
+    once a stream (> 2 Hz) is present (PX4 user guide, "Offboard Mode"); a few setpoints
+    at the stream's 20 Hz make it so."""
+    takeoff_timeout_s: float = 20.0
+    """How long a take-off or a landing may take before it counts as failed."""
     mode_timeout_s: float = 5.0
     """After an accepted mode or arming command, wait this long to see it in the heartbeat."""
 
@@ -110,6 +114,7 @@ class LinkConfig:
                 "link_loss_s",
                 "command_timeout_s",
                 "offboard_warmup_s",
+                "takeoff_timeout_s",
                 "mode_timeout_s",
             ),
         )
@@ -164,6 +169,7 @@ class _Inbox:
     position_at: float = -math.inf
     attitude: tuple[float, float, float] | None = None
     attitude_at: float = -math.inf
+    landed_state: int | None = None
     acks: list[tuple[int, int]] = field(default_factory=list)
 
 
@@ -414,6 +420,81 @@ class MavlinkVehicle:
         if not self._wait_for(lambda: self.armed, self.link.mode_timeout_s):
             raise VehicleNotReadyError("arming was accepted but the heartbeat never showed it")
 
+    @property
+    def landed(self) -> bool | None:
+        """On the ground, as the vehicle's EXTENDED_SYS_STATE says (None before the first)."""
+        state = self._inbox.landed_state
+        if state is None or state == mavlink.MAV_LANDED_STATE_UNDEFINED:
+            return None
+        return state == mavlink.MAV_LANDED_STATE_ON_GROUND
+
+    def take_off(self, height_m: float, speed_m_s: float = 0.5) -> None:
+        """Climb to ``height_m`` above the local origin and hold there (armed, guided mode).
+
+        ArduCopter does not leave the ground for position targets in GUIDED: it takes off
+        with ``MAV_CMD_NAV_TAKEOFF`` (param7, metres above home; ArduPilot, "Copter Commands
+        in Guided Mode"), after which the climb point is its target. PX4 in OFFBOARD flies
+        the setpoints it is sent, from the ground too, so the stream climbs (a PX4
+        ``NAV_TAKEOFF`` would leave OFFBOARD for AUTO.TAKEOFF). Returns once the measured
+        height is within 10 cm of ``height_m``, with the setpoint there.
+
+        Raises
+        ------
+        UnsafeTargetError
+            The climb point is outside the geofence; nothing was sent.
+        VehicleNotReadyError
+            Not armed in the guided mode, or the climb took longer than
+            ``link.takeoff_timeout_s``.
+        """
+        if not (math.isfinite(height_m) and height_m > 0):
+            raise UnsafeTargetError(f"take-off height must be finite and > 0, got {height_m}")
+        here = self._measured_position()
+        goal = np.array([here[0], here[1], -height_m])
+        self.fence.check(goal, "take-off point")
+        self._require_link()
+        if not (self.armed and self.in_guided_mode):
+            raise VehicleNotReadyError("the vehicle must be armed and in its guided mode")
+        yaw = self.wait_for_state().yaw
+        if self.autopilot == "ardupilot":
+            self.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, height_m)
+        else:
+            self.goto(goal, yaw, speed_m_s)
+
+        def reached() -> bool:
+            position = self._inbox.position
+            return position is not None and abs(position[2] - goal[2]) <= 0.1
+
+        if not self._wait_for(reached, self.link.takeoff_timeout_s):
+            raise VehicleNotReadyError(f"the take-off did not reach {height_m} m in time")
+        with self._condition:
+            if self.autopilot == "ardupilot":  # it holds the climb point: stream that
+                self._setpoint = _Setpoint(goal.copy(), goal.copy(), yaw, speed_m_s)
+        if not self._wait_for(self._setpoint_reached, self.link.takeoff_timeout_s):
+            raise VehicleNotReadyError("the take-off setpoint was not reached in time")
+
+    def land(self) -> None:
+        """Land where the vehicle is (``MAV_CMD_NAV_LAND``) and wait until it is on the ground.
+
+        Both autopilots switch to their landing mode (LAND; AUTO.LAND), descend and disarm
+        on their own after touching down; the setpoint stream stops first.
+
+        Raises
+        ------
+        VehicleNotReadyError
+            Not on the ground within ``link.takeoff_timeout_s``.
+        """
+        with self._condition:
+            self._setpoint = None
+        self.command(mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, math.nan)
+
+        def down() -> bool:
+            if self.landed is not None:
+                return bool(self.landed)
+            return self._inbox.position is not None and self._inbox.position[2] > -0.05
+
+        if not self._wait_for(down, self.link.takeoff_timeout_s):
+            raise VehicleNotReadyError("the vehicle did not land in time")
+
     def disarm(self) -> None:
         """Disarm the motors."""
         self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0)
@@ -631,6 +712,8 @@ class MavlinkVehicle:
             elif kind == "ATTITUDE":
                 inbox.attitude = (message.roll, message.pitch, message.yaw)
                 inbox.attitude_at = now
+            elif kind == "EXTENDED_SYS_STATE":
+                inbox.landed_state = message.landed_state
             elif kind == "COMMAND_ACK":
                 inbox.acks.append((message.command, message.result))
             else:

@@ -51,6 +51,9 @@ TRIAL_APPROACH = ApproachConfig(approach_speed_m_s=0.4)
 """The adapter's defaults (0.5 m standoff, 10 mm tolerance, 0.3 s dwell, gripper 0.40 m ahead
 of and 0.20 m below the vehicle origin) with a brisker final move (0.4 m/s, not 0.25)."""
 
+TAKEOFF_HEIGHT_M = 1.0
+"""The vehicle takes off from the ground to this height before the first approach."""
+
 TRIAL_SCENE_CABLES = 3
 TRIAL_FRACTIONS = (0.15, 0.85)
 """Grasp points are drawn uniformly between these fractions of a chain's length."""
@@ -153,7 +156,8 @@ def run_trials(
     """Fly one approach per target against a fresh fake vehicle; collect the errors.
 
     The fake runs in this process on its own thread, sending to a free loopback UDP
-    port that the adapter listens on. Between approaches the gripper opens again.
+    port that the adapter listens on. The vehicle takes off from the ground, flies the
+    approaches (the gripper opens again between them) and lands.
 
     By default the fake and the adapter run in lockstep on the fake's simulated clock
     (:class:`~adapters.hexarotor.clock.LockstepClock`): as fast as the two can exchange
@@ -178,6 +182,7 @@ def run_trials(
         vehicle.wait_for_state()
         vehicle.set_guided_mode()
         vehicle.arm()
+        vehicle.take_off(TAKEOFF_HEIGHT_M)
         for index, target in enumerate(targets):
             report = vehicle.approach(target.target_ned, target.heading_ned, config)
             if not report.ok:
@@ -194,7 +199,7 @@ def run_trials(
             if on_trial is not None:
                 on_trial(index, target, error, "closed")
             vehicle.set_gripper(False)
-        vehicle.hold()
+        vehicle.land()
         outcome.simulated_s = fake.sim_time_s
     return outcome
 
