@@ -1,7 +1,7 @@
 """``dlo hexa trial`` and ``dlo feasibility``: the paper's aerial experiments, runnable anywhere.
 
-The ``dlo`` CLI registers them with ``app.add_typer(hexa_app, name="hexa")`` and
-``app.command()(feasibility)``. Importing this module stays light: pymavlink, OpenCV,
+The ``dlo`` CLI (:mod:`service.cli`) names :data:`hexa_app` and :func:`feasibility` and
+imports this module only when one of them runs. Importing it stays light: pymavlink, OpenCV,
 SciPy and the detection are imported by the commands that use them.
 
 ``dlo hexa trial`` flies grasp approaches with the hexarotor adapter against the fake
@@ -32,18 +32,15 @@ from adapters.hexarotor.wrench import (
     HexarotorGeometry,
     pull_feasibility,
 )
-from service.console import EXIT_FAILED, exit_usage, print_error, stderr_console
+from service.console import EXIT_FAILED, exit_usage, print_error, stderr_console, typer_app
 
 if TYPE_CHECKING:
     from adapters.hexarotor.trial import TrialTarget
     from adapters.hexarotor.wrench import PullFeasibility
 
-hexa_app = typer.Typer(
+hexa_app = typer_app(
     name="hexa",
     help="Fly grasp approaches with a hexarotor over MAVLink (against the built-in fake).",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
 )
 
 

@@ -1,7 +1,7 @@
 """``dlo ur3``: plan a grasp on a detected cable (a dry run) or pick it with a UR3.
 
-A typer sub-app; the ``dlo`` CLI registers :data:`ur3_app` with
-``app.add_typer(ur3_app, name="ur3")``. Tests build their own with
+A typer sub-app; the ``dlo`` CLI (:mod:`service.cli`) names :data:`ur3_app` and imports
+this module only when ``dlo ur3`` runs. Tests build their own with
 :func:`build_ur3_app` and a fake robot's ``connect``. Importing this module stays light:
 detection, OpenCV and NumPy are imported by the steps that use them.
 
@@ -27,7 +27,14 @@ from adapters.grasp.errors import DepthImageError, GraspPlanningError
 from adapters.ur3.driver import ConnectFactory, RobotNotReadyError, UR3Picker
 from adapters.ur3.driver import connect as connect_ur_rtde
 from schemas import CameraModel, DepthSurface, Detection, GraspSelector
-from service.console import EXIT_FAILED, EXIT_USAGE, print_error, print_warning, stderr_console
+from service.console import (
+    EXIT_FAILED,
+    EXIT_USAGE,
+    print_error,
+    print_warning,
+    stderr_console,
+    typer_app,
+)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -110,13 +117,7 @@ def build_ur3_app(connect: ConnectFactory = connect_ur_rtde) -> typer.Typer:
         ``connect(robot_ip) -> (control, receive, io)``: ur_rtde by default, a fake's
         ``connect`` in tests.
     """
-    app = typer.Typer(
-        name="ur3",
-        help="Plan a grasp on a detected cable and pick it with a UR3.",
-        no_args_is_help=True,
-        add_completion=False,
-        pretty_exceptions_enable=False,
-    )
+    app = typer_app(name="ur3", help="Plan a grasp on a detected cable and pick it with a UR3.")
 
     @app.command("plan")
     def plan_command(

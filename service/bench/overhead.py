@@ -7,7 +7,9 @@ Everything runs on this machine, over loopback:
 * HTTP: a ``dlo serve`` process (2 detection threads, zenoh listening on a loopback port
   only, multicast scouting off) answering ``POST /v1/detect`` with the same JPEG, first
   from one client one request at a time (the latency, and the overhead over the bare
-  time), then from several clients at once (requests per second);
+  time), then from several clients at once (requests per second), and last how long a
+  refusal takes: 503 answers to small images while every worker and queue slot holds a
+  1920x1080 one (target: within 1 s, at once rather than after a slot frees);
 * zenoh: the same server; a client session publishes the JPEG on ``dlo/bench/image`` and
   times until the Detection arrives on ``dlo/bench/chains`` (one frame at a time, so no
   frame is ever replaced), then the same as a ``get`` on ``dlo/detect``.
@@ -49,7 +51,11 @@ import numpy as np
 WIDTH, HEIGHT, CABLES = 640, 360, 3
 CAMERA = "bench"
 HTTP_TARGET_MS, ZENOH_TARGET_MS = 2.0, 3.0
-SERVER_WORKERS = 2
+REFUSAL_TARGET_MS = 1000.0
+"""A 503 must come at once, not after a slot frees (the limit a test used to assert)."""
+SERVER_WORKERS, SERVER_QUEUE = 2, 4
+FILL_WIDTH, FILL_HEIGHT = 1920, 1080
+"""The images that keep every worker and queue slot busy while refusals are timed."""
 CONCURRENT_CLIENTS = 4
 DLO = [sys.executable, "-c", "from service.cli import main; main()"]
 
@@ -59,6 +65,7 @@ HTTP_ROW = "HTTP POST /v1/detect, 1 client"
 CONCURRENT_ROW = f"HTTP POST /v1/detect, {CONCURRENT_CLIENTS} clients"
 ZENOH_ROW = f"zenoh dlo/{CAMERA}/image -> chains"
 QUERY_ROW = "zenoh get dlo/detect"
+REFUSAL_ROW = "HTTP 503 when every worker and queue slot is busy"
 OVERHEAD_ROWS = (HTTP_ROW, ZENOH_ROW, QUERY_ROW)
 
 
@@ -84,22 +91,27 @@ class Counts:
     sequential: int = 300
     concurrent: int = 600
     warm_up: int = 30
+    refusals: int = 300
 
 
 def run_service_bench(quick: bool, as_json: bool) -> int:
     """Measure, then print a table (or JSON); the exit status of ``dlo bench --service``."""
     import cv2
 
-    from service.perception import _kernels
+    from service.console import load_kernels, stderr_console
     from service.synthetic import make_scene
 
-    counts = Counts(sequential=20, concurrent=40, warm_up=5) if quick else Counts()
+    counts = Counts(sequential=20, concurrent=40, warm_up=5, refusals=20) if quick else Counts()
     cv2.setNumThreads(1)
-    _kernels.warm_up()
-    scene = make_scene(WIDTH, HEIGHT, CABLES, seed=0, occluders=1)
-    encoded_ok, encoded = cv2.imencode(".jpg", scene.image)
-    assert encoded_ok
-    jpeg = encoded.tobytes()
+    load_kernels(stderr_console())
+
+    def encoded_scene(width: int, height: int) -> bytes:
+        scene = make_scene(width, height, CABLES, seed=0, occluders=1)
+        encoded_ok, encoded = cv2.imencode(".jpg", scene.image)
+        assert encoded_ok
+        return encoded.tobytes()
+
+    jpeg, large = encoded_scene(WIDTH, HEIGHT), encoded_scene(FILL_WIDTH, FILL_HEIGHT)
 
     with _dlo_serve() as (http_port, zenoh_endpoint), _ZenohClient(zenoh_endpoint) as bus:
         connection = http.client.HTTPConnection("127.0.0.1", http_port, timeout=60)
@@ -107,18 +119,22 @@ def run_service_bench(quick: bool, as_json: bool) -> int:
         rows = _interleaved(paths, counts)
         connection.close()
         rows.append(_http_concurrent(http_port, jpeg, counts))
+        rows.append(_http_refusals(http_port, large, jpeg, counts.refusals))
 
     by_name = {row.name: row for row in rows}
     rows = [by_name[name] for name in (BARE_DETECT_ROW, BARE_ROW, HTTP_ROW, CONCURRENT_ROW)]
-    rows += [by_name[ZENOH_ROW], by_name[QUERY_ROW]]
+    rows += [by_name[ZENOH_ROW], by_name[QUERY_ROW], by_name[REFUSAL_ROW]]
     bare = by_name[BARE_ROW].p50_ms
     results = {
         "image": f"{WIDTH}x{HEIGHT} JPEG ({len(jpeg)} bytes), {CABLES} cables, generated",
-        "server": f"dlo serve, {SERVER_WORKERS} detection threads, one numeric thread each",
+        "server": f"dlo serve, {SERVER_WORKERS} detection threads and {SERVER_QUEUE} queue "
+        "slots, one numeric thread each",
         "rows": [asdict(row) for row in rows],
         "http_overhead_p50_ms": by_name[HTTP_ROW].p50_ms - bare,
         "zenoh_overhead_p50_ms": by_name[ZENOH_ROW].p50_ms - bare,
+        "refusal_p99_ms": by_name[REFUSAL_ROW].p99_ms,
         "targets_ms": {"http": HTTP_TARGET_MS, "zenoh": ZENOH_TARGET_MS},
+        "refusal_target_ms": REFUSAL_TARGET_MS,
         "quick": quick,
     }
     if as_json:
@@ -137,9 +153,9 @@ def _sequential_paths(
 ) -> dict[str, Timing]:
     """The ways to get a Detection of the image, one request at a time."""
     from schemas import DetectParams
-    from service.http.inputs import Frame
-    from service.http.jobs import default_detect, run_detection
     from service.imageio import decode_image
+    from service.runtime.frames import Frame
+    from service.runtime.jobs import default_detect, run_detection
 
     frame = Frame(jpeg, DetectParams())
     image = decode_image(jpeg)  # what the service sees: the JPEG's pixels, not the scene's
@@ -233,6 +249,7 @@ def _dlo_serve() -> Iterator[tuple[int, str]]:
             **os.environ,  # dlo bench has set the numeric libraries to one thread
             "OPENCV_FOR_THREADS_NUM": "1",
             "DLO_WORKERS": str(SERVER_WORKERS),
+            "DLO_QUEUE_SIZE": str(SERVER_QUEUE),
             "DLO_LOG_LEVEL": "warning",
             "DLO_ZENOH": "true",
             "DLO_ZENOH_CONFIG": str(config),
@@ -326,6 +343,40 @@ def _http_concurrent(port: int, jpeg: bytes, counts: Counts) -> Row:
     return _row(CONCURRENT_ROW, times, elapsed, refused=refused)
 
 
+def _http_refusals(port: int, large: bytes, small: bytes, wanted: int) -> Row:
+    """Time ``wanted`` 503 answers: every worker and queue slot is kept busy with large
+    images while small ones are sent one at a time; only the 503s are timed (a small one
+    sent as a slot came free is admitted and not counted)."""
+    times: list[float] = []
+    failures: list[str] = []
+    connection = http.client.HTTPConnection("127.0.0.1", port, timeout=60)
+
+    def fill() -> None:
+        with contextlib.closing(http.client.HTTPConnection("127.0.0.1", port, timeout=60)) as own:
+            status, body = _post_detect(own, large)
+            if status not in (200, 503):  # 503: the slots were full already
+                failures.append(f"POST /v1/detect answered {status}: {body[:200]!r}")
+
+    began = time.perf_counter()
+    while len(times) < wanted and not failures:
+        fillers = [threading.Thread(target=fill) for _ in range(SERVER_WORKERS + SERVER_QUEUE)]
+        for thread in fillers:
+            thread.start()
+        while len(times) < wanted and any(thread.is_alive() for thread in fillers):
+            started = time.perf_counter()
+            status, body = _post_detect(connection, small)
+            if status == 503:
+                times.append(time.perf_counter() - started)
+            elif status != 200:
+                failures.append(f"POST /v1/detect answered {status}: {body[:200]!r}")
+        for thread in fillers:
+            thread.join()
+    connection.close()
+    if failures:
+        raise RuntimeError(failures[0])
+    return _row(REFUSAL_ROW, times, time.perf_counter() - began)
+
+
 # --------------------------------------------------------------------------- zenoh
 
 
@@ -340,7 +391,7 @@ class _ZenohClient:
     def __enter__(self) -> _ZenohClient:
         import zenoh
 
-        from service.bus import chains_key, make_config
+        from service.bus.config import chains_key, make_config
 
         config = make_config(mode="client", multicast=False, connect=[self.endpoint])
         self.session = zenoh.open(config)
@@ -368,7 +419,7 @@ class _ZenohClient:
 
     def query(self, jpeg: bytes) -> float:
         """Ask ``dlo/detect`` for the Detection of one frame; its ``timings_ms.total``."""
-        from service.bus import QUERY_KEY
+        from service.bus.config import QUERY_KEY
 
         replies = list(self.session.get(QUERY_KEY, payload=jpeg, timeout=60))
         if len(replies) != 1 or replies[0].ok is None:
@@ -412,6 +463,12 @@ def _print_table(results: dict[str, Any], rows: list[Row]) -> None:
             f"(target <= {target:g} ms: {verdict})",
             highlight=False,
         )
+    refusal, target = results["refusal_p99_ms"], results["refusal_target_ms"]
+    verdict = "met" if refusal <= target else "NOT met"
+    console.print(
+        f"503 when full: {refusal:.2f} ms p99 (target <= {target:g} ms: {verdict})",
+        highlight=False,
+    )
 
 
 def _optional(milliseconds: float | None) -> str:

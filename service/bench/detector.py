@@ -14,10 +14,10 @@ the p50 wall time. The cases:
   (with their crossings) at 1280x720.
 
 One thread: the numeric libraries size their thread pools when they are first
-imported, and ``dlo`` imports NumPy before any command runs, so ``dlo bench``
-re-executes itself (``python -m service.bench``) with ``OMP_NUM_THREADS``,
-``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS`` and ``NUMBA_NUM_THREADS`` set to 1,
-and there also calls ``cv2.setNumThreads(1)`` and ``numba.set_num_threads(1)``.
+imported, so ``dlo bench`` runs this in a process of its own (``python -m service.cli
+bench``) with :data:`THREAD_VARIABLES` (``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``,
+``MKL_NUM_THREADS``, ``NUMBA_NUM_THREADS``) set to 1, and there also calls
+``cv2.setNumThreads(1)`` and ``numba.set_num_threads(1)``.
 The peak resident memory of that process (``ru_maxrss``) is reported too. Each scene
 is generated just before it is timed and dropped after (photographs are read likewise),
 so the process never holds more than one image of a case at a time.
@@ -28,16 +28,13 @@ from __future__ import annotations
 import itertools
 import json
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Annotated, Any
-
-import typer
+from typing import Any
 
 STAGES = ("segmentation", "skeleton", "contours", "fitting", "pruning", "merging", "total")
-# The stages whose code is compiled (service/perception/_kernels.py).
+# The stages whose code is compiled (service/perception/_*_kernels.py).
 KERNEL_STAGES = ("skeleton", "contours", "fitting", "pruning")
 THREAD_VARIABLES = (
     "OMP_NUM_THREADS",
@@ -45,72 +42,29 @@ THREAD_VARIABLES = (
     "MKL_NUM_THREADS",
     "NUMBA_NUM_THREADS",
 )
-CHILD_FLAG = "DLO_BENCH_CHILD"
-DEFAULT_DATASET = Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "mbest"
+DEFAULT_DATASET = Path(__file__).resolve().parents[3] / "shared" / "datasets" / "mbest"
+"""``../shared/datasets/mbest`` beside the checkout."""
 OCCLUDERS = 1
-
-
-def bench_command(
-    quick: Annotated[
-        bool,
-        typer.Option("--quick", help="Tiny images and one frame per case: a smoke test."),
-    ] = False,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print the results as JSON instead of tables.")
-    ] = False,
-    dataset: Annotated[
-        Path,
-        typer.Option(
-            metavar="DIR",
-            help="Photographs to time: every <subset>/images/*.jpg (skipped when absent).",
-        ),
-    ] = DEFAULT_DATASET,
-    frames: Annotated[
-        int,
-        typer.Option(min=1, metavar="N", help="Generated scenes (seeds) per case."),
-    ] = 10,
-    repeats: Annotated[
-        int, typer.Option(min=1, metavar="N", help="Detections timed per generated scene.")
-    ] = 3,
-    service: Annotated[
-        bool,
-        typer.Option(
-            "--service",
-            help="Time the service instead: HTTP and zenoh latency against bare detection "
-            "(service/bench_service.py).",
-        ),
-    ] = False,
-) -> None:
-    """Time the detector per stage on one thread: photographs, generated scenes, scaling."""
-    if os.environ.get(CHILD_FLAG) == "1":
-        if service:
-            from service.bench_service import run_service_bench
-
-            raise typer.Exit(run_service_bench(quick, as_json))
-        raise typer.Exit(_run(quick, as_json, dataset, frames, repeats))
-    env = dict(os.environ, **dict.fromkeys(THREAD_VARIABLES, "1"), **{CHILD_FLAG: "1"})
-    args = [sys.executable, "-m", "service.bench", "--dataset", str(dataset)]
-    args += ["--frames", str(frames), "--repeats", str(repeats)]
-    args += ["--quick"] * quick + ["--json"] * as_json + ["--service"] * service
-    raise typer.Exit(subprocess.call(args, env=env))
 
 
 # --------------------------------------------------------------------------- the run
 
 
-def _run(quick: bool, as_json: bool, dataset: Path, frames: int, repeats: int) -> int:
+def run_detector_bench(quick: bool, as_json: bool, dataset: Path, frames: int, repeats: int) -> int:
+    """Time the cases, then print the tables (or JSON); the exit status of ``dlo bench``."""
     import resource
 
     import cv2
     import numba
     import numpy as np
 
-    from service.perception import _kernels, detect
+    from service.console import load_kernels, stderr_console
+    from service.perception import detect
     from service.synthetic import make_scene
 
     cv2.setNumThreads(1)
     numba.set_num_threads(1)
-    _kernels.warm_up()
+    load_kernels(stderr_console())
 
     if quick:
         frames, repeats = 1, 1
@@ -195,11 +149,11 @@ def _run(quick: bool, as_json: bool, dataset: Path, frames: int, repeats: int) -
             "environment": {name: os.environ.get(name) for name in THREAD_VARIABLES},
             "cv2_threads": cv2.getNumThreads(),
             "numba_threads": numba.get_num_threads(),
-            "warm_up": "kernels loaded (_kernels.warm_up) and 4 detections before timing",
+            "warm_up": "kernels loaded (perception.warm_up) and 4 detections before timing",
             "quick": quick,
             "frames_per_case": frames,
             "repeats_per_frame": repeats,
-            "cpu": _cpu_name(),
+            "cpu": cpu_name(),
             "versions": {
                 "python": sys.version.split()[0],
                 "numpy": np.__version__,
@@ -268,7 +222,8 @@ def _run(quick: bool, as_json: bool, dataset: Path, frames: int, repeats: int) -
     return 0
 
 
-def _cpu_name() -> str:
+def cpu_name() -> str:
+    """The CPU model, as /proc/cpuinfo (or the platform) names it."""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("model name"):
@@ -379,7 +334,3 @@ def _print_tables(results: dict[str, Any]) -> None:
         )
     console.print(table)
     console.print(f"peak resident memory: {results['peak_rss_mb']:.0f} MB", highlight=False)
-
-
-if __name__ == "__main__":
-    typer.run(bench_command)

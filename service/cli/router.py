@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import logging
-import signal
-import threading
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-EXIT_USAGE = 2
+from service.bus.router import RouterStartError, open_router, run_until_stopped
+from service.console import EXIT_USAGE
 
 
-def router_command(
+def router(
     listen: Annotated[
         list[str] | None,
         typer.Option(
@@ -38,28 +37,16 @@ def router_command(
     ] = None,
 ) -> None:
     """Run a zenoh router until Ctrl-C; start services with connect/endpoints set to it."""
-    import zenoh  # here, so that the other commands do not load zenoh
-
-    from service.bus import make_config
-
     logging.basicConfig(level="INFO", format="%(levelname)s:     %(name)s: %(message)s")
     try:
-        zenoh_config = make_config(config, mode="router", multicast=multicast, listen=listen)
-        session = zenoh.open(zenoh_config)
-    except Exception as exc:  # zenoh reports bad endpoints and files as ZError
-        typer.echo(f"error: cannot start the zenoh router: {exc}", err=True)
+        session = open_router(config, listen=listen, multicast=multicast)
+    except RouterStartError as exc:
+        typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(EXIT_USAGE) from None
-    stop = threading.Event()
-    for number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(number, lambda *_: stop.set())
     typer.echo(
         f"zenoh router {session.zid()} listening on {', '.join(listen or ['the default'])}; "
         "Ctrl-C to stop",
         err=True,
     )
-    try:
-        while not stop.wait(0.5):
-            pass
-    finally:
-        session.close()
+    run_until_stopped(session)
     typer.echo("zenoh router stopped", err=True)

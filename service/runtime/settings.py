@@ -1,4 +1,5 @@
-"""Settings of the HTTP service, read from ``DLO_*`` environment variables."""
+"""Settings of one service process (``dlo serve``): where HTTP listens, the worker pool, the
+input limits both transports check, and the zenoh session; read from ``DLO_*`` variables."""
 
 from __future__ import annotations
 

@@ -1,37 +1,29 @@
-"""The ``dlo`` command line: a thin typer shell over :mod:`service.batch`.
+"""``dlo detect``: the cables in image files, folders, videos and camera streams.
 
-Output conventions: stdout carries only results (the detection JSON of a single
-image, or the paths ``dlo demo`` wrote); progress, summaries and errors go to
-stderr, each error on one line ``error: <file>: <problem>`` (``warning: ...`` for
-frames of a video that were skipped while the rest went through). Exit status: 0
-when everything worked, 1 when any input failed (a video fails only when none of
-its frames could be processed), 2 for a usage error, 130 when Ctrl-C stopped the
-run before anything was processed (a Ctrl-C after that is a clean stop).
+Output conventions: stdout carries only results (the detection JSON of a single image);
+progress, summaries and errors go to stderr, each error on one line ``error: <file>:
+<problem>`` (``warning: ...`` for frames of a video that were skipped while the rest went
+through). Exit status (:mod:`service.console`): 0 when everything worked, 1 when any input
+failed (a video fails only when none of its frames could be processed), 2 for a usage
+error, 130 when Ctrl-C stopped the run before anything was processed (a Ctrl-C after that
+is a clean stop).
 """
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable, Iterable
-from importlib.metadata import PackageNotFoundError
-from importlib.metadata import version as installed_version
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
 
-from adapters.hexarotor.cli import feasibility, hexa_app
-from adapters.ur3.cli import ur3_app
 from schemas import Detection, DetectParams, SegmentationMethod
 from service.batch import (
     OUTPUT_KINDS,
     InvalidParametersError,
-    OutputPaths,
     build_params,
     detection_to_json,
     expand_inputs,
@@ -40,19 +32,16 @@ from service.batch import (
     parse_outputs,
     process_file,
 )
-from service.bench import bench_command
-from service.bus_cli import router_command
 from service.console import (
     EXIT_FAILED,
+    EXIT_INTERRUPTED,
     exit_usage,
+    load_kernels,
     print_error,
     print_warning,
     stderr_console,
 )
-from service.evaluation.cli import eval_command
-from service.http.cli import serve_command
-from service.imageio import OutputWriteError, write_png
-from service.perception import render_overlay
+from service.imageio import OutputWriteError
 from service.video import (
     FrameOutcome,
     FrameSource,
@@ -65,15 +54,8 @@ from service.video import (
     process_stream,
 )
 
-EXIT_INTERRUPTED = 130
-"""Ctrl-C before anything was processed (128 + SIGINT, as shells report it)."""
-
 FRAME_MESSAGES_PER_STREAM = 5
 """Skipped frames reported one by one per video; the rest only counted in the summary."""
-
-DEMO_SIZE = (1280, 720)
-DEMO_CABLES = 3
-DEMO_OCCLUDERS = 2
 
 
 def _default_of(field: str) -> str:
@@ -86,16 +68,6 @@ def _default_of(field: str) -> str:
     return str(default)
 
 
-app = typer.Typer(
-    name="dlo",
-    help="Detect cables (deformable linear objects) in images as chains of segments.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
-
-
-@app.command()
 def detect(
     paths: Annotated[
         list[Path] | None,
@@ -210,6 +182,7 @@ def detect(
         stream_outputs = _stream_outputs(console, outputs, selected, overlay_video)
         _make_out_dir(console, out_dir)
         source = parse_camera(camera)
+        load_kernels(console)
         summary = _run_stream(
             console, lambda: open_camera(source), params, out_dir, stream_outputs, max_frames
         )
@@ -237,6 +210,8 @@ def detect(
     for problem in problems:
         print_error(console, problem)
     failed = len(problems)
+    if files:
+        load_kernels(console)
 
     if out_dir is None:
         if files:
@@ -278,79 +253,6 @@ def detect(
     if interrupted and processed == 0:
         raise typer.Exit(EXIT_INTERRUPTED)
     raise typer.Exit(EXIT_FAILED if failed else 0)
-
-
-@app.command()
-def demo(
-    out_dir: Annotated[
-        Path, typer.Option(metavar="DIR", help="Where to write the scene and the outputs.")
-    ] = Path("out/demo"),
-    seed: Annotated[int, typer.Option(help="Seed of the synthetic scene.")] = 7,
-    figure: Annotated[
-        Path | None,
-        typer.Option(
-            metavar="FILE",
-            help="Also write the scene and its overlay side by side at half size "
-            "(the README picture).",
-        ),
-    ] = None,
-) -> None:
-    """Generate the bundled synthetic example scene and detect the cables in it."""
-    console = stderr_console()
-    width, height = DEMO_SIZE
-    try:
-        # Imported here so that `dlo detect` does not depend on the scene generator.
-        from service.synthetic import make_scene
-
-        out_dir.mkdir(parents=True, exist_ok=True)
-        scene = make_scene(width, height, DEMO_CABLES, seed=seed, occluders=DEMO_OCCLUDERS)
-        example = out_dir / "example.png"
-        write_png(example, scene.image)
-        started = time.perf_counter()
-        detection = process_file(example, DetectParams(), out_dir)
-        elapsed_ms = (time.perf_counter() - started) * 1000.0
-        if figure is not None:
-            overlay = render_overlay(scene.image, detection)
-            side_by_side = np.hstack([scene.image, overlay])[::2, ::2]
-            write_png(figure, np.ascontiguousarray(side_by_side))
-    except Exception as exc:  # report any failure on one line, never a traceback
-        print_error(console, failure_message("demo", exc))
-        raise typer.Exit(EXIT_FAILED) from None
-
-    _print_summary(console, detection, len(scene.cables), elapsed_ms)
-    for path in (example, *OutputPaths.for_input(example, out_dir).all()):
-        typer.echo(str(path))
-
-
-@app.command()
-def version() -> None:
-    """Print the installed version of dlo-service."""
-    try:
-        number = installed_version("dlo-service")
-    except PackageNotFoundError:
-        number = "unknown (not installed)"
-    typer.echo(f"dlo-service {number}")
-
-
-app.command("eval")(eval_command)
-
-# Commands that live beside their own packages: the HTTP service, the benchmark and
-# the UR3 robot cell (grasp planning and picking).
-app.command("serve")(serve_command)
-app.command("router")(router_command)
-app.command("bench")(bench_command)
-app.add_typer(ur3_app, name="ur3")
-app.add_typer(hexa_app, name="hexa")
-app.command()(feasibility)
-
-
-def main() -> None:
-    """Entry point of the ``dlo`` console script; no traceback ever reaches the user."""
-    try:
-        app(prog_name="dlo")
-    except Exception as exc:  # last line of defence: bugs in the shell itself
-        print(f"error: internal error: {type(exc).__name__}: {exc}", file=sys.stderr)
-        sys.exit(EXIT_FAILED)
 
 
 def _stream_outputs(
@@ -529,51 +431,3 @@ def _process_or_report(
     except Exception as exc:  # every failure is reported per file and the batch goes on
         print_error(console, failure_message(path, exc))
         return None
-
-
-def _print_summary(
-    console: Console, detection: Detection, cable_count: int, elapsed_ms: float
-) -> None:
-    console.print(
-        f"{len(detection.chains)} chain(s) found in a {detection.width}x{detection.height} "
-        f"scene of {cable_count} cable(s), segments of {detection.segment_length:g} px",
-        highlight=False,
-    )
-    chains = Table(title="chains", title_justify="left")
-    for column in ("id", "points", "length px", "radius px", "inferred segments"):
-        chains.add_column(column, justify="right")
-    for chain in detection.chains:
-        chains.add_row(
-            str(chain.id),
-            str(len(chain.points)),
-            f"{chain.length:.1f}",
-            f"{chain.radius:.1f}",
-            str(sum(chain.inferred)),
-        )
-    console.print(chains)
-
-    if detection.crossings:
-        crossings = Table(title="crossings", title_justify="left")
-        for column in ("x", "y", "over", "under", "confidence"):
-            crossings.add_column(column, justify="right")
-        for crossing in detection.crossings:
-            crossings.add_row(
-                f"{crossing.x:.0f}",
-                f"{crossing.y:.0f}",
-                str(crossing.over),
-                str(crossing.under),
-                f"{crossing.confidence:.2f}",
-            )
-        console.print(crossings)
-    else:
-        console.print("no crossings")
-
-    stage_times = ", ".join(
-        f"{stage} {milliseconds:.0f}"
-        for stage, milliseconds in detection.timings_ms.model_dump().items()
-    )
-    console.print(
-        f"timings (ms): {stage_times}; with file I/O {elapsed_ms:.0f}",
-        highlight=False,
-        soft_wrap=True,
-    )

@@ -1,4 +1,4 @@
-"""``dlo serve``: run the HTTP service with uvicorn."""
+"""``dlo serve``: run the detection service (HTTP with uvicorn, and zenoh) until Ctrl-C."""
 
 from __future__ import annotations
 
@@ -7,12 +7,16 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+import uvicorn
 from pydantic import ValidationError
 
-EXIT_USAGE = 2
+from service.console import EXIT_USAGE, FIRST_RUN_NOTICE
+from service.http import create_app
+from service.perception import kernels_cached
+from service.runtime.settings import Settings
 
 
-def serve_command(
+def serve(
     host: Annotated[
         str | None, typer.Option(help="Address to listen on (env DLO_HOST, default 127.0.0.1).")
     ] = None,
@@ -43,11 +47,6 @@ def serve_command(
     Other settings come from DLO_* environment variables: DLO_QUEUE_SIZE,
     DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_ZENOH_MULTICAST, DLO_LOG_LEVEL (see the README).
     """
-    # Imported here so that the other commands do not load the web stack.
-    import uvicorn
-
-    from service.http import Settings, create_app
-
     options = {
         "host": host,
         "port": port,
@@ -65,6 +64,8 @@ def serve_command(
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(levelname)s:     %(name)s: %(message)s"
     )
+    if not kernels_cached():  # the app's warm-up compiles them; /readyz waits for it
+        typer.echo(f"{FIRST_RUN_NOTICE}; /readyz answers 503 until then", err=True)
     uvicorn.run(
         create_app(settings),
         host=settings.host,

@@ -24,7 +24,6 @@ import logging
 import threading
 from collections import Counter, OrderedDict
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import zenoh
@@ -32,49 +31,13 @@ from pydantic import ValidationError
 
 from schemas import DetectParams
 from service.batch import describe_json_validation_error
-from service.http.inputs import Frame, RequestError
-from service.http.jobs import DetectFunction, check_declared_size, default_detect, run_detection
-from service.http.metrics import Metrics
+from service.bus.config import IMAGE_KEYS, JSON, QUERY_KEY, chains_key, errors_key
+from service.runtime.errors import RequestError
+from service.runtime.frames import Frame, check_declared_size
+from service.runtime.jobs import DetectFunction, default_detect, run_detection
+from service.runtime.metrics import Metrics
 
 logger = logging.getLogger(__name__)
-
-IMAGE_KEYS = "dlo/*/image"
-"""Where cameras publish their frames; ``*`` is the camera's name."""
-QUERY_KEY = "dlo/detect"
-"""The queryable: ``get`` with the image as payload."""
-JSON = "application/json"
-
-
-def chains_key(camera: str) -> str:
-    """Where the Detections of ``camera``'s frames are published."""
-    return f"dlo/{camera}/chains"
-
-
-def errors_key(camera: str) -> str:
-    """Where the error records of ``camera``'s unprocessable frames are published."""
-    return f"dlo/{camera}/errors"
-
-
-def make_config(
-    path: str | Path | None = None,
-    *,
-    mode: str | None = None,
-    multicast: bool | None = None,
-    listen: list[str] | None = None,
-    connect: list[str] | None = None,
-) -> zenoh.Config:
-    """A zenoh configuration: the JSON5 file at ``path`` (else zenoh's default, a peer),
-    with the given settings written over it (None: leave as is)."""
-    config = zenoh.Config.from_file(str(path)) if path is not None else zenoh.Config()
-    if mode is not None:
-        config.insert_json5("mode", json.dumps(mode))
-    if multicast is not None:
-        config.insert_json5("scouting/multicast/enabled", json.dumps(multicast))
-    if listen is not None:
-        config.insert_json5("listen/endpoints", json.dumps(listen))
-    if connect is not None:
-        config.insert_json5("connect/endpoints", json.dumps(connect))
-    return config
 
 
 def params_from_attachment(attachment: zenoh.ZBytes | None) -> DetectParams:

@@ -1,102 +1,56 @@
-"""The CPU-bound work of one request, run in a worker thread: decode, check, detect, render,
-plan a grasp.
+"""Grasp planning as a job of the runtime: detect the cables in a frame (or take a saved
+Detection), then plan where to grasp and the UR3 motions, without moving any robot.
 
-Plain functions of bytes and parameters, so that any front end (HTTP now, a message bus
-later) can run them in its pool. Client mistakes raise :class:`RequestError`; anything
-else raised here is a failure of the service.
+The planning itself is :mod:`adapters.grasp.pick`; here its refusals become
+:class:`~service.runtime.errors.RequestError` answers (422), and the inputs of one plan are
+gathered: :class:`GraspFrame` (an image to detect, with a camera model and a selector) or
+:class:`GraspRequest` (a saved Detection, as JSON).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from pydantic import ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from adapters.grasp.depth import decode_depth_image
 from adapters.grasp.errors import DepthImageError, GraspPlanningError, InferredSegmentError
 from adapters.grasp.pick import plan_pick
-from schemas import CameraModel, DepthSurface, Detection, DetectParams, GraspSelector
+from schemas import CameraModel, DepthSurface, Detection, GraspSelector
 from schemas.grasp import GraspPlan
-from service.http.inputs import (
-    Frame,
-    GraspFrame,
-    GraspRequest,
-    RequestError,
-    describe_fields,
-    image_size,
-)
-from service.imageio import ImageFileError, decode_image, decode_mask
-from service.perception import InvalidInputError, render_overlay
-from service.perception import detect as detect_dlos
-
-DetectFunction = Callable[[np.ndarray, DetectParams, np.ndarray | None], Detection]
-"""``detect(image, params, mask) -> Detection``, as :func:`service.perception.detect`."""
+from service.runtime.errors import RequestError, describe_fields
+from service.runtime.frames import Frame
+from service.runtime.jobs import DetectFunction, run_detection
 
 
-def default_detect(image: np.ndarray, params: DetectParams, mask: np.ndarray | None) -> Detection:
-    """:func:`service.perception.detect` with positional arguments."""
-    return detect_dlos(image, params, mask)
+class GraspRequest(BaseModel):
+    """A plan on a saved detection: the ``application/json`` body of ``POST /v1/grasp``."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    detection: Detection = Field(description="The chains, as `/v1/detect` or `dlo detect` give.")
+    camera: CameraModel = Field(description="Intrinsics, pose in the robot base frame, table.")
+    selector: GraspSelector = Field(
+        default_factory=GraspSelector,
+        description="Which chain and point; default: the middle of the longest chain.",
+    )
 
 
-def check_declared_size(data: bytes, max_pixels: int) -> None:
-    """413 when the PNG/JPEG header announces more than ``max_pixels`` pixels."""
-    size = image_size(data)
-    if size is not None:
-        _check_pixels(*size, max_pixels)
+@dataclass(frozen=True)
+class GraspFrame:
+    """A plan on an image: the frame to detect, the camera and the selector.
 
-
-def decode_frame(frame: Frame, max_pixels: int) -> tuple[np.ndarray, np.ndarray | None]:
-    """Decode and check the image and the mask of ``frame``.
-
-    Returns
-    -------
-    (image, mask)
-        BGR ``uint8`` image, and the boolean mask of its size or None.
-
-    Raises
-    ------
-    RequestError
-        422 when either cannot be decoded (saying which and why), the mask's size differs
-        or it marks nothing; 413 when the image has more than ``max_pixels`` pixels.
+    ``depth`` is the encoded depth image (16-bit PNG), present exactly when the camera's
+    surface is a depth image.
     """
-    try:
-        image = decode_image(frame.image, "image")
-    except ImageFileError as exc:
-        raise RequestError(422, "invalid_image", str(exc)) from None
-    _check_pixels(image.shape[1], image.shape[0], max_pixels)
-    if frame.mask is None:
-        return image, None
-    try:
-        mask = decode_mask(frame.mask, image.shape, "mask")
-    except ImageFileError as exc:
-        raise RequestError(422, "invalid_mask", str(exc)) from None
-    if not mask.any():
-        raise RequestError(422, "invalid_mask", "mask: empty, it marks no cable pixel")
-    return image, mask
 
-
-def run_detection(
-    frame: Frame, detect: DetectFunction, max_pixels: int
-) -> tuple[np.ndarray, Detection]:
-    """Decode ``frame`` and detect the DLOs in it; returns the image and the Detection."""
-    image, mask = decode_frame(frame, max_pixels)
-    try:
-        detection = detect(image, frame.params, mask)
-    except InvalidInputError as exc:
-        raise RequestError(422, "invalid_input", str(exc)) from None
-    return image, detection
-
-
-def run_overlay(frame: Frame, detect: DetectFunction, max_pixels: int) -> tuple[bytes, Detection]:
-    """As :func:`run_detection`, then the overlay drawn on the image, encoded as PNG."""
-    image, detection = run_detection(frame, detect, max_pixels)
-    encoded_ok, encoded = cv2.imencode(".png", render_overlay(image, detection))
-    if not encoded_ok:
-        raise RuntimeError("OpenCV could not encode the overlay as PNG")
-    return encoded.tobytes(), detection
+    frame: Frame
+    camera: CameraModel
+    selector: GraspSelector
+    depth: bytes | None = None
 
 
 def run_grasp(
@@ -190,21 +144,3 @@ def plan_or_refuse(
             f"pixel {list(plan.target.pixel)} meets the table too far away",
         )
     return plan
-
-
-def warm_up(detect: DetectFunction) -> Detection:
-    """One detection on a tiny synthetic image (two crossing strokes), to load everything."""
-    image = np.full((96, 160, 3), 30, np.uint8)
-    cv2.line(image, (8, 20), (150, 80), (40, 160, 230), 7, cv2.LINE_AA)
-    cv2.line(image, (10, 85), (150, 15), (230, 120, 40), 7, cv2.LINE_AA)
-    return detect(image, DetectParams(), None)
-
-
-def _check_pixels(width: int, height: int, max_pixels: int) -> None:
-    if width * height > max_pixels:
-        raise RequestError(
-            413,
-            "image_too_large",
-            f"image is {width}x{height} = {width * height / 1e6:.1f} megapixels, "
-            f"more than the limit of {max_pixels / 1e6:g}",
-        )
