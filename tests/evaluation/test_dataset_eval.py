@@ -66,16 +66,19 @@ def test_fake_dataset_scores_high_and_the_csv_has_one_row_per_image(
 
     assert result.exit_code == 0, result.stderr
     data = json.loads(result.stdout)
-    assert [s["subset"] for s in data["subsets"]] == ["S1", "S2"]
-    assert [s["images"] for s in data["subsets"]] == [2, 1]
-    assert data["all"]["images"] == 3
-    assert data["all"]["mean_dice"] > 0.9
     assert data["failed"] == 0
+    [report] = data["datasets"]
+    assert report["crossing_order_truth"] is True
+    assert [s["subset"] for s in report["subsets"]] == ["S1", "S2"]
+    assert [s["images"] for s in report["subsets"]] == [2, 1]
+    assert report["all"]["images"] == 3
+    assert report["all"]["mean_dice"] > 0.9
+    assert report["all"]["mean_foreground_dice"] > 0.9
 
     with table.open(newline="") as handle:
         rows = list(csv.DictReader(handle))
     assert list(rows[0]) == [
-        "subset", "image", "dice", "n_gt", "n_chains",
+        "subset", "image", "dice", "foreground_dice", "n_gt", "n_chains",
         "crossings_judged", "crossings_correct", "ms",
     ]  # fmt: skip
     assert [(row["subset"], row["image"], row["n_gt"]) for row in rows] == [
@@ -84,7 +87,7 @@ def test_fake_dataset_scores_high_and_the_csv_has_one_row_per_image(
         ("S2", "img3", "2"),
     ]
     assert np.mean([float(row["dice"]) for row in rows]) == pytest.approx(
-        data["all"]["mean_dice"], abs=1e-3
+        report["all"]["mean_dice"], abs=1e-3
     )
     assert all(float(row["ms"]) > 0 for row in rows)
     assert sorted(path.name for path in out_dir.iterdir() if path.name.startswith("S1_img1")) == [
@@ -101,7 +104,7 @@ def test_table_names_the_subsets_and_the_worst_images(dataset: Path) -> None:
     assert result.exit_code == 0, result.stderr
     text = ANSI_ESCAPE.sub("", result.stdout)
     assert "mask from labels" in text
-    for word in ("S1", "S2", "all", "mean DICE", "crossing order", "worst 1"):
+    for word in ("S1", "S2", "all", "mean DICE", "fg DICE", "crossing order", "worst 1"):
         assert word in text
     assert "self-crossing" in text
 
@@ -138,7 +141,7 @@ def test_bad_label_file_is_reported_and_the_rest_scored(dataset: Path, tmp_path:
     assert result.exit_code == 1
     assert len(error_lines(result)) == 1
     assert error_lines(result)[0].startswith(f"error: {root / 'S1' / 'labels' / 'img1.png'}: ")
-    assert json.loads(result.stdout)["all"]["images"] == 1
+    assert json.loads(result.stdout)["datasets"][0]["all"]["images"] == 1
 
 
 def test_images_are_found_in_natural_order_and_unlabelled_ones_reported(tmp_path: Path) -> None:
