@@ -138,6 +138,15 @@ def _fit_inside_box(rng, points, box, tries=8):
 
 def _clip_to_box(points, anchor_index, box):
     """Keep the contiguous piece inside ``box`` around the anchor, ends cut at the border."""
+    clipped = _clip_to_box_with_offset(points, anchor_index, box)
+    return None if clipped is None else clipped[0]
+
+
+def _clip_to_box_with_offset(points, anchor_index, box):
+    """:func:`_clip_to_box`, and the index in the result of original sample 0.
+
+    Returns ``(points, offset)``: original sample ``i`` (if kept) is ``points[i + offset]``.
+    """
     x_min, y_min, x_max, y_max = box
     inside = (
         (points[:, 0] >= x_min)
@@ -156,7 +165,8 @@ def _clip_to_box(points, anchor_index, box):
         pieces.insert(0, _border_point(points[first], points[first - 1], box))
     if last < len(points) - 1:
         pieces.append(_border_point(points[last], points[last + 1], box))
-    return np.vstack(pieces)
+    prepended = len(pieces[0]) if first > 0 else 0
+    return np.vstack(pieces), prepended - first
 
 
 def _border_point(inside, outside, box):

@@ -8,6 +8,7 @@ parts of one) running close together except briefly at a crossing.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -86,11 +87,35 @@ def _place_cables(rng, width, height, n_cables, radius_range, loops, margin):
 # --------------------------------------------------------------------------- layout rules
 
 
-def _crossings_if_well_placed(curve, index, placed, existing_crossings):
+@dataclass(frozen=True)
+class _Exemption:
+    """Stretches allowed to run close together: a designed feature of a scene family.
+
+    The stretch ``own`` (arc range, px) of the cable being placed may run close to the
+    stretch ``theirs`` of cable ``other`` (the same cable for a hairpin), as long as the two
+    do not cross there: two cables lying side by side, or a cable doubled back on itself.
+    """
+
+    other: int
+    own: tuple[float, float]
+    theirs: tuple[float, float]
+
+    def covers_own(self, arc):
+        return (arc >= self.own[0]) & (arc <= self.own[1])
+
+    def covers_theirs(self, arc):
+        return (arc >= self.theirs[0]) & (arc <= self.theirs[1])
+
+
+def _crossings_if_well_placed(
+    curve, index, placed, existing_crossings, *, min_angle=MIN_CROSSING_ANGLE, exempt=()
+):
     """Crossings the new curve adds, or None if it breaks a layout rule.
 
     The cheap rules (crossing angles and spacing, cable ends) are checked before the
-    costlier search for stretches where two cables run close together.
+    costlier search for stretches where two cables run close together. ``min_angle`` is
+    the shallowest crossing allowed; ``exempt`` lists :class:`_Exemption` stretches that
+    may run close together but must not cross.
     """
     radius = curve.radius
     # Beyond this arc distance two parts of one curve can only be near each other by coming
@@ -109,7 +134,9 @@ def _crossings_if_well_placed(curve, index, placed, existing_crossings):
         for other_index, other in enumerate(placed)
     ]
     found = self_crossings + [crossing for pair in pair_crossings for crossing in pair]
-    if any(crossing.angle < MIN_CROSSING_ANGLE for crossing in found):
+    if any(crossing.angle < min_angle for crossing in found):
+        return None
+    if any(_crosses_in_exempt_stretch(c, exempt) for c in found):
         return None
     if not _crossings_spread_out(found, existing_crossings):
         return None
@@ -132,29 +159,55 @@ def _crossings_if_well_placed(curve, index, placed, existing_crossings):
     pairs = cKDTree(curve.points[coarse]).query_pairs(clearance, output_type="ndarray")
     if len(pairs):
         pairs = pairs[np.abs(coarse_arc[pairs[:, 0]] - coarse_arc[pairs[:, 1]]) > same_curve_window]
+    for exemption in exempt:
+        if exemption.other == index and len(pairs):
+            allowed = exemption.covers_own(coarse_arc[pairs[:, 0]])
+            allowed &= exemption.covers_own(coarse_arc[pairs[:, 1]])
+            pairs = pairs[~allowed]
     close = np.zeros(len(coarse_arc), dtype=bool)
     close[pairs.ravel()] = True
     events = [c.first_arc for c in self_crossings] + [c.second_arc for c in self_crossings]
     angles = [c.angle for c in self_crossings] * 2
-    if not _close_stretches_ok(close, coarse_arc, events, angles, clearance, 6 * radius):
+    if not _close_stretches_ok(close, coarse_arc, events, angles, clearance, 6 * radius, min_angle):
         return None
-    for other, crossings in zip(placed, pair_crossings, strict=True):
+    for other_index, (other, crossings) in enumerate(zip(placed, pair_crossings, strict=True)):
         radius_sum = radius + other.radius
         clearance = 2.5 * radius_sum
         angles = [c.angle for c in crossings]
-        close = other.tree.query(curve.points[coarse], distance_upper_bound=clearance)[0]
+        own_close = other.tree.query(curve.points[coarse], distance_upper_bound=clearance)[0]
+        own_close = own_close < clearance
+        other_close = curve.tree.query(other.points[coarse], distance_upper_bound=clearance)[0]
+        other_close = other_close < clearance
+        for exemption in exempt:
+            if exemption.other == other_index:
+                own_close &= ~exemption.covers_own(coarse_arc)
+                other_close &= ~exemption.covers_theirs(other.arc[coarse])
         events = [c.first_arc for c in crossings]
         if not _close_stretches_ok(
-            close < clearance, coarse_arc, events, angles, clearance, 3 * radius_sum
+            own_close, coarse_arc, events, angles, clearance, 3 * radius_sum, min_angle
         ):
             return None
-        close = curve.tree.query(other.points[coarse], distance_upper_bound=clearance)[0]
         events = [c.second_arc for c in crossings]
         if not _close_stretches_ok(
-            close < clearance, other.arc[coarse], events, angles, clearance, 3 * radius_sum
+            other_close, other.arc[coarse], events, angles, clearance, 3 * radius_sum, min_angle
         ):
             return None
     return found
+
+
+def _crosses_in_exempt_stretch(crossing, exempt):
+    """Whether a crossing lies in a stretch exempted for lying close (it must not)."""
+    for exemption in exempt:
+        if exemption.other != crossing.second:
+            continue
+        if exemption.covers_own(crossing.first_arc):
+            return True
+        if crossing.first == crossing.second:
+            if exemption.covers_own(crossing.second_arc):
+                return True
+        elif exemption.covers_theirs(crossing.second_arc):
+            return True
+    return False
 
 
 def _crossings_spread_out(new_crossings, existing_crossings):
@@ -170,7 +223,9 @@ def _crossings_spread_out(new_crossings, existing_crossings):
     return True
 
 
-def _close_stretches_ok(close, arc, event_arcs, event_angles, clearance, free_length):
+def _close_stretches_ok(
+    close, arc, event_arcs, event_angles, clearance, free_length, min_angle=MIN_CROSSING_ANGLE
+):
     """Check every stretch of ``close`` samples against the length a crossing explains.
 
     A stretch with no crossing may be ``free_length`` long; one with a crossing at angle
@@ -188,7 +243,7 @@ def _close_stretches_ok(close, arc, event_arcs, event_angles, clearance, free_le
             return False
         allowed = free_length
         if np.any(inside):
-            angle = max(float(event_angles[inside][0]), MIN_CROSSING_ANGLE)
+            angle = max(float(event_angles[inside][0]), min_angle)
             allowed += 2.0 * clearance / math.sin(angle)
         if stretch > allowed:
             return False

@@ -122,10 +122,11 @@ def _occluder_fits(rect, target, curves, crossings, rects, width, height):
     return True
 
 
-def _hidden_samples(points, rects):
+def _hidden_samples(points, shapes):
+    """Which centreline samples lie under one of the occluders' shapes."""
     hidden = np.zeros(len(points), dtype=bool)
-    for rect in rects:
-        hidden |= rect.contains(points)
+    for shape in shapes:
+        hidden |= shape.contains(points)
     return hidden
 
 

@@ -106,13 +106,23 @@ def _draw_background(rng, width, height, kind):
 
 
 def _compose(rng, grey, tint, paints, noise_sigma):
+    """The uint8 BGR image: background ``grey * tint``, paints in order, sensor noise."""
+
+    def background(top, bottom):
+        return grey[top:bottom, :, None] * tint[None, None, :]
+
+    return _compose_bands(rng, background, grey.shape, paints, noise_sigma)
+
+
+def _compose_bands(rng, background, shape, paints, noise_sigma):
     """The uint8 BGR image: background, paints in order, sensor noise, rounded.
 
+    ``background(top, bottom)`` gives the float32 BGR rows ``top:bottom`` (a new array).
     Made in bands of rows, so that only one band is ever held in float32; every pixel
     goes through the same float32 operations in the same order as if the whole image
     were made at once, and the noise bytes are drawn in the same order.
     """
-    height, width = grey.shape
+    height, width = shape
     image = np.empty((height, width, 3), dtype=np.uint8)
     # A multiple of 4 rows makes every band's noise a whole number of the 4-byte words
     # rng.bytes draws, so the bands together draw exactly the bytes of one big call.
@@ -120,7 +130,7 @@ def _compose(rng, grey, tint, paints, noise_sigma):
     noise_levels = _NOISE_LEVELS * np.float32(noise_sigma)
     for top in range(0, height, band_rows):
         bottom = min(top + band_rows, height)
-        band = grey[top:bottom, :, None] * tint[None, None, :]
+        band = background(top, bottom)
         for paint in paints:
             inside = (paint.rows >= top) & (paint.rows < bottom)
             band[paint.rows[inside] - top, paint.cols[inside]] = paint.bgr[inside]
@@ -145,11 +155,12 @@ def _smooth_noise(rng, width, height, feature_size):
     return cv2.resize(small, (width, height), interpolation=cv2.INTER_CUBIC)
 
 
-def _pick_colours(rng, n_cables):
-    order = rng.permutation(len(_PALETTE_BGR))
+def _pick_colours(rng, n_cables, palette=_PALETTE_BGR):
+    """Distinct palette colours (repeating after ``len(palette)``), each jittered a little."""
+    order = rng.permutation(len(palette))
     colours = []
     for index in range(n_cables):
-        base = np.array(_PALETTE_BGR[order[index % len(order)]])
+        base = np.array(palette[order[index % len(order)]])
         jittered = np.clip(base + rng.integers(-10, 11, 3), 0, 255)
         colours.append(tuple(int(channel) for channel in jittered))
     return colours

@@ -119,16 +119,7 @@ def make_scene(
     image = _compose(rng, grey, tint, paints, noise_sigma)
     del grey  # 4 bytes a pixel: free it before the mask is made
 
-    cables = [
-        SyntheticCable(
-            centreline=curve.points,
-            radius=curve.radius,
-            colour=colours[index],
-            hidden=_hidden_samples(curve.points, rects),
-            depth=int(depths[index]),
-        )
-        for index, curve in enumerate(curves)
-    ]
+    cables = _cables_truth(curves, colours, depths, rects)
     crossings = [_public_crossing(crossing, depths) for crossing in raw_crossings]
     return SyntheticScene(
         image=image,
@@ -137,7 +128,22 @@ def make_scene(
         cables=cables,
         crossings=crossings,
         occluders=[Occluder(polygon=rect.corners()) for rect in rects],
+        backdrop=f"dark-{background}",
     )
+
+
+def _cables_truth(curves, colours, depths, occluders):
+    """The ground truth of the cables: ``occluders`` are shapes with ``contains(points)``."""
+    return [
+        SyntheticCable(
+            centreline=curve.points,
+            radius=curve.radius,
+            colour=colours[index],
+            hidden=_hidden_samples(curve.points, occluders),
+            depth=int(depths[index]),
+        )
+        for index, curve in enumerate(curves)
+    ]
 
 
 # --------------------------------------------------------------------------- validation

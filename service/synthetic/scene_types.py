@@ -66,15 +66,48 @@ class SyntheticCrossing:
 
 @dataclass(frozen=True, eq=False)
 class Occluder:
-    """An object lying on top of the cables, coloured like the background.
+    """An object lying on top of the cables.
 
     Attributes
     ----------
     polygon : ndarray, shape (K, 2), float64
-        ``[x, y]`` vertices in order. A pixel is covered when its centre lies inside.
+        ``[x, y]`` vertices of a convex polygon, in order. A pixel is covered when its
+        centre lies inside. It may reach beyond the picture.
+    like_background : bool
+        Coloured like the background (always, in :func:`make_scene`), or an object of
+        another colour.
     """
 
     polygon: np.ndarray
+    like_background: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class SceneFeature:
+    """A structure a scene family placed on purpose, and the values it was drawn with.
+
+    Attributes
+    ----------
+    kind : str
+        ``"loop"`` (a loop crossing itself; values ``bend_radius`` px and
+        ``crossing_angle`` degrees), ``"hairpin"`` (a cable doubled back: ``bend_radius``
+        px of its tightest bend, ``gap`` px between the strands' surfaces,
+        ``parallel_length`` px, ``part_angle`` degrees, and the arc ranges of the two
+        strands that run side by side, ``strand_start``-``strand_end`` and
+        ``return_start``-``return_end``), ``"shallow_crossing"`` (``angle`` degrees, at
+        ``x``, ``y``), ``"side_by_side"`` (``gap`` px between the two cables' surfaces,
+        ``length`` px, along arcs ``start``-``end`` of the first cable and
+        ``partner_start``-``partner_end`` of the second) or ``"occluder"``
+        (``hidden_length`` px, and 0/1 flags ``on_bend``, ``at_edge``,
+        ``like_background``). Arcs are px from the cable's first centreline sample.
+    cables : tuple of int
+        Indices into :attr:`SyntheticScene.cables` of the cables involved.
+    values : dict of str to float
+    """
+
+    kind: str
+    cables: tuple[int, ...]
+    values: dict[str, float]
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,6 +126,11 @@ class SyntheticScene:
     cables : list of SyntheticCable
     crossings : list of SyntheticCrossing
     occluders : list of Occluder
+    features : tuple of SceneFeature
+        What a scene family placed on purpose (empty for :func:`make_scene`).
+    backdrop : str
+        The background's kind: ``"dark-textured"``, ``"dark-plain"``, ``"paper"`` or
+        ``"painted"``.
     """
 
     image: np.ndarray
@@ -101,3 +139,5 @@ class SyntheticScene:
     cables: list[SyntheticCable]
     crossings: list[SyntheticCrossing]
     occluders: list[Occluder]
+    features: tuple[SceneFeature, ...] = ()
+    backdrop: str = "dark-textured"
