@@ -159,7 +159,7 @@ def eval_command(
 ) -> None:
     """Score the detector on labelled data sets, or on synthetic scenes (--synthetic N).
 
-    Seeds: tune on seeds 1-99999 (and look at their failures); seeds from 100001 up are
+    Seeds: tune on seeds 0-99999 (and look at their failures); seeds from 100000 up are
     held out, to be run only to report a result (e.g. --synthetic 200 --seed 100001).
     """
     errors = Console(stderr=True)

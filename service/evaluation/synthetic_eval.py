@@ -40,8 +40,8 @@ foreground DICE
     The detector's foreground mask against the scene's visible-cable mask (about 1 when
     the detector is given that mask).
 
-Seeds (:mod:`service.evaluation.conventions`): seeds 1-99999 are for tuning and for
-looking at failures; seeds from 100001 up are held out, to be run only to report a result.
+Seeds (:mod:`service.evaluation.conventions`): seeds 0-99999 are for tuning and for
+looking at failures; seeds from 100000 up are held out, to be run only to report a result.
 
 All functions are pure; only :func:`evaluate_scene` runs the detector.
 """

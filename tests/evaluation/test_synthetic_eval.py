@@ -416,7 +416,7 @@ def test_dlo_eval_help_states_the_seed_convention() -> None:
     result = run_dlo("eval", "--help")
 
     text = " ".join(ANSI_ESCAPE.sub("", result.stdout).split())
-    assert "1-99999" in text and "100001" in text and "held out" in text
+    assert "0-99999" in text and "100000" in text and "held out" in text
     assert "--family" in text
 
 
