@@ -85,7 +85,10 @@ class DetectParams(BaseModel):
         0.6, ge=0, le=100, description="Weight of the end direction difference (per pi)."
     )
     curvature_weight: float = Field(
-        0.9, ge=0, le=100, description="Weight of the turning needed to connect (per pi)."
+        0.9,
+        ge=0,
+        le=100,
+        description="Weight of the turning needed to connect (per 2 pi: two turns of up to pi).",
     )
     min_chain_length: float = Field(
         20.0, ge=0, le=10_000, description="Chains shorter than this after merging are dropped."

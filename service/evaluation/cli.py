@@ -36,7 +36,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from service.console import EXIT_FAILED, exit_usage, print_error
+from service.console import EXIT_FAILED, exit_usage, load_kernels, print_error
 from service.evaluation.conventions import FAMILY_NAMES, HELD_OUT_FIRST_SEED, TUNING_SEEDS
 
 if TYPE_CHECKING:
@@ -157,7 +157,7 @@ def eval_command(
         ),
     ] = None,
 ) -> None:
-    """Score the detector on labelled data sets, or on synthetic scenes (--synthetic N).
+    """Score the detector on a labelled data set, or on synthetic scenes (--synthetic N).
 
     Seeds: tune on seeds 0-99999 (and look at their failures); seeds from 100000 up are
     held out, to be run only to report a result (e.g. --synthetic 200 --seed 100001).
@@ -254,7 +254,6 @@ def _run_dataset(
     params: DetectParams | None = None,
 ) -> None:
     from service.evaluation import dataset
-    from service.perception import _kernels
 
     found = []
     for root in roots:
@@ -266,7 +265,7 @@ def _run_dataset(
     _make_out_dir(errors, out_dir)
 
     # Load the compiled kernels first, so that ms/image is the detection alone.
-    _kernels.warm_up()
+    load_kernels(errors)
     reports = []
     failed = 0
     columns = ("dataset", *dataset.CSV_COLUMNS) if len(roots) > 1 else dataset.CSV_COLUMNS
@@ -468,7 +467,6 @@ def _run_synthetic(
     params: DetectParams | None = None,
 ) -> None:
     from service.evaluation import synthetic_eval
-    from service.perception import _kernels
     from service.synthetic import make_family_scene, make_scene
 
     if count < 1:
@@ -483,7 +481,7 @@ def _run_synthetic(
         exit_usage(
             errors, "--family needs --width {} and --height {} or more".format(*FAMILY_MIN_SIZE)
         )
-    _kernels.warm_up()  # ms per scene is the detection alone
+    load_kernels(errors)  # ms per scene is the detection alone
     try:
         low, high = synthetic_eval.parse_cable_counts(cables)
     except ValueError as exc:

@@ -3,15 +3,22 @@
 Public API
 ----------
 detect(image, params=None, mask=None) -> Detection
-    The whole six-step pipeline.
+    The whole pipeline.
 detect_full(image, params=None, mask=None) -> DetectionResult
     The same, also returning the foreground mask it used (for ``render_labels``).
 render_labels(detection, mask, image=None) -> np.ndarray (uint16)
 render_overlay(image, detection) -> np.ndarray (BGR uint8)
+warm_up() -> None
+    Load (on a machine's first run: compile) every compiled kernel, so that the next
+    detection's timings are detection time alone.
+kernels_cached() -> bool
+    Whether the kernels are already compiled into numba's cache on this machine (a
+    cheap check, before ``warm_up``, for front ends that say when a run compiles).
 """
 
+from service.perception._kernel_cache import kernels_cached
 from service.perception.errors import InvalidInputError
-from service.perception.pipeline import DetectionResult, detect, detect_full
+from service.perception.pipeline import DetectionResult, detect, detect_full, warm_up
 from service.perception.render import render_labels, render_overlay
 
 __all__ = [
@@ -19,6 +26,8 @@ __all__ = [
     "InvalidInputError",
     "detect",
     "detect_full",
+    "kernels_cached",
     "render_labels",
     "render_overlay",
+    "warm_up",
 ]

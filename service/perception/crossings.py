@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from service.perception import _kernels
+from service.perception import _crossings_kernels
 
 
 @dataclass(frozen=True)
@@ -49,11 +49,11 @@ def find_intersections(chains: list[np.ndarray]) -> list[tuple[int, int, int, in
     lo = np.minimum(starts, ends)
     hi = np.maximum(starts, ends)
     # Sweep along x: only segments whose x ranges overlap can intersect. The sweep
-    # itself is compiled (_kernels.segment_intersections).
+    # itself is compiled (_crossings_kernels.segment_intersections).
     order = np.argsort(lo[:, 0])
     lo_sorted_x = lo[order, 0]
     stops = np.searchsorted(lo_sorted_x, hi[order, 0], side="right")
-    pairs, params = _kernels.segment_intersections(
+    pairs, params = _crossings_kernels.segment_intersections(
         np.ascontiguousarray(starts, np.float64),
         np.ascontiguousarray(ends, np.float64),
         chain_ids.astype(np.int64),
@@ -93,13 +93,6 @@ def _variation(image_lab: np.ndarray, map_x: np.ndarray, map_y: np.ndarray) -> f
     return float(np.abs(np.diff(samples, axis=0)).sum(axis=1).mean())
 
 
-def profile_variation(
-    image_lab: np.ndarray, centre: np.ndarray, direction: np.ndarray, half_length: float
-) -> float:
-    """Mean absolute change of the image per pixel along a line through ``centre``."""
-    return _variation(image_lab, *_profile_maps(centre, direction, half_length))
-
-
 def _lab(image_bgr: np.ndarray) -> np.ndarray:
     """The image as ``float32`` Lab after a 3x3 Gaussian blur."""
     blurred = cv2.GaussianBlur(image_bgr, (3, 3), 0)
@@ -114,7 +107,10 @@ _BLUR_MARGIN = 1
 def profile_variations(
     image_bgr: np.ndarray, lines: list[tuple[np.ndarray, np.ndarray, float]], full_lab=None
 ) -> tuple[list[float], np.ndarray | None]:
-    """:func:`profile_variation` of several lines, in ``_lab(image_bgr)``.
+    """Mean absolute change of ``_lab(image_bgr)`` per pixel along each line.
+
+    A line is ``(centre, direction, half_length)``: samples 1 px apart (bilinear) from
+    ``-half_length`` to ``half_length`` along the unit ``direction`` through ``centre``.
 
     Blurs and converts only the patch round the lines when they stay clear of the
     image border, which gives the very same samples: the blur and the colour

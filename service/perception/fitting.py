@@ -4,7 +4,7 @@ The walk follows a contour and emits a joint each time it is ``l_s`` pixels from
 previous joint. A chain ends at every branch tip (where the contour turns back) and
 wherever the walk enters a junction zone: near a crossing or a branch the skeleton
 bends towards the junction and says nothing reliable about the strands, so those
-pixels are left for the merging step to bridge with a natural curve.
+pixels are left for the merging step to bridge with its gap curve.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from service.perception import _kernels
+from service.perception import _fitting_kernels
 from service.perception.skeleton import _BRANCH_COUNT, as_uint8
 
 # Skeleton branches between two junction zones shorter than this many cable radii
@@ -39,84 +39,10 @@ def junction_zones(skeleton: np.ndarray, radius: float) -> np.ndarray:
     """
     zone_radius = max(2, round(1.5 * radius))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * zone_radius + 1,) * 2)
-    zones, _ = _kernels.junction_zones_kernel(
+    zones, _ = _fitting_kernels.junction_zones_kernel(
         as_uint8(skeleton), disc, BRIDGE_RADII * radius, _BRANCH_COUNT
     )
     return zones.view(np.bool_)
-
-
-def walk_joints(pixels: np.ndarray, segment_length: float) -> np.ndarray:
-    """Joints along an ordered pixel run, each ``segment_length`` from the previous one.
-
-    The first and last pixels are always joints, so the last segment may be shorter.
-
-    Parameters
-    ----------
-    pixels : ndarray
-        ``(N, 2)`` ordered ``[x, y]`` pixels.
-    segment_length : float
-
-    Returns
-    -------
-    ndarray
-        ``(K, 2)`` ``float64`` joints, ``K >= 2`` when ``N >= 2``.
-    """
-    pixels = np.asarray(pixels, dtype=np.float64)
-    joints = [pixels[0]]
-    start = pixels[0]
-    limit_sq = segment_length * segment_length
-    for point in pixels[1:]:
-        delta = point - start
-        if delta[0] * delta[0] + delta[1] * delta[1] >= limit_sq:
-            joints.append(point)
-            start = point
-    if len(pixels) > 1 and not np.array_equal(joints[-1], pixels[-1]):
-        joints.append(pixels[-1])
-    return np.array(joints)
-
-
-def split_contour(contour: np.ndarray, is_tip: np.ndarray, in_zone: np.ndarray):
-    """Cut a closed contour into runs that end at tips and stop short of junction zones.
-
-    Parameters
-    ----------
-    contour : ndarray
-        ``(N, 2)`` ``[x, y]`` pixels of one closed border.
-    is_tip, in_zone : ndarray of bool
-        Per contour pixel.
-
-    Returns
-    -------
-    list of ndarray
-        Runs of pixels, each in walking order.
-    """
-    n = len(contour)
-    breaks = np.flatnonzero(is_tip | in_zone)
-    if len(breaks) == 0:
-        # A closed loop with no tip or junction: one run around it.
-        return [contour]
-    # Start the cyclic walk at a break so that no run wraps around the array end.
-    order = np.roll(np.arange(n), -int(breaks[0]))
-    runs: list[np.ndarray] = []
-    current: list[int] = []
-    for index in order:
-        if in_zone[index]:
-            if len(current) > 1:
-                runs.append(contour[current])
-            current = []
-        elif is_tip[index]:
-            current.append(index)
-            if len(current) > 1:
-                runs.append(contour[current])
-            current = [index]
-        else:
-            current.append(index)
-    if len(current) > 1:
-        first_break = order[0]
-        if is_tip[first_break] and not in_zone[first_break]:
-            current.append(first_break)
-        runs.append(contour[current])
-    return runs
 
 
 def fit_chains(
@@ -146,8 +72,12 @@ def fit_chains(
 
     Notes
     -----
-    Runs :func:`split_contour` and :func:`walk_joints` over all contours in one
-    compiled loop (``_kernels.fit_kernel``), with the same result.
+    Each contour is cut into runs at branch tips (where a run ends and the next
+    begins) and at junction zones (whose pixels belong to no run); a closed contour
+    with neither is one run. Each run gets a joint at its first pixel, then at every
+    pixel at least ``segment_length`` from the previous joint, and at its last pixel.
+    All contours are walked in one compiled loop (``_fitting_kernels.fit_kernel``);
+    the plain version is the reference in ``tests/perception/references/fitting.py``.
     """
     if not contours:
         return []
@@ -155,7 +85,7 @@ def fit_chains(
     points = np.ascontiguousarray(points, dtype=np.int32)
     starts = np.zeros(len(contours) + 1, np.int64)
     np.cumsum([len(c) for c in contours], out=starts[1:])
-    joints, ends = _kernels.fit_kernel(
+    joints, ends = _fitting_kernels.fit_kernel(
         points,
         starts,
         as_uint8(skeleton),

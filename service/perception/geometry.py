@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from service.perception import _kernels
+from service.perception import _geometry_kernels
 
 
 def unit(vector: np.ndarray) -> np.ndarray:
@@ -53,7 +53,7 @@ def end_tangent(
     """
     ordered = points[::-1] if at_start else points
     backwards = np.ascontiguousarray(ordered[::-1], dtype=np.float64)
-    fitted, x0, y0, dx, dy, last = _kernels.end_fit(backwards, float(skip), float(span))
+    fitted, x0, y0, dx, dy, last = _geometry_kernels.end_fit(backwards, float(skip), float(span))
     # The linear term points into the polyline; outwards is its opposite.
     tangent = np.array([-dx, -dy])
     if fitted and np.hypot(*tangent) > 1e-9:
@@ -80,10 +80,11 @@ def resample(points: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     source_edge : ndarray
         ``(K,)`` index of the polyline edge each joint lies on.
     """
-    # The loop is compiled (_kernels.resample_kernel). It takes np.sqrt where the plain
-    # loop took ``disc ** 0.5`` (NumPy's scalar pow, at times 1 ulp off the root), so
-    # a joint may move by round-off (about 1e-14 px), never more.
-    found, found_edges = _kernels.resample_kernel(np.ascontiguousarray(points, np.float64), step)
+    # The loop is compiled (_geometry_kernels.resample_kernel). It takes np.sqrt where the
+    # first plain loop took ``disc ** 0.5`` (NumPy's scalar pow, at times 1 ulp off the
+    # root), so a joint may move by round-off (about 1e-14 px), never more.
+    points_f64 = np.ascontiguousarray(points, np.float64)
+    found, found_edges = _geometry_kernels.resample_kernel(points_f64, step)
     joints = [points[0], *found[1:]]
     edges = found_edges.tolist()
     n = len(points)

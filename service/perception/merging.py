@@ -2,11 +2,17 @@
 
 Every pair of chain ends gets a cost from three parts, as in Keipour et al. (RA-L
 2022): the distance between the ends, the difference of their directions, and the
-turning a curve needs to connect them. The cheapest pair is joined first, then the
-next, never closing a chain on itself, until the cheapest remaining join is
-implausible or the expected number of DLOs is reached. Each gap is filled with the
-"natural" curve: it leaves each end along that end's direction and turns with one
-constant rate.
+turning a curve needs to connect them (:func:`join_cost`). The ends that meet in one
+junction zone are paired first, by the cheapest matching of that zone; then the
+remaining pairs are joined cheapest first, never closing a chain on itself, until the
+cheapest remaining join is implausible or the expected number of DLOs is reached; last,
+two free ends across a short gap that are each other's clearly cheapest partner are
+joined up to a looser limit (:func:`choose_joins`).
+
+Each gap is filled with the curve ``DetectParams.gap_curve`` names (:func:`gap_curve`):
+by default "smooth", a cubic along both end directions that spreads the turn over the
+whole gap as an elastic cable bends; or the paper's "natural" curve, straight along the
+end directions and then one arc of constant curvature.
 """
 
 from __future__ import annotations
@@ -17,7 +23,7 @@ import cv2
 import numpy as np
 
 from schemas import DetectParams, GapCurve
-from service.perception import _kernels
+from service.perception import _merging_kernels
 from service.perception.geometry import angle_between, end_tangent, polyline_length
 
 END_FIT_SPAN_PX = 40.0
@@ -92,7 +98,7 @@ def chain_ends(
         # the border at its joints.
         starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
         joints = np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64)
-        medians = _kernels.median_distance_per_piece(
+        medians = _merging_kernels.median_distance_per_piece(
             np.ascontiguousarray(distance, np.float32), joints, starts
         )
     for index, points in enumerate(pieces):
@@ -129,6 +135,12 @@ def _narrow_end_length(points, at_start, distance, full_width, limit=NARROW_END_
 def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> float:
     """Cost of joining two chain ends: distance, direction difference and curvature.
 
+    ``distance_weight * d / max_gap + direction_weight * angle / pi + curvature_weight *
+    fade * turning / (2 pi)``, with ``d`` the gap's length, ``angle`` (0 to pi) between
+    the direction leaving ``a`` and the direction arriving at ``b``, ``turning`` (0 to
+    2 pi) the turn from the leaving direction onto the gap's heading plus the turn from
+    there onto the arriving direction, and ``fade = min(1, d / (3 radius))``.
+
     Parameters
     ----------
     a, b : ChainEnd
@@ -141,8 +153,8 @@ def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> 
     Returns
     -------
     float
-        0 for ends that touch and continue each other straight; 1 is the default
-        limit of plausibility.
+        0 for ends that touch and continue each other straight; the usual limit of
+        plausibility is ``params.merge_cost_threshold``.
     """
     gap = b.position - a.position
     distance = float(np.hypot(gap[0], gap[1]))
@@ -159,13 +171,13 @@ def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> 
     return cost
 
 
-def natural_curve(
+def gap_curve(
     start: np.ndarray,
     leaving: np.ndarray,
     end: np.ndarray,
     arriving: np.ndarray,
     step: float = 1.0,
-    shape: GapCurve | str = GapCurve.natural,
+    shape: GapCurve | str = GapCurve.smooth,
 ) -> np.ndarray:
     """The curve that bridges a gap between two chain ends.
 
@@ -190,19 +202,20 @@ def natural_curve(
         Unit headings at ``start`` and at ``end``.
     step : float
         Spacing of the returned samples.
-    shape : {"natural", "smooth"}
+    shape : {"smooth", "natural"}
+        Default "smooth", as ``DetectParams.gap_curve``.
 
     Returns
     -------
     ndarray
         ``(M, 2)`` samples from ``start`` to ``end`` inclusive.
     """
-    # Compiled (_kernels): a frame bridges hundreds of gaps and crossings. The plain
-    # versions are the references in tests/perception.
+    # Compiled: a frame bridges hundreds of gaps and crossings. The plain versions are
+    # the references in tests/perception/references/merging.py.
     kernel = (
-        _kernels.smooth_curve_kernel
+        _merging_kernels.smooth_curve_kernel
         if GapCurve(shape) is GapCurve.smooth
-        else _kernels.natural_curve_kernel
+        else _merging_kernels.natural_curve_kernel
     )
     return kernel(
         np.asarray(start, np.float64),
@@ -463,10 +476,10 @@ def assemble_paths(
     pieces: list[np.ndarray],
     ends: list[ChainEnd],
     joins: list[tuple[int, int, float]],
-    curve: GapCurve | str = GapCurve.natural,
+    curve: GapCurve | str = GapCurve.smooth,
 ) -> list[MergedPath]:
     """Walk every group of joined pieces from one free end to the other; each join is
-    bridged by :func:`natural_curve` of the given ``curve`` shape."""
+    bridged by :func:`gap_curve` of the given ``curve`` shape."""
     partner = np.full(len(ends), -1)
     for i, j, _ in joins:
         partner[i], partner[j] = j, i
@@ -489,7 +502,7 @@ def assemble_paths(
             next_entry = partner[exit_end]
             if next_entry == -1:
                 break
-            bridge = natural_curve(
+            bridge = gap_curve(
                 ends[exit_end].position,
                 ends[exit_end].direction,
                 ends[next_entry].position,

@@ -1,20 +1,30 @@
-"""The six-step detection pipeline, from an image (or a mask) to a Detection."""
+"""The detection pipeline, from an image (or a mask) to a Detection, and its warm-up.
+
+The six steps of Keipour et al. (RA-L 2022), one module each: segmentation, skeleton,
+contours, fitting, pruning and merging; then each merged path's ends are extended to
+the cable's ends (end_extension), the path is resampled to joints exactly ``l_s``
+apart, the crossings are found and ordered (crossings), and, on the brightness path,
+the mask grows by each cable's own threshold (segmentation again).
+"""
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
-from schemas import Chain, Crossing, Detection, DetectParams, StageTimings
-from service.perception import _kernels
+from schemas import Chain, Crossing, Detection, DetectParams, GapCurve, StageTimings
+from service.perception import _pipeline_kernels
+from service.perception._kernel_cache import kernels_cached, write_stamp
 from service.perception.contours import extract_contours
-from service.perception.crossings import detect_crossings
+from service.perception.crossings import detect_crossings, find_intersections
+from service.perception.end_extension import extend_ends
 from service.perception.errors import InvalidInputError
 from service.perception.fitting import fit_chains, junction_zones
-from service.perception.geometry import end_direction, polyline_length, resample
-from service.perception.merging import Join, MergedPath, merge_chains
+from service.perception.geometry import polyline_length, resample
+from service.perception.merging import Join, MergedPath, chain_ends, gap_curve, merge_chains
 from service.perception.pruning import prune_overlaps
 from service.perception.segmentation import (
     as_bgr,
@@ -24,7 +34,6 @@ from service.perception.segmentation import (
     validate_mask,
 )
 from service.perception.skeleton import (
-    as_uint8,
     distance_transform,
     estimate_radius,
     remove_spurs,
@@ -65,96 +74,14 @@ class _Stopwatch:
         self._last = now
 
 
-def _extend_end(points: np.ndarray, at_start: bool, mask, radius: float, span: float):
-    """Push a chain end out to where the cable ends in the mask, less one radius.
-
-    Thinning stops about one radius short of a square-cut cable end; a grasp at "the
-    end" should still be on the cable, so the end is placed one radius inside: along
-    the end's direction to where the mask stops, or, when it is farther, toward the
-    farthest pixel of the cable within 35 degrees ahead. A cable that runs out of the
-    picture does not end there: its chain goes to the edge.
-    """
-    direction = end_direction(points, at_start, span)
-    tip = points[0] if at_start else points[-1]
-    height, width = mask.shape
-    reach = 0.0
-    limit = 3.0 * radius + 2.0
-    leaves_image = False
-    while reach < limit:
-        probe = tip + (reach + 1.0) * direction
-        col, row = round(probe[0]), round(probe[1])
-        if not (0 <= col < width and 0 <= row < height):
-            leaves_image = True
-            break
-        if not mask[row, col]:
-            break
-        reach += 1.0
-    extension = reach if leaves_image else reach - radius
-    if not leaves_image:
-        # A curving end, or one whose tip fork fell to spur removal, leaves the straight
-        # walk through the side of the cap: the farthest pixel of the cable ahead marks
-        # the end better.
-        far = _farthest_ahead(tip, direction, mask, TIP_SEARCH_RADII * radius + 2.0)
-        if far is not None:
-            offset = far - tip
-            length = float(np.hypot(*offset))
-            if length - radius > extension:
-                direction = offset / length
-                extension = length - radius
-    if extension < 1.0:
-        return points
-    new_tip = tip + extension * direction
-    return np.vstack([new_tip, points]) if at_start else np.vstack([points, new_tip])
-
-
-# At most this many extensions of a free end, each from where the last one stopped.
-END_EXTENSION_ROUNDS = 3
-# How far ahead of a free chain end (in radii) and within which angle of its direction
-# the cable's farthest pixel is looked for.
-TIP_SEARCH_RADII = 5.0
-TIP_SEARCH_COS = float(np.cos(np.radians(35.0)))
-FAR_RIM_PX = 2.0
-
-
-def _farthest_ahead(tip, direction, mask, limit, cos_half_angle=TIP_SEARCH_COS):
-    """The middle of the mask's farthest rim from ``tip``: the pixels at most ``limit``
-    px away, within the cone of ``cos_half_angle`` round ``direction`` and connected to
-    the tip through the mask near it, that lie within FAR_RIM_PX of the largest
-    distance (the middle, so the corners of a square-cut end do not pull the end
-    sideways). None when there is none. Compiled: the plain version is the reference in
-    tests/perception.
-    """
-    found, x, y = _kernels.farthest_rim_ahead(
-        as_uint8(mask),
-        round(float(tip[0])),
-        round(float(tip[1])),
-        float(tip[0]),
-        float(tip[1]),
-        float(direction[0]),
-        float(direction[1]),
-        float(limit),
-        float(cos_half_angle),
-        FAR_RIM_PX,
-    )
-    return np.array([x, y]) if found else None
-
-
 def _finalise_path(path: MergedPath, mask, distance, params: DetectParams, radius: float):
-    """Resample a merged path to joints exactly ``l_s`` apart, with per-segment flags."""
-    vertices, filled = path.vertices, path.filled
+    """A merged path with its ends extended, as joints exactly ``l_s`` apart.
+
+    Returns the joints, the per-segment "inferred" flags and the chain's radius (the
+    median distance to the border at its joints on the cable, less half a pixel).
+    """
     span = max(2.0 * params.segment_length, 3.0 * radius)
-    # End extensions are seen cable (they lie on the mask). An extension that ends at its
-    # search limit still inside the cable (a thin cable whose skeleton stopped several
-    # widths short of its tip) goes on from its new tip; once at the end it adds nothing.
-    for at_start in (True, False):
-        for _ in range(END_EXTENSION_ROUNDS):
-            extended = _extend_end(vertices, at_start, mask, radius, span)
-            added = len(extended) - len(vertices)
-            if added == 0:
-                break
-            flags = np.zeros(added, bool)
-            filled = np.concatenate([flags, filled] if at_start else [filled, flags])
-            vertices = extended
+    vertices, filled = extend_ends(path.vertices, path.filled, mask, radius, span)
     height, width = mask.shape
     # A filled edge across foreground (a crossing) is seen; across background, hidden.
     midpoints = 0.5 * (vertices[:-1] + vertices[1:])
@@ -164,7 +91,7 @@ def _finalise_path(path: MergedPath, mask, distance, params: DetectParams, radiu
     joints, source_edge = resample(vertices, params.segment_length)
     edge_lengths = np.linalg.norm(np.diff(vertices, axis=0), axis=1)
     # Inferred where more than half the length of the edges a segment spans is hidden.
-    inferred = _kernels.inferred_segments(
+    inferred = _pipeline_kernels.inferred_segments(
         source_edge.astype(np.int64),
         np.ascontiguousarray(edge_lengths, np.float64),
         np.ascontiguousarray(hidden_edge, bool),
@@ -241,7 +168,7 @@ def detect_full(
     skeleton = skeletonize(foreground)
     # The compiled distance transform: cv2's values, bit for bit, in O(foreground).
     distance = distance_transform(foreground)
-    radius = max(estimate_radius(foreground, skeleton, distance), 1.0)
+    radius = max(estimate_radius(skeleton, distance=distance), 1.0)
     spur_length = 2.5 * radius if params.spur_length is None else params.spur_length
     if spur_length > 0:
         skeleton = remove_spurs(skeleton, spur_length)
@@ -262,7 +189,8 @@ def detect_full(
     pieces = [p for p in pieces if polyline_length(p) >= min(radius, params.min_chain_length)]
     watch.lap("pruning")
 
-    # 6. Merging across gaps and crossings, then crossings and their order.
+    # 6. Merging across gaps and crossings; each path's free ends extended to the
+    # cable's ends and the path resampled; then crossings and their order.
     merged = merge_chains(pieces, params, radius, zones, distance)
     finals = []
     for path in merged.paths:
@@ -338,8 +266,8 @@ def detect(
     """Detect every deformable linear object in an image as a chain of segments.
 
     The six steps of Keipour et al. (RA-L 2022): segmentation, skeletonization,
-    contour extraction, fitting, pruning and merging, plus the order of the strands at
-    each crossing.
+    contour extraction, fitting, pruning and merging; then the chains' free ends are
+    extended to the cables' ends and the order of the strands at each crossing is found.
 
     Parameters
     ----------
@@ -376,3 +304,66 @@ def detect(
     18
     """
     return detect_full(image, params, mask).detection
+
+
+def _numba_cache_dir() -> str:
+    """The directory numba caches the kernels in ("" when numba does not say).
+
+    Every kernel module lives in this package, so one kernel's directory is all of theirs.
+    """
+    cache = getattr(_pipeline_kernels.inferred_segments, "_cache", None)
+    return str(getattr(cache, "_cache_path", "") or "")
+
+
+def warm_up() -> None:
+    """Load every compiled kernel, compiling it first when numba's cache lacks it.
+
+    Runs each step on small inputs through the same wrappers, and so with the same
+    argument types, as :func:`detect_full`: afterwards a detection compiles and loads
+    nothing, so its ``timings_ms`` are detection time alone. On a machine's first run
+    (see :func:`service.perception.kernels_cached`) the kernels are compiled, which
+    takes tens of seconds, and cached by numba; the stamp that ``kernels_cached`` reads
+    is then written. Later processes load the machine code from the cache (a fraction
+    of a second), and calls after the first in a process take a few milliseconds.
+    """
+    mask = np.zeros((40, 48), bool)
+    mask[17:23, 2:46] = True  # a cross: one junction, four arms
+    mask[2:38, 21:27] = True
+    mask[8, 4] = True  # a speck
+    image = np.repeat((mask * 200 + 20).astype(np.uint8)[:, :, None], 3, axis=2)
+    # 1. The brightness path (Otsu, hysteresis and clean-up in one pass), the clean-up
+    # of other masks, and the growth by a cable's own threshold.
+    _, cue, _ = segment_with_cue(image, DetectParams())
+    clean_mask(mask, 2, 2)
+    line = np.array([[2.0, 20.0], [45.0, 20.0]])
+    grow_by_own_thresholds(cue, mask, [line], [3.0], [np.array([False])], [])
+    # 2 to 5.
+    skeleton = skeletonize(mask)
+    distance = distance_transform(mask)
+    radius = max(estimate_radius(skeleton, distance=distance), 1.0)
+    skeleton = remove_spurs(skeleton, 2.5 * radius)
+    zones = junction_zones(skeleton, radius)
+    prune_overlaps(fit_chains(extract_contours(skeleton), skeleton, zones, 5.0), mask.shape)
+    # 6. End fits (leaving out narrow ends) and the gap curves: the natural curve's three
+    # shapes (straight, arc, Bezier) and the smooth one.
+    strands = [
+        np.array([[0.0, 5.0], [4.0, 5.0], [8.0, 5.0], [12.0, 5.0]]),
+        np.array([[6.0, 0.0], [6.0, 4.0], [6.0, 8.0], [6.0, 12.0]]),
+    ]
+    chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
+    east, north = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    for shape in GapCurve:
+        for end, arriving in (
+            (strands[0][-1], east),
+            (np.array([20.0, 20.0]), north),
+            (np.array([-9.0, 9.0]), north),
+        ):
+            gap_curve(strands[0][0], east, end, arriving, shape=shape)
+    # End extension, resampling and the inferred flags; the crossings' sweep.
+    _finalise_path(MergedPath(line, np.array([False])), mask, distance, DetectParams(), radius)
+    find_intersections(strands)
+    # OpenCV builds its Lab tables on the first conversion (about 60 ms), which the
+    # crossings step and the labels would otherwise report as their own time.
+    cv2.cvtColor(image[:1, :1], cv2.COLOR_BGR2LAB)
+    if not kernels_cached():
+        write_stamp(_numba_cache_dir())

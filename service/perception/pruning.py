@@ -4,8 +4,8 @@ Fitting walks every skeleton branch once per side of its contour, so most branch
 come out twice. Chains are visited longest first; a segment with at least two of its
 points at 1/4, 1/2 and 3/4 of its length on pixels already covered by a kept segment
 (a band ``2 * tolerance + 1`` px wide drawn by ``cv2.polylines``) is removed, and what
-is left of a chain is split into its unbroken runs. The per-segment test runs in a
-compiled kernel (``_kernels.uncovered_runs``).
+is left of a chain is split into its unbroken runs (runs under 1 px long are dropped).
+The per-segment test runs in a compiled kernel (``_pruning_kernels.uncovered_runs``).
 """
 
 from __future__ import annotations
@@ -13,12 +13,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from service.perception import _kernels
-
-
-def chain_length(joints: np.ndarray) -> float:
-    """Arc length of a polyline in pixels."""
-    return float(np.linalg.norm(np.diff(joints, axis=0), axis=1).sum()) if len(joints) > 1 else 0.0
+from service.perception import _pruning_kernels
 
 
 def prune_overlaps(
@@ -47,7 +42,7 @@ def prune_overlaps(
     arrays = [np.asarray(joints, dtype=np.float64).reshape(-1, 2) for joints in chains]
     ends = np.cumsum([len(joints) for joints in arrays])
     everything = np.ascontiguousarray(np.concatenate(arrays))
-    lengths = _kernels.chain_lengths(everything, ends)
+    lengths = _pruning_kernels.chain_lengths(everything, ends)
     # The pixels cv2.polylines draws a kept run through, for all chains at once.
     rounded = np.rint(everything).astype(np.int32)
     starts = ends - [len(joints) for joints in arrays]
@@ -58,7 +53,7 @@ def prune_overlaps(
         if len(joints) < 2:
             continue
         offset = int(starts[index])
-        runs = _kernels.uncovered_runs(everything[offset : offset + len(joints)], coverage)
+        runs = _pruning_kernels.uncovered_runs(everything[offset : offset + len(joints)], coverage)
         for start, stop in runs.tolist():
             kept.append(joints[start:stop])
             points = rounded[offset + start : offset + stop]

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from schemas import DetectParams, SegmentationMethod
-from service.perception import _kernels
+from service.perception import _segmentation_kernels
 from service.perception.errors import InvalidInputError
 
 
@@ -75,11 +75,9 @@ def _histogram(feature: np.ndarray) -> np.ndarray:
     return np.bincount(feature.ravel(), minlength=256).astype(np.float64)
 
 
-def _otsu(feature: np.ndarray, hist: np.ndarray | None = None) -> tuple[float, float]:
-    """Otsu threshold of a ``uint8`` image (or of its histogram) and its separability (0..1)."""
-    if hist is None:
-        hist = _histogram(feature)
-    return _kernels.otsu_kernel(np.ascontiguousarray(hist, np.float64))
+def _otsu(hist: np.ndarray) -> tuple[float, float]:
+    """Otsu threshold of a 256-level histogram and its separability (0..1)."""
+    return _segmentation_kernels.otsu_kernel(np.ascontiguousarray(hist, np.float64))
 
 
 def cue_images(image_bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -103,16 +101,6 @@ THIN_FOREGROUND_SHARE = 0.25
 HYSTERESIS_FRACTION = 0.85
 
 
-def hysteresis_threshold(cue: np.ndarray, low: float, high: float) -> np.ndarray:
-    """Pixels above ``low`` that are 8-connected to a pixel above ``high``."""
-    cue = np.ascontiguousarray(cue)
-    weak_count = int(np.count_nonzero(cue > low))
-    # The fused kernel with no clean-up is the plain hysteresis.
-    return _kernels.threshold_and_clean(cue, float(low), float(high), weak_count, 0, 0).view(
-        np.bool_
-    )
-
-
 def _hysteresis_low(hist: np.ndarray, threshold: float) -> float:
     """The weak threshold: :data:`HYSTERESIS_FRACTION` of the way up from the background.
 
@@ -127,9 +115,7 @@ def _hysteresis_low(hist: np.ndarray, threshold: float) -> float:
     return background + HYSTERESIS_FRACTION * (threshold - background)
 
 
-def _cable_like(
-    cue: np.ndarray, threshold: float, separability: float, hist: np.ndarray | None = None
-) -> bool:
+def _cable_like(cue: np.ndarray, threshold: float, separability: float, hist: np.ndarray) -> bool:
     """Does thresholding this cue look like cables against a background?
 
     Either the histogram is clearly two-class, or it is moderately so and the bright
@@ -138,11 +124,8 @@ def _cable_like(
     """
     if separability >= BIMODAL_SEPARABILITY:
         return True
-    if hist is None:
-        above = np.count_nonzero(cue > threshold)
-    else:
-        # The threshold is a whole level: the pixels above it are the levels after it.
-        above = int(hist[int(threshold) + 1 :].sum())
+    # The threshold is a whole level: the pixels above it are the levels after it.
+    above = int(hist[int(threshold) + 1 :].sum())
     share = float(above) / cue.size
     return separability >= THIN_SEPARABILITY and share <= THIN_FOREGROUND_SHARE
 
@@ -171,20 +154,20 @@ def _segment_auto(
     """:func:`segment_auto`, and the brightness and weak threshold when brightness made it."""
     # No blur: it moves the border of thin cables more than it removes noise, and
     # the clean-up afterwards removes the specks noise leaves.
-    brightness, counts = _kernels.brightness_histogram(image_bgr)
+    brightness, counts = _segmentation_kernels.brightness_histogram(image_bgr)
     hist = counts.astype(np.float64)
-    threshold, separability = _otsu(brightness, hist)
+    threshold, separability = _otsu(hist)
     if _cable_like(brightness, threshold, separability, hist):
         low = _hysteresis_low(hist, threshold)
         # Pixels above ``low``: the levels from the first whole level above it.
         weak_count = int(hist[max(int(np.floor(low)) + 1, 0) :].sum())
-        mask = _kernels.threshold_and_clean(
+        mask = _segmentation_kernels.threshold_and_clean(
             brightness, low, threshold, weak_count, int(min_component_area), int(max_hole_area)
         ).view(np.bool_)
         return mask, brightness, low
     colourfulness = cue_images(image_bgr)[1]
     colour_hist = _histogram(colourfulness)
-    colour_threshold, colour_separability = _otsu(colourfulness, colour_hist)
+    colour_threshold, colour_separability = _otsu(colour_hist)
     if _cable_like(colourfulness, colour_threshold, colour_separability, colour_hist):
         mask = clean_mask(colourfulness > colour_threshold, min_component_area, max_hole_area)
         return mask, None, 0.0
@@ -220,9 +203,9 @@ def clean_mask(mask: np.ndarray, min_component_area: int, max_hole_area: int) ->
     # The fills visit the foreground and the background next to it, not the whole image.
     cleaned = np.array(mask, dtype=bool, order="C").view(np.uint8)
     if min_component_area > 0:
-        _kernels.remove_small_components(cleaned, int(min_component_area))
+        _segmentation_kernels.remove_small_components(cleaned, int(min_component_area))
     if max_hole_area > 0:
-        _kernels.fill_small_holes(cleaned, int(max_hole_area))
+        _segmentation_kernels.fill_small_holes(cleaned, int(max_hole_area))
     return cleaned.view(np.bool_)
 
 
@@ -327,12 +310,12 @@ def grow_by_own_thresholds(
         avoid_reach = np.array(
             [span + radii[c[3] if c[2] == index else c[2]] for c in mine], np.float64
         )
-        hist, feet = _kernels.profile_histogram(
+        hist, feet = _segmentation_kernels.profile_histogram(
             cue, points, seen, avoid_xy, avoid_reach, span, PROFILE_STRIDE
         )
         if feet * PROFILE_STRIDE < 2 * span:
             continue  # too little of the cable in the open to judge its own level
-        threshold, separability = _otsu(cue, hist)
+        threshold, separability = _otsu(hist)
         if separability < THIN_SEPARABILITY:
             continue  # no clear cable-and-background split around this cable
         low = _hysteresis_low(hist, threshold)
@@ -343,7 +326,7 @@ def grow_by_own_thresholds(
         reach = min(int(np.ceil(radius + OWN_THRESHOLD_REACH)), span)
         # Walks start two pixels inside the typical edge when the mask is there.
         start = max(int(np.ceil(radius)) - 2, 0)
-        _kernels.grow_along_profiles(
+        _segmentation_kernels.grow_along_profiles(
             cue, before, grown, points, seen, avoid_xy, avoid_reach, start, reach, low
         )
     return grown.view(np.bool_)

@@ -4,24 +4,25 @@ Morphological thinning keeps every component connected. Thinning also leaves sho
 spurs where the border of the mask is ragged; those are removed so that the skeleton
 has one branch per real branch of the cable.
 
-The pixel loops run in compiled kernels (:mod:`service.perception._kernels`) that
-visit only the pixels that can change. The thinning is Zhang and Suen's parallel
-thinning followed by one pass that removes the corners of staircases (see
-:func:`thin`); the distances are OpenCV's 5x5 chamfer distances.
+The pixel loops run in compiled kernels (``_skeleton_kernels.py``, and the distance
+transform in ``_shared_kernels.py``) that visit only the pixels that can change. The
+thinning is Zhang and Suen's parallel thinning followed by one pass that removes the
+corners of staircases (see :func:`skeletonize`); the distances are OpenCV's 5x5 chamfer
+distances.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from service.perception import _kernels
-
-# Offsets of the 8 neighbours in circular order (clockwise from east), as (row, col).
-NEIGHBOUR_OFFSETS = ((0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1), (-1, 0), (-1, 1))
+from service.perception import _shared_kernels, _skeleton_kernels
 
 
 def _branch_count_table() -> np.ndarray:
     """Number of separate runs of skeleton pixels around a pixel, per 8-bit pattern.
+
+    Bit k of a pattern is the neighbour k in circular order, clockwise from east
+    (``_shared_kernels.RING_DR``, ``RING_DC``).
 
     Counting runs rather than neighbours keeps staircase steps of a diagonal line
     (two neighbours that touch each other) from looking like a junction.
@@ -57,16 +58,8 @@ def as_uint8(image: np.ndarray) -> np.ndarray:
     return image.view(np.uint8)
 
 
-def branch_counts(skeleton: np.ndarray) -> np.ndarray:
-    """Branches leaving each skeleton pixel: 1 at a tip, 2 along a line, 3+ at a junction.
-
-    Zero off the skeleton.
-    """
-    return _kernels.branch_count_image(as_uint8(skeleton), _BRANCH_COUNT)
-
-
 def _thinning_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Removal tables of :func:`thin`, indexed by the pattern of the ring P2..P9.
+    """Removal tables of :func:`skeletonize`, indexed by the pattern of the ring P2..P9.
 
     Bit k of a pattern is neighbour P(k+2) in Zhang and Suen's order: N, NE, E, SE,
     S, SW, W, NW.
@@ -107,8 +100,8 @@ def _thinning_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 _THIN_FIRST, _THIN_SECOND, _THIN_STAIRCASE = _thinning_tables()
 
 
-def thin(mask: np.ndarray) -> np.ndarray:
-    """Thin a 2D mask to a one-pixel-wide, 8-connected skeleton.
+def skeletonize(mask: np.ndarray) -> np.ndarray:
+    """Step 2's thinning: a 2D mask to a one-pixel-wide, 8-connected skeleton.
 
     Zhang and Suen's parallel thinning [1]_: sub-iterations alternate between two
     rules until neither removes a pixel. A foreground pixel P1 with ring P2..P9 (N,
@@ -137,7 +130,7 @@ def thin(mask: np.ndarray) -> np.ndarray:
     """
     mask = np.asarray(mask)
     if mask.ndim != 2:
-        raise ValueError(f"thin needs a 2D mask, not {mask.ndim}D")
+        raise ValueError(f"skeletonize needs a 2D mask, not {mask.ndim}D")
     skeleton = np.zeros(mask.shape, bool)
     rows = np.flatnonzero(mask.any(axis=1))
     if rows.size == 0:
@@ -147,14 +140,9 @@ def thin(mask: np.ndarray) -> np.ndarray:
     # One pixel of background round the box, so the kernel needs no bounds checks.
     padded = np.zeros((bottom - top + 2, right - left + 2), np.uint8)
     padded[1:-1, 1:-1] = mask[top:bottom, left:right] != 0
-    _kernels.thin_padded(padded, _THIN_FIRST, _THIN_SECOND, _THIN_STAIRCASE)
+    _skeleton_kernels.thin_padded(padded, _THIN_FIRST, _THIN_SECOND, _THIN_STAIRCASE)
     skeleton[top:bottom, left:right] = padded[1:-1, 1:-1].view(np.bool_)
     return skeleton
-
-
-def skeletonize(mask: np.ndarray) -> np.ndarray:
-    """Step 2's thinning: :func:`thin` (kept as the name the pipeline uses)."""
-    return thin(mask)
 
 
 def remove_spurs(skeleton: np.ndarray, spur_length: float, passes: int = 2) -> np.ndarray:
@@ -173,31 +161,10 @@ def remove_spurs(skeleton: np.ndarray, spur_length: float, passes: int = 2) -> n
     """
     skeleton = as_uint8(skeleton).copy()
     for _ in range(passes):
-        if not _kernels.remove_spurs_inplace(skeleton, float(spur_length), _BRANCH_COUNT):
+        if not _skeleton_kernels.remove_spurs_inplace(skeleton, float(spur_length), _BRANCH_COUNT):
             break
         skeleton = as_uint8(skeletonize(skeleton))
     return skeleton.view(np.bool_)
-
-
-def skeletonize_mask(mask: np.ndarray, spur_length: float) -> np.ndarray:
-    """Step 2 of the pipeline: thin the mask to a spur-free 8-connected skeleton.
-
-    Parameters
-    ----------
-    mask : ndarray of bool
-        Foreground mask.
-    spur_length : float
-        Tip-to-junction branches shorter than this (px) are removed.
-
-    Returns
-    -------
-    ndarray of bool
-        The skeleton, same shape as ``mask``.
-    """
-    skeleton = skeletonize(mask)
-    if spur_length > 0:
-        skeleton = remove_spurs(skeleton, spur_length)
-    return skeleton
 
 
 def distance_transform(mask: np.ndarray) -> np.ndarray:
@@ -206,29 +173,23 @@ def distance_transform(mask: np.ndarray) -> np.ndarray:
     Float32 distance of each foreground pixel to the nearest background pixel centre
     (OpenCV's 5x5 chamfer approximation of the Euclidean distance); 0 on background.
     """
-    return _kernels.distance_transform(as_uint8(mask))
+    return _shared_kernels.distance_transform(as_uint8(mask))
 
 
-def estimate_radius(
-    mask: np.ndarray, skeleton: np.ndarray, distance: np.ndarray | None = None
-) -> float:
+def estimate_radius(skeleton: np.ndarray, *, distance: np.ndarray) -> float:
     """Typical half width of the cables: the median distance from skeleton to border.
 
     Parameters
     ----------
-    mask, skeleton : ndarray of bool
-    distance : ndarray, optional
-        ``distance_transform(mask)`` when the caller has it already; otherwise the
-        distance is computed at the skeleton pixels only.
+    skeleton : ndarray of bool
+    distance : ndarray
+        ``distance_transform(mask)`` of the mask the skeleton was thinned from.
     """
     skeleton = as_uint8(skeleton)
-    if distance is not None:
-        # Gathered at the skeleton's pixels (found 8 bytes at a time), not through a
-        # boolean index over the whole image.
-        indices = _kernels.nonzero_flat(skeleton.reshape(-1))
-        values = np.ascontiguousarray(distance).reshape(-1)[indices]
-    else:
-        values = _kernels.distances_on_skeleton(as_uint8(mask), skeleton)
+    # Gathered at the skeleton's pixels (found 8 bytes at a time), not through a
+    # boolean index over the whole image.
+    indices = _shared_kernels.nonzero_flat(skeleton.reshape(-1))
+    values = np.ascontiguousarray(distance).reshape(-1)[indices]
     if values.size == 0:
         return 0.0
     # The distance is to the nearest background pixel centre, half a pixel beyond

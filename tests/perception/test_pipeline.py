@@ -1,12 +1,33 @@
-"""The whole pipeline on generated scenes with exact ground truth."""
+"""The whole pipeline on generated scenes with exact ground truth, and its own kernel.
+
+Steps 2 to 5 chained against their references on the mbest labels are a slow case.
+"""
 
 import cv2
 import numpy as np
 import pytest
 
 from schemas import Detection, DetectParams
-from service.perception import InvalidInputError, detect, detect_full, render_labels
+from service.perception import (
+    InvalidInputError,
+    _pipeline_kernels,
+    detect,
+    detect_full,
+    render_labels,
+)
+from service.perception.contours import extract_contours
+from service.perception.fitting import fit_chains, junction_zones
+from service.perception.pruning import prune_overlaps
+from service.perception.skeleton import (
+    distance_transform,
+    estimate_radius,
+    remove_spurs,
+    skeletonize,
+)
 from service.synthetic import make_scene
+from tests.perception.cases import MBEST, assert_same_chains
+from tests.perception.references import pipeline as reference
+from tests.perception.references import steps
 
 
 def distance_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
@@ -223,3 +244,48 @@ def test_one_thin_cable_on_a_textured_table_is_still_found():
     # the thin bright class still marks it as a cable, unlike plain texture.
     scene = make_scene(1280, 720, 1, seed=21, occluders=2)
     assert len(detect(scene.image).chains) == 1
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_inferred_segments_kernel_equals_the_reference(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(40):
+        n_edges = int(rng.integers(1, 400))
+        edge_lengths = rng.random(n_edges) * rng.choice([0.0, 1.0, 3.0])
+        edge_lengths[rng.random(n_edges) < 0.1] = 0.0
+        hidden_edge = rng.random(n_edges) < rng.random()
+        source_edge = np.sort(rng.integers(0, n_edges, int(rng.integers(2, 60))))
+        np.testing.assert_array_equal(
+            _pipeline_kernels.inferred_segments(source_edge, edge_lengths, hidden_edge),
+            reference.inferred_segments(source_edge, edge_lengths, hidden_edge),
+        )
+
+
+def assert_steps_2_to_5_match(mask, segment_length=10.0):
+    """The compiled steps 2 to 5, each fed by the one before, against the references."""
+    expected = steps.run(mask, segment_length)
+    skeleton = skeletonize(mask)
+    np.testing.assert_array_equal(skeleton, expected.skeleton)
+    radius = max(estimate_radius(skeleton, distance=distance_transform(mask)), 1.0)
+    assert radius == expected.radius
+    skeleton = remove_spurs(skeleton, 2.5 * radius)
+    np.testing.assert_array_equal(skeleton, expected.pruned_skeleton)
+    zones = junction_zones(skeleton, radius)
+    np.testing.assert_array_equal(zones, expected.zones)
+    pieces = fit_chains(extract_contours(skeleton), skeleton, zones, segment_length)
+    assert_same_chains(pieces, expected.pieces)
+    assert_same_chains(prune_overlaps(pieces, mask.shape), expected.kept)
+
+
+@pytest.mark.slow
+@pytest.mark.shared_data
+def test_steps_2_to_5_equal_the_references_on_mbest_labels():
+    if not MBEST.is_dir():
+        pytest.skip(f"{MBEST} not present")
+    labels = sorted(MBEST.glob("S*/labels/*.png"))[::25]
+    assert labels
+    for path in labels:
+        assert_steps_2_to_5_match(cv2.imread(str(path), cv2.IMREAD_UNCHANGED) > 0)

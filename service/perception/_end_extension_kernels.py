@@ -1,0 +1,75 @@
+"""Compiled loop of end extension (:mod:`service.perception.end_extension`).
+
+Plain version: ``tests/perception/references/end_extension.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from service.perception._shared_kernels import ORTHOGONAL_FIRST_DC, ORTHOGONAL_FIRST_DR
+
+
+@njit(cache=True, nogil=True)
+def farthest_rim_ahead(mask, col, row, tip_x, tip_y, dir_x, dir_y, limit, cos_half_angle, rim):
+    """See end_extension.farthest_ahead: ``(found, x, y)`` of the middle of the farthest rim.
+
+    The 8-connected component of the pixel (``row``, ``col``) is flood-filled within the
+    square window of half size ceil(limit) round it, as cv2.connectedComponents on that
+    window would label it.
+    """
+    height, width = mask.shape
+    r = int(np.ceil(limit))
+    x0 = max(col - r, 0)
+    y0 = max(row - r, 0)
+    x1 = min(col + r + 1, width)
+    y1 = min(row + r + 1, height)
+    if not (x0 <= col < x1 and y0 <= row < y1) or not mask[row, col]:
+        return False, 0.0, 0.0
+    w = x1 - x0
+    h = y1 - y0
+    seen = np.zeros((h, w), np.uint8)
+    queue = np.empty(h * w, np.int64)
+    queue[0] = (row - y0) * w + (col - x0)
+    seen[row - y0, col - x0] = 1
+    count = 1
+    head = 0
+    far = -1.0
+    while head < count:
+        qr = queue[head] // w
+        qc = queue[head] - qr * w
+        head += 1
+        for k in range(8):
+            rr = qr + ORTHOGONAL_FIRST_DR[k]
+            cc = qc + ORTHOGONAL_FIRST_DC[k]
+            if 0 <= rr < h and 0 <= cc < w and not seen[rr, cc] and mask[y0 + rr, x0 + cc]:
+                seen[rr, cc] = 1
+                queue[count] = rr * w + cc
+                count += 1
+    # Two passes over the component: the farthest distance in the cone, then the rim.
+    for i in range(count):
+        qr = queue[i] // w
+        qc = queue[i] - qr * w
+        vx = qc + x0 - tip_x
+        vy = qr + y0 - tip_y
+        dist = np.hypot(vx, vy)
+        if 0 < dist <= limit and vx * dir_x + vy * dir_y >= cos_half_angle * dist:
+            far = max(far, dist)
+    if far < 0:
+        return False, 0.0, 0.0
+    sum_x = 0.0
+    sum_y = 0.0
+    n = 0
+    for i in range(count):
+        qr = queue[i] // w
+        qc = queue[i] - qr * w
+        vx = qc + x0 - tip_x
+        vy = qr + y0 - tip_y
+        dist = np.hypot(vx, vy)
+        inside = 0 < dist <= limit and vx * dir_x + vy * dir_y >= cos_half_angle * dist
+        if inside and dist >= far - rim:
+            sum_x += vx
+            sum_y += vy
+            n += 1
+    return True, tip_x + sum_x / n, tip_y + sum_y / n

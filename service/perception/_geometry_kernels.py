@@ -1,0 +1,128 @@
+"""Compiled loops of :mod:`service.perception.geometry`: resampling and end fits.
+
+Plain version of the resampling: ``tests/perception/references/geometry.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from service.perception._shared_kernels import solve_small
+
+
+@njit(cache=True, nogil=True)
+def resample_kernel(points, step):
+    """The loop of geometry.resample in float64 (a correctly rounded square root)."""
+    n = points.shape[0]
+    step_sq = step * step
+    capacity = 16
+    joints = np.empty((capacity, 2), np.float64)
+    edges = np.empty(capacity, np.int64)
+    cx = points[0, 0]
+    cy = points[0, 1]
+    joints[0, 0] = cx
+    joints[0, 1] = cy
+    edges[0] = 0
+    count = 1
+    edge = 0
+    while edge < n - 1:
+        ax = points[edge, 0]
+        ay = points[edge, 1]
+        bx = points[edge + 1, 0]
+        by = points[edge + 1, 1]
+        if (bx - cx) ** 2 + (by - cy) ** 2 < step_sq:
+            edge += 1
+            continue
+        dx = bx - ax
+        dy = by - ay
+        fx = ax - cx
+        fy = ay - cy
+        qa = dx * dx + dy * dy
+        qb = 2.0 * (fx * dx + fy * dy)
+        qc = fx * fx + fy * fy - step_sq
+        disc = max(qb * qb - 4.0 * qa * qc, 0.0)
+        t = (-qb + np.sqrt(disc)) / (2.0 * qa) if qa > 0 else 1.0
+        t = min(max(t, 0.0), 1.0)
+        cx = ax + t * dx
+        cy = ay + t * dy
+        if count + 2 > capacity:
+            capacity *= 2
+            grown = np.empty((capacity, 2), np.float64)
+            grown[:count] = joints[:count]
+            joints = grown
+            grown_edges = np.empty(capacity, np.int64)
+            grown_edges[:count] = edges[:count]
+            edges = grown_edges
+        joints[count, 0] = cx
+        joints[count, 1] = cy
+        edges[count] = edge
+        count += 1
+    return joints[:count], edges[:count]
+
+
+@njit(cache=True, nogil=True)
+def end_fit(backwards, skip, span):
+    """Quadratic least-squares fit of a polyline's last stretch (see geometry.end_tangent).
+
+    ``backwards`` starts at the end. Returns ``(fitted, x0, y0, dx, dy, last)``:
+    whether at least four points lie between ``skip`` and ``skip + span`` of arc
+    length; the end position (the fit's value at arc length 0 when a stretch was
+    skipped, else the first point); the fit's first-order coefficient; and the index
+    of the last point within ``span`` (for the chord fallback).
+    """
+    n = backwards.shape[0]
+    total = 0.0
+    for i in range(1, n):
+        total += np.hypot(
+            backwards[i, 0] - backwards[i - 1, 0], backwards[i, 1] - backwards[i - 1, 1]
+        )
+    if total < 2.0 * skip + 1.0:
+        skip = 0.0
+    reach = skip + span
+    # Normal equations in t = s / reach, which keeps them well conditioned.
+    sums = np.zeros(5)
+    rhs = np.zeros((3, 2))
+    used = 0
+    last = 0
+    arc = 0.0
+    for i in range(n):
+        if i > 0:
+            arc += np.hypot(
+                backwards[i, 0] - backwards[i - 1, 0], backwards[i, 1] - backwards[i - 1, 1]
+            )
+        if arc <= span:
+            last = i
+        if arc > reach:
+            break
+        if arc >= skip:
+            t = arc / reach if reach > 0 else 0.0
+            power = 1.0
+            for k in range(5):
+                sums[k] += power
+                if k < 3:
+                    rhs[k, 0] += power * backwards[i, 0]
+                    rhs[k, 1] += power * backwards[i, 1]
+                power *= t
+            used += 1
+    last = max(last, 1)
+    if used < 4:
+        return False, backwards[0, 0], backwards[0, 1], 0.0, 0.0, last
+    normal = np.empty((3, 3))
+    for r in range(3):
+        for c in range(3):
+            normal[r, c] = sums[r + c]
+    determinant, coefficients = solve_small(normal, rhs)
+    if abs(determinant) < 1e-12:
+        return False, backwards[0, 0], backwards[0, 1], 0.0, 0.0, last
+    x0, y0 = backwards[0, 0], backwards[0, 1]
+    if skip > 0:
+        x0, y0 = coefficients[0, 0], coefficients[0, 1]
+    return (
+        True,
+        x0,
+        y0,
+        coefficients[1, 0] / reach,
+        coefficients[1, 1] / reach,
+        last,
+    )

@@ -1,0 +1,133 @@
+"""Whether numba's cache on this machine holds the compiled kernels: a stamp file.
+
+numba compiles a kernel (``cache=True``) on its first call in a process unless its cache
+holds machine code for this source file, this numba and this CPU. Compiling every kernel
+of the perception core takes tens of seconds; loading them from the cache, a fraction of
+a second. :func:`service.perception.warm_up` writes a stamp once every kernel is in the
+cache; :func:`kernels_cached` compares it with this machine and this source, without
+loading any kernel, so that a front end can say before its first detection that this
+run is about to compile.
+
+The stamp holds a key (a hash of the kernel source files with their modification times
+and sizes, which numba also checks, the numba version, the Python version and the CPU)
+and the directory numba caches the kernels in. It lives in that directory when it is
+the package's ``__pycache__`` (so that deleting the cache deletes the stamp), else in
+the user's cache directory.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import platform
+import sys
+from pathlib import Path
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+KERNEL_SOURCES = tuple(sorted(PACKAGE_DIR.glob("_*_kernels.py")))
+STAMP_NAME = "dlo-kernels.stamp"
+# numba's own settings that change the machine code or where it is cached.
+_NUMBA_SETTINGS = ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "NUMBA_CACHE_DIR", "NUMBA_OPT")
+
+
+def _cpu() -> str:
+    """The CPU's model name and feature flags (the first processor's), or the machine."""
+    found = []
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as cpuinfo:
+            for line in cpuinfo:
+                if line.startswith(("model name", "flags", "Features")):
+                    found.append(line.partition(":")[2].strip())
+                elif not line.strip() and found:
+                    break
+    except OSError:
+        pass
+    return "|".join(found) or platform.processor() or platform.machine()
+
+
+def kernels_key() -> str:
+    """A hash of what numba's cached machine code depends on, for this source and machine."""
+    digest = hashlib.sha256()
+    for path in KERNEL_SOURCES:
+        stat = path.stat()
+        digest.update(f"{path.name}\0{stat.st_mtime}\0{stat.st_size}\0".encode())
+        digest.update(path.read_bytes())
+    # Already imported by the kernel modules (this loads no kernel).
+    import numba
+
+    parts = [
+        numba.__version__,
+        sys.implementation.cache_tag or "",
+        platform.machine(),
+        _cpu(),
+        *(os.environ.get(name, "") for name in _NUMBA_SETTINGS),
+    ]
+    digest.update("\0".join(parts).encode())
+    return digest.hexdigest()
+
+
+def stamp_path() -> Path:
+    """Where the stamp is: the package's ``__pycache__`` when writable, else the user cache."""
+    in_tree = PACKAGE_DIR / "__pycache__"
+    if os.access(in_tree, os.W_OK) or (not in_tree.exists() and os.access(PACKAGE_DIR, os.W_OK)):
+        return in_tree / STAMP_NAME
+    user_cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    package = hashlib.sha1(str(PACKAGE_DIR).encode()).hexdigest()[:16]
+    return user_cache / "dlo-service" / f"{package}-{STAMP_NAME}"
+
+
+def _has_every_index(cache_dir: str) -> bool:
+    """Does ``cache_dir`` hold a numba index file for every kernel source file?"""
+    try:
+        names = os.listdir(cache_dir)
+    except OSError:
+        return False
+    stems = {name.partition(".")[0] for name in names if name.endswith(".nbi")}
+    return all(path.stem in stems for path in KERNEL_SOURCES)
+
+
+def kernels_cached() -> bool:
+    """Are the kernels of this source compiled into numba's cache on this machine?
+
+    True when a previous :func:`service.perception.warm_up` compiled every kernel of
+    these very source files with this numba on this CPU, and numba's cache still holds
+    them: the next warm-up (or first detection) loads machine code instead of compiling
+    it. Reads the stamp and the kernel source files (well under a millisecond here) and
+    loads no kernel.
+
+    Examples
+    --------
+    >>> import sys
+    >>> from service.perception import kernels_cached, warm_up
+    >>> if not kernels_cached():
+    ...     print("compiling the detection kernels (once per machine) ...", file=sys.stderr)
+    >>> warm_up()
+    """
+    try:
+        stamp = json.loads(stamp_path().read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    if not isinstance(stamp, dict) or stamp.get("key") != kernels_key():
+        return False
+    return _has_every_index(str(stamp.get("numba_cache", "")))
+
+
+def write_stamp(numba_cache: str) -> bool:
+    """Record that every kernel is now compiled into ``numba_cache`` (numba's directory).
+
+    Returns False, and leaves no stamp, when it cannot be written (a read-only install).
+    """
+    path = stamp_path()
+    text = json.dumps({"key": kernels_key(), "numba_cache": str(numba_cache)})
+    partial = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial.write_text(text, encoding="utf-8")
+        os.replace(partial, path)
+    except OSError:
+        with contextlib.suppress(OSError):
+            partial.unlink(missing_ok=True)
+        return False
+    return True

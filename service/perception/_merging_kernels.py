@@ -1,0 +1,183 @@
+"""Compiled loops of step 6 (:mod:`service.perception.merging`): end widths, gap curves.
+
+Plain versions: ``tests/perception/references/merging.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from service.perception._shared_kernels import solve_small
+
+# --------------------------------------------------------------------------- end widths
+
+
+@njit(cache=True, nogil=True)
+def median_distance_per_piece(distance, points, starts):
+    """Median of ``distance`` at the rounded joints of each piece (as ``np.median``).
+
+    ``points`` holds every piece's joints one after another; piece ``k`` is
+    ``points[starts[k]:starts[k + 1]]``. Joints are rounded half to even and clipped to
+    the image, as ``np.rint`` and ``np.clip`` would.
+    """
+    height, width = distance.shape
+    medians = np.empty(starts.size - 1)
+    for k in range(starts.size - 1):
+        count = starts[k + 1] - starts[k]
+        values = np.empty(count, np.float32)
+        for i in range(count):
+            col = min(max(int(np.rint(points[starts[k] + i, 0])), 0), width - 1)
+            row = min(max(int(np.rint(points[starts[k] + i, 1])), 0), height - 1)
+            values[i] = distance[row, col]
+        values.sort()
+        middle = count // 2
+        if count % 2:
+            medians[k] = values[middle]
+        else:
+            medians[k] = (values[middle - 1] + values[middle]) / np.float32(2.0)
+    return medians
+
+
+# --------------------------------------------------------------------------- gap curves
+
+
+@njit(cache=True, nogil=True)
+def _put_segment(out, n, ax, ay, bx, by, step, skip_first):
+    """Append the samples of the segment a-b (``step`` apart at most) to ``out[n:]``."""
+    count = max(2, int(np.ceil(np.hypot(bx - ax, by - ay) / step)) + 1)
+    fractions = np.linspace(0.0, 1.0, count)
+    for k in range(1 if skip_first else 0, count):
+        out[n, 0] = ax + fractions[k] * (bx - ax)
+        out[n, 1] = ay + fractions[k] * (by - ay)
+        n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def _gap_geometry(start, leaving, end, arriving):
+    """The gap between two chain ends: its vector, its length, and the cross and dot
+    products of the two end headings."""
+    gap_x = end[0] - start[0]
+    gap_y = end[1] - start[1]
+    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
+    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+    return gap_x, gap_y, np.hypot(gap_x, gap_y), cross, dot
+
+
+@njit(cache=True, nogil=True)
+def _ends_only(start, end):
+    """The curve across a gap of no length: its two ends."""
+    out = np.empty((2, 2))
+    out[0] = start
+    out[1] = end
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _bezier_samples(start, leaving, end, arriving, handle, distance, step):
+    """Samples of the cubic Bezier from ``start`` along ``leaving`` to ``end`` along
+    ``arriving`` with both handles ``handle`` long (1.3 samples per ``step`` of gap)."""
+    count = max(4, int(np.ceil(1.3 * distance / step)) + 1)
+    t = np.linspace(0.0, 1.0, count)
+    out = np.empty((count, 2))
+    for axis in range(2):
+        p0 = start[axis]
+        p1 = start[axis] + handle * leaving[axis]
+        p2 = end[axis] - handle * arriving[axis]
+        p3 = end[axis]
+        for k in range(count):
+            u = t[k]
+            out[k, axis] = (
+                (1 - u) ** 3 * p0 + 3 * (1 - u) ** 2 * u * p1 + 3 * (1 - u) * u**2 * p2 + u**3 * p3
+            )
+    return out
+
+
+@njit(cache=True, nogil=True)
+def natural_curve_kernel(start, leaving, end, arriving, step):
+    """Samples of the natural curve between two chain ends (merging.gap_curve, "natural")."""
+    gap_x, gap_y, distance, cross, dot = _gap_geometry(start, leaving, end, arriving)
+    if distance < 1e-9:
+        return _ends_only(start, end)
+    turn = np.arctan2(cross, dot)
+    heading_x = gap_x / distance
+    heading_y = gap_y / distance
+    if abs(cross) < 1e-6:
+        cosine = min(max(leaving[0] * heading_x + leaving[1] * heading_y, -1.0), 1.0)
+        if dot > 0 and np.arccos(cosine) < 1e-3:
+            out = np.empty((max(2, int(np.ceil(distance / step)) + 1), 2))
+            n = _put_segment(out, 0, start[0], start[1], end[0], end[1], step, False)
+            return out[:n]
+    else:
+        # start + t_a * leaving = end - t_b * arriving
+        matrix = np.empty((2, 2))
+        matrix[0, 0] = leaving[0]
+        matrix[0, 1] = arriving[0]
+        matrix[1, 0] = leaving[1]
+        matrix[1, 1] = arriving[1]
+        rhs = np.empty((2, 1))
+        rhs[0, 0] = gap_x
+        rhs[1, 0] = gap_y
+        _, solution = solve_small(matrix, rhs)
+        t_a = solution[0, 0]
+        t_b = solution[1, 0]
+        if t_a > 0 and t_b > 0:
+            tangent = min(t_a, t_b)
+            corner_x = start[0] + t_a * leaving[0]
+            corner_y = start[1] + t_a * leaving[1]
+            arc_start_x = corner_x - tangent * leaving[0]
+            arc_start_y = corner_y - tangent * leaving[1]
+            arc_radius = tangent / np.tan(abs(turn) / 2.0)
+            sign = 1.0 if turn >= 0 else -1.0
+            centre_x = arc_start_x + arc_radius * sign * -leaving[1]
+            centre_y = arc_start_y + arc_radius * sign * leaving[0]
+            offset_x = arc_start_x - centre_x
+            offset_y = arc_start_y - centre_y
+            arc_count = max(2, int(np.ceil(abs(turn) * arc_radius / step)) + 1)
+            angles = np.linspace(0.0, turn, arc_count)
+            arc_x = centre_x + (np.cos(angles) * offset_x - np.sin(angles) * offset_y)
+            arc_y = centre_y + (np.sin(angles) * offset_x + np.cos(angles) * offset_y)
+            first = max(
+                2, int(np.ceil(np.hypot(arc_start_x - start[0], arc_start_y - start[1]) / step)) + 1
+            )
+            last = max(2, int(np.ceil(np.hypot(end[0] - arc_x[-1], end[1] - arc_y[-1]) / step)) + 1)
+            curve = np.empty((first + arc_count + last, 2))
+            n = _put_segment(curve, 0, start[0], start[1], arc_start_x, arc_start_y, step, False)
+            for k in range(1, arc_count):
+                curve[n, 0] = arc_x[k]
+                curve[n, 1] = arc_y[k]
+                n += 1
+            n = _put_segment(curve, n, arc_x[-1], arc_y[-1], end[0], end[1], step, True)
+            curve[n - 1, 0] = end[0]
+            curve[n - 1, 1] = end[1]
+            # Drop points that repeat their predecessor (a straight part of zero length).
+            kept = 1
+            for k in range(1, n):
+                if np.hypot(curve[k, 0] - curve[k - 1, 0], curve[k, 1] - curve[k - 1, 1]) > 1e-9:
+                    curve[kept] = curve[k]
+                    kept += 1
+            return curve[:kept]
+    handle = 0.4 * distance
+    return _bezier_samples(start, leaving, end, arriving, handle, distance, step)
+
+
+@njit(cache=True, nogil=True)
+def smooth_curve_kernel(start, leaving, end, arriving, step):
+    """Samples of the smooth gap curve (see merging.gap_curve, shape "smooth").
+
+    A cubic Bezier from ``start`` along ``leaving`` to ``end`` along ``arriving`` whose
+    handle length, for a total turn theta between the end directions, is
+    (2/3) d tan(theta / 4) / sin(theta / 2) with d the gap: the cubic that best follows
+    a circular arc when the ends are symmetric, d / 3 (a straight line) when they are
+    aligned. theta is capped at 0.95 pi so a reversing gap gets finite handles.
+    """
+    _, _, distance, cross, dot = _gap_geometry(start, leaving, end, arriving)
+    if distance < 1e-9:
+        return _ends_only(start, end)
+    theta = min(abs(np.arctan2(cross, dot)), 0.95 * np.pi)
+    if theta < 1e-6:
+        handle = distance / 3.0
+    else:
+        handle = (2.0 / 3.0) * distance * np.tan(theta / 4.0) / np.sin(theta / 2.0)
+    return _bezier_samples(start, leaving, end, arriving, handle, distance, step)

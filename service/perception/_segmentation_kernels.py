@@ -1,0 +1,362 @@
+"""Compiled loops of step 1 (:mod:`service.perception.segmentation`).
+
+Otsu's threshold and the brightness histogram, the hysteresis and the clean-up of the
+mask (flood fills), and each cable's own threshold (profiles across its centreline).
+Plain versions: ``tests/perception/references/segmentation.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from service.perception._shared_kernels import ORTHOGONAL_FIRST_DC, ORTHOGONAL_FIRST_DR
+
+# --------------------------------------------------------------------------- thresholds
+
+
+@njit(cache=True, nogil=True)
+def otsu_kernel(hist):
+    """Otsu's threshold of a 256-level histogram and its separability (0..1).
+
+    Between-class variance at every level; with an empty stretch of the histogram
+    between the classes every threshold in it is equally good, and the middle one
+    (within a relative 1e-12 of the best) keeps the most margin to both classes. A
+    histogram of one level gives ``(255.0, 0.0)``.
+    """
+    total = 0.0
+    level_sum = 0.0
+    for level in range(256):
+        total += hist[level]
+        level_sum += hist[level] * level
+    mean_all = level_sum / total
+    var_sum = 0.0
+    for level in range(256):
+        offset = level - mean_all
+        var_sum += hist[level] * (offset * offset)
+    var_all = var_sum / total
+    if var_all <= 1e-9:
+        return 255.0, 0.0
+    between = np.zeros(256)
+    count_low = 0.0
+    sum_low = 0.0
+    peak = 0.0
+    for level in range(256):
+        count_low += hist[level]
+        sum_low += hist[level] * level
+        weight_low = count_low / total
+        weight_high = 1.0 - weight_low
+        if weight_low > 0 and weight_high > 0:
+            gap = mean_all * weight_low - sum_low / total
+            between[level] = gap * gap / (weight_low * weight_high)
+            peak = max(peak, between[level])
+    best_levels = np.empty(256, np.int64)
+    n_best = 0
+    for level in range(256):
+        if between[level] >= peak * (1.0 - 1e-12):
+            best_levels[n_best] = level
+            n_best += 1
+    return float(best_levels[n_best // 2]), peak / var_all
+
+
+@njit(cache=True, nogil=True)
+def brightness_histogram(image_bgr):
+    """Brightness (largest channel) of a BGR ``uint8`` image and its 256-level histogram.
+
+    Two loops, not one: the channel maximum over flat memory vectorizes, and four
+    interleaved histograms keep consecutive pixels of one level from waiting on each
+    other's increment.
+    """
+    height, width = image_bgr.shape[:2]
+    flat = image_bgr.reshape(-1)
+    count = height * width
+    brightness = np.empty(count, np.uint8)
+    for i in range(count):
+        blue = flat[3 * i]
+        green = flat[3 * i + 1]
+        red = flat[3 * i + 2]
+        larger = blue if blue > green else green
+        brightness[i] = larger if larger > red else red
+    partial = np.zeros((4, 256), np.int64)
+    whole = count - count % 4
+    for i in range(0, whole, 4):
+        partial[0, brightness[i]] += 1
+        partial[1, brightness[i + 1]] += 1
+        partial[2, brightness[i + 2]] += 1
+        partial[3, brightness[i + 3]] += 1
+    for i in range(whole, count):
+        partial[0, brightness[i]] += 1
+    return brightness.reshape(height, width), partial.sum(axis=0)
+
+
+# --------------------------------------------------------------------------- clean-up
+
+
+@njit(cache=True, nogil=True)
+def remove_small_components(mask, min_area):
+    """Clear, in place, the 8-connected foreground components of fewer than ``min_area`` px."""
+    height, width = mask.shape
+    seen = np.zeros((height, width), np.uint8)
+    # Room for the largest possible component up front: growing an array inside the
+    # loop makes numba count references on every step, which costs more than the fill.
+    members = np.empty(max(np.count_nonzero(mask), 1), np.int64)
+    for r0 in range(height):
+        for c0 in range(width):
+            if not mask[r0, c0] or seen[r0, c0]:
+                continue
+            # Breadth-first over ``members``: the filled pixels are the component.
+            seen[r0, c0] = 1
+            members[0] = r0 * width + c0
+            count = 1
+            head = 0
+            while head < count:
+                r = members[head] // width
+                c = members[head] - r * width
+                head += 1
+                for k in range(8):
+                    rr = r + ORTHOGONAL_FIRST_DR[k]
+                    cc = c + ORTHOGONAL_FIRST_DC[k]
+                    if 0 <= rr < height and 0 <= cc < width and mask[rr, cc] and not seen[rr, cc]:
+                        seen[rr, cc] = 1
+                        members[count] = rr * width + cc
+                        count += 1
+            if count < min_area:
+                for i in range(count):
+                    r = members[i] // width
+                    c = members[i] - r * width
+                    mask[r, c] = 0
+
+
+_UNSEEN, _SMALL_HOLE, _OPEN = 0, 1, 2
+
+
+@njit(cache=True, nogil=True)
+def _fill_holes_next_to(mask, foreground, n_foreground, max_hole_area):
+    """Fill, in place, the small holes next to the listed foreground pixels.
+
+    A hole is a 4-connected background component of at most ``max_hole_area`` pixels
+    that does not touch the image border; ``foreground[:n_foreground]`` (flat indices)
+    must include every foreground pixel that borders one, and holes are whole
+    components, so the order of the fills does not matter.
+
+    Every hole borders the foreground, so fills start only from background pixels next
+    to it. A fill stops as soon as its component is known not to be a hole: more than
+    ``max_hole_area`` pixels, the image border, or a pixel an earlier stopped fill
+    reached (the same component). Its pixels are then marked open, so no background
+    pixel is filled twice and the cost stays near the length of the mask's border.
+    """
+    height, width = mask.shape
+    state = np.zeros((height, width), np.uint8)
+    # A fill stops before it holds more than ``max_hole_area`` pixels.
+    members = np.empty(max_hole_area + 1, np.int64)
+    for i0 in range(n_foreground):
+        r0 = foreground[i0] // width
+        c0 = foreground[i0] - r0 * width
+        for k0 in range(4):
+            rs = r0 + ORTHOGONAL_FIRST_DR[k0]
+            cs = c0 + ORTHOGONAL_FIRST_DC[k0]
+            if not (0 <= rs < height and 0 <= cs < width):
+                continue
+            if mask[rs, cs] or state[rs, cs] != _UNSEEN:
+                continue
+            state[rs, cs] = _SMALL_HOLE
+            members[0] = rs * width + cs
+            count = 1
+            head = 0
+            is_hole = True
+            while head < count and is_hole:
+                r = members[head] // width
+                c = members[head] - r * width
+                head += 1
+                if r == 0 or c == 0 or r == height - 1 or c == width - 1:
+                    is_hole = False
+                    break
+                for k in range(4):
+                    rr = r + ORTHOGONAL_FIRST_DR[k]
+                    cc = c + ORTHOGONAL_FIRST_DC[k]
+                    if mask[rr, cc]:
+                        continue
+                    if state[rr, cc] == _OPEN:
+                        is_hole = False
+                        break
+                    if state[rr, cc] == _UNSEEN:
+                        if count >= max_hole_area:
+                            is_hole = False
+                            break
+                        state[rr, cc] = _SMALL_HOLE
+                        members[count] = rr * width + cc
+                        count += 1
+            for i in range(count):
+                r = members[i] // width
+                c = members[i] - r * width
+                if is_hole:
+                    mask[r, c] = 1
+                else:
+                    state[r, c] = _OPEN
+
+
+@njit(cache=True, nogil=True)
+def fill_small_holes(mask, max_hole_area):
+    """Fill, in place, the 4-connected background components of at most ``max_hole_area``
+    pixels that do not touch the image border (see _fill_holes_next_to)."""
+    flat = mask.ravel()
+    foreground = np.empty(np.count_nonzero(flat), np.int64)
+    n = 0
+    for i in range(flat.size):
+        if flat[i]:
+            foreground[n] = i
+            n += 1
+    _fill_holes_next_to(mask, foreground, n, max_hole_area)
+
+
+@njit(cache=True, nogil=True)
+def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
+    """Hysteresis threshold, speck removal and hole filling in one pass over the result.
+
+    The hysteresis keeps the pixels above ``low`` that are 8-connected to a pixel above
+    ``high``; the result is that mask after ``segmentation.clean_mask(mask, min_area,
+    max_hole_area)`` (with both 0, the plain hysteresis). Each flood fill of the
+    hysteresis is a whole 8-connected
+    component of the result (two floods never touch, or they would be one), so a flood
+    of fewer than ``min_area`` pixels is exactly a speck; the kept floods list every
+    foreground pixel, so the holes are found next to them without a scan.
+    ``weak_count`` is the number of pixels above ``low`` (from the histogram).
+    """
+    height, width = cue.shape
+    result = np.zeros((height, width), np.uint8)
+    # Kept components fill ``members`` from the front, removed ones from the back.
+    members = np.empty(max(weak_count, 1), np.int64)
+    speck = np.empty(max(min_area, 1), np.int64)
+    kept = 0
+    removed = 0
+    for r0 in range(height):
+        for c0 in range(width):
+            if result[r0, c0] or not (cue[r0, c0] > high and cue[r0, c0] > low):
+                continue
+            result[r0, c0] = 1
+            members[kept] = r0 * width + c0
+            count = 1
+            head = 0
+            while head < count:
+                r = members[kept + head] // width
+                c = members[kept + head] - r * width
+                head += 1
+                for k in range(8):
+                    rr = r + ORTHOGONAL_FIRST_DR[k]
+                    cc = c + ORTHOGONAL_FIRST_DC[k]
+                    inside = 0 <= rr < height and 0 <= cc < width
+                    if inside and not result[rr, cc] and cue[rr, cc] > low:
+                        result[rr, cc] = 1
+                        members[kept + count] = rr * width + cc
+                        count += 1
+            if count >= min_area:
+                kept += count
+            else:
+                # Still marked in ``result`` so no pixel of it seeds again; cleared below.
+                # Through a buffer: the two stretches of ``members`` may overlap.
+                speck[:count] = members[kept : kept + count]
+                for i in range(count):
+                    members[members.size - 1 - removed - i] = speck[i]
+                removed += count
+    for i in range(removed):
+        index = members[members.size - 1 - i]
+        result[index // width, index - (index // width) * width] = 0
+    if max_hole_area > 0:
+        _fill_holes_next_to(result, members, kept, max_hole_area)
+    return result
+
+
+# --------------------------------------------------------------------------- own thresholds
+
+
+@njit(cache=True, nogil=True)
+def _clear_of(x, y, avoid_xy, avoid_reach):
+    """Is ``(x, y)`` outside every disc ``avoid_reach[k]`` round ``avoid_xy[k]``?"""
+    for k in range(avoid_xy.shape[0]):
+        ex, ey = x - avoid_xy[k, 0], y - avoid_xy[k, 1]
+        if ex * ex + ey * ey < avoid_reach[k] * avoid_reach[k]:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def profile_histogram(cue, points, seen, avoid_xy, avoid_reach, span, stride):
+    """Histogram of ``cue`` across a polyline: profiles ``foot + t * normal``, ``|t| <= span``.
+
+    Each segment has ``ceil(length)`` feet, evenly spread from its start, so feet are
+    at most one pixel apart. Every ``stride``-th foot (counted over the whole polyline)
+    on a ``seen`` segment and outside every disc ``avoid_reach[k]`` round
+    ``avoid_xy[k]`` is used. Profile points go to the nearest pixel (halves up); those
+    off the image are left out. Returns the ``float64`` counts of the 256 levels and
+    the number of feet used.
+    """
+    height, width = cue.shape
+    hist = np.zeros(256, np.float64)
+    used = 0
+    foot = 0
+    for segment in range(points.shape[0] - 1):
+        x0, y0 = points[segment, 0], points[segment, 1]
+        dx, dy = points[segment + 1, 0] - x0, points[segment + 1, 1] - y0
+        length = np.sqrt(dx * dx + dy * dy)
+        count = max(int(np.ceil(length)), 1)
+        if not seen[segment] or length <= 1e-9:
+            foot += count
+            continue
+        nx, ny = -dy / length, dx / length
+        for step in range(count):
+            foot += 1
+            if (foot - 1) % stride:
+                continue
+            x, y = x0 + dx * (step / count), y0 + dy * (step / count)
+            if not _clear_of(x, y, avoid_xy, avoid_reach):
+                continue
+            used += 1
+            for t in range(-span, span + 1):
+                col = int(np.floor(x + t * nx + 0.5))
+                row = int(np.floor(y + t * ny + 0.5))
+                if 0 <= col < width and 0 <= row < height:
+                    hist[cue[row, col]] += 1.0
+    return hist, used
+
+
+@njit(cache=True, nogil=True)
+def grow_along_profiles(cue, before, grown, points, seen, avoid_xy, avoid_reach, start, reach, low):
+    """Walk out, both ways, from feet at most half a pixel apart along the ``seen`` segments.
+
+    The feet are those of :func:`profile_histogram`, twice as dense (``ceil(2 *
+    length)`` a segment): a slanted rim is a staircase with up to 1.4 pixels per pixel
+    of length, and walks one pixel apart miss about one rim pixel in 80 (half a pixel
+    apart, about one in 5,000, on straight cables at every angle). A walk begins
+    ``start`` pixels out when that pixel is in ``before`` (the cable's inside need not
+    be walked), else at the foot. It sets ``grown`` while its pixel is in ``before``
+    or its cue is above ``low``, for at most ``reach`` pixels beyond the foot, and
+    stops at the image's edge. ``before`` and ``grown`` are ``uint8`` masks; only
+    ``grown`` changes.
+    """
+    height, width = cue.shape
+    for segment in range(points.shape[0] - 1):
+        x0, y0 = points[segment, 0], points[segment, 1]
+        dx, dy = points[segment + 1, 0] - x0, points[segment + 1, 1] - y0
+        length = np.sqrt(dx * dx + dy * dy)
+        if not seen[segment] or length <= 1e-9:
+            continue
+        nx, ny = -dy / length, dx / length
+        count = max(int(np.ceil(2.0 * length)), 1)
+        for step in range(count):
+            x, y = x0 + dx * (step / count), y0 + dy * (step / count)
+            if not _clear_of(x, y, avoid_xy, avoid_reach):
+                continue
+            for sign in (1.0, -1.0):
+                first = 0
+                col = int(np.floor(x + sign * start * nx + 0.5))
+                row = int(np.floor(y + sign * start * ny + 0.5))
+                if 0 <= col < width and 0 <= row < height and before[row, col]:
+                    first = start
+                for t in range(first, reach + 1):
+                    col = int(np.floor(x + sign * t * nx + 0.5))
+                    row = int(np.floor(y + sign * t * ny + 0.5))
+                    if not (0 <= col < width and 0 <= row < height):
+                        break
+                    if before[row, col] == 0 and not cue[row, col] > low:
+                        break
+                    grown[row, col] = 1

@@ -1,0 +1,154 @@
+"""End extension: the free ends of each merged chain pushed out to where the cable ends.
+
+Thinning stops about one radius short of a square-cut cable end, and farther short of
+a thin cable's tip; a grasp at "the end" should still be on the cable. So each free end
+is moved along its direction to where the mask stops, or, when that is farther, toward
+the farthest pixel of the cable ahead, and then one radius back inside. A cable that
+runs out of the picture does not end there: its chain goes to the edge. An extension
+that stops at its search limit still inside the cable goes on from its new tip, a few
+times at most. Extensions lie on the mask, so they are seen cable, not inferred.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from service.perception import _end_extension_kernels
+from service.perception.geometry import end_direction
+from service.perception.skeleton import as_uint8
+
+# At most this many extensions of a free end, each from where the last one stopped.
+END_EXTENSION_ROUNDS = 3
+# How far ahead of a free chain end (in radii) and within which angle of its direction
+# the cable's farthest pixel is looked for.
+TIP_SEARCH_RADII = 5.0
+TIP_SEARCH_COS = float(np.cos(np.radians(35.0)))
+# The pixels this close (px) to the farthest distance ahead make the cable's far rim.
+FAR_RIM_PX = 2.0
+
+
+def farthest_ahead(
+    tip: np.ndarray,
+    direction: np.ndarray,
+    mask: np.ndarray,
+    limit: float,
+    cos_half_angle: float = TIP_SEARCH_COS,
+) -> np.ndarray | None:
+    """The middle of the mask's farthest rim ahead of ``tip``, or None when there is none.
+
+    The rim is the pixels at most ``limit`` px from ``tip``, within the cone of
+    ``cos_half_angle`` round ``direction`` and connected to the tip through the mask
+    near it, that lie within :data:`FAR_RIM_PX` of the largest such distance. Its middle,
+    not its farthest pixel, so that the corners of a square-cut end do not pull the end
+    sideways. Compiled (``_end_extension_kernels.farthest_rim_ahead``); the plain
+    version is the reference in ``tests/perception/references/end_extension.py``.
+    """
+    found, x, y = _end_extension_kernels.farthest_rim_ahead(
+        as_uint8(mask),
+        round(float(tip[0])),
+        round(float(tip[1])),
+        float(tip[0]),
+        float(tip[1]),
+        float(direction[0]),
+        float(direction[1]),
+        float(limit),
+        float(cos_half_angle),
+        FAR_RIM_PX,
+    )
+    return np.array([x, y]) if found else None
+
+
+def extend_end(
+    points: np.ndarray, at_start: bool, mask: np.ndarray, radius: float, span: float
+) -> np.ndarray:
+    """One end of a polyline pushed out to where the cable ends in the mask, less one radius.
+
+    Parameters
+    ----------
+    points : ndarray
+        ``(N, 2)`` polyline, ``[x, y]`` in pixels.
+    at_start : bool
+        Extend the end at ``points[0]`` (else the one at ``points[-1]``).
+    mask : ndarray of bool
+        The foreground mask.
+    radius : float
+        Cable half width in pixels.
+    span : float
+        Arc length over which the end's direction is fitted.
+
+    Returns
+    -------
+    ndarray
+        ``points`` with one new vertex at that end, or ``points`` itself when the end
+        would move by less than a pixel.
+    """
+    direction = end_direction(points, at_start, span)
+    tip = points[0] if at_start else points[-1]
+    height, width = mask.shape
+    reach = 0.0
+    limit = 3.0 * radius + 2.0
+    leaves_image = False
+    while reach < limit:
+        probe = tip + (reach + 1.0) * direction
+        col, row = round(probe[0]), round(probe[1])
+        if not (0 <= col < width and 0 <= row < height):
+            leaves_image = True
+            break
+        if not mask[row, col]:
+            break
+        reach += 1.0
+    extension = reach if leaves_image else reach - radius
+    if not leaves_image:
+        # A curving end, or one whose tip fork fell to spur removal, leaves the straight
+        # walk through the side of the cap: the farthest pixel of the cable ahead marks
+        # the end better.
+        far = farthest_ahead(tip, direction, mask, TIP_SEARCH_RADII * radius + 2.0)
+        if far is not None:
+            offset = far - tip
+            length = float(np.hypot(*offset))
+            if length - radius > extension:
+                direction = offset / length
+                extension = length - radius
+    if extension < 1.0:
+        return points
+    new_tip = tip + extension * direction
+    return np.vstack([new_tip, points]) if at_start else np.vstack([points, new_tip])
+
+
+def extend_ends(
+    vertices: np.ndarray, filled: np.ndarray, mask: np.ndarray, radius: float, span: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Both ends of a merged path extended, each up to :data:`END_EXTENSION_ROUNDS` times.
+
+    An extension that ends at its search limit still inside the cable (a thin cable
+    whose skeleton stopped several widths short of its tip) goes on from its new tip;
+    once at the end it adds nothing and the rounds stop.
+
+    Parameters
+    ----------
+    vertices : ndarray
+        ``(N, 2)`` dense polyline of the path.
+    filled : ndarray of bool
+        ``(N - 1,)`` per-edge flags of edges drawn across gaps.
+    mask : ndarray of bool
+    radius : float
+        Cable half width in pixels.
+    span : float
+        Arc length over which each end's direction is fitted.
+
+    Returns
+    -------
+    vertices, filled : ndarray
+        The extended polyline and its flags; the new edges are not filled (they lie on
+        the mask).
+    """
+    for at_start in (True, False):
+        for _ in range(END_EXTENSION_ROUNDS):
+            extended = extend_end(vertices, at_start, mask, radius, span)
+            added = len(extended) - len(vertices)
+            if added == 0:
+                break
+            flags = np.zeros(added, bool)
+            filled = np.concatenate([flags, filled] if at_start else [filled, flags])
+            vertices = extended
+    return vertices, filled

@@ -1,0 +1,103 @@
+"""Plain gap curves (step 6): the natural curve's three shapes and the smooth cubic."""
+
+import numpy as np
+
+from service.perception.geometry import angle_between
+
+
+def _arc(start: np.ndarray, heading: np.ndarray, turn: float, radius: float, step: float):
+    """Points of a circular arc leaving ``start`` along ``heading`` and turning ``turn`` rad."""
+    sign = 1.0 if turn >= 0 else -1.0
+    normal = sign * np.array([-heading[1], heading[0]])
+    centre = start + radius * normal
+    offset = start - centre
+    count = max(2, int(np.ceil(abs(turn) * radius / step)) + 1)
+    angles = np.linspace(0.0, turn, count)
+    cos, sin = np.cos(angles), np.sin(angles)
+    rotated_x = cos * offset[0] - sin * offset[1]
+    rotated_y = sin * offset[0] + cos * offset[1]
+    return centre + np.stack([rotated_x, rotated_y], axis=1)
+
+
+def _without_repeats(points: np.ndarray) -> np.ndarray:
+    """Drop points that repeat their predecessor (a straight part of zero length)."""
+    steps = np.hypot(*np.diff(points, axis=0).T)
+    keep = np.concatenate([[True], steps > 1e-9])
+    return points[keep]
+
+
+def _segment(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:
+    count = max(2, int(np.ceil(np.hypot(*(b - a)) / step)) + 1)
+    return a + np.linspace(0.0, 1.0, count)[:, None] * (b - a)
+
+
+def natural_curve_shape(start, leaving, end, arriving) -> str:
+    """Which shape the natural curve takes: "point", "straight", "arc" or "bezier"."""
+    gap = end - start
+    distance = float(np.hypot(*gap))
+    if distance < 1e-9:
+        return "point"
+    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
+    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+    if abs(cross) < 1e-6:
+        straight = dot > 0 and angle_between(leaving, gap / distance) < 1e-3
+        return "straight" if straight else "bezier"
+    matrix = np.array([[leaving[0], arriving[0]], [leaving[1], arriving[1]]])
+    t_a, t_b = np.linalg.solve(matrix, gap)
+    return "arc" if t_a > 0 and t_b > 0 else "bezier"
+
+
+def natural_curve(start, leaving, end, arriving, step=1.0):
+    gap = end - start
+    distance = float(np.hypot(*gap))
+    if distance < 1e-9:
+        return np.array([start, end])
+    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
+    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+    turn = float(np.arctan2(cross, dot))
+    heading = gap / distance
+    if abs(cross) < 1e-6:
+        if dot > 0 and angle_between(leaving, heading) < 1e-3:
+            return _segment(start, end, step)
+    else:
+        # start + t_a * leaving = end - t_b * arriving
+        matrix = np.array([[leaving[0], arriving[0]], [leaving[1], arriving[1]]])
+        t_a, t_b = np.linalg.solve(matrix, gap)
+        if t_a > 0 and t_b > 0:
+            corner = start + t_a * leaving
+            tangent = min(t_a, t_b)
+            arc_start = corner - tangent * leaving
+            arc_radius = tangent / np.tan(abs(turn) / 2.0)
+            arc = _arc(arc_start, leaving, turn, arc_radius, step)
+            parts = [
+                _segment(start, arc_start, step),
+                arc[1:],
+                _segment(arc[-1], end, step)[1:],
+            ]
+            curve = np.concatenate(parts)
+            curve[-1] = end
+            return _without_repeats(curve)
+    handle = 0.4 * distance
+    control = np.array([start, start + handle * leaving, end - handle * arriving, end])
+    count = max(4, int(np.ceil(1.3 * distance / step)) + 1)
+    t = np.linspace(0.0, 1.0, count)[:, None]
+    weights = [(1 - t) ** 3, 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t**2, t**3]
+    return sum(w * c for w, c in zip(weights, control, strict=True))
+
+
+def smooth_curve(start, leaving, end, arriving, step=1.0):
+    distance = float(np.hypot(*(end - start)))
+    if distance < 1e-9:
+        return np.array([start, end])
+    cross = leaving[0] * arriving[1] - leaving[1] * arriving[0]
+    dot = leaving[0] * arriving[0] + leaving[1] * arriving[1]
+    theta = min(abs(float(np.arctan2(cross, dot))), 0.95 * np.pi)
+    if theta < 1e-6:
+        handle = distance / 3.0
+    else:
+        handle = (2.0 / 3.0) * distance * np.tan(theta / 4.0) / np.sin(theta / 2.0)
+    control = np.array([start, start + handle * leaving, end - handle * arriving, end])
+    count = max(4, int(np.ceil(1.3 * distance / step)) + 1)
+    t = np.linspace(0.0, 1.0, count)[:, None]
+    weights = [(1 - t) ** 3, 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t**2, t**3]
+    return sum(w * c for w, c in zip(weights, control, strict=True))

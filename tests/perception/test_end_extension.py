@@ -1,0 +1,59 @@
+"""End extension: free chain ends taken to the cable's ends, and its kernel."""
+
+import cv2
+import numpy as np
+import pytest
+
+from service.perception.end_extension import (
+    FAR_RIM_PX,
+    TIP_SEARCH_COS,
+    extend_ends,
+    farthest_ahead,
+)
+from tests.perception.references import end_extension as reference
+
+
+def test_a_chain_far_short_of_a_thin_cables_end_is_taken_to_it_and_to_the_picture_edge():
+    # A thin cable (radius 3) from x = 0 (the picture's edge) to x = 99 whose chain runs
+    # from x = 5 to x = 70, ten radii short of the cable's end: one extension reaches
+    # only a few radii, so the end is pushed on from where it stops.
+    mask = np.zeros((40, 140), bool)
+    mask[17:24, 0:100] = True
+    vertices, filled = extend_ends(
+        np.array([[5.0, 20.0], [70.0, 20.0]]), np.array([False]), mask, radius=3.0, span=20.0
+    )
+    assert 94.0 <= vertices[-1][0] <= 97.5  # one radius inside the cable's end
+    assert abs(vertices[-1][1] - 20.0) < 1.0
+    # The cable leaves the picture at x = 0: its chain goes to the edge, not a radius short.
+    np.testing.assert_allclose(vertices[0], [0.0, 20.0])
+    assert len(filled) == len(vertices) - 1 and not filled.any()  # seen cable, not a gap
+
+
+# --------------------------------------------------------------------------- kernel
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_farthest_rim_ahead_equals_the_reference(seed):
+    rng = np.random.default_rng(seed)
+    found = 0
+    for _ in range(100):
+        mask = np.zeros((90, 120), np.uint8)
+        for _ in range(3):
+            start = tuple(int(v) for v in rng.integers(0, 120, 2))
+            end = tuple(int(v) for v in rng.integers(0, 90, 2))
+            cv2.line(mask, start, end, 1, int(rng.integers(5, 15)))
+        rows, cols = np.nonzero(mask)
+        pick = rng.integers(rows.size)
+        tip = np.array([cols[pick], rows[pick]]) + rng.uniform(-0.4, 0.4, 2)
+        direction = rng.normal(size=2)
+        direction /= np.linalg.norm(direction)
+        limit = float(rng.uniform(5, 40))
+        fast = farthest_ahead(tip, direction, mask > 0, limit)
+        expected = reference.farthest_ahead(
+            tip, direction, mask > 0, limit, TIP_SEARCH_COS, FAR_RIM_PX
+        )
+        assert (fast is None) == (expected is None)
+        if fast is not None:
+            np.testing.assert_allclose(fast, expected, rtol=0, atol=1e-9)
+            found += 1
+    assert found > 50

@@ -1,0 +1,38 @@
+"""Polyline helpers: resampling to exact chords and end directions, and their kernels."""
+
+import numpy as np
+import pytest
+
+from service.perception import _geometry_kernels
+from service.perception.geometry import end_direction, resample
+from tests.perception.references import geometry as reference
+
+
+def test_resample_gives_exact_chord_lengths():
+    t = np.linspace(0, np.pi, 400)
+    arc = np.stack([100 + 50 * np.cos(t), 100 + 50 * np.sin(t)], axis=1)
+    joints, _ = resample(arc, 10.0)
+    steps = np.linalg.norm(np.diff(joints, axis=0), axis=1)
+    assert np.allclose(steps[:-1], 10.0, atol=1e-9)
+    assert steps[-1] <= 10.0 + 1e-9
+    assert np.allclose(joints[-1], arc[-1])
+
+
+def test_end_direction_points_outwards():
+    line = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0]])
+    assert np.allclose(end_direction(line, at_start=False, span=15), [1, 0])
+    assert np.allclose(end_direction(line, at_start=True, span=15), [-1, 0])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_resample_kernel_equals_the_reference(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(50):
+        points = np.cumsum(rng.normal(0, 3, (rng.integers(2, 50), 2)), axis=0) + 400.0
+        step = float(rng.uniform(1.0, 12.0))
+        joints, edges = _geometry_kernels.resample_kernel(points, step)
+        expected_joints, expected_edges = reference.resample(points, step)
+        np.testing.assert_array_equal(joints, expected_joints)
+        np.testing.assert_array_equal(edges, expected_edges)
+        full_joints, _ = resample(points, step)
+        np.testing.assert_array_equal(full_joints[: len(joints)], joints)

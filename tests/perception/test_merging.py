@@ -1,0 +1,185 @@
+"""Step 6, merging: join costs, joins, gap curves and bridges, and their kernels."""
+
+from collections import Counter
+
+import cv2
+import numpy as np
+import pytest
+
+from schemas import DetectParams
+from service.perception import _merging_kernels
+from service.perception.merging import (
+    ChainEnd,
+    assemble_paths,
+    chain_ends,
+    ends_through_short_pieces,
+    gap_curve,
+    join_cost,
+    merge_chains,
+)
+from tests.perception.references import merging as reference
+
+
+def test_gap_curves_are_straight_for_aligned_ends():
+    for shape in ("natural", "smooth"):
+        curve = gap_curve(
+            np.array([0.0, 0]),
+            np.array([1.0, 0]),
+            np.array([50.0, 0]),
+            np.array([1.0, 0]),
+            shape=shape,
+        )
+        assert np.allclose(curve[:, 1], 0)
+        assert np.allclose(curve[0], [0, 0]) and np.allclose(curve[-1], [50, 0])
+
+
+def test_natural_curve_follows_the_ends_then_turns_at_a_constant_rate():
+    # Leaving east from the origin, arriving heading north at (30, 40): the rays meet
+    # at (30, 0); the gentlest arc is tangent 30 px before that corner.
+    start, end = np.array([0.0, 0.0]), np.array([30.0, 40.0])
+    curve = gap_curve(
+        start, np.array([1.0, 0.0]), end, np.array([0.0, 1.0]), step=0.5, shape="natural"
+    )
+    assert np.allclose(curve[0], start) and np.allclose(curve[-1], end)
+    headings = np.diff(curve, axis=0)
+    assert np.allclose(headings[0] / np.linalg.norm(headings[0]), [1, 0], atol=0.01)
+    assert np.allclose(headings[-1] / np.linalg.norm(headings[-1]), [0, 1], atol=0.01)
+    # The arc part (centre (0, 30), radius 30) then a straight stretch north.
+    on_arc = curve[(curve[:, 1] < 30) & (curve[:, 1] > 0.5)]
+    radii = np.hypot(on_arc[:, 0] - 0.0, on_arc[:, 1] - 30.0)
+    assert np.allclose(radii, 30.0, atol=0.05)
+
+
+def test_smooth_curve_follows_an_arc_between_symmetric_ends_and_is_straight_when_aligned():
+    radius = 80.0
+    angles = (0.3, 1.4)
+    start, end = (np.array([radius * np.cos(a), radius * np.sin(a)]) for a in angles)
+    leaving, arriving = (np.array([-np.sin(a), np.cos(a)]) for a in angles)
+    curve = gap_curve(start, leaving, end, arriving, step=0.5, shape="smooth")
+    # The cubic stays within a small fraction of a pixel of the circle it approximates.
+    assert np.abs(np.hypot(curve[:, 0], curve[:, 1]) - radius).max() < 0.05
+    np.testing.assert_allclose(curve[[0, -1]], [start, end])
+    straight = gap_curve(
+        np.array([0.0, 0.0]),
+        np.array([1.0, 0.0]),
+        np.array([30.0, 0.0]),
+        np.array([1.0, 0.0]),
+        shape="smooth",
+    )
+    assert np.abs(straight[:, 1]).max() < 1e-9
+
+
+def test_join_cost_prefers_straight_continuation_over_a_turn():
+    params = DetectParams()
+    a = ChainEnd(0, False, np.array([100.0, 100.0]), np.array([1.0, 0.0]))
+    straight = ChainEnd(1, True, np.array([130.0, 100.0]), np.array([-1.0, 0.0]))
+    turned = ChainEnd(2, True, np.array([115.0, 115.0]), np.array([0.0, -1.0]))
+    backwards = ChainEnd(3, True, np.array([70.0, 100.0]), np.array([1.0, 0.0]))
+    assert join_cost(a, straight, params, 4) < join_cost(a, turned, params, 4)
+    assert join_cost(a, turned, params, 4) < join_cost(a, backwards, params, 4)
+    assert join_cost(a, straight, params, 4) < params.merge_cost_threshold
+
+
+def test_merging_bridges_a_gap_and_marks_it_filled():
+    left = np.stack([np.arange(0, 101, 10.0), np.full(11, 50.0)], axis=1)
+    right = np.stack([np.arange(160, 261, 10.0), np.full(11, 50.0)], axis=1)
+    result = merge_chains([left, right], DetectParams(), radius=4)
+    assert len(result.paths) == 1 and len(result.joins) == 1
+    path = result.paths[0]
+    assert path.filled.any() and not path.filled.all()
+    gap_edges = path.vertices[:-1][path.filled]
+    assert gap_edges[:, 0].min() >= 100 - 1e-9 and gap_edges[:, 0].max() < 160
+
+
+def test_merging_stops_at_the_expected_count():
+    pieces = [
+        np.stack([np.arange(0, 101, 10.0) + 200 * k, np.full(11, 50.0)], axis=1) for k in range(3)
+    ]
+    assert len(merge_chains(pieces, DetectParams(), 4).paths) == 1
+    assert len(merge_chains(pieces, DetectParams(expected_count=2), 4).paths) == 2
+    # Far apart and implausible: with no expected count they stay apart ...
+    far = [pieces[0], pieces[0] + [0, 400]]
+    assert len(merge_chains(far, DetectParams(), 4).paths) == 2
+    # ... and an expected count of one forces the join.
+    assert len(merge_chains(far, DetectParams(expected_count=1), 4).paths) == 1
+
+
+def test_end_directions_leave_out_a_cut_end_where_the_cable_narrows():
+    # A straight cable along y = 50 whose last joints bend toward a slanted cut's corner.
+    piece = np.array([[x, 50.0] for x in range(0, 100, 10)] + [[100.0, 53.0], [108.0, 58.0]])
+    mask = np.zeros((100, 140), np.uint8)
+    cv2.line(mask, (0, 50), (96, 50), 1, 13)  # half width 6, ends before the hook
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    radius = 6.0
+    plain = chain_ends([piece], span=40.0, skip=radius)[1]
+    adaptive = chain_ends(
+        [piece], span=40.0, skip=radius, distance=distance, full_width=0.8 * (radius + 0.5)
+    )[1]
+    # The hook tilts the plain fit; leaving out the narrow joints keeps the cable's axis.
+    assert abs(plain.direction[1]) > 0.1
+    assert abs(adaptive.direction[1]) < 0.02 and adaptive.direction[0] > 0.99
+
+
+def test_a_short_piece_joined_on_both_sides_is_bridged_along_its_partners_line():
+    # A straight cable along y = 50 seen in three pieces: the middle one, between two
+    # occluders, is short and its thinned line is tilted (cut at a slant at both ends).
+    pieces = [
+        np.array([[0.0, 50.0], [10.0, 50.0], [20.0, 50.0], [30.0, 50.0], [40.0, 50.0]]),
+        np.array([[60.0, 48.0], [66.0, 52.0]]),
+        np.array([[90.0, 50.0], [100.0, 50.0], [110.0, 50.0], [120.0, 50.0], [130.0, 50.0]]),
+    ]
+    ends = chain_ends(pieces, 40.0)
+    joins = [(1, 2, 0.1), (3, 4, 0.1)]  # end of piece 0 to piece 1, piece 1 to piece 2
+    adjusted = ends_through_short_pieces(pieces, ends, joins, 40.0)
+    np.testing.assert_allclose(adjusted[2].direction, [-1.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(adjusted[3].direction, [1.0, 0.0], atol=1e-9)
+    assert adjusted[0] is ends[0] and adjusted[5] is ends[5]  # long pieces keep theirs
+
+    def worst_offset(which):
+        (path,) = assemble_paths(pieces, which, joins, "smooth")
+        return float(np.abs(path.vertices[:, 1] - 50.0).max())
+
+    # The piece's own tilted directions throw the bridges well off the line.
+    assert worst_offset(adjusted) <= 2.5 < worst_offset(ends)
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_gap_curve_kernels_equal_the_references_in_every_shape(seed):
+    rng = np.random.default_rng(seed)
+    natural_shapes = Counter()
+    for _ in range(400):
+        start, end = rng.uniform(0, 300, 2), rng.uniform(0, 300, 2)
+        leaving, arriving = (v / np.linalg.norm(v) for v in rng.normal(size=(2, 2)))
+        if rng.random() < 0.1:  # aligned ends: the straight case
+            leaving = arriving = (end - start) / np.linalg.norm(end - start)
+        step = float(rng.choice([0.5, 1.0, 3.0]))
+        natural_shapes[reference.natural_curve_shape(start, leaving, end, arriving)] += 1
+        fast = gap_curve(start, leaving, end, arriving, step, shape="natural")
+        expected = reference.natural_curve(start, leaving, end, arriving, step)
+        assert fast.shape == expected.shape
+        np.testing.assert_allclose(fast, expected, rtol=0, atol=1e-9)
+        fast = gap_curve(start, leaving, end, arriving, step, shape="smooth")
+        expected = reference.smooth_curve(start, leaving, end, arriving, step)
+        assert fast.shape == expected.shape
+        np.testing.assert_allclose(fast, expected, rtol=0, atol=1e-9)
+    # Each of the natural curve's three shapes was compared many times (about 40
+    # straight, 90 arcs and 270 Bezier curves in 400).
+    assert natural_shapes["straight"] >= 20
+    assert natural_shapes["arc"] >= 50
+    assert natural_shapes["bezier"] >= 150
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_median_distance_per_piece_equals_numpy(seed):
+    rng = np.random.default_rng(seed)
+    distance = (rng.random((60, 80)) * 9).astype(np.float32)
+    pieces = [rng.uniform(-5, 85, (int(rng.integers(1, 30)), 2)) for _ in range(8)]
+    starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
+    medians = _merging_kernels.median_distance_per_piece(distance, np.concatenate(pieces), starts)
+    for points, median in zip(pieces, medians, strict=True):
+        cols = np.clip(np.rint(points[:, 0]).astype(int), 0, 79)
+        rows = np.clip(np.rint(points[:, 1]).astype(int), 0, 59)
+        assert float(np.median(distance[rows, cols])) == float(median)

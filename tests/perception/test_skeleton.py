@@ -1,0 +1,126 @@
+"""Step 2, skeletonization: thinning, spurs, radius and distances, and their kernels."""
+
+import cv2
+import numpy as np
+import pytest
+
+from service.perception.skeleton import (
+    distance_transform,
+    estimate_radius,
+    remove_spurs,
+    skeletonize,
+)
+from tests.perception.cases import INPUTS, thick_polylines
+from tests.perception.references import skeleton as reference
+from tests.perception.references import steps
+
+
+def skeleton_without_spurs(mask, spur_length):
+    """Step 2 as the pipeline runs it, with a given spur length."""
+    skeleton = skeletonize(mask)
+    return remove_spurs(skeleton, spur_length) if spur_length > 0 else skeleton
+
+
+def test_skeleton_of_a_band_is_one_connected_branch_on_its_centreline():
+    mask = thick_polylines((80, 200), [[(20, 40), (180, 40)]], 11)
+    skeleton = skeleton_without_spurs(mask, spur_length=12)
+    counts = reference.branch_counts(skeleton)
+    assert (counts == 1).sum() == 2  # two tips
+    assert (counts >= 3).sum() == 0  # no junction
+    assert np.abs(np.argwhere(skeleton)[:, 0] - 40).max() <= 1
+    assert cv2.connectedComponents(skeleton.astype(np.uint8))[0] == 2  # background + 1
+    assert estimate_radius(skeleton, distance=distance_transform(mask)) == pytest.approx(
+        5.5, abs=1.0
+    )
+
+
+def test_skeleton_of_a_crossing_has_a_junction_and_four_tips():
+    mask = thick_polylines((200, 200), [[(20, 20), (180, 180)], [(20, 180), (180, 20)]], 9)
+    skeleton = skeleton_without_spurs(mask, spur_length=12)
+    counts = reference.branch_counts(skeleton)
+    assert (counts == 1).sum() == 4
+    assert (counts >= 3).any()
+
+
+def test_spurs_from_a_ragged_border_are_removed():
+    mask = thick_polylines((80, 200), [[(20, 40), (180, 40)]], 11)
+    mask[30:35, 100:103] = True  # a bump on the border grows a spur
+    raw = skeleton_without_spurs(mask, spur_length=0)
+    pruned = skeleton_without_spurs(mask, spur_length=15)
+    assert (reference.branch_counts(raw) == 1).sum() >= 2
+    assert (reference.branch_counts(pruned) == 1).sum() == 2
+    assert (reference.branch_counts(pruned) >= 3).sum() == 0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_thinning_keeps_topology_and_leaves_lines_one_pixel_wide(seed):
+    # Rings, thick strokes and solid blobs, overlapping at random.
+    rng = np.random.default_rng(seed)
+    shapes = np.zeros((120, 160), np.uint8)
+    for _ in range(12):
+        centre = (int(rng.integers(10, 150)), int(rng.integers(10, 110)))
+        radius = int(rng.integers(5, 14))
+        cv2.circle(shapes, centre, radius, 1, int(rng.choice([-1, 3, 5])))
+        end = (int(rng.integers(0, 160)), int(rng.integers(0, 120)))
+        cv2.line(shapes, centre, end, 1, int(rng.integers(3, 9)))
+    skeleton = skeletonize(shapes).astype(np.uint8)
+
+    def components(image):
+        # Background round the image, as the thinning assumes: a hole is a 4-connected
+        # background component that does not reach it.
+        padded = np.pad(image, 1)
+        return (
+            cv2.connectedComponents(padded, connectivity=8)[0],
+            cv2.connectedComponents(1 - padded, connectivity=4)[0],
+        )
+
+    assert components(skeleton) == components(shapes)
+    blocks = skeleton[:-1, :-1] & skeleton[1:, :-1] & skeleton[:-1, 1:] & skeleton[1:, 1:]
+    assert not blocks.any()
+    # Lines, not clumps: most pixels have exactly two branches.
+    counts = reference.branch_counts(skeleton > 0)
+    assert np.count_nonzero(counts == 2) > 0.8 * np.count_nonzero(skeleton)
+
+
+def test_thinning_a_bar_leaves_its_centre_line():
+    bar = np.zeros((21, 60), bool)
+    bar[6:15, 5:55] = True
+    rows, cols = np.nonzero(skeletonize(bar))
+    assert set(rows[(cols > 12) & (cols < 48)]) == {10}
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+@pytest.mark.parametrize("name", sorted(INPUTS))
+def test_thinning_spurs_and_radius_equal_the_reference(name):
+    mask = INPUTS[name]
+    expected = steps.on_input(name)
+    thinned = skeletonize(mask)
+    assert thinned.dtype == bool
+    np.testing.assert_array_equal(thinned, expected.skeleton)
+    assert max(estimate_radius(thinned, distance=distance_transform(mask)), 1.0) == expected.radius
+    pruned = remove_spurs(thinned, 2.5 * expected.radius)
+    assert pruned.dtype == bool
+    np.testing.assert_array_equal(pruned, expected.pruned_skeleton)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_thinning_equals_the_reference_on_random_noise(seed):
+    # Dense noise makes every removal pattern of the thinning tables occur.
+    rng = np.random.default_rng(seed)
+    mask = rng.random((64, 80)) < (0.5 + 0.1 * seed)
+    np.testing.assert_array_equal(skeletonize(mask), reference.thin(mask))
+    full = np.ones((7 + seed, 9), bool)
+    np.testing.assert_array_equal(skeletonize(full), reference.thin(full))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_distance_transform_equals_opencv(seed):
+    rng = np.random.default_rng(seed)
+    mask = cv2.dilate((rng.random((90, 70)) < 0.05).astype(np.uint8), np.ones((9, 9), np.uint8))
+    mask[rng.random(mask.shape) < 0.03] = 0
+    for image in (mask, np.ones((6, 9), np.uint8), np.zeros((5, 5), np.uint8)):
+        np.testing.assert_array_equal(
+            distance_transform(image > 0), cv2.distanceTransform(image, cv2.DIST_L2, 5)
+        )
