@@ -12,9 +12,11 @@ from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
 
+from service.http.live import live_api, live_socket
 from service.http.middleware import RequestContextMiddleware, error_payload, request_id_of
 from service.http.routes import api, router
 from service.http.state import AppState
+from service.http.viewer import viewer
 from service.runtime.errors import RequestError
 from service.runtime.jobs import DetectFunction, default_detect, warm_up
 from service.runtime.metrics import Metrics
@@ -65,7 +67,10 @@ def create_app(settings: Settings | None = None, detect: DetectFunction | None =
         lifespan=lifespan,
     )
     app.include_router(api)
+    app.include_router(live_api)
+    app.include_router(live_socket)
     app.include_router(router)
+    app.include_router(viewer)
     app.add_middleware(RequestContextMiddleware, metrics=metrics)
     app.add_exception_handler(RequestError, _request_error)
     app.add_exception_handler(HTTPException, _http_exception)

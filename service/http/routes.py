@@ -18,7 +18,7 @@ from service.http.state import AppState
 from service.runtime.errors import RequestError
 from service.runtime.frames import check_declared_size
 from service.runtime.grasp import GraspFrame, GraspRequest, plan_from_json, run_grasp
-from service.runtime.jobs import run_detection, run_overlay
+from service.runtime.jobs import run_detection, run_labels, run_overlay
 from service.runtime.pool import PoolBusyError
 
 router = APIRouter()
@@ -200,13 +200,15 @@ _GRASP_ERRORS: dict[int | str, dict[str, Any]] = {
 }
 
 
-async def _run(request: Request, job: Any) -> Any:
-    """Read the request, then run ``job`` in the pool (503 at once when it is full)."""
+async def _run(request: Request, job: Any, *, with_detect: bool = True) -> Any:
+    """Read the request, then run ``job(frame, [the app's detect,] max_pixels)`` in the
+    pool (503 at once when it is full)."""
     state = app_state(request)
     settings = state.settings
     frame = await read_frame(request, settings.max_body_bytes)
     check_declared_size(frame.image, settings.max_pixels)
-    result = await _in_pool(state, job, frame, state.detect, settings.max_pixels)
+    detect = (state.detect,) if with_detect else ()
+    result = await _in_pool(state, job, frame, *detect, settings.max_pixels)
     state.metrics.observe_detection(result[1])
     return result
 
@@ -255,6 +257,25 @@ async def detect(request: Request) -> Response:
 async def detect_overlay(request: Request) -> Response:
     """The image with the chains drawn on it (inferred segments dashed), as PNG."""
     png, _ = await _run(request, run_overlay)
+    return Response(png, media_type="image/png")
+
+
+@api.post(
+    "/v1/detect/labels",
+    summary="The instance label image of the detected cables",
+    response_model=None,
+    response_class=Response,
+    responses={
+        200: {"content": {"image/png": {}}, "description": "16-bit PNG of the image's size."},
+        **_ERRORS,
+    },
+    openapi_extra=_DETECT_OPENAPI,
+)
+async def detect_labels(request: Request) -> Response:
+    """Every cable pixel labelled with its chain: 0 background, chain *i* as *i* + 1, the
+    strand on top at crossings, inferred segments as tubes of the chain's radius (as
+    `dlo detect` writes `<stem>.labels.png`)."""
+    png, _ = await _run(request, run_labels, with_detect=False)  # the pipeline's mask
     return Response(png, media_type="image/png")
 
 

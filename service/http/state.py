@@ -15,6 +15,7 @@ from service.runtime.settings import Settings
 
 if TYPE_CHECKING:
     from service.bus.detection import DetectionBus
+    from service.bus.live import LiveHub
 
 
 @dataclass
@@ -36,6 +37,8 @@ class AppState:
     background: list[asyncio.Task[Any] | Future[Any]] = field(default_factory=list)
     bus: DetectionBus | None = None
     bus_error: str | None = None
+    live: LiveHub | None = None
+    """The viewer's live mode on the bus's session, made on first use (:mod:`.live`)."""
 
     @property
     def bus_ready(self) -> bool:
@@ -59,6 +62,8 @@ class AppState:
     async def close(self) -> None:
         for task in self.background:
             task.cancel()
+        if self.live is not None:
+            self.live.close()
         if self.bus is not None:
             await asyncio.to_thread(self.bus.close)
         self.pool.shutdown()
