@@ -16,11 +16,11 @@ import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from adapters.grasp.depth import decode_depth_image
 from adapters.grasp.errors import DepthImageError, GraspPlanningError, InferredSegmentError
 from adapters.grasp.pick import plan_pick
 from schemas import CameraModel, DepthSurface, Detection, GraspSelector
 from schemas.grasp import GraspPlan
+from service.geometry3d.depth import decode_depth_image
 from service.runtime.errors import RequestError, describe_fields
 from service.runtime.frames import Frame
 from service.runtime.jobs import DetectFunction, run_detection
