@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from schemas import Chain, Detection
+from schemas import CameraModel, Chain, Detection, PlaneSurface
 from schemas.model import CablePhysics, ResolvedPhysics
 
 INTEGRATOR = "implicitfast"
@@ -144,6 +144,15 @@ def to_mjcf(detection: Detection, **physics: Any) -> str:
         )
     ET.indent(root)
     return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def with_surface(physics: CablePhysics | None, camera: CameraModel) -> CablePhysics:
+    """``physics`` (the defaults when None) with the plane at the camera's table plane when
+    its surface is a plane and no ``plane_z`` was given."""
+    physics = physics or CablePhysics()
+    if physics.plane_z is None and isinstance(camera.surface, PlaneSurface):
+        return physics.model_copy(update={"plane_z": camera.surface.plane_z})
+    return physics
 
 
 def physics_of(physics: Mapping[str, Any] | CablePhysics) -> CablePhysics:
