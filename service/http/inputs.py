@@ -134,11 +134,7 @@ async def read_grasp_request(request: Request, max_body_bytes: int) -> GraspFram
         "the file field 'image', optionally 'mask', the JSON fields 'camera' and "
         "optionally 'selector', and the file field 'depth' for a depth surface",
     )
-    selector = (
-        GraspSelector()
-        if parts["selector"] is None
-        else parse_json_field(GraspSelector, "selector", parts["selector"])
-    )
+    selector = optional_json_field(GraspSelector, "selector", parts["selector"])
     frame = Frame(image=parts["image"], mask=parts["mask"], params=params)
     return GraspFrame(frame=frame, camera=camera, selector=selector, depth=parts["depth"])
 
@@ -172,11 +168,7 @@ async def read_model_request(request: Request, max_body_bytes: int) -> ModelFram
         "the file field 'image', optionally 'mask', the JSON fields 'camera' and "
         "optionally 'physics', and the file field 'depth' for a depth surface",
     )
-    physics = (
-        CablePhysics()
-        if parts["physics"] is None
-        else parse_json_field(CablePhysics, "physics", parts["physics"])
-    )
+    physics = optional_json_field(CablePhysics, "physics", parts["physics"])
     frame = Frame(image=parts["image"], mask=parts["mask"], params=params)
     return ModelFrame(frame=frame, camera=camera, physics=physics, depth=parts["depth"])
 
@@ -235,6 +227,11 @@ def check_depth_part(camera: CameraModel, depth: bytes | None) -> None:
             f"depth: image is {declared[0]}x{declared[1]} px but the camera model is "
             f"{camera.width}x{camera.height} px",
         )
+
+
+def optional_json_field(model: type[ModelT], name: str, data: bytes | None) -> ModelT:
+    """:func:`parse_json_field`, or the model's defaults when the field was not sent."""
+    return model() if data is None else parse_json_field(model, name, data)
 
 
 def parse_json_field(model: type[ModelT], name: str, data: bytes) -> ModelT:

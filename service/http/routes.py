@@ -110,6 +110,29 @@ _DEPTH_PART = {
     'Required when the camera\'s surface is {"kind": "depth", ...}, refused otherwise.',
 }
 
+
+def _camera_form(name: str, field: dict[str, Any]) -> dict[str, Any]:
+    """The multipart form of ``/v1/grasp`` and ``/v1/model``: image, mask, camera, depth
+    and the route's own JSON field ``name``."""
+    return {
+        "schema": {
+            "type": "object",
+            "required": ["image", "camera"],
+            "properties": {
+                "image": _BINARY,
+                "mask": _BINARY,
+                "camera": {
+                    "type": "string",
+                    "description": "CameraModel as JSON, e.g. docs/examples/camera.json.",
+                },
+                name: field,
+                "depth": _DEPTH_PART,
+            },
+        },
+        "encoding": {"camera": {"contentType": JSON_TYPE}, name: {"contentType": JSON_TYPE}},
+    }
+
+
 _GRASP_OPENAPI = {
     "parameters": _query_parameters(),
     "requestBody": {
@@ -123,30 +146,14 @@ _GRASP_OPENAPI = {
         "optional `selector`; no query parameters then.",
         "content": {
             JSON_TYPE: {"schema": inline_schema(GraspRequest)},
-            "multipart/form-data": {
-                "schema": {
-                    "type": "object",
-                    "required": ["image", "camera"],
-                    "properties": {
-                        "image": _BINARY,
-                        "mask": _BINARY,
-                        "camera": {
-                            "type": "string",
-                            "description": "CameraModel as JSON, e.g. docs/examples/camera.json.",
-                        },
-                        "selector": {
-                            "type": "string",
-                            "description": 'GraspSelector as JSON, e.g. {"chain": "longest", '
-                            '"point": {"kind": "fraction", "value": 0.5}}.',
-                        },
-                        "depth": _DEPTH_PART,
-                    },
+            "multipart/form-data": _camera_form(
+                "selector",
+                {
+                    "type": "string",
+                    "description": 'GraspSelector as JSON, e.g. {"chain": "longest", '
+                    '"point": {"kind": "fraction", "value": 0.5}}.',
                 },
-                "encoding": {
-                    "camera": {"contentType": JSON_TYPE},
-                    "selector": {"contentType": JSON_TYPE},
-                },
-            },
+            ),
         },
     },
 }
@@ -161,30 +168,14 @@ _MODEL_OPENAPI = {
         "cables' physics as JSON, and the file field `depth` when the camera's surface is "
         "a depth image; the query sets up the detection as for `/v1/detect`.",
         "content": {
-            "multipart/form-data": {
-                "schema": {
-                    "type": "object",
-                    "required": ["image", "camera"],
-                    "properties": {
-                        "image": _BINARY,
-                        "mask": _BINARY,
-                        "camera": {
-                            "type": "string",
-                            "description": "CameraModel as JSON, e.g. docs/examples/camera.json.",
-                        },
-                        "physics": {
-                            **inline_schema(CablePhysics),
-                            "description": "The cables' physics (per metre of cable) as JSON, "
-                            'e.g. {"bending_stiffness": 1e-3}; every field optional.',
-                        },
-                        "depth": _DEPTH_PART,
-                    },
+            "multipart/form-data": _camera_form(
+                "physics",
+                {
+                    **inline_schema(CablePhysics),
+                    "description": "The cables' physics (per metre of cable) as JSON, "
+                    'e.g. {"bending_stiffness": 1e-3}; every field optional.',
                 },
-                "encoding": {
-                    "camera": {"contentType": JSON_TYPE},
-                    "physics": {"contentType": JSON_TYPE},
-                },
-            },
+            ),
         },
     },
 }
