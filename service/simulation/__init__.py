@@ -1,5 +1,5 @@
 """Lifted chains as a simulation model: :func:`to_mjcf` writes MuJoCo's MJCF (text; no
-MuJoCo needed), :mod:`.figure` renders the settled model (needs the ``mujoco`` package).
+MuJoCo needed). The README's picture of it: ``python -m service.evaluation.model_figure``.
 """
 
 from service.simulation.mjcf import ModelError, to_mjcf

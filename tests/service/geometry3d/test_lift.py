@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from schemas import Chain, Detection
+from service.evaluation.lifting import nearest_cable as evaluation_nearest_cable
 from service.geometry3d import lift
-from service.synthetic3d import SCENE_KINDS, distance_to_polylines
+from service.synthetic3d import SCENE_KINDS
 from tests.service.geometry3d.scenes import detected, lifted_points, scene, true_detection
 
 FLAT_KINDS = ("down", "tilted", "distorted", "crossing")
@@ -101,8 +102,8 @@ def test_on_a_tilted_table_the_detectors_radius_sets_the_error(seed):
 
 def nearest_cable(scene_3d, chain: Chain):
     """The cable of the scene a lifted chain lies along."""
-    points = np.array([point for point in chain.points_3d if point is not None])
-    return min(
-        scene_3d.cables,
-        key=lambda cable: np.median(distance_to_polylines(points, [cable.centreline])),
-    )
+    return evaluation_nearest_cable(scene_3d, lifted_points_of(chain))
+
+
+def lifted_points_of(chain: Chain) -> np.ndarray:
+    return np.array([p if p is not None else (np.nan,) * 3 for p in chain.points_3d], float)

@@ -1,7 +1,7 @@
 """The README's picture of the MuJoCo model: a rendered scene, its model, and the model
 after a simulated hand lifted one cable by an end.
 
-``python -m service.simulation.figure docs/images/model.png`` (needs the ``mujoco``
+``python -m service.evaluation.model_figure docs/images/model.png`` (needs the ``mujoco``
 package: ``pip install -e '.[sim]'``). It renders with MuJoCo's offscreen renderer (EGL by
 default, ``MUJOCO_GL`` chooses); where no OpenGL is available it draws the bodies seen from
 the side with OpenCV instead.
