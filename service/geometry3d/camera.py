@@ -28,7 +28,9 @@ PARALLEL_TOLERANCE = 1e-9
 REPROJECTION_TOLERANCE_PX = 1e-3
 """Undistortion is checked by distorting the result again; a larger error is refused."""
 
-_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+"""Converged to about 1e-12 px (checked by distorting again); a tighter epsilon costs eight
+times the time for nothing a robot could use."""
 
 
 def camera_matrix(camera: CameraModel) -> np.ndarray:

@@ -148,17 +148,20 @@ class _Joints:
         radius_px = np.repeat([chain.radius for chain in chains], counts).astype(float)
         # One pixel across the chain gives the angle a pixel spans; the sides (when asked
         # for) give it over their span, and the surface beside the cable.
-        reach = np.maximum(SIDE_RADII * radius_px, radius_px + SIDE_MARGIN_PX) if sides else 1.0
-        offsets = across * np.asarray(reach).reshape(-1, 1)
-        probes = np.concatenate((pixels, pixels - offsets, pixels + offsets))
+        count = len(pixels)
+        if sides:
+            reach = np.maximum(SIDE_RADII * radius_px, radius_px + SIDE_MARGIN_PX)
+            offsets = across * reach[:, None]
+            probes = np.concatenate((pixels, pixels - offsets, pixels + offsets))
+        else:  # one pixel across is enough for the angle a pixel spans
+            reach = np.full(count, 0.5)
+            probes = np.concatenate((pixels, pixels - 0.5 * across, pixels + 0.5 * across))
         normalised, ok = undistort_points(camera, probes)
         directions = ray_directions(camera, normalised)
         units = directions / np.linalg.norm(directions, axis=1)[:, None]
-        count = len(pixels)
         first, second = units[count : 2 * count], units[2 * count :]
         chord = np.linalg.norm(first - second, axis=1)
-        span = 2.0 * np.asarray(reach, dtype=float) * np.ones(count)
-        pixel_angles = 2.0 * np.arcsin(np.clip(chord / 2.0, 0.0, 1.0)) / span
+        pixel_angles = 2.0 * np.arcsin(np.clip(chord / 2.0, 0.0, 1.0)) / (2.0 * reach)
         index = np.arange(count)
         chain_of = np.repeat(np.arange(len(chains)), counts)
         previous = np.where(index > starts[chain_of], index - 1, index)
