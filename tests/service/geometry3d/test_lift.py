@@ -7,17 +7,18 @@ rendered image in, ``points_3d`` against the truth)?
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from schemas import Chain, Detection
 from service.evaluation.lifting import nearest_cable as evaluation_nearest_cable
-from service.geometry3d import lift
+from service.evaluation.lifting import project
+from service.geometry3d import DepthImageError, LiftError, lift
 from service.synthetic3d import SCENE_KINDS
 from tests.service.geometry3d.scenes import detected, lifted_points, scene, true_detection
 
-FLAT_KINDS = ("down", "tilted", "distorted", "crossing")
-"""Cables on the bare table: a plane surface describes them; so does the depth image."""
 BOX_KINDS = ("box", "box_tilted")
 """A cable over a box: only the depth image describes it."""
 SEEDS = (0, 1)
@@ -107,3 +108,98 @@ def nearest_cable(scene_3d, chain: Chain):
 
 def lifted_points_of(chain: Chain) -> np.ndarray:
     return np.array([p if p is not None else (np.nan,) * 3 for p in chain.points_3d], float)
+
+
+# --- nulls, hidden joints, refusals, the contract ----------------------------------------
+
+
+def test_a_hole_in_the_depth_image_gives_null_joints_and_nothing_else():
+    scene_3d = scene("down", 0)
+    truth = true_detection("down", 0)
+    chain = truth.chains[0]
+    middle = len(chain.points) // 2
+    x, y = (round(v) for v in chain.points[middle])
+    depth = scene_3d.depth_m.copy()
+    depth[y - 30 : y + 31, x - 30 : x + 31] = 0.0  # not measured (as depth cameras write)
+    lifted = lift(truth, scene_3d.depth_camera, depth)
+    points = lifted.chains[0].points_3d
+    missing = [k for k, point in enumerate(points) if point is None]
+    assert middle in missing and 2 <= len(missing) <= 8
+    located = lifted_points(lifted)
+    errors = scene_3d.distance_to_centrelines(located[np.isfinite(located).all(axis=1)])
+    assert errors.max() < 0.6e-3
+    assert lifted.chains[0].radius_m == pytest.approx(scene_3d.cables[0].radius, rel=0.03)
+
+
+def test_hidden_joints_lie_between_their_seen_neighbours_whatever_hides_them():
+    scene_3d = scene("tilted", 1)
+    truth = true_detection("tilted", 1)
+    chain = truth.chains[0]
+    hidden = range(10, 16)
+    inferred = [k in hidden for k in range(len(chain.points) - 1)]
+    occluded = truth.model_copy(
+        update={"chains": [chain.model_copy(update={"inferred": inferred}), *truth.chains[1:]]}
+    )
+    # Something 5 cm nearer the camera lies over those segments in the depth image (and
+    # not over the seen joints either side).
+    depth = scene_3d.depth_m.copy()
+    rows, columns = np.mgrid[: depth.shape[0], : depth.shape[1]]
+    for x, y in chain.points[10:17]:
+        depth[(columns - x) ** 2 + (rows - y) ** 2 <= 6**2] -= 0.05
+    lifted = lift(occluded, scene_3d.depth_camera, depth)
+    points = np.array(lifted.chains[0].points_3d)
+    errors = scene_3d.distance_to_centrelines(points[10:17])
+    assert errors.max() < 0.3e-3, errors  # a cable on the table: interpolation is exact
+    # ... each on its own ray: seen where the chain says.
+    back = project(scene_3d, points[10:17])
+    np.testing.assert_allclose(back, np.array(chain.points[10:17]), atol=1e-6)
+
+
+def test_lifting_and_grasp_planning_place_a_pixel_alike():
+    """One implementation: a grasp target on a plane is where lifting puts the joint, less
+    the cable's radius (the grasp is on the table, the centreline a radius above it)."""
+    from adapters.grasp.target import plan_grasp
+    from schemas import GraspSelector
+
+    scene_3d = scene("distorted", 0)
+    truth = true_detection("distorted", 0)
+    lifted = lift(truth, scene_3d.camera)
+    chain = lifted.chains[0]
+    end = {"kind": "end", "end": "start"}
+    target = plan_grasp(truth, scene_3d.camera, GraspSelector(chain=chain.id, point=end))
+    on_table = np.array(target.position_m)
+    centre = np.array(chain.points_3d[0])
+    ray = centre - np.asarray(scene_3d.camera.T_base_camera)[:3, 3]
+    expected = centre + ray * (-chain.radius_m / ray[2])
+    np.testing.assert_allclose(on_table, expected, atol=1e-9)
+
+
+def test_refusals():
+    scene_3d = scene("down", 0)
+    truth = true_detection("down", 0)
+    small = scene_3d.camera.model_copy(update={"width": 320, "height": 240})
+    with pytest.raises(LiftError, match="320x240"):
+        lift(truth, small)
+    with pytest.raises(DepthImageError, match="plane"):
+        lift(truth, scene_3d.camera, scene_3d.depth_m)
+    with pytest.raises(DepthImageError, match="no depth image"):
+        lift(truth, scene_3d.depth_camera)
+    with pytest.raises(DepthImageError, match="camera model is"):
+        lift(truth, scene_3d.depth_camera, scene_3d.depth_m[:100])
+    empty = truth.model_copy(update={"chains": [], "crossings": []})
+    assert lift(empty, scene_3d.camera).chains == []
+
+
+def test_points_3d_are_optional_in_the_contract():
+    truth = true_detection("down", 0)
+    plain = json.loads(truth.model_dump_json())
+    assert "points_3d" not in plain["chains"][0] and "radius_m" not in plain["chains"][0]
+    lifted = lift(truth, scene("down", 0).camera)
+    again = Detection.model_validate_json(lifted.model_dump_json())
+    assert again.chains[0].points_3d == lifted.chains[0].points_3d
+    schema = Chain.model_json_schema()["properties"]
+    assert "robot base frame" in schema["points_3d"]["description"]
+    assert "null" in schema["points_3d"]["description"]
+    assert "points_3d" not in Chain.model_json_schema().get("required", [])
+    with pytest.raises(ValueError, match="points_3d has 1 entries"):
+        Chain(id=0, points=[(0, 0), (1, 1)], radius=1, inferred=[False], points_3d=[(0, 0, 0)])
