@@ -1,6 +1,6 @@
 """``dlo bench``: what a camera model adds to a detection (``dlo detect --camera``).
 
-On rendered 3-D scenes (:mod:`service.synthetic3d`, 1280 x 960 px) each detection is made
+On rendered 3-D scenes (:mod:`service.synthetic.scene3d`, 1280 x 960 px) each detection is made
 once and then lifted to 3-D (:func:`service.geometry3d.lift`) ``repeats`` times: with the
 table plane (a camera looking straight down, and a tilted one with lens distortion) and
 with the depth image (a cable over a box). The MJCF (:func:`service.simulation.to_mjcf`),
@@ -26,7 +26,7 @@ def run_lifting_cases(quick: bool, frames: int, repeats: int) -> list[dict[str, 
     from service.geometry3d import lift
     from service.perception import detect
     from service.simulation import to_mjcf
-    from service.synthetic3d import make_scene_3d
+    from service.synthetic.scene3d import make_scene_3d
 
     size = {"width": 640, "height": 480, "focal": 700.0} if quick else {}
     rows = []

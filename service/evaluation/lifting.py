@@ -1,7 +1,7 @@
 """How close ``points_3d`` comes to the true centreline: the table in docs/BENCHMARKS.md.
 
 ``python -m service.evaluation.lifting [--seeds 0-4] [--lighting ring|side]`` renders every
-kind of :mod:`service.synthetic3d` scene, detects the cables in the image, lifts them with
+kind of :mod:`service.synthetic.scene3d` scene, detects the cables in the image, lifts them with
 the plane camera (cables on the bare table) and with the depth image (every kind), and
 prints per case the share of joints within 1 mm of the closed-form centreline, the median
 and 95th percentile error and the radius error. ``--perfect`` lifts the true chains
@@ -19,7 +19,7 @@ import numpy as np
 from schemas import Chain, Crossing, Detection
 from service.geometry3d import lift
 from service.perception import detect
-from service.synthetic3d import SCENE_KINDS, Scene3D, distance_to_polylines, make_scene_3d
+from service.synthetic.scene3d import SCENE_KINDS, Scene3D, distance_to_polylines, make_scene_3d
 
 BOX_KINDS = ("box", "box_tilted")
 PERFECT_SEGMENT_PX = 10.0

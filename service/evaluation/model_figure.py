@@ -21,7 +21,7 @@ from schemas import DetectParams
 from service.geometry3d import lift
 from service.perception import detect, render_overlay
 from service.simulation.mjcf import to_mjcf
-from service.synthetic3d import make_scene_3d
+from service.synthetic.scene3d import make_scene_3d
 
 PANEL = (640, 480)
 """Width and height of each panel, pixels."""

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from schemas import Detection
-from service.synthetic3d import make_scene_3d
+from service.synthetic.scene3d import make_scene_3d
 
 from .test_cli import assert_no_traceback, error_lines, run_dlo
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from service.http import Settings
-from service.synthetic3d import make_scene_3d
+from service.synthetic.scene3d import make_scene_3d
 
 from .test_http import assert_error, encode, running_server
 

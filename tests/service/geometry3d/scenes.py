@@ -12,7 +12,7 @@ import numpy as np
 from schemas import Detection
 from service.evaluation.lifting import perfect_detection
 from service.perception import detect
-from service.synthetic3d import Scene3D, make_scene_3d
+from service.synthetic.scene3d import Scene3D, make_scene_3d
 
 
 @lru_cache(maxsize=16)

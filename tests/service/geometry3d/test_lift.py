@@ -16,7 +16,7 @@ from schemas import Chain, Detection
 from service.evaluation.lifting import nearest_cable as evaluation_nearest_cable
 from service.evaluation.lifting import project
 from service.geometry3d import DepthImageError, LiftError, lift
-from service.synthetic3d import SCENE_KINDS
+from service.synthetic.scene3d import SCENE_KINDS
 from tests.service.geometry3d.scenes import detected, lifted_points, scene, true_detection
 
 BOX_KINDS = ("box", "box_tilted")
