@@ -132,8 +132,8 @@ class _Joints:
     lengths: np.ndarray  # (M,) |direction|: distance along the ray per unit of depth
     units: np.ndarray  # (M, 3) unit rays
     normalised: np.ndarray  # (M, 2) undistorted image coordinates
-    ok: np.ndarray  # (M,) undistorted (and so are both side pixels)
-    pixel_angles: np.ndarray  # (M,) radians spanned by a pixel across the chain
+    ok: np.ndarray  # (M,) undistorted
+    pixel_angles: np.ndarray  # (M,) radians spanned by a pixel across the chain (NaN: unknown)
     side_pixels: np.ndarray | None  # (2, M, 2) beside the cable, both sides
     side_directions: np.ndarray | None  # (2, M, 3)
     previous: np.ndarray  # (M,) the joint before on the same chain (itself at a start)
@@ -162,6 +162,9 @@ class _Joints:
         first, second = units[count : 2 * count], units[2 * count :]
         chord = np.linalg.norm(first - second, axis=1)
         pixel_angles = 2.0 * np.arcsin(np.clip(chord / 2.0, 0.0, 1.0)) / (2.0 * reach)
+        # Probes that could not be undistorted (beyond a strongly distorted image's edge)
+        # leave the angle unknown there: those joints do not count towards the radius.
+        pixel_angles[~(ok[count : 2 * count] & ok[2 * count :])] = np.nan
         index = np.arange(count)
         chain_of = np.repeat(np.arange(len(chains)), counts)
         previous = np.where(index > starts[chain_of], index - 1, index)
@@ -176,7 +179,7 @@ class _Joints:
             lengths=np.linalg.norm(directions[:count], axis=1),
             units=units[:count],
             normalised=normalised[:count],
-            ok=ok[:count] & ok[count : 2 * count] & ok[2 * count :],
+            ok=ok[:count],
             pixel_angles=pixel_angles,
             side_pixels=np.stack((probes[count : 2 * count], probes[2 * count :]))
             if sides
