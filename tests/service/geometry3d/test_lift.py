@@ -7,6 +7,7 @@ rendered image in, ``points_3d`` against the truth)?
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import numpy as np
@@ -16,7 +17,7 @@ from schemas import Chain, Detection
 from service.evaluation.lifting import nearest_cable as evaluation_nearest_cable
 from service.evaluation.lifting import project
 from service.geometry3d import DepthImageError, LiftError, lift
-from service.synthetic.scene3d import SCENE_KINDS
+from service.synthetic.scene3d import SCENE_KINDS, distance_to_polylines
 from tests.service.geometry3d.scenes import detected, lifted_points, scene, true_detection
 
 BOX_KINDS = ("box", "box_tilted")
@@ -203,3 +204,22 @@ def test_points_3d_are_optional_in_the_contract():
     assert "points_3d" not in Chain.model_json_schema().get("required", [])
     with pytest.raises(ValueError, match="points_3d has 1 entries"):
         Chain(id=0, points=[(0, 0), (1, 1)], radius=1, inferred=[False], points_3d=[(0, 0, 0)])
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_on_a_plane_the_upper_strand_rests_on_the_lower_one(seed):
+    """Both strands of a crossing lifted to the table would run through each other; the
+    upper one is raised so that their surfaces at most touch (as in the scene)."""
+    found = detected("crossing", seed)
+    assert found.crossings, "the detector reports the crossing"
+    lifted = lift(found, scene("crossing", seed).camera)
+    crossing = found.crossings[0]
+    over, under = lifted.chain(crossing.over), lifted.chain(crossing.under)
+    over_points = np.array(over.points_3d)
+    under_points = np.array(under.points_3d)
+    samples = np.linspace(0, 1, 20)[:, None]
+    dense = np.vstack([a + samples * (b - a) for a, b in itertools.pairwise(under_points)])
+    apart = distance_to_polylines(over_points, [dense])
+    assert apart.min() >= 0.9 * (over.radius_m + under.radius_m)
+    # ... and away from the crossing it lies on the table like the other.
+    assert np.median(over_points[:, 2]) == pytest.approx(over.radius_m, abs=1e-4)
