@@ -25,6 +25,7 @@ from service.imageio import (
     write_text,
 )
 from service.perception import InvalidInputError, detect_full, render_labels, render_overlay
+from service.perception.segmenter import Segmenter
 
 OUTPUT_KINDS = ("json", "labels", "overlay")
 """The outputs written per image, as named on the command line (``--outputs``)."""
@@ -199,6 +200,7 @@ def process_file(
     out_dir: str | os.PathLike[str] | None,
     mask_path: str | os.PathLike[str] | None = None,
     outputs: Collection[str] = OUTPUT_KINDS,
+    segmenter: Segmenter | None = None,
 ) -> Detection:
     """Detect the DLOs in one image file and write the outputs.
 
@@ -216,6 +218,9 @@ def process_file(
     outputs : collection of str
         Which of :data:`OUTPUT_KINDS` to write in ``out_dir`` (all by default); the
         images that are not asked for are not rendered.
+    segmenter : callable, optional
+        The segmenter for ``params.segmentation == "model"`` (see
+        :mod:`service.perception.segmenter`).
 
     Returns
     -------
@@ -231,7 +236,7 @@ def process_file(
     """
     image = read_image(path)
     mask = None if mask_path is None else read_mask(mask_path, image.shape)
-    result = detect_full(image, params, mask=mask)
+    result = detect_full(image, params, mask=mask, segmenter=segmenter)
     if out_dir is not None:
         paths = OutputPaths.for_input(path, out_dir)
         if "labels" in outputs:

@@ -53,6 +53,7 @@ from service.evaluation.cli import eval_command
 from service.http.cli import serve_command
 from service.imageio import OutputWriteError, write_png
 from service.perception import render_overlay
+from service.perception.segmenter import OnnxSegmenter, Segmenter, SegmenterModelError
 from service.video import (
     FrameOutcome,
     FrameSource,
@@ -151,6 +152,15 @@ def detect(
             show_default=_default_of("hsv_high"),
         ),
     ] = None,
+    segmenter_model: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="FILE",
+            help="A learned segmenter in ONNX format (input 1x3xHxW RGB, output a cable "
+            "probability or logit map; see the README) that makes the mask; implies "
+            "--segmentation model. Needs onnxruntime: pip install 'dlo-service[onnx]'.",
+        ),
+    ] = None,
     out_dir: Annotated[
         Path | None,
         typer.Option(
@@ -186,6 +196,14 @@ def detect(
     Ctrl-C stops cleanly, keeping every line written so far.
     """
     console = stderr_console()
+    if segmenter_model is not None:
+        if segmentation not in (None, SegmentationMethod.model):
+            exit_usage(
+                console, f"--segmenter-model cannot be used with --segmentation {segmentation}"
+            )
+        segmentation = SegmentationMethod.model
+    elif segmentation is SegmentationMethod.model:
+        exit_usage(console, "--segmentation model needs --segmenter-model FILE.onnx")
     try:
         params = build_params(
             segment_length=segment_length,
@@ -197,6 +215,12 @@ def detect(
         selected = OUTPUT_KINDS if outputs is None else parse_outputs(outputs)
     except InvalidParametersError as exc:
         exit_usage(console, str(exc))
+    segmenter = None
+    if segmenter_model is not None:
+        try:
+            segmenter = OnnxSegmenter(segmenter_model)
+        except SegmenterModelError as exc:
+            exit_usage(console, str(exc))
     if max_frames is not None and max_frames < 1:
         exit_usage(console, "--max-frames: must be at least 1")
 
@@ -211,7 +235,13 @@ def detect(
         _make_out_dir(console, out_dir)
         source = parse_camera(camera)
         summary = _run_stream(
-            console, lambda: open_camera(source), params, out_dir, stream_outputs, max_frames
+            console,
+            lambda: open_camera(source),
+            params,
+            out_dir,
+            stream_outputs,
+            max_frames,
+            segmenter,
         )
         if summary is not None and summary.interrupted and summary.processed == 0:
             raise typer.Exit(EXIT_INTERRUPTED)
@@ -240,7 +270,9 @@ def detect(
 
     if out_dir is None:
         if files:
-            detection = _process_or_report(console, files[0], params, None, mask)
+            detection = _process_or_report(
+                console, files[0], params, None, mask, segmenter=segmenter
+            )
             if detection is None:
                 failed += 1
             else:
@@ -252,7 +284,7 @@ def detect(
     interrupted = False
     if images:
         images_done, images_failed, interrupted = _detect_images(
-            console, images, params, out_dir, mask, selected
+            console, images, params, out_dir, mask, selected, segmenter
         )
         processed += images_done
         failed += images_failed
@@ -267,7 +299,13 @@ def detect(
             failed += 1
             continue
         summary = _run_stream(
-            console, lambda path=path: open_video(path), params, out_dir, stream_outputs, max_frames
+            console,
+            lambda path=path: open_video(path),
+            params,
+            out_dir,
+            stream_outputs,
+            max_frames,
+            segmenter,
         )
         if summary is None or not (summary.succeeded or summary.interrupted):
             failed += 1
@@ -380,6 +418,7 @@ def _detect_images(
     out_dir: Path,
     mask: Path | None,
     outputs: Iterable[str],
+    segmenter: Segmenter | None = None,
 ) -> tuple[int, int, bool]:
     """Process image files into ``out_dir``; returns (processed, failed, interrupted)."""
     outputs = frozenset(outputs)
@@ -406,7 +445,10 @@ def _detect_images(
                         f"{path}: outputs would overwrite those of {clashes[path]} (same name)",
                     )
                     failed += 1
-                elif _process_or_report(console, path, params, out_dir, mask, outputs) is None:
+                elif (
+                    _process_or_report(console, path, params, out_dir, mask, outputs, segmenter)
+                    is None
+                ):
                     failed += 1
                 else:
                     processed += 1
@@ -430,6 +472,7 @@ def _run_stream(
     out_dir: Path,
     outputs: tuple[bool, bool],
     max_frames: int | None,
+    segmenter: Segmenter | None = None,
 ) -> StreamSummary | None:
     """Open a video or camera and process it with a progress bar; report on stderr.
 
@@ -483,6 +526,7 @@ def _run_stream(
                 overlay_video=overlay_video,
                 max_frames=max_frames,
                 on_frame=on_frame,
+                segmenter=segmenter,
             )
         except OutputWriteError as exc:
             print_error(console, str(exc))
@@ -522,10 +566,18 @@ def _process_or_report(
     out_dir: Path | None,
     mask: Path | None,
     outputs: Iterable[str] = OUTPUT_KINDS,
+    segmenter: Segmenter | None = None,
 ) -> Detection | None:
     """Run :func:`process_file`; on failure print the one-line error and return None."""
     try:
-        return process_file(path, params, out_dir, mask_path=mask, outputs=frozenset(outputs))
+        return process_file(
+            path,
+            params,
+            out_dir,
+            mask_path=mask,
+            outputs=frozenset(outputs),
+            segmenter=segmenter,
+        )
     except Exception as exc:  # every failure is reported per file and the batch goes on
         print_error(console, failure_message(path, exc))
         return None

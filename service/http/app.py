@@ -12,12 +12,13 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
 
 from service.http.inputs import RequestError
-from service.http.jobs import DetectFunction, default_detect, warm_up
+from service.http.jobs import DetectFunction, default_detect, detect_with_segmenter, warm_up
 from service.http.metrics import Metrics
 from service.http.middleware import RequestContextMiddleware, error_payload, request_id_of
 from service.http.routes import router
 from service.http.settings import Settings
 from service.http.state import AppState
+from service.perception.segmenter import OnnxSegmenter
 
 logger = logging.getLogger(__name__)
 
@@ -31,16 +32,26 @@ def create_app(settings: Settings | None = None, detect: DetectFunction | None =
         Limits and pool size; by default read from ``DLO_*`` environment variables.
     detect : callable, optional
         ``detect(image, params, mask) -> Detection`` run for each request; by default
-        :func:`service.perception.detect`. Tests inject slow or failing ones.
+        :func:`service.perception.detect`, with the ONNX segmenter of
+        ``settings.segmenter_model`` for requests with ``segmentation=model``. Tests
+        inject slow or failing ones.
 
     Returns
     -------
     FastAPI
         The app; its lifespan starts the worker pool and the warm-up detection, and
         stores the :class:`AppState` as ``app.state.dlo``.
+
+    Raises
+    ------
+    SegmenterModelError
+        ``settings.segmenter_model`` cannot be loaded (one-line message).
     """
     settings = Settings() if settings is None else settings
-    detect = default_detect if detect is None else detect
+    if detect is None:
+        detect = default_detect
+        if settings.segmenter_model is not None:
+            detect = detect_with_segmenter(OnnxSegmenter(settings.segmenter_model))
     metrics = Metrics()
 
     @asynccontextmanager

@@ -37,6 +37,14 @@ def serve_command(
             help="zenoh JSON5 configuration file (env DLO_ZENOH_CONFIG; default: a peer).",
         ),
     ] = None,
+    segmenter_model: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="FILE",
+            help="ONNX segmenter for requests with segmentation=model "
+            "(env DLO_SEGMENTER_MODEL; needs pip install 'dlo-service[onnx]').",
+        ),
+    ] = None,
 ) -> None:
     """Serve detection over HTTP (POST /v1/detect; OpenAPI docs at /docs).
 
@@ -47,6 +55,7 @@ def serve_command(
     import uvicorn
 
     from service.http import Settings, create_app
+    from service.perception.segmenter import SegmenterModelError
 
     options = {
         "host": host,
@@ -54,6 +63,7 @@ def serve_command(
         "workers": workers,
         "zenoh": zenoh,
         "zenoh_config": zenoh_config,
+        "segmenter_model": segmenter_model,
     }
     try:
         settings = Settings(**{name: value for name, value in options.items() if value is not None})
@@ -65,8 +75,13 @@ def serve_command(
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(levelname)s:     %(name)s: %(message)s"
     )
+    try:
+        app = create_app(settings)
+    except SegmenterModelError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(EXIT_USAGE) from None
     uvicorn.run(
-        create_app(settings),
+        app,
         host=settings.host,
         port=settings.port,
         log_level=settings.log_level,

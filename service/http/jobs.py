@@ -35,6 +35,7 @@ from service.http.inputs import (
 from service.imageio import ImageFileError, decode_image, decode_mask
 from service.perception import InvalidInputError, render_overlay
 from service.perception import detect as detect_dlos
+from service.perception.segmenter import Segmenter
 
 DetectFunction = Callable[[np.ndarray, DetectParams, np.ndarray | None], Detection]
 """``detect(image, params, mask) -> Detection``, as :func:`service.perception.detect`."""
@@ -43,6 +44,15 @@ DetectFunction = Callable[[np.ndarray, DetectParams, np.ndarray | None], Detecti
 def default_detect(image: np.ndarray, params: DetectParams, mask: np.ndarray | None) -> Detection:
     """:func:`service.perception.detect` with positional arguments."""
     return detect_dlos(image, params, mask)
+
+
+def detect_with_segmenter(segmenter: Segmenter) -> DetectFunction:
+    """:func:`default_detect` with ``segmenter`` for requests with ``segmentation=model``."""
+
+    def detect(image: np.ndarray, params: DetectParams, mask: np.ndarray | None) -> Detection:
+        return detect_dlos(image, params, mask, segmenter)
+
+    return detect
 
 
 def check_declared_size(data: bytes, max_pixels: int) -> None:

@@ -45,6 +45,11 @@ class Settings(BaseSettings):
         None,
         description="Multicast scouting on/off; default: as the configuration file (or zenoh).",
     )
+    segmenter_model: Path | None = Field(
+        None,
+        description="ONNX segmenter model for requests with segmentation=model "
+        "(needs onnxruntime: the dlo-service[onnx] extra).",
+    )
     log_level: Literal["critical", "error", "warning", "info", "debug"] = Field(
         "info", description="Server log level."
     )

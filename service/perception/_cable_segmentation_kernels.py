@@ -1,0 +1,313 @@
+"""Compiled pixel loops of the cable-contrast segmentation (:mod:`cable_segmentation`).
+
+Colours are CIELAB as OpenCV stores it in ``uint8`` (L scaled by 255/100, a and b
+offset by 128); the kernels convert to CIELAB units (L 0..100, a and b about -128..127)
+as they read, so that every distance is a CIELAB colour difference (Delta E 1976).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_L_SCALE = np.float32(100.0 / 255.0)
+_AB_OFFSET = np.float32(128.0)
+
+
+@njit(cache=True, nogil=True)
+def lab_to_float(lab8):
+    """``uint8`` OpenCV Lab to float32 CIELAB units, ``(H, W, 3)``."""
+    height, width, _ = lab8.shape
+    out = np.empty((height, width, 3), np.float32)
+    for y in range(height):
+        for x in range(width):
+            out[y, x, 0] = lab8[y, x, 0] * _L_SCALE
+            out[y, x, 1] = np.float32(lab8[y, x, 1]) - _AB_OFFSET
+            out[y, x, 2] = np.float32(lab8[y, x, 2]) - _AB_OFFSET
+    return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _distance2(c0, c1, c2, colours, y, x):
+    """Squared CIELAB distance from ``(c0, c1, c2)`` to ``colours[y, x]``."""
+    d0 = c0 - colours[y, x, 0]
+    d1 = c1 - colours[y, x, 1]
+    d2 = c2 - colours[y, x, 2]
+    return d0 * d0 + d1 * d1 + d2 * d2
+
+
+@njit(cache=True, nogil=True)
+def _line_geometry(cos_t, sin_t, half_length, height, width):
+    """How a family of parallel digital lines at angle ``t`` crosses the image.
+
+    Lines run along x (``along_x``) when they are closer to horizontal, else along y;
+    a line with offset ``o`` visits ``(s, o + round(s * slope))`` in (along, across)
+    coordinates. Returns ``along_x, slope, n_along, n_across, half_samples``, where
+    ``half_samples`` is the number of steps along the line on each side of a pixel
+    that spans ``half_length`` px.
+    """
+    along_x = abs(cos_t) >= abs(sin_t)
+    if along_x:
+        slope = sin_t / cos_t
+        n_along, n_across = width, height
+        half_samples = round(half_length * abs(cos_t))
+    else:
+        slope = cos_t / sin_t
+        n_along, n_across = height, width
+        half_samples = round(half_length * abs(sin_t))
+    return along_x, slope, n_along, n_across, half_samples
+
+
+@njit(cache=True, nogil=True)
+def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix):
+    """Mean colour and colour variance over the line segment through each pixel.
+
+    The segment is ``2 * half_length`` px long at angle ``t`` (cosine and sine given)
+    and centred on the pixel, cut short at the image border. Running sums along each
+    digital line of the family make it O(1) per pixel whatever the length.
+    """
+    height, width, _ = lab.shape
+    along_x, slope, n_along, n_across, a = _line_geometry(cos_t, sin_t, half_length, height, width)
+    reach = int(np.ceil(abs(slope) * n_along)) + 1
+    for line in range(-reach, n_across + reach):
+        # The stretch of the line inside the image: s with 0 <= line + round(s*slope) < n_across.
+        n = 0
+        for s in range(n_along):
+            o = line + int(np.floor(s * slope + 0.5))
+            if 0 <= o < n_across:
+                if along_x:
+                    buf_y[n] = o
+                    buf_x[n] = s
+                else:
+                    buf_y[n] = s
+                    buf_x[n] = o
+                n += 1
+        if n == 0:
+            continue
+        p0 = 0.0
+        p1 = 0.0
+        p2 = 0.0
+        p3 = 0.0
+        prefix[0, 0] = 0.0
+        prefix[0, 1] = 0.0
+        prefix[0, 2] = 0.0
+        prefix[0, 3] = 0.0
+        for i in range(n):
+            y = buf_y[i]
+            x = buf_x[i]
+            c0 = lab[y, x, 0]
+            c1 = lab[y, x, 1]
+            c2 = lab[y, x, 2]
+            p0 += c0
+            p1 += c1
+            p2 += c2
+            p3 += c0 * c0 + c1 * c1 + c2 * c2
+            prefix[i + 1, 0] = p0
+            prefix[i + 1, 1] = p1
+            prefix[i + 1, 2] = p2
+            prefix[i + 1, 3] = p3
+        for i in range(n):
+            lo = max(i - a, 0)
+            hi = min(i + a + 1, n)
+            inv = 1.0 / (hi - lo)
+            m0 = (prefix[hi, 0] - prefix[lo, 0]) * inv
+            m1 = (prefix[hi, 1] - prefix[lo, 1]) * inv
+            m2 = (prefix[hi, 2] - prefix[lo, 2]) * inv
+            y = buf_y[i]
+            x = buf_x[i]
+            mean[y, x, 0] = m0
+            mean[y, x, 1] = m1
+            mean[y, x, 2] = m2
+            v = (prefix[hi, 3] - prefix[lo, 3]) * inv - (m0 * m0 + m1 * m1 + m2 * m2)
+            var[y, x] = v if v > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset, floor2):
+    """Line contrast of every pixel of one pyramid level, and the angle that gives it.
+
+    For each of ``n_orientations`` angles, the mean colour along the line segment
+    through a pixel is compared with the means along the parallel segments ``offset``
+    px to either side and with the local background colour (``background8``, a median
+    over a wide window); the smallest of the three colour differences is the line's
+    contrast, and divided by the spread of colours along the line (``floor2`` added to
+    the variance) it is the line's contrast-to-spread ratio. A cable along the line
+    gives a high ratio: a uniform colour that differs from both sides and from the
+    background. A step edge (one side the same), texture (a large spread) and the
+    background between two cables (the background colour) give a low one.
+
+    Returns
+    -------
+    ratio : ndarray of float32
+        ``(H, W)``: the largest ratio over the angles.
+    orientation : ndarray of uint8
+        ``(H, W)``: the index of the angle (``pi * k / n_orientations``) that gave it.
+    """
+    height, width, _ = lab8.shape
+    lab = lab_to_float(lab8)
+    background = lab_to_float(background8)
+    wide = lab_to_float(wide8)
+    mean = np.empty((height, width, 3), np.float32)
+    var = np.empty((height, width), np.float32)
+    longest = max(height, width) + 2
+    buf_y = np.empty(longest, np.int64)
+    buf_x = np.empty(longest, np.int64)
+    prefix = np.empty((longest + 1, 4), np.float64)
+    best = np.zeros((height, width), np.float32)
+    orientation = np.zeros((height, width), np.uint8)
+    for k in range(n_orientations):
+        angle = np.pi * k / n_orientations
+        cos_t = np.cos(angle)
+        sin_t = np.sin(angle)
+        _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix)
+        dy = round(offset * cos_t)
+        dx = round(-offset * sin_t)
+        for y in range(height):
+            y1 = y + dy
+            y2 = y - dy
+            if y1 < 0 or y1 >= height or y2 < 0 or y2 >= height:
+                continue  # a side outside the picture: not known to differ
+            for x in range(width):
+                x1 = x + dx
+                x2 = x - dx
+                if x1 < 0 or x1 >= width or x2 < 0 or x2 >= width:
+                    continue
+                m0 = mean[y, x, 0]
+                m1 = mean[y, x, 1]
+                m2 = mean[y, x, 2]
+                contrast2 = min(
+                    _distance2(m0, m1, m2, mean, y1, x1),
+                    _distance2(m0, m1, m2, mean, y2, x2),
+                    _distance2(m0, m1, m2, background, y, x),
+                    _distance2(m0, m1, m2, wide, y, x),
+                )
+                ratio2 = contrast2 / (var[y, x] + floor2)
+                if ratio2 > best[y, x]:
+                    best[y, x] = ratio2
+                    orientation[y, x] = k
+    for y in range(height):
+        for x in range(width):
+            best[y, x] = np.sqrt(best[y, x])
+    return best, orientation
+
+
+@njit(cache=True, nogil=True)
+def merge_level(best, best_level, ratio, level):
+    """Keep, per pixel of the finest grid, the level whose (nearest) ratio is largest."""
+    grid_h, grid_w = best.shape
+    level_h, level_w = ratio.shape
+    scale_y = level_h / grid_h
+    scale_x = level_w / grid_w
+    for y in range(grid_h):
+        ly = min(int((y + 0.5) * scale_y), level_h - 1)
+        for x in range(grid_w):
+            lx = min(int((x + 0.5) * scale_x), level_w - 1)
+            value = ratio[ly, lx]
+            if value > best[y, x]:
+                best[y, x] = value
+                best_level[y, x] = level
+
+
+@njit(cache=True, nogil=True)
+def seed_colours(lab8, background8, rows, cols, orientation, n_orientations, half_length, offset):
+    """The cable colour and the colours around it at seed pixels of one level.
+
+    The same line means as :func:`level_contrast`, summed directly at each seed (in
+    the seed's own best angle): the mean colour along the line, and along the parallel
+    lines ``offset`` px to either side; and the local background colour there.
+
+    Returns
+    -------
+    ndarray of float32
+        ``(N, 4, 3)``: per seed, the cable colour, side one, side two and the
+        background (CIELAB).
+    """
+    height, width, _ = lab8.shape
+    n = rows.size
+    out = np.zeros((n, 4, 3), np.float32)
+    for i in range(n):
+        y0 = rows[i]
+        x0 = cols[i]
+        angle = np.pi * orientation[y0, x0] / n_orientations
+        cos_t = np.cos(angle)
+        sin_t = np.sin(angle)
+        along_x, slope, n_along, n_across, a = _line_geometry(
+            cos_t, sin_t, half_length, height, width
+        )
+        dy = round(offset * cos_t)
+        dx = round(-offset * sin_t)
+        for which in range(3):
+            sy = dy if which == 1 else (-dy if which == 2 else 0)
+            sx = dx if which == 1 else (-dx if which == 2 else 0)
+            cy = min(max(y0 + sy, 0), height - 1)
+            cx = min(max(x0 + sx, 0), width - 1)
+            # Walk the digital line through (cy, cx) as _line_means does.
+            if along_x:
+                s0 = cx
+                line = cy - int(np.floor(s0 * slope + 0.5))
+            else:
+                s0 = cy
+                line = cx - int(np.floor(s0 * slope + 0.5))
+            total0 = 0.0
+            total1 = 0.0
+            total2 = 0.0
+            count = 0
+            for s in range(s0 - a, s0 + a + 1):
+                if s < 0 or s >= n_along:
+                    continue
+                o = line + int(np.floor(s * slope + 0.5))
+                if o < 0 or o >= n_across:
+                    continue
+                if along_x:
+                    py, px = o, s
+                else:
+                    py, px = s, o
+                total0 += lab8[py, px, 0] * _L_SCALE
+                total1 += np.float32(lab8[py, px, 1]) - _AB_OFFSET
+                total2 += np.float32(lab8[py, px, 2]) - _AB_OFFSET
+                count += 1
+            if count:
+                out[i, which, 0] = total0 / count
+                out[i, which, 1] = total1 / count
+                out[i, which, 2] = total2 / count
+        out[i, 3, 0] = background8[y0, x0, 0] * _L_SCALE
+        out[i, 3, 1] = np.float32(background8[y0, x0, 1]) - _AB_OFFSET
+        out[i, 3, 2] = np.float32(background8[y0, x0, 2]) - _AB_OFFSET
+    return out
+
+
+@njit(cache=True, nogil=True)
+def nearest_colour_class(lab8, nearest, distance, grid_step, reach, colours):
+    """Cable pixels: nearer in colour to the nearest seed's cable than to what is round it.
+
+    ``nearest`` and ``distance`` are, on the seeds' grid, the index of the nearest seed
+    and the distance to it (grid px, ``grid_step`` image px each); a pixel of the image
+    is judged against that seed when it lies within ``reach[seed]`` image px of it.
+
+    Returns
+    -------
+    ndarray of uint8
+        ``(H, W)``, 1 on cable pixels.
+    """
+    height, width, _ = lab8.shape
+    grid_h, grid_w = nearest.shape
+    out = np.zeros((height, width), np.uint8)
+    for y in range(height):
+        gy = min(int((y + 0.5) * grid_h / height), grid_h - 1)
+        for x in range(width):
+            gx = min(int((x + 0.5) * grid_w / width), grid_w - 1)
+            seed = nearest[gy, gx]
+            if seed < 0 or distance[gy, gx] * grid_step > reach[seed]:
+                continue
+            c0 = lab8[y, x, 0] * _L_SCALE
+            c1 = np.float32(lab8[y, x, 1]) - _AB_OFFSET
+            c2 = np.float32(lab8[y, x, 2]) - _AB_OFFSET
+            to_cable = _distance2(c0, c1, c2, colours, seed, 0)
+            around = min(
+                _distance2(c0, c1, c2, colours, seed, 1),
+                _distance2(c0, c1, c2, colours, seed, 2),
+                _distance2(c0, c1, c2, colours, seed, 3),
+            )
+            if to_cable < around:
+                out[y, x] = 1
+    return out
