@@ -36,7 +36,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from service.console import EXIT_FAILED, exit_usage, print_error
+from service.console import EXIT_FAILED, exit_usage, load_kernels, print_error
 
 if TYPE_CHECKING:
     from schemas import DetectParams
@@ -229,7 +229,6 @@ def _run_dataset(
 ) -> None:
     from service.evaluation import dataset
     from service.imageio import read_image
-    from service.perception import warm_up
 
     try:
         items, unlabelled = dataset.find_labelled_images(root)
@@ -240,7 +239,7 @@ def _run_dataset(
     _make_out_dir(errors, out_dir)
 
     # Load the compiled kernels first, so that ms/image is the detection alone.
-    warm_up()
+    load_kernels(errors)
     scores = []
     failed = len(unlabelled)
     with (
@@ -362,7 +361,6 @@ def _run_synthetic(
     params: DetectParams | None = None,
 ) -> None:
     from service.evaluation import synthetic_eval
-    from service.perception import warm_up
     from service.synthetic import make_scene
 
     if count < 1:
@@ -373,7 +371,7 @@ def _run_synthetic(
         exit_usage(errors, "--occluders must be 0 or more")
     if width < MIN_SIDE or height < MIN_SIDE:
         exit_usage(errors, f"--width and --height must be {MIN_SIDE} or more")
-    warm_up()  # ms per scene is the detection alone
+    load_kernels(errors)  # ms per scene is the detection alone
     try:
         low, high = synthetic_eval.parse_cable_counts(cables)
     except ValueError as exc:

@@ -1,12 +1,14 @@
 """The HTTP service: ``create_app(settings) -> FastAPI`` and its :class:`Settings`.
 
 Routes: ``POST /v1/detect`` (Detection JSON), ``POST /v1/detect/overlay`` (PNG),
-``GET /healthz``, ``GET /readyz``, ``GET /metrics`` (Prometheus), ``/docs`` (OpenAPI).
+``POST /v1/grasp`` (GraspPlan JSON), ``GET /healthz``, ``GET /readyz``, ``GET /metrics``
+(Prometheus), ``/docs`` (OpenAPI).
 Detection runs in a bounded thread pool; when it and its queue are full, requests are
-refused at once with 503 and ``Retry-After``.
+refused at once with 503 and ``Retry-After``. The detection runtime itself (jobs, pool,
+metrics, settings) is :mod:`service.runtime`, shared with the zenoh bus.
 """
 
 from service.http.app import create_app
-from service.http.settings import Settings
+from service.runtime.settings import Settings
 
 __all__ = ["Settings", "create_app"]

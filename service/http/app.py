@@ -11,14 +11,14 @@ from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
 
-from service.http.inputs import RequestError
-from service.http.jobs import DetectFunction, default_detect, detect_with_segmenter, warm_up
-from service.http.metrics import Metrics
 from service.http.middleware import RequestContextMiddleware, error_payload, request_id_of
 from service.http.routes import router
-from service.http.settings import Settings
 from service.http.state import AppState
 from service.perception.segmenter import OnnxSegmenter
+from service.runtime.errors import RequestError
+from service.runtime.jobs import DetectFunction, default_detect, detect_with_segmenter, warm_up
+from service.runtime.metrics import Metrics
+from service.runtime.settings import Settings
 
 logger = logging.getLogger(__name__)
 
@@ -96,7 +96,9 @@ async def _warm_up(state: AppState) -> None:
 
 async def _open_bus(state: AppState) -> None:
     """Open the zenoh front end (in a thread: opening may take a moment)."""
-    from service.bus import DetectionBus, make_config  # only load zenoh when enabled
+    # only load zenoh when enabled
+    from service.bus.config import make_config
+    from service.bus.detection import DetectionBus
 
     settings = state.settings
     try:

@@ -2,23 +2,25 @@
 or of one grasp plan (those, or a saved detection, plus a camera model and a selector).
 
 Everything here runs on the event loop and is cheap: reading the body (bounded), parsing
-the multipart form, its small JSON fields and the query, and reading image sizes from PNG
-and JPEG headers. Decoding and validating large bodies, which is CPU work, happens in the
-worker pool (:mod:`service.http.jobs`). Every problem becomes a :class:`RequestError`
-carrying the HTTP status and a one-line message saying what is wrong.
+the multipart form, its small JSON fields and the query, and checking the depth image's
+PNG header. Decoding and validating large bodies, which is CPU work, happens in the
+worker pool (:mod:`service.runtime.jobs`, :mod:`service.runtime.grasp`). Every problem
+becomes a :class:`~service.runtime.errors.RequestError` carrying the HTTP status and a
+one-line message saying what is wrong.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass, field
 from typing import Any, TypeVar, get_origin
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ValidationError
 from starlette.datastructures import QueryParams, UploadFile
 from starlette.requests import Request
 
-from schemas import CameraModel, DepthSurface, Detection, DetectParams, GraspSelector
+from schemas import CameraModel, DepthSurface, DetectParams, GraspSelector
+from service.runtime.errors import RequestError, describe_fields
+from service.runtime.frames import PNG_SIGNATURE, Frame, image_size
+from service.runtime.grasp import GraspFrame
 
 RAW_IMAGE_TYPES = ("image/jpeg", "image/png")
 """Content types accepted for an image sent as the whole request body."""
@@ -29,64 +31,12 @@ FORM_FIELDS = ("image", "mask")
 GRASP_FORM_FIELDS = ("image", "mask", "camera", "selector", "depth")
 """The multipart fields of ``/v1/grasp``: image and mask files, camera and selector JSON,
 and the depth image file for a camera whose surface is a depth image."""
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-SHOWN_INPUT_CHARS = 80
-"""How much of an offending value a validation message quotes."""
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
 _TUPLE_FIELDS = frozenset(
     name for name, info in DetectParams.model_fields.items() if get_origin(info.annotation) is tuple
 )
-
-
-@dataclass
-class RequestError(Exception):
-    """A request the service does not process; answered with ``status`` and ``message``."""
-
-    status: int
-    code: str
-    message: str
-    headers: Mapping[str, str] = field(default_factory=dict)
-
-    def __str__(self) -> str:
-        return self.message
-
-
-@dataclass(frozen=True)
-class Frame:
-    """The encoded inputs of one detection, as they arrived."""
-
-    image: bytes
-    params: DetectParams
-    mask: bytes | None = None
-
-
-class GraspRequest(BaseModel):
-    """The ``application/json`` body of ``POST /v1/grasp``: plan on a saved detection."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    detection: Detection = Field(description="The chains, as `/v1/detect` or `dlo detect` give.")
-    camera: CameraModel = Field(description="Intrinsics, pose in the robot base frame, table.")
-    selector: GraspSelector = Field(
-        default_factory=GraspSelector,
-        description="Which chain and point; default: the middle of the longest chain.",
-    )
-
-
-@dataclass(frozen=True)
-class GraspFrame:
-    """A multipart ``/v1/grasp`` request: the image to detect, the camera and the selector.
-
-    ``depth`` is the encoded depth image (16-bit PNG), present exactly when the camera's
-    surface is a depth image.
-    """
-
-    frame: Frame
-    camera: CameraModel
-    selector: GraspSelector
-    depth: bytes | None = None
 
 
 async def read_frame(request: Request, max_body_bytes: int) -> Frame:
@@ -366,61 +316,3 @@ def _describe(error: ValidationError) -> list[str]:
         name += "".join(f"[{index}]" for index in location[1:])
         problems.append(f"{name}: {message} (got {detail.get('input')!r})")
     return problems
-
-
-def describe_fields(error: ValidationError) -> list[str]:
-    """Each problem of a nested model as ``a.b.0.c: message (got <value, shortened>)``."""
-    problems = []
-    for detail in error.errors(include_url=False):
-        message = str(detail["msg"]).removeprefix("Value error, ")
-        where = ".".join(str(part) for part in detail["loc"])
-        if not where or detail["type"] in ("missing", "json_invalid", "json_type"):
-            problems.append(f"{where}: {message}" if where else message)
-            continue
-        shown = repr(detail.get("input"))
-        if len(shown) > SHOWN_INPUT_CHARS:
-            shown = shown[: SHOWN_INPUT_CHARS - 3] + "..."
-        problems.append(f"{where}: {message} (got {shown})")
-    return problems
-
-
-def image_size(data: bytes) -> tuple[int, int] | None:
-    """``(width, height)`` from a PNG or JPEG header, without decoding; None otherwise.
-
-    Lets a huge image be refused (413) before it is decoded. Other formats, and headers
-    this does not understand, are checked after decoding instead.
-    """
-    if data.startswith(PNG_SIGNATURE) and data[12:16] == b"IHDR" and len(data) >= 24:
-        return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
-    if data.startswith(b"\xff\xd8"):
-        return _jpeg_size(data)
-    return None
-
-
-_JPEG_FRAME_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
-"""Start-of-frame markers (baseline, progressive, lossless...): they hold the size."""
-
-
-def _jpeg_size(data: bytes) -> tuple[int, int] | None:
-    position = 2
-    while position + 4 <= len(data):
-        if data[position] != 0xFF:
-            return None
-        marker = data[position + 1]
-        if marker == 0xFF:  # fill byte
-            position += 1
-            continue
-        if 0xD0 <= marker <= 0xD9 or marker == 0x01:  # markers without a payload
-            position += 2
-            continue
-        length = int.from_bytes(data[position + 2 : position + 4], "big")
-        if marker in _JPEG_FRAME_MARKERS:
-            if position + 9 > len(data):
-                return None
-            height = int.from_bytes(data[position + 5 : position + 7], "big")
-            width = int.from_bytes(data[position + 7 : position + 9], "big")
-            return width, height
-        if marker == 0xDA or length < 2:  # scan data before any frame header: give up
-            return None
-        position += 2 + length
-    return None

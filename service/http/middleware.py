@@ -11,7 +11,7 @@ from starlette.datastructures import MutableHeaders
 from starlette.routing import Match
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.http.metrics import Metrics
+from service.runtime.metrics import Metrics
 
 logger = logging.getLogger(__name__)
 

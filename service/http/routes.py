@@ -1,4 +1,5 @@
-"""The HTTP routes: thin wrappers over :mod:`service.http.inputs` and :mod:`service.http.jobs`."""
+"""The HTTP routes: thin wrappers over :mod:`service.http.inputs` (reading a request) and the
+runtime's jobs (:mod:`service.runtime.jobs`, :mod:`service.runtime.grasp`) run in its pool."""
 
 from __future__ import annotations
 
@@ -11,23 +12,13 @@ from pydantic import BaseModel
 
 from schemas import Detection, DetectParams
 from schemas.grasp import GraspPlan
-from service.http.inputs import (
-    JSON_TYPE,
-    RAW_IMAGE_TYPES,
-    GraspFrame,
-    GraspRequest,
-    RequestError,
-    read_frame,
-    read_grasp_request,
-)
-from service.http.jobs import (
-    check_declared_size,
-    plan_from_json,
-    run_detection,
-    run_grasp,
-    run_overlay,
-)
-from service.http.state import AppState, PoolBusyError
+from service.http.inputs import JSON_TYPE, RAW_IMAGE_TYPES, read_frame, read_grasp_request
+from service.http.state import AppState
+from service.runtime.errors import RequestError
+from service.runtime.frames import check_declared_size
+from service.runtime.grasp import GraspFrame, GraspRequest, plan_from_json, run_grasp
+from service.runtime.jobs import run_detection, run_overlay
+from service.runtime.pool import PoolBusyError
 
 router = APIRouter()
 

@@ -51,3 +51,30 @@ def test_dlo_bench_prints_tables_by_default(tmp_path):
     for heading in ("one thread", "after warm-up", "p50 per stage", "scaling with image area"):
         assert heading in completed.stdout
     assert "peak resident memory" in completed.stdout
+
+
+def test_dlo_bench_startup_times_whole_processes(tmp_path):
+    """Only the report's shape: the figures themselves are the benchmark's."""
+    completed = subprocess.run(
+        [*DLO, "bench", "--startup", "--quick", "--json", "--dataset", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert completed.returncode == 0, completed.stderr
+    results = json.loads(completed.stdout)
+    assert "generated" in results["image"]  # no photographs in an empty folder
+    rows = {row["command"]: row for row in results["rows"]}
+    assert set(rows) == {"dlo --help", "dlo version", "dlo detect IMAGE --out-dir DIR"}
+    for row in rows.values():
+        assert row["runs"] == 2
+        assert 0 < row["min_s"] <= row["median_s"] <= row["max_s"]
+    assert rows["dlo --help"]["target_s"] == 0.3
+
+
+def test_dlo_bench_times_one_thing_at_a_time():
+    completed = subprocess.run(
+        [*DLO, "bench", "--startup", "--service"], capture_output=True, text=True, timeout=60
+    )
+    assert completed.returncode == 2
+    assert "give one" in completed.stderr

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from service.bench_service import Row, _print_table
+from service.bench.overhead import Row, _print_table
 
 DLO = [sys.executable, "-c", "from service.cli import main; main()"]
 PATHS = {
@@ -19,6 +19,7 @@ PATHS = {
     "HTTP POST /v1/detect, 4 clients",
     "zenoh dlo/bench/image -> chains",
     "zenoh get dlo/detect",
+    "HTTP 503 when every worker and queue slot is busy",
 }
 
 
@@ -44,6 +45,8 @@ def test_every_path_is_timed(results: dict) -> None:
     for name in ("HTTP POST /v1/detect, 1 client", "zenoh dlo/bench/image -> chains"):
         assert rows[name]["detect_timings_p50_ms"] > 0  # the Detections' own timings
     assert results["targets_ms"] == {"http": 2.0, "zenoh": 3.0}
+    refusals = rows["HTTP 503 when every worker and queue slot is busy"]
+    assert results["refusal_p99_ms"] == refusals["p99_ms"] and results["refusal_target_ms"] > 0
     bare = rows["bare decode + detect() of the JPEG"]["p50_ms"]
     http = rows["HTTP POST /v1/detect, 1 client"]["p50_ms"]
     assert results["http_overhead_p50_ms"] == http - bare
@@ -57,3 +60,4 @@ def test_the_table_shows_every_path_and_the_targets(results: dict, capsys) -> No
         assert name in printed
     for path in ("http", "zenoh"):
         assert f"{path}: adds" in printed and "target <=" in printed
+    assert "503 when full:" in printed

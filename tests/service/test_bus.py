@@ -9,7 +9,7 @@ import queue
 import socket
 import subprocess
 import sys
-import time
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -19,18 +19,16 @@ import numpy as np
 import zenoh
 
 from schemas import Detection, DetectParams
-from service.bus import QUERY_KEY, DetectionBus, make_config
-from service.http import Settings
+from service.bus.config import QUERY_KEY, make_config
+from service.bus.detection import DetectionBus
+from service.http import Settings, create_app
 from service.perception import detect as real_detect
 from service.synthetic import make_scene
+from tests.helpers import free_port, wait_until
 
 TIMEOUT = 15.0
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
+READY_TIMEOUT_S = 120.0
+"""A first start on a machine compiles the numba kernels before a service is ready."""
 
 
 def encoded_scene(seed: int = 0, extension: str = ".png") -> bytes:
@@ -69,15 +67,28 @@ def subscribe(client: zenoh.Session, key: str) -> queue.Queue[tuple[str, bytes]]
     return received
 
 
-def publisher_to_bus(client: zenoh.Session, key: str) -> zenoh.Publisher:
-    """A publisher on ``key``, once the bus's subscriber is known to match it."""
+def publisher_to_bus(
+    client: zenoh.Session, key: str, bus_session: zenoh.Session | None = None
+) -> zenoh.Publisher:
+    """A publisher on ``key`` (``dlo/<camera>/image``), once the bus's subscriber matches it.
+
+    With ``bus_session`` (the session that publishes the results), also wait until it
+    knows the client's subscriber on ``dlo/<camera>/chains``, so that no result is lost.
+    """
     publisher = client.declare_publisher(key)
-    deadline = time.monotonic() + TIMEOUT
-    while not publisher.matching_status.matching:
-        assert time.monotonic() < deadline, "the bus's subscriber never showed up"
-        time.sleep(0.02)
-    time.sleep(0.1)  # and our own subscribers have reached the bus
+    wait_until(lambda: publisher.matching_status.matching, "the bus's subscriber", TIMEOUT)
+    if bus_session is not None:
+        wait_for_subscriber(bus_session, f"dlo/{key.split('/')[1]}/chains")
     return publisher
+
+
+def wait_for_subscriber(session: zenoh.Session, key: str) -> None:
+    """Until ``session`` knows a subscriber on ``key`` (a publisher of its own matches one)."""
+    probe = session.declare_publisher(key)
+    try:
+        wait_until(lambda: probe.matching_status.matching, f"a subscriber on {key}", TIMEOUT)
+    finally:
+        probe.undeclare()
 
 
 def take(received: queue.Queue[tuple[str, bytes]]) -> tuple[str, bytes]:
@@ -85,12 +96,14 @@ def take(received: queue.Queue[tuple[str, bytes]]) -> tuple[str, bytes]:
 
 
 def query(client: zenoh.Session, image: bytes, attachment: str | None = None) -> zenoh.Reply:
-    deadline = time.monotonic() + TIMEOUT
-    while True:  # until the queryable is known to the client
-        replies = list(client.get(QUERY_KEY, payload=image, attachment=attachment, timeout=TIMEOUT))
-        if replies or time.monotonic() > deadline:
-            break
-        time.sleep(0.05)
+    """The one reply to a ``get`` on ``dlo/detect``, asked again until the queryable is known."""
+    replies: list[zenoh.Reply] = []
+
+    def answered() -> bool:
+        replies[:] = client.get(QUERY_KEY, payload=image, attachment=attachment, timeout=TIMEOUT)
+        return bool(replies)
+
+    wait_until(answered, "a reply from dlo/detect", TIMEOUT)
     assert len(replies) == 1
     return replies[0]
 
@@ -98,7 +111,7 @@ def query(client: zenoh.Session, image: bytes, attachment: str | None = None) ->
 def test_image_in_detection_out() -> None:
     with bus_and_client() as (bus, client):
         chains = subscribe(client, "dlo/cam1/chains")
-        publisher = publisher_to_bus(client, "dlo/cam1/image")
+        publisher = publisher_to_bus(client, "dlo/cam1/image", bus.session)
         publisher.put(encoded_scene(), attachment=json.dumps({"segment_length": 12}))
         key, payload = take(chains)
         assert key == "dlo/cam1/chains"
@@ -135,7 +148,8 @@ def test_bad_samples_are_counted_and_the_next_good_one_works() -> None:
     with bus_and_client() as (bus, client):
         chains = subscribe(client, "dlo/cam1/chains")
         errors = subscribe(client, "dlo/cam1/errors")
-        publisher = publisher_to_bus(client, "dlo/cam1/image")
+        publisher = publisher_to_bus(client, "dlo/cam1/image", bus.session)
+        wait_for_subscriber(bus.session, "dlo/cam1/errors")
 
         publisher.put(b"\x89PNG\r\n\x1a\n truncated")
         record = json.loads(take(errors)[1])
@@ -151,52 +165,59 @@ def test_bad_samples_are_counted_and_the_next_good_one_works() -> None:
         assert chains.empty() and errors.empty()
 
 
-class SlowDetect:
-    """Real detection, slowed down; records how many frames of each camera were waiting."""
+class GatedDetect:
+    """Real detection whose calls wait until :attr:`release` is set, so frames pile up."""
 
-    def __init__(self, seconds: float) -> None:
-        self.seconds = seconds
-        self.bus: DetectionBus | None = None
-        self.most_waiting = 0
+    def __init__(self) -> None:
+        self.entered = threading.Event()
+        self.release = threading.Event()
 
     def __call__(self, image: np.ndarray, params: DetectParams, mask: np.ndarray | None):
-        time.sleep(self.seconds)
-        if self.bus is not None:
-            self.most_waiting = max(
-                self.most_waiting, self.bus.pending("cam1"), self.bus.pending("cam2")
-            )
+        self.entered.set()
+        assert self.release.wait(TIMEOUT), "the test never released the detection"
         return real_detect(image, params, mask)
 
 
+def numbered_frame(publisher: zenoh.Publisher, number: int) -> None:
+    """Publish a frame whose number travels in its parameters: segment_length 5 + number."""
+    publisher.put(encoded_scene(), attachment=json.dumps({"segment_length": 5 + number}))
+
+
 def test_latest_frame_wins_under_a_burst() -> None:
-    slow = SlowDetect(0.1)
-    with bus_and_client(slow) as (bus, client):
-        slow.bus = bus
+    gated = GatedDetect()
+    with bus_and_client(gated) as (bus, client):
         chains = subscribe(client, "dlo/cam1/chains")
-        publisher = publisher_to_bus(client, "dlo/cam1/image")
+        publisher = publisher_to_bus(client, "dlo/cam1/image", bus.session)
+        numbered_frame(publisher, 0)
+        assert gated.entered.wait(TIMEOUT), "frame 0 never reached the detector"
         frames = 20
-        for index in range(frames):
-            # the frame's number travels in its parameters: segment_length 5 + index
-            publisher.put(encoded_scene(), attachment=json.dumps({"segment_length": 5 + index}))
-        last = None
-        while last is None or last.segment_length != 5 + frames - 1:
-            last = Detection.model_validate_json(take(chains)[1])
-        time.sleep(0.3)
-        assert chains.empty()
-        assert bus.counts["replaced"] > 0
-        assert bus.counts["replaced"] + bus.counts["published"] == frames
-        assert slow.most_waiting <= 1
+        for number in range(1, frames):  # a burst while frame 0 is being detected
+            numbered_frame(publisher, number)
+        wait_until(lambda: bus.counts["replaced"] == frames - 2, "the burst to arrive", TIMEOUT)
+        assert bus.pending("cam1") == 1  # only the newest frame waits
+        gated.release.set()
+        numbers = [Detection.model_validate_json(take(chains)[1]).segment_length - 5]
+        numbers.append(Detection.model_validate_json(take(chains)[1]).segment_length - 5)
+        # A frame published after the burst: any result of a replaced frame, published
+        # before it on the same key, would be in the queue by the time it arrives.
+        numbered_frame(publisher, frames)
+        while numbers[-1] != frames:
+            numbers.append(Detection.model_validate_json(take(chains)[1]).segment_length - 5)
+        assert numbers == [0, frames - 1, frames]
+        assert bus.counts["replaced"] == frames - 2 and bus.counts["published"] == 3
 
 
 def test_two_cameras_at_once() -> None:
-    slow = SlowDetect(0.02)
-    with bus_and_client(slow) as (bus, client):
-        slow.bus = bus
+    gated = GatedDetect()
+    with bus_and_client(gated) as (bus, client):
         chains = subscribe(client, "dlo/*/chains")
-        first = publisher_to_bus(client, "dlo/cam1/image")
-        second = publisher_to_bus(client, "dlo/cam2/image")
+        first = publisher_to_bus(client, "dlo/cam1/image", bus.session)
+        second = publisher_to_bus(client, "dlo/cam2/image", bus.session)
         first.put(encoded_scene(1))
+        assert gated.entered.wait(TIMEOUT), "cam1's frame never reached the detector"
         second.put(encoded_scene(2))
+        wait_until(lambda: bus.pending("cam2") == 1, "cam2's frame to wait", TIMEOUT)
+        gated.release.set()
         got = dict(take(chains) for _ in range(2))
         assert set(got) == {"dlo/cam1/chains", "dlo/cam2/chains"}
         for payload in got.values():
@@ -206,7 +227,7 @@ def test_two_cameras_at_once() -> None:
 
 def test_http_app_runs_the_bus(tmp_path: Path) -> None:
     """The lifespan opens the bus from a configuration file; /readyz and /metrics show it."""
-    from tests.service.test_http import running_server
+    from tests.service.test_http import serving
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     config_file = tmp_path / "zenoh.json5"
@@ -214,11 +235,12 @@ def test_http_app_runs_the_bus(tmp_path: Path) -> None:
         '{ mode: "peer", listen: { endpoints: ["ENDPOINT"] }, // the bus\n'
         "  scouting: { multicast: { enabled: false } } }\n".replace("ENDPOINT", endpoint)
     )
-    settings = Settings(workers=1, zenoh=True, zenoh_config=config_file)
-    with running_server(settings) as base, client_of(endpoint) as client:
+    app = create_app(Settings(workers=1, zenoh=True, zenoh_config=config_file))
+    with serving(app) as base, client_of(endpoint) as client:
         assert httpx.get(f"{base}/readyz").json() == {"status": "ready"}
         chains = subscribe(client, "dlo/cam7/chains")
-        publisher_to_bus(client, "dlo/cam7/image").put(encoded_scene())
+        bus_session = app.state.dlo.bus.session
+        publisher_to_bus(client, "dlo/cam7/image", bus_session).put(encoded_scene())
         Detection.model_validate_json(take(chains)[1])
         metrics = httpx.get(f"{base}/metrics").text
         assert 'dlo_zenoh_frames_total{outcome="published"} 1.0' in metrics
@@ -231,11 +253,12 @@ def test_readyz_fails_when_zenoh_cannot_open(tmp_path: Path) -> None:
     config_file.write_text('{ mode: "peer", listen: { endpoints: ["nonsense/1.2.3.4:5"] } }')
     settings = Settings(workers=1, zenoh=True, zenoh_config=config_file)
     with running_server(settings, wait_ready=False) as base:
-        deadline = time.monotonic() + TIMEOUT
-        while (answer := httpx.get(f"{base}/readyz").json())["status"] != "failed":
-            assert time.monotonic() < deadline
-            time.sleep(0.05)
-        assert "zenoh" in answer["detail"]
+        wait_until(
+            lambda: httpx.get(f"{base}/readyz").json()["status"] == "failed",
+            "/readyz to report the failure",
+            READY_TIMEOUT_S,
+        )
+        assert "zenoh" in httpx.get(f"{base}/readyz").json()["detail"]
 
 
 def test_http_app_without_zenoh() -> None:
@@ -248,6 +271,23 @@ def test_http_app_without_zenoh() -> None:
 # --- dlo router with two dlo serve processes ---------------------------------------------------
 
 DLO = [sys.executable, "-c", "from service.cli import main; main()"]
+
+
+def listening(address: tuple[str, int]) -> bool:
+    """True when a TCP connection to ``address`` is accepted."""
+    with contextlib.suppress(OSError), socket.create_connection(address, 1):
+        return True
+    return False
+
+
+def ready_or_exited(base: str, processes: list[subprocess.Popen]) -> bool:
+    """True once the service at ``base`` is ready, failed, or any process has exited."""
+    if any(process.poll() is not None for process in processes):
+        return True
+    with contextlib.suppress(httpx.TransportError):
+        answer = httpx.get(f"{base}/readyz")
+        return answer.status_code == 200 or answer.json()["status"] == "failed"
+    return False
 
 
 def test_router_with_two_services(tmp_path: Path) -> None:
@@ -274,13 +314,13 @@ def test_router_with_two_services(tmp_path: Path) -> None:
         )
     ]
     try:
-        deadline = time.monotonic() + 30
-        while True:  # the router listens (clients give up when it is not there yet)
-            assert processes[0].poll() is None, "dlo router exited"
-            with contextlib.suppress(OSError), socket.create_connection(router_address, 1):
-                break
-            assert time.monotonic() < deadline, "dlo router did not come up"
-            time.sleep(0.05)
+        # the router listens before any service starts (clients give up when it is not there)
+        wait_until(
+            lambda: processes[0].poll() is not None or listening(router_address),
+            "dlo router to listen",
+            30,
+        )
+        assert processes[0].poll() is None, "dlo router exited"
         bases = []
         for _ in range(2):
             port = free_port()
@@ -294,16 +334,18 @@ def test_router_with_two_services(tmp_path: Path) -> None:
             )
             bases.append(f"http://127.0.0.1:{port}")
         for base in bases:
-            deadline = time.monotonic() + 60
-            while True:
-                assert all(process.poll() is None for process in processes)
-                with contextlib.suppress(httpx.TransportError):
-                    answer = httpx.get(f"{base}/readyz")
-                    if answer.status_code == 200:
-                        break
-                    assert answer.json()["status"] != "failed", answer.text
-                assert time.monotonic() < deadline, "dlo serve did not become ready"
-                time.sleep(0.1)
+            wait_until(
+                lambda base=base: ready_or_exited(base, processes),
+                "both dlo serve to become ready",
+                READY_TIMEOUT_S,
+            )
+            assert all(process.poll() is None for process in processes)
+            answer = httpx.get(f"{base}/readyz")
+            assert answer.status_code == 200, answer.text
+        # Both services declared their subscribers before they were ready, so the router
+        # forwards the frame to both once it matches; the client declares its subscriber
+        # before it publishes, over the same link, so the router (and through it each
+        # service) knows where the results go before any is published.
         with client_of(router, "client") as client:
             chains = subscribe(client, "dlo/*/chains")
             publisher = publisher_to_bus(client, "dlo/cam3/image")

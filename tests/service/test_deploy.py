@@ -12,8 +12,6 @@ from __future__ import annotations
 import json
 import queue
 import re
-import socket
-import time
 from pathlib import Path
 from typing import Any
 
@@ -23,8 +21,11 @@ import yaml
 import zenoh
 
 from schemas import Detection
-from service.bus import DetectionBus, make_config
+from service.bus.config import make_config
+from service.bus.detection import DetectionBus
 from service.synthetic import make_scene
+from tests.helpers import free_port, wait_until
+from tests.service.test_bus import wait_for_subscriber
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 ZENOH_CONFIGS = sorted((DEPLOY / "zenoh").glob("*.json5"))
@@ -65,11 +66,12 @@ def test_the_local_configurations_join_a_service_and_a_script(free_endpoint: str
     script_config = make_config(DEPLOY / "zenoh" / "local-client.json5", connect=[free_endpoint])
     ok, image = cv2.imencode(".png", make_scene(240, 160, 2, seed=0, loops=False).image)
     assert ok
-    with DetectionBus(service_config), zenoh.open(script_config) as script:
+    with DetectionBus(service_config) as bus, zenoh.open(script_config) as script:
         received: queue.Queue[bytes] = queue.Queue()
         script.declare_subscriber("dlo/*/chains", lambda s: received.put(s.payload.to_bytes()))
         publisher = script.declare_publisher("dlo/cam1/image")
-        wait_for(lambda: publisher.matching_status.matching, "the service's subscriber")
+        wait_until(lambda: publisher.matching_status.matching, "the service's subscriber")
+        wait_for_subscriber(bus.session, "dlo/cam1/chains")
         publisher.put(image.tobytes())
         assert Detection.model_validate_json(received.get(timeout=TIMEOUT)).chains
 
@@ -153,16 +155,6 @@ def only_container(deployment: dict[str, Any]) -> dict[str, Any]:
     return container
 
 
-def wait_for(condition, what: str) -> None:
-    deadline = time.monotonic() + TIMEOUT
-    while not condition():
-        assert time.monotonic() < deadline, f"{what} never showed up"
-        time.sleep(0.02)
-    time.sleep(0.1)  # and the subscriber of the script has reached the service
-
-
 @pytest.fixture
 def free_endpoint() -> str:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{probe.getsockname()[1]}"
+    return f"tcp/127.0.0.1:{free_port()}"

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import threading
-import time
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 
@@ -16,10 +15,12 @@ import httpx
 import numpy as np
 import pytest
 
-from schemas import CameraModel, Chain, Detection
+from schemas import Chain, Detection
 from service.http import Settings
 from service.perception import detect as real_detect
 from service.synthetic import make_scene
+from tests.adapters.builders import looking_down
+from tests.helpers import wait_until
 
 from .test_http import assert_error, encode, metric, running_server
 
@@ -30,24 +31,12 @@ LABELS = ["approach", "descend", "close_gripper", "lift"]
 
 
 def camera(origin=(0.25, 0.0, 0.3), width=W, height=H) -> dict:
-    """A camera looking straight down from ``origin``; its image rows run along base -y.
+    """A camera looking straight down from ``origin``, as JSON; image rows along base -y.
 
     At 0.3 m the 480x320 image covers x 0.13..0.37 and y -0.08..0.08 around the default
     origin: inside the UR3's default workspace wherever the cable lies.
     """
-    transform = np.eye(4)
-    transform[:3, :3] = np.diag([1.0, -1.0, -1.0])
-    transform[:3, 3] = origin
-    model = CameraModel(
-        fx=F,
-        fy=F,
-        cx=W / 2,
-        cy=H / 2,
-        width=width,
-        height=height,
-        T_base_camera=transform.tolist(),
-        surface={"plane_z": 0.0},
-    )
+    model = looking_down(origin, fx=F, fy=F, cx=W / 2, cy=H / 2, width=width, height=height)
     return model.model_dump(mode="json")
 
 
@@ -279,10 +268,10 @@ def test_busy_pool_answers_503_at_once(png) -> None:
         fields = {"camera": json.dumps(camera()), "selector": '{"allow_inferred": true}'}
         with ThreadPoolExecutor(1) as client:
             held = client.submit(post_form, base, png, fields)
-            deadline = time.monotonic() + 10
-            while metric(base, "dlo_detections_in_flight") < 1:
-                assert time.monotonic() < deadline, "the first request was never admitted"
-                time.sleep(0.01)
+            wait_until(
+                lambda: metric(base, "dlo_detections_in_flight") == 1,
+                "the first request to be admitted",
+            )
             refused = post_form(base, png, fields)
             assert_error(refused, 503, "busy")
             assert refused.headers["retry-after"] == "1"

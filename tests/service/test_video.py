@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-import service.cli
+import service.cli.detect
 import service.video
 from schemas import Detection
 from service.cli import app
@@ -399,7 +399,7 @@ def test_ctrl_c_in_the_cli_is_a_clean_stop(
     tmp_path: Path, clip_mp4: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setattr(
-        service.cli,
+        service.cli.detect,
         "open_video",
         lambda path: in_memory_source(frames_then(2, KeyboardInterrupt())),
     )
@@ -417,7 +417,7 @@ def test_ctrl_c_before_any_frame_exits_130(
     tmp_path: Path, clip_mp4: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setattr(
-        service.cli,
+        service.cli.detect,
         "open_video",
         lambda path: in_memory_source(frames_then(0, KeyboardInterrupt())),
     )
@@ -432,7 +432,7 @@ def test_ctrl_c_before_any_frame_exits_130(
 def test_video_that_yields_nothing_fails(
     tmp_path: Path, clip_mp4: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(service.cli, "open_video", lambda path: in_memory_source([]))
+    monkeypatch.setattr(service.cli.detect, "open_video", lambda path: in_memory_source([]))
 
     result = run_dlo("detect", clip_mp4, "--out-dir", tmp_path)
 

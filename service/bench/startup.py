@@ -1,0 +1,151 @@
+"""``dlo bench --startup``: how long whole ``dlo`` processes take, from start to exit.
+
+Timed, each as a separate process, as a user runs them: ``dlo --help``, ``dlo version``
+and a one-image ``dlo detect IMAGE --out-dir DIR`` (the first photograph of the data set
+when present, else a generated 1280x720 scene with three cables). One untimed
+``dlo detect`` of the image runs first, so the kernels are compiled (once per machine)
+and the files are in the page cache: the figures are those of a warm kernel cache.
+Then the commands run round after round, one of each per round, so that a busy spell of a
+shared machine slows all of them alike; each is reported as min, median and max over its
+runs, against the targets of issue 15.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from service.bench.detector import cpu_name
+
+TARGETS_S = {"dlo --help": 0.3, "dlo detect IMAGE --out-dir DIR": 0.7}
+"""Whole-process targets, in seconds (issue 15)."""
+GENERATED_SIZE = (1280, 720)
+
+
+@dataclass
+class StartupRow:
+    """The wall times of one command, in seconds."""
+
+    command: str
+    runs: int
+    min_s: float
+    median_s: float
+    max_s: float
+    target_s: float | None
+
+
+def dlo_command() -> list[str]:
+    """How to start ``dlo``: the console script beside this Python, else the module."""
+    script = Path(sys.executable).with_name("dlo")
+    if script.is_file():
+        return [str(script)]
+    return [sys.executable, "-m", "service.cli"]
+
+
+def run_startup_bench(dlo: list[str], dataset: Path, runs: int, as_json: bool) -> int:
+    """Time the commands, started with ``dlo``, ``runs`` times each; print a table (or
+    JSON); the exit status of ``dlo bench --startup``."""
+    with tempfile.TemporaryDirectory(prefix="dlo-startup-") as folder:
+        image, image_note = _image(dataset, Path(folder))
+        out_dir = Path(folder) / "out"
+        commands = {
+            "dlo --help": [*dlo, "--help"],
+            "dlo version": [*dlo, "version"],
+            "dlo detect IMAGE --out-dir DIR": [
+                *dlo,
+                "detect",
+                str(image),
+                "--out-dir",
+                str(out_dir),
+            ],
+        }
+        _run(commands["dlo detect IMAGE --out-dir DIR"])  # warm: kernels, page cache
+        seconds: dict[str, list[float]] = {name: [] for name in commands}
+        for _ in range(runs):
+            for name, command in commands.items():
+                seconds[name].append(_run(command))
+    rows = [
+        StartupRow(
+            command=name,
+            runs=len(times),
+            min_s=min(times),
+            median_s=statistics.median(times),
+            max_s=max(times),
+            target_s=TARGETS_S.get(name),
+        )
+        for name, times in seconds.items()
+    ]
+    results = {
+        "dlo": " ".join(dlo),
+        "image": image_note,
+        "rows": [asdict(row) for row in rows],
+        "cpu": cpu_name(),
+    }
+    if as_json:
+        print(json.dumps(results, indent=2))
+    else:
+        _print_table(results, rows)
+    return 0
+
+
+def _run(command: list[str]) -> float:
+    """Run ``command`` to its end; its wall time in seconds. Fails loudly if it fails."""
+    started = time.perf_counter()
+    finished = subprocess.run(command, capture_output=True, check=False)
+    elapsed = time.perf_counter() - started
+    if finished.returncode != 0:
+        detail = finished.stderr.decode(errors="replace").strip().splitlines()[-1:]
+        raise RuntimeError(f"{' '.join(command)} exited {finished.returncode}: {detail}")
+    return elapsed
+
+
+def _image(dataset: Path, folder: Path) -> tuple[Path, str]:
+    """The image to detect and a note saying what it is."""
+    photos = sorted(dataset.glob("*/images/*.jpg")) if dataset.is_dir() else []
+    if photos:
+        return photos[0], f"{photos[0]} (photograph)"
+    from service.imageio import write_png
+    from service.synthetic import make_scene
+
+    width, height = GENERATED_SIZE
+    scene = make_scene(width, height, 3, seed=0, occluders=1)
+    path = folder / "scene.png"
+    write_png(path, scene.image)
+    return path, f"generated {width}x{height} scene, 3 cables ({dataset} not found)"
+
+
+def _print_table(results: dict[str, Any], rows: list[StartupRow]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(width=160)
+    console.print(
+        f"dlo bench --startup: whole processes of {results['dlo']}, warm kernel cache; "
+        f"image {results['image']}; CPU {results['cpu']}; times in s",
+        highlight=False,
+    )
+    table = Table(title="start-up", title_justify="left")
+    for column in ("command", "runs", "min", "median", "max", "target"):
+        table.add_column(column, justify="left" if column == "command" else "right")
+    for row in rows:
+        if row.target_s is None:
+            target = ""
+        else:
+            verdict = "met" if row.median_s <= row.target_s else "NOT met"
+            target = f"<= {row.target_s:g} ({verdict})"
+        table.add_row(
+            row.command,
+            str(row.runs),
+            f"{row.min_s:.3f}",
+            f"{row.median_s:.3f}",
+            f"{row.max_s:.3f}",
+            target,
+        )
+    console.print(table)

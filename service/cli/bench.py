@@ -1,0 +1,107 @@
+"""``dlo bench``: the detector per stage on one thread; with ``--service`` what HTTP and
+zenoh add; with ``--startup`` how long whole ``dlo`` processes take (:mod:`service.bench`).
+
+The detector and service benchmarks run in a process of their own with the numeric
+libraries set to one thread (they size their thread pools when first imported); the
+start-up benchmark runs ``dlo`` processes as a user would, with the environment as given.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from service.bench.detector import DEFAULT_DATASET, THREAD_VARIABLES
+from service.console import exit_usage, stderr_console
+
+CHILD_FLAG = "DLO_BENCH_CHILD"
+"""Set in the one-thread process that ``dlo bench`` starts for the timing itself."""
+STARTUP_RUNS, STARTUP_QUICK_RUNS = 10, 2
+
+
+def bench(
+    quick: Annotated[
+        bool,
+        typer.Option("--quick", help="Tiny images and one frame per case: a smoke test."),
+    ] = False,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print the results as JSON instead of tables.")
+    ] = False,
+    dataset: Annotated[
+        Path,
+        typer.Option(
+            metavar="DIR",
+            help="Photographs to time: every <subset>/images/*.jpg (skipped when absent); "
+            "with --startup, the first one is the image detected.",
+        ),
+    ] = DEFAULT_DATASET,
+    frames: Annotated[
+        int,
+        typer.Option(min=1, metavar="N", help="Generated scenes (seeds) per case."),
+    ] = 10,
+    repeats: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            metavar="N",
+            help="Detections timed per generated scene; with --startup, runs of each command.",
+            show_default=f"3; {STARTUP_RUNS} with --startup",
+        ),
+    ] = None,
+    service: Annotated[
+        bool,
+        typer.Option(
+            "--service",
+            help="Time the service instead: HTTP and zenoh latency against bare detection "
+            "(service/bench/overhead.py).",
+        ),
+    ] = False,
+    startup: Annotated[
+        bool,
+        typer.Option(
+            "--startup",
+            help="Time whole dlo processes instead: dlo --help, dlo version and a one-image "
+            "dlo detect, with a warm kernel cache (service/bench/startup.py).",
+        ),
+    ] = False,
+    dlo: Annotated[
+        str | None,
+        typer.Option(
+            metavar="COMMAND",
+            help="With --startup: the command line that starts dlo, e.g. another "
+            "checkout's (default: the dlo beside this Python).",
+            show_default=False,
+        ),
+    ] = None,
+) -> None:
+    """Time the detector per stage on one thread: photographs, generated scenes, scaling."""
+    if service and startup:
+        exit_usage(stderr_console(), "--service and --startup time different things: give one")
+    if dlo is not None and not startup:
+        exit_usage(stderr_console(), "--dlo applies only with --startup")
+    if startup:
+        from service.bench.startup import dlo_command, run_startup_bench
+
+        runs = repeats or (STARTUP_QUICK_RUNS if quick else STARTUP_RUNS)
+        command = dlo_command() if dlo is None else shlex.split(dlo)
+        raise typer.Exit(run_startup_bench(command, dataset, runs, as_json))
+    repeats = repeats or 3
+    if os.environ.get(CHILD_FLAG) == "1":
+        if service:
+            from service.bench.overhead import run_service_bench
+
+            raise typer.Exit(run_service_bench(quick, as_json))
+        from service.bench.detector import run_detector_bench
+
+        raise typer.Exit(run_detector_bench(quick, as_json, dataset, frames, repeats))
+    env = dict(os.environ, **dict.fromkeys(THREAD_VARIABLES, "1"), **{CHILD_FLAG: "1"})
+    args = [sys.executable, "-m", "service.cli", "bench", "--dataset", str(dataset)]
+    args += ["--frames", str(frames), "--repeats", str(repeats)]
+    args += ["--quick"] * quick + ["--json"] * as_json + ["--service"] * service
+    raise typer.Exit(subprocess.call(args, env=env))

@@ -1,0 +1,485 @@
+"""``dlo detect``: the cables in image files, folders, videos and camera streams.
+
+Output conventions: stdout carries only results (the detection JSON of a single image);
+progress, summaries and errors go to stderr, each error on one line ``error: <file>:
+<problem>`` (``warning: ...`` for frames of a video that were skipped while the rest went
+through). Exit status (:mod:`service.console`): 0 when everything worked, 1 when any input
+failed (a video fails only when none of its frames could be processed), 2 for a usage
+error, 130 when Ctrl-C stopped the run before anything was processed (a Ctrl-C after that
+is a clean stop).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from schemas import Detection, DetectParams, SegmentationMethod
+from service.batch import (
+    OUTPUT_KINDS,
+    InvalidParametersError,
+    build_params,
+    detection_to_json,
+    expand_inputs,
+    failure_message,
+    find_output_clashes,
+    parse_outputs,
+    process_file,
+)
+from service.console import (
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    exit_usage,
+    load_kernels,
+    print_error,
+    print_warning,
+    stderr_console,
+)
+from service.imageio import OutputWriteError
+from service.perception.segmenter import OnnxSegmenter, Segmenter, SegmenterModelError
+from service.video import (
+    FrameOutcome,
+    FrameSource,
+    StreamSummary,
+    VideoSourceError,
+    is_video_path,
+    open_camera,
+    open_video,
+    parse_camera,
+    process_stream,
+)
+
+FRAME_MESSAGES_PER_STREAM = 5
+"""Skipped frames reported one by one per video; the rest only counted in the summary."""
+
+
+def _default_of(field: str) -> str:
+    """The default of a :class:`DetectParams` field, as shown in ``--help``."""
+    default = DetectParams.model_fields[field].default
+    if isinstance(default, SegmentationMethod):
+        return default.value
+    if isinstance(default, tuple):
+        return " ".join(map(str, default))
+    return str(default)
+
+
+def detect(
+    paths: Annotated[
+        list[Path] | None,
+        typer.Argument(
+            metavar="PATH",
+            help="Image or video files, or directories of images.",
+            show_default=False,
+        ),
+    ] = None,
+    camera: Annotated[
+        str | None,
+        typer.Option(
+            metavar="SRC",
+            help="Read a camera (device index such as 0) or a stream URL instead of files; "
+            "needs --out-dir. Stop with Ctrl-C or --max-frames.",
+        ),
+    ] = None,
+    mask: Annotated[
+        Path | None,
+        typer.Option(help="Foreground mask (non-zero = cable) for a single input image."),
+    ] = None,
+    segment_length: Annotated[
+        float | None,
+        typer.Option(
+            metavar="PX",
+            help="Length of each chain segment.",
+            show_default=_default_of("segment_length"),
+        ),
+    ] = None,
+    expected_count: Annotated[
+        int | None, typer.Option(metavar="N", help="Number of cables in view, when known.")
+    ] = None,
+    segmentation: Annotated[
+        SegmentationMethod | None,
+        typer.Option(
+            help="Segmentation when no mask is given.",
+            show_default=_default_of("segmentation"),
+        ),
+    ] = None,
+    hsv_low: Annotated[
+        tuple[int, int, int] | None,
+        typer.Option(
+            metavar="H S V",
+            help="Lower HSV bound for --segmentation hsv.",
+            show_default=_default_of("hsv_low"),
+        ),
+    ] = None,
+    hsv_high: Annotated[
+        tuple[int, int, int] | None,
+        typer.Option(
+            metavar="H S V",
+            help="Upper HSV bound for --segmentation hsv.",
+            show_default=_default_of("hsv_high"),
+        ),
+    ] = None,
+    segmenter_model: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="FILE",
+            help="A learned segmenter in ONNX format (input 1x3xHxW RGB, output a cable "
+            "probability or logit map; see the README) that makes the mask; implies "
+            "--segmentation model. Needs onnxruntime: pip install 'dlo-service[onnx]'.",
+        ),
+    ] = None,
+    out_dir: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="DIR",
+            help="Write <stem>.json, <stem>.labels.png and <stem>.overlay.png per image, "
+            "<stem>.jsonl per video or camera here; without it, the JSON of the single "
+            "input image goes to stdout.",
+        ),
+    ] = None,
+    outputs: Annotated[
+        str | None,
+        typer.Option(
+            metavar="LIST",
+            help="What to write, comma-separated from json, labels, overlay. Default: all "
+            "three per image; json (the <stem>.jsonl) per video. For videos, overlay is "
+            "the overlay video and labels are not available.",
+            show_default=False,
+        ),
+    ] = None,
+    overlay_video: Annotated[
+        bool,
+        typer.Option("--overlay-video", help="Also write <stem>.overlay.mp4 per video or camera."),
+    ] = False,
+    max_frames: Annotated[
+        int | None,
+        typer.Option(metavar="N", help="Stop each video or camera after N frames."),
+    ] = None,
+) -> None:
+    """Detect the cables in each image, or in every frame of a video or camera stream.
+
+    Videos (.mp4 .avi .mkv .mov .webm .m4v .mpg .mpeg) and cameras write one line of
+    JSON per frame to <stem>.jsonl: {"frame": i, "timestamp_s": t, "detection": {...}}.
+    Ctrl-C stops cleanly, keeping every line written so far.
+    """
+    console = stderr_console()
+    if segmenter_model is not None:
+        if segmentation not in (None, SegmentationMethod.model):
+            exit_usage(
+                console, f"--segmenter-model cannot be used with --segmentation {segmentation}"
+            )
+        segmentation = SegmentationMethod.model
+    elif segmentation is SegmentationMethod.model:
+        exit_usage(console, "--segmentation model needs --segmenter-model FILE.onnx")
+    try:
+        params = build_params(
+            segment_length=segment_length,
+            expected_count=expected_count,
+            segmentation=segmentation,
+            hsv_low=hsv_low,
+            hsv_high=hsv_high,
+        )
+        selected = OUTPUT_KINDS if outputs is None else parse_outputs(outputs)
+    except InvalidParametersError as exc:
+        exit_usage(console, str(exc))
+    segmenter = None
+    if segmenter_model is not None:
+        try:
+            segmenter = OnnxSegmenter(segmenter_model)
+        except SegmenterModelError as exc:
+            exit_usage(console, str(exc))
+    if max_frames is not None and max_frames < 1:
+        exit_usage(console, "--max-frames: must be at least 1")
+
+    if camera is not None:
+        if paths:
+            exit_usage(console, "--camera cannot be combined with PATH arguments")
+        if mask is not None:
+            exit_usage(console, "--mask applies to a single input image")
+        if out_dir is None:
+            exit_usage(console, "--camera needs --out-dir")
+        stream_outputs = _stream_outputs(console, outputs, selected, overlay_video)
+        _make_out_dir(console, out_dir)
+        source = parse_camera(camera)
+        load_kernels(console)
+        summary = _run_stream(
+            console,
+            lambda: open_camera(source),
+            params,
+            out_dir,
+            stream_outputs,
+            max_frames,
+            segmenter,
+        )
+        if summary is not None and summary.interrupted and summary.processed == 0:
+            raise typer.Exit(EXIT_INTERRUPTED)
+        raise typer.Exit(0 if summary is not None and summary.succeeded else EXIT_FAILED)
+
+    if not paths:
+        exit_usage(console, "give image or video files (PATH...), or --camera SRC")
+    files, problems = expand_inputs(paths)
+    videos = [path for path in files if is_video_path(path)]
+    images = [path for path in files if not is_video_path(path)]
+    if mask is not None and (len(paths) != 1 or len(files) > 1 or videos):
+        exit_usage(console, "--mask applies to a single input image")
+    if out_dir is None and videos:
+        exit_usage(console, "videos need --out-dir")
+    if out_dir is None and len(files) > 1:
+        exit_usage(console, "several inputs need --out-dir")
+    if out_dir is None and outputs is not None:
+        exit_usage(console, "--outputs needs --out-dir")
+    stream_outputs = (
+        _stream_outputs(console, outputs, selected, overlay_video) if videos else (False, False)
+    )
+
+    for problem in problems:
+        print_error(console, problem)
+    failed = len(problems)
+    if files:
+        load_kernels(console)
+
+    if out_dir is None:
+        if files:
+            detection = _process_or_report(
+                console, files[0], params, None, mask, segmenter=segmenter
+            )
+            if detection is None:
+                failed += 1
+            else:
+                typer.echo(detection_to_json(detection))
+        raise typer.Exit(EXIT_FAILED if failed else 0)
+
+    _make_out_dir(console, out_dir)
+    processed = 0
+    interrupted = False
+    if images:
+        images_done, images_failed, interrupted = _detect_images(
+            console, images, params, out_dir, mask, selected, segmenter
+        )
+        processed += images_done
+        failed += images_failed
+    clashes = find_output_clashes(videos)
+    for path in videos:
+        if interrupted:
+            break
+        if path in clashes:
+            print_error(
+                console, f"{path}: outputs would overwrite those of {clashes[path]} (same name)"
+            )
+            failed += 1
+            continue
+        summary = _run_stream(
+            console,
+            lambda path=path: open_video(path),
+            params,
+            out_dir,
+            stream_outputs,
+            max_frames,
+            segmenter,
+        )
+        if summary is None or not (summary.succeeded or summary.interrupted):
+            failed += 1
+        if summary is not None:
+            processed += summary.processed
+            interrupted = summary.interrupted
+
+    if interrupted and processed == 0:
+        raise typer.Exit(EXIT_INTERRUPTED)
+    raise typer.Exit(EXIT_FAILED if failed else 0)
+
+
+def _stream_outputs(
+    console: Console, given: str | None, selected: Iterable[str], overlay_video: bool
+) -> tuple[bool, bool]:
+    """Which outputs videos get: (JSON Lines, overlay video); labels are a usage error."""
+    chosen = set(selected)
+    if given is None:
+        return True, overlay_video
+    if "labels" in chosen:
+        exit_usage(console, "--outputs: labels are not available for videos (use json, overlay)")
+    return "json" in chosen, "overlay" in chosen or overlay_video
+
+
+def _make_out_dir(console: Console, out_dir: Path) -> None:
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print_error(console, f"{out_dir}: cannot create output directory: {exc.strerror or exc}")
+        raise typer.Exit(EXIT_FAILED) from None
+
+
+def _detect_images(
+    console: Console,
+    images: list[Path],
+    params: DetectParams,
+    out_dir: Path,
+    mask: Path | None,
+    outputs: Iterable[str],
+    segmenter: Segmenter | None = None,
+) -> tuple[int, int, bool]:
+    """Process image files into ``out_dir``; returns (processed, failed, interrupted)."""
+    outputs = frozenset(outputs)
+    clashes = find_output_clashes(images)
+    processed = failed = 0
+    interrupted = False
+    progress = Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=len(images) < 2 or not console.is_terminal,
+    )
+    try:
+        with progress:
+            task = progress.add_task("detecting", total=len(images))
+            for path in images:
+                progress.update(task, description=path.name)
+                if path in clashes:
+                    print_error(
+                        console,
+                        f"{path}: outputs would overwrite those of {clashes[path]} (same name)",
+                    )
+                    failed += 1
+                elif (
+                    _process_or_report(console, path, params, out_dir, mask, outputs, segmenter)
+                    is None
+                ):
+                    failed += 1
+                else:
+                    processed += 1
+                progress.advance(task)
+    except KeyboardInterrupt:
+        interrupted = True
+    state = " (interrupted)" if interrupted else ""
+    console.print(
+        f"{processed} of {len(images)} image(s) processed into {out_dir}{state}",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
+    return processed, failed, interrupted
+
+
+def _run_stream(
+    console: Console,
+    open_source: Callable[[], FrameSource],
+    params: DetectParams,
+    out_dir: Path,
+    outputs: tuple[bool, bool],
+    max_frames: int | None,
+    segmenter: Segmenter | None = None,
+) -> StreamSummary | None:
+    """Open a video or camera and process it with a progress bar; report on stderr.
+
+    Returns None when the source cannot be opened or the output cannot be created
+    (the error is printed), else the summary, also when Ctrl-C stopped it.
+    """
+    try:
+        source = open_source()
+    except VideoSourceError as exc:
+        print_error(console, str(exc))
+        return None
+    except KeyboardInterrupt:
+        return StreamSummary(source="", interrupted=True)
+
+    jsonl, overlay_video = outputs
+    reported = 0
+    started = time.perf_counter()
+    progress = Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[fps]:.1f} fps"),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=not console.is_terminal,
+    )
+
+    def on_frame(outcome: FrameOutcome) -> None:
+        nonlocal reported
+        if outcome.problem is not None:
+            if reported < FRAME_MESSAGES_PER_STREAM:
+                print_warning(console, f"{source.label}: {outcome.problem}")
+            elif reported == FRAME_MESSAGES_PER_STREAM:
+                print_warning(
+                    console, f"{source.label}: further skipped frames are only counted below"
+                )
+            reported += 1
+        progress.advance(task)
+        done = progress.tasks[0].completed
+        progress.update(task, fps=done / max(time.perf_counter() - started, 1e-9))
+
+    with progress:
+        task = progress.add_task(source.name, total=source.frame_count, fps=0.0)
+        try:
+            summary = process_stream(
+                source,
+                params,
+                out_dir,
+                jsonl=jsonl,
+                overlay_video=overlay_video,
+                max_frames=max_frames,
+                on_frame=on_frame,
+                segmenter=segmenter,
+            )
+        except OutputWriteError as exc:
+            print_error(console, str(exc))
+            return None
+
+    if summary.stop_reason is not None:
+        report = print_warning if summary.processed else print_error
+        report(console, f"{source.label}: {summary.stop_reason}")
+    if summary.output_error is not None:
+        print_error(console, summary.output_error)
+    elif summary.processed == 0 and not summary.interrupted and summary.stop_reason is None:
+        print_error(console, f"{source.label}: no frame could be processed")
+    console.print(_stream_summary_line(summary), markup=False, highlight=False, soft_wrap=True)
+    return summary
+
+
+def _stream_summary_line(summary: StreamSummary) -> str:
+    """``clip.mp4: 12 frame(s) processed, 0 dropped or unreadable, 0 failed; ...``."""
+    counts = (
+        f"{summary.processed} frame(s) processed, {summary.unreadable} dropped or unreadable, "
+        f"{summary.failed} failed"
+    )
+    p50 = summary.p50_ms
+    timing = "" if p50 is None else f"; p50 {p50:.1f} ms/frame, {summary.fps:.1f} fps overall"
+    state = " (interrupted)" if summary.interrupted else ""
+    if summary.stop_reason is not None or summary.output_error is not None:
+        state = " (stopped early)"
+    written = [str(path) for path in (summary.jsonl_path, summary.overlay_path) if path is not None]
+    into = f" -> {', '.join(written)}" if written and summary.processed else ""
+    return f"{summary.source}: {counts}{timing}{state}{into}"
+
+
+def _process_or_report(
+    console: Console,
+    path: Path,
+    params: DetectParams,
+    out_dir: Path | None,
+    mask: Path | None,
+    outputs: Iterable[str] = OUTPUT_KINDS,
+    segmenter: Segmenter | None = None,
+) -> Detection | None:
+    """Run :func:`process_file`; on failure print the one-line error and return None."""
+    try:
+        return process_file(
+            path,
+            params,
+            out_dir,
+            mask_path=mask,
+            outputs=frozenset(outputs),
+            segmenter=segmenter,
+        )
+    except Exception as exc:  # every failure is reported per file and the batch goes on
+        print_error(console, failure_message(path, exc))
+        return None

@@ -1,0 +1,89 @@
+"""``dlo serve``: run the detection service (HTTP with uvicorn, and zenoh) until Ctrl-C."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Annotated
+
+import typer
+import uvicorn
+from pydantic import ValidationError
+
+from service.console import EXIT_USAGE, FIRST_RUN_NOTICE
+from service.http import create_app
+from service.perception import kernels_cached
+from service.perception.segmenter import SegmenterModelError
+from service.runtime.settings import Settings
+
+
+def serve(
+    host: Annotated[
+        str | None, typer.Option(help="Address to listen on (env DLO_HOST, default 127.0.0.1).")
+    ] = None,
+    port: Annotated[int | None, typer.Option(help="TCP port (env DLO_PORT, default 8000).")] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(help="Detection threads (env DLO_WORKERS, default 2)."),
+    ] = None,
+    zenoh: Annotated[
+        bool | None,
+        typer.Option(
+            "--zenoh/--no-zenoh",
+            help="Also serve over zenoh: dlo/*/image -> dlo/*/chains, dlo/detect "
+            "(env DLO_ZENOH, default on).",
+        ),
+    ] = None,
+    zenoh_config: Annotated[
+        Path | None,
+        typer.Option(
+            exists=True,
+            dir_okay=False,
+            help="zenoh JSON5 configuration file (env DLO_ZENOH_CONFIG; default: a peer).",
+        ),
+    ] = None,
+    segmenter_model: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="FILE",
+            help="ONNX segmenter for requests with segmentation=model "
+            "(env DLO_SEGMENTER_MODEL; needs pip install 'dlo-service[onnx]').",
+        ),
+    ] = None,
+) -> None:
+    """Serve detection over HTTP (POST /v1/detect; OpenAPI docs at /docs).
+
+    Other settings come from DLO_* environment variables: DLO_QUEUE_SIZE,
+    DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_ZENOH_MULTICAST, DLO_LOG_LEVEL (see the README).
+    """
+    options = {
+        "host": host,
+        "port": port,
+        "workers": workers,
+        "zenoh": zenoh,
+        "zenoh_config": zenoh_config,
+        "segmenter_model": segmenter_model,
+    }
+    try:
+        settings = Settings(**{name: value for name, value in options.items() if value is not None})
+    except ValidationError as exc:
+        for detail in exc.errors(include_url=False):
+            where = "/".join(str(part) for part in detail["loc"])
+            typer.echo(f"error: {where}: {detail['msg']}", err=True)
+        raise typer.Exit(EXIT_USAGE) from None
+    logging.basicConfig(
+        level=settings.log_level.upper(), format="%(levelname)s:     %(name)s: %(message)s"
+    )
+    try:
+        app = create_app(settings)
+    except SegmenterModelError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(EXIT_USAGE) from None
+    if not kernels_cached():  # the app's warm-up compiles them; /readyz waits for it
+        typer.echo(f"{FIRST_RUN_NOTICE}; /readyz answers 503 until then", err=True)
+    uvicorn.run(
+        app,
+        host=settings.host,
+        port=settings.port,
+        log_level=settings.log_level,
+    )
