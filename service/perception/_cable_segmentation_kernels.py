@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from service.perception._shared_kernels import RING_DC, RING_DR
+
 _L_SCALE = np.float32(100.0 / 255.0)
 _AB_OFFSET = np.float32(128.0)
 
@@ -68,20 +70,32 @@ def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix)
     """
     height, width, _ = lab.shape
     along_x, slope, n_along, n_across, a = _line_geometry(cos_t, sin_t, half_length, height, width)
+    # A line with offset ``line`` visits (s, line + rise[s]); ``rise`` is monotonic, so the
+    # stretch inside the image is one run of s, found by bisection.
+    rise = np.empty(n_along, np.int64)
+    for s in range(n_along):
+        rise[s] = int(np.floor(s * slope + 0.5))
+    ascending = rise if slope >= 0 else rise[::-1].copy()
     reach = int(np.ceil(abs(slope) * n_along)) + 1
     for line in range(-reach, n_across + reach):
-        # The stretch of the line inside the image: s with 0 <= line + round(s*slope) < n_across.
+        # 0 <= line + rise[s] <= n_across - 1
+        if slope >= 0:
+            first = np.searchsorted(ascending, -line, side="left")
+            stop = np.searchsorted(ascending, n_across - 1 - line, side="right")
+        else:
+            # rise[s] = ascending[n_along - 1 - s]
+            first = n_along - np.searchsorted(ascending, n_across - 1 - line, side="right")
+            stop = n_along - np.searchsorted(ascending, -line, side="left")
         n = 0
-        for s in range(n_along):
-            o = line + int(np.floor(s * slope + 0.5))
-            if 0 <= o < n_across:
-                if along_x:
-                    buf_y[n] = o
-                    buf_x[n] = s
-                else:
-                    buf_y[n] = s
-                    buf_x[n] = o
-                n += 1
+        for s in range(first, stop):
+            o = line + rise[s]
+            if along_x:
+                buf_y[n] = o
+                buf_x[n] = s
+            else:
+                buf_y[n] = s
+                buf_x[n] = o
+            n += 1
         if n == 0:
             continue
         p0 = 0.0
@@ -311,3 +325,50 @@ def nearest_colour_class(lab8, nearest, distance, grid_step, reach, colours):
             if to_cable < around:
                 out[y, x] = 1
     return out
+
+
+@njit(cache=True, nogil=True)
+def component_widths(mask, distance):
+    """Label the 8-connected components of a mask and measure each.
+
+    Returns
+    -------
+    labels : ndarray of int64
+        ``(H, W)``: 0 on background, ``1..n`` on the components (in scan order).
+    area, width : ndarray of float64
+        Per label (index 0 unused): the pixel count, and four times the mean of
+        ``distance`` over the component (the width of a band: its distances spread
+        evenly over 0..w/2).
+    """
+    height, width = mask.shape
+    labels = np.zeros((height, width), np.int64)
+    stack = np.empty(max(np.count_nonzero(mask), 1), np.int64)
+    areas = [0.0]
+    widths = [0.0]
+    label = 0
+    for r0 in range(height):
+        for c0 in range(width):
+            if not mask[r0, c0] or labels[r0, c0]:
+                continue
+            label += 1
+            labels[r0, c0] = label
+            stack[0] = r0 * width + c0
+            top = 1
+            count = 0
+            total = 0.0
+            while top:
+                top -= 1
+                r = stack[top] // width
+                c = stack[top] - r * width
+                count += 1
+                total += distance[r, c]
+                for k in range(8):
+                    rr = r + RING_DR[k]
+                    cc = c + RING_DC[k]
+                    if 0 <= rr < height and 0 <= cc < width and mask[rr, cc] and not labels[rr, cc]:
+                        labels[rr, cc] = label
+                        stack[top] = rr * width + cc
+                        top += 1
+            areas.append(float(count))
+            widths.append(4.0 * total / count)
+    return labels, np.array(areas), np.array(widths)
