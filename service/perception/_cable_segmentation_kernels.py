@@ -16,19 +16,6 @@ _L_SCALE = np.float32(100.0 / 255.0)
 _AB_OFFSET = np.float32(128.0)
 
 
-@njit(cache=True, nogil=True)
-def lab_to_float(lab8):
-    """``uint8`` OpenCV Lab to float32 CIELAB units, ``(H, W, 3)``."""
-    height, width, _ = lab8.shape
-    out = np.empty((height, width, 3), np.float32)
-    for y in range(height):
-        for x in range(width):
-            out[y, x, 0] = lab8[y, x, 0] * _L_SCALE
-            out[y, x, 1] = np.float32(lab8[y, x, 1]) - _AB_OFFSET
-            out[y, x, 2] = np.float32(lab8[y, x, 2]) - _AB_OFFSET
-    return out
-
-
 @njit(cache=True, nogil=True, inline="always")
 def _distance2(c0, c1, c2, colours, y, x):
     """Squared CIELAB distance from ``(c0, c1, c2)`` to ``colours[y, x]``."""
@@ -61,14 +48,28 @@ def _line_geometry(cos_t, sin_t, half_length, height, width):
 
 
 @njit(cache=True, nogil=True)
+def _planar(lab8):
+    """``uint8`` OpenCV Lab to float32 CIELAB units, one plane per channel: ``(3, H, W)``."""
+    height, width, _ = lab8.shape
+    out = np.empty((3, height, width), np.float32)
+    for y in range(height):
+        for x in range(width):
+            out[0, y, x] = lab8[y, x, 0] * _L_SCALE
+            out[1, y, x] = np.float32(lab8[y, x, 1]) - _AB_OFFSET
+            out[2, y, x] = np.float32(lab8[y, x, 2]) - _AB_OFFSET
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix):
     """Mean colour and colour variance over the line segment through each pixel.
 
-    The segment is ``2 * half_length`` px long at angle ``t`` (cosine and sine given)
-    and centred on the pixel, cut short at the image border. Running sums along each
-    digital line of the family make it O(1) per pixel whatever the length.
+    ``lab`` and ``mean`` are ``(3, H, W)`` planes. The segment is ``2 * half_length`` px
+    long at angle ``t`` (cosine and sine given) and centred on the pixel, cut short at
+    the image border. Running sums along each digital line of the family make it O(1)
+    per pixel whatever the length.
     """
-    height, width, _ = lab.shape
+    _, height, width = lab.shape
     along_x, slope, n_along, n_across, a = _line_geometry(cos_t, sin_t, half_length, height, width)
     # A line with offset ``line`` visits (s, line + rise[s]); ``rise`` is monotonic, so the
     # stretch inside the image is one run of s, found by bisection.
@@ -86,17 +87,8 @@ def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix)
             # rise[s] = ascending[n_along - 1 - s]
             first = n_along - np.searchsorted(ascending, n_across - 1 - line, side="right")
             stop = n_along - np.searchsorted(ascending, -line, side="left")
-        n = 0
-        for s in range(first, stop):
-            o = line + rise[s]
-            if along_x:
-                buf_y[n] = o
-                buf_x[n] = s
-            else:
-                buf_y[n] = s
-                buf_x[n] = o
-            n += 1
-        if n == 0:
+        n = stop - first
+        if n <= 0:
             continue
         p0 = 0.0
         p1 = 0.0
@@ -107,11 +99,17 @@ def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix)
         prefix[0, 2] = 0.0
         prefix[0, 3] = 0.0
         for i in range(n):
-            y = buf_y[i]
-            x = buf_x[i]
-            c0 = lab[y, x, 0]
-            c1 = lab[y, x, 1]
-            c2 = lab[y, x, 2]
+            s = first + i
+            o = line + rise[s]
+            if along_x:
+                y, x = o, s
+            else:
+                y, x = s, o
+            buf_y[i] = y
+            buf_x[i] = x
+            c0 = lab[0, y, x]
+            c1 = lab[1, y, x]
+            c2 = lab[2, y, x]
             p0 += c0
             p1 += c1
             p2 += c2
@@ -129,9 +127,9 @@ def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix)
             m2 = (prefix[hi, 2] - prefix[lo, 2]) * inv
             y = buf_y[i]
             x = buf_x[i]
-            mean[y, x, 0] = m0
-            mean[y, x, 1] = m1
-            mean[y, x, 2] = m2
+            mean[0, y, x] = m0
+            mean[1, y, x] = m1
+            mean[2, y, x] = m2
             v = (prefix[hi, 3] - prefix[lo, 3]) * inv - (m0 * m0 + m1 * m1 + m2 * m2)
             var[y, x] = v if v > 0.0 else 0.0
 
@@ -142,13 +140,14 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
 
     For each of ``n_orientations`` angles, the mean colour along the line segment
     through a pixel is compared with the means along the parallel segments ``offset``
-    px to either side and with the local background colour (``background8``, a median
-    over a wide window); the smallest of the three colour differences is the line's
-    contrast, and divided by the spread of colours along the line (``floor2`` added to
-    the variance) it is the line's contrast-to-spread ratio. A cable along the line
-    gives a high ratio: a uniform colour that differs from both sides and from the
+    px to either side and with the local background colours (``background8`` and
+    ``wide8``, medians over two windows); the smallest of the colour differences is the
+    line's contrast, and divided by the spread of colours along the line (``floor2``
+    added to the variance) it is the line's contrast-to-spread ratio. A cable along the
+    line gives a high ratio: a uniform colour that differs from both sides and from the
     background. A step edge (one side the same), texture (a large spread) and the
-    background between two cables (the background colour) give a low one.
+    background between two cables (the background colour) give a low one. A pixel whose
+    side segment would lie outside the picture gets no ratio at that angle.
 
     Returns
     -------
@@ -158,10 +157,10 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
         ``(H, W)``: the index of the angle (``pi * k / n_orientations``) that gave it.
     """
     height, width, _ = lab8.shape
-    lab = lab_to_float(lab8)
-    background = lab_to_float(background8)
-    wide = lab_to_float(wide8)
-    mean = np.empty((height, width, 3), np.float32)
+    lab = _planar(lab8)
+    background = _planar(background8)
+    wide = _planar(wide8)
+    mean = np.empty((3, height, width), np.float32)
     var = np.empty((height, width), np.float32)
     longest = max(height, width) + 2
     buf_y = np.empty(longest, np.int64)
@@ -169,6 +168,8 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
     prefix = np.empty((longest + 1, 4), np.float64)
     best = np.zeros((height, width), np.float32)
     orientation = np.zeros((height, width), np.uint8)
+    row = np.empty(width, np.float32)
+    floor = np.float32(floor2)
     for k in range(n_orientations):
         angle = np.pi * k / n_orientations
         cos_t = np.cos(angle)
@@ -176,28 +177,36 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
         _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix)
         dy = round(offset * cos_t)
         dx = round(-offset * sin_t)
-        for y in range(height):
+        # Sides outside the picture are not known to differ: those pixels get no ratio.
+        x_lo = abs(dx)
+        x_hi = width - abs(dx)
+        for y in range(abs(dy), height - abs(dy)):
             y1 = y + dy
             y2 = y - dy
-            if y1 < 0 or y1 >= height or y2 < 0 or y2 >= height:
-                continue  # a side outside the picture: not known to differ
-            for x in range(width):
-                x1 = x + dx
-                x2 = x - dx
-                if x1 < 0 or x1 >= width or x2 < 0 or x2 >= width:
-                    continue
-                m0 = mean[y, x, 0]
-                m1 = mean[y, x, 1]
-                m2 = mean[y, x, 2]
+            for x in range(x_lo, x_hi):
+                m0 = mean[0, y, x]
+                m1 = mean[1, y, x]
+                m2 = mean[2, y, x]
+                a0 = m0 - mean[0, y1, x + dx]
+                a1 = m1 - mean[1, y1, x + dx]
+                a2 = m2 - mean[2, y1, x + dx]
+                b0 = m0 - mean[0, y2, x - dx]
+                b1 = m1 - mean[1, y2, x - dx]
+                b2 = m2 - mean[2, y2, x - dx]
+                c0 = m0 - background[0, y, x]
+                c1 = m1 - background[1, y, x]
+                c2 = m2 - background[2, y, x]
+                d0 = m0 - wide[0, y, x]
+                d1 = m1 - wide[1, y, x]
+                d2 = m2 - wide[2, y, x]
                 contrast2 = min(
-                    _distance2(m0, m1, m2, mean, y1, x1),
-                    _distance2(m0, m1, m2, mean, y2, x2),
-                    _distance2(m0, m1, m2, background, y, x),
-                    _distance2(m0, m1, m2, wide, y, x),
+                    min(a0 * a0 + a1 * a1 + a2 * a2, b0 * b0 + b1 * b1 + b2 * b2),
+                    min(c0 * c0 + c1 * c1 + c2 * c2, d0 * d0 + d1 * d1 + d2 * d2),
                 )
-                ratio2 = contrast2 / (var[y, x] + floor2)
-                if ratio2 > best[y, x]:
-                    best[y, x] = ratio2
+                row[x] = contrast2 / (var[y, x] + floor)
+            for x in range(x_lo, x_hi):
+                if row[x] > best[y, x]:
+                    best[y, x] = row[x]
                     orientation[y, x] = k
     for y in range(height):
         for x in range(width):
