@@ -231,3 +231,17 @@ def test_merge_level_and_nearest_colour_class_equal_the_reference(seed):
     )
     expected = reference.nearest_colour_class(lab8, nearest, distance, 81 / 40, reach, colours)
     assert (found != expected).mean() < 1e-3  # float32 against float64 at exact ties
+
+
+def test_auto_leaves_brightness_for_a_sheet_of_paper_on_a_dark_table():
+    # A sheet covering a sixth of the picture: brightness splits it off cleanly, but the
+    # bright class is one wide region, not cables.
+    table = plain(40, shape=(300, 400))
+    table[60:200, 80:260] = 225
+    image, truth = draw_scene(table, [(40, 40, 200)])  # red: seen on the table and the sheet
+    mask, cue, _ = segment_with_cue(image, DetectParams())
+    assert cue is None
+    assert not mask[110:190, 120:250].any()  # the sheet is no cable
+    # (The sliver of paper between the cable and the sheet's edge, and the sheet's corner
+    # next to it, are thin bright shapes too: some of them are taken.)
+    assert dice(mask, truth) > 0.8
