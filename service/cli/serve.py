@@ -39,7 +39,27 @@ def serve(
         typer.Option(
             exists=True,
             dir_okay=False,
-            help="zenoh JSON5 configuration file (env DLO_ZENOH_CONFIG; default: a peer).",
+            help="zenoh JSON5 configuration file (env DLO_ZENOH_CONFIG; default: a peer "
+            "listening on tcp/127.0.0.1:7447 only, no scouting).",
+        ),
+    ] = None,
+    zenoh_listen: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="ENDPOINT",
+            help="zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 to be reachable from "
+            "the network (repeatable; env DLO_ZENOH_LISTEN, comma separated; default: the "
+            "configuration file's, else tcp/127.0.0.1:7447).",
+        ),
+    ] = None,
+    image_keys: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="KEYEXPR",
+            help="The frames this replica takes, dlo/<camera or pattern>/image, e.g. "
+            "dlo/line1-$*/image for a fixed group of cameras (repeatable; env "
+            "DLO_ZENOH_IMAGE_KEYS, comma separated; default dlo/*/image). Replicas with the "
+            "same keys share the cameras out among themselves.",
         ),
     ] = None,
     segmenter_model: Annotated[
@@ -53,8 +73,10 @@ def serve(
 ) -> None:
     """Serve detection over HTTP (POST /v1/detect; OpenAPI docs at /docs).
 
-    Other settings come from DLO_* environment variables: DLO_QUEUE_SIZE,
-    DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_ZENOH_MULTICAST, DLO_LOG_LEVEL (see the README).
+    Other settings come from DLO_* variables (see the README): DLO_QUEUE_SIZE,
+    DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_ZENOH_MULTICAST,
+    DLO_ZENOH_ASSIGNMENT, DLO_API_TOKEN or DLO_API_TOKEN_FILE (a bearer token
+    on /v1/*), DLO_PROTECT_METRICS, DLO_LOG_LEVEL.
     """
     options = {
         "host": host,
@@ -62,6 +84,8 @@ def serve(
         "workers": workers,
         "zenoh": zenoh,
         "zenoh_config": zenoh_config,
+        "zenoh_listen": zenoh_listen or None,
+        "zenoh_image_keys": image_keys or None,
         "segmenter_model": segmenter_model,
     }
     try:
@@ -69,7 +93,8 @@ def serve(
     except ValidationError as exc:
         for detail in exc.errors(include_url=False):
             where = "/".join(str(part) for part in detail["loc"])
-            typer.echo(f"error: {where}: {detail['msg']}", err=True)
+            message = str(detail["msg"]).removeprefix("Value error, ")
+            typer.echo(f"error: {where}: {message}" if where else f"error: {message}", err=True)
         raise typer.Exit(EXIT_USAGE) from None
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(levelname)s:     %(name)s: %(message)s"
