@@ -23,10 +23,20 @@ class SegmentationMethod(StrEnum):
     """How the foreground mask is found when the caller gives none."""
 
     auto = "auto"
+    """``brightness`` when the image shows what it needs (bright, thin cables on a darker,
+    plain background: brightness is clearly two-class and its bright class is thin);
+    ``contrast`` otherwise."""
+    contrast = "contrast"
+    """Cable contrast: lines of one colour that differ from both sides and from the local
+    background, at every cable width, on any background (bright, dark or textured)."""
+    brightness = "brightness"
     """Otsu with hysteresis on brightness (again per cable once the chains are known);
-    colourfulness when brightness is not two-class."""
+    colourfulness when brightness is not two-class (``auto`` before cable contrast)."""
     hsv = "hsv"
     """Fixed HSV range ``hsv_low`` .. ``hsv_high`` (OpenCV ranges: H 0-179, S and V 0-255)."""
+    model = "model"
+    """A segmenter the caller supplies: a learned model (ONNX, ``--segmenter-model``) or,
+    in Python, any callable from the image to a mask."""
 
 
 class DetectParams(BaseModel):

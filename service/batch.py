@@ -29,6 +29,7 @@ from service.imageio import (
     write_text,
 )
 from service.perception import InvalidInputError, detect_full, render_labels, render_overlay
+from service.perception.segmenter import Segmenter
 from service.simulation import ModelError, to_mjcf
 from service.simulation.mjcf import with_surface
 
@@ -214,6 +215,7 @@ def process_file(
     camera: CameraModel | None = None,
     depth_path: str | os.PathLike[str] | None = None,
     physics: CablePhysics | None = None,
+    segmenter: Segmenter | None = None,
 ) -> Detection:
     """Detect the DLOs in one image file and write the outputs.
 
@@ -238,6 +240,9 @@ def process_file(
         The depth image (16-bit PNG or ``.npy``) when the camera's surface is a depth image.
     physics : CablePhysics, optional
         The cables' physics in ``<stem>.mjcf.xml``; the defaults when None.
+    segmenter : callable, optional
+        The segmenter for ``params.segmentation == "model"`` (see
+        :mod:`service.perception.segmenter`).
 
     Returns
     -------
@@ -259,7 +264,7 @@ def process_file(
     image = read_image(path)
     mask = None if mask_path is None else read_mask(mask_path, image.shape)
     depth = None if depth_path is None or camera is None else read_depth(depth_path, camera)
-    result = detect_full(image, params, mask=mask)
+    result = detect_full(image, params, mask=mask, segmenter=segmenter)
     detection = result.detection
     if camera is not None:
         detection = lift(detection, camera, depth)

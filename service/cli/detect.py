@@ -45,6 +45,7 @@ from service.console import (
     stderr_console,
 )
 from service.imageio import OutputWriteError
+from service.perception.segmenter import OnnxSegmenter, Segmenter, SegmenterModelError
 from service.video import (
     FrameOutcome,
     FrameSource,
@@ -148,6 +149,15 @@ def detect(
             show_default=_default_of("hsv_high"),
         ),
     ] = None,
+    segmenter_model: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="FILE",
+            help="A learned segmenter in ONNX format (input 1x3xHxW RGB, output a cable "
+            "probability or logit map; see the README) that makes the mask; implies "
+            "--segmentation model. Needs onnxruntime: pip install 'dlo-service[onnx]'.",
+        ),
+    ] = None,
     out_dir: Annotated[
         Path | None,
         typer.Option(
@@ -184,6 +194,14 @@ def detect(
     Ctrl-C stops cleanly, keeping every line written so far.
     """
     console = stderr_console()
+    if segmenter_model is not None:
+        if segmentation not in (None, SegmentationMethod.model):
+            exit_usage(
+                console, f"--segmenter-model cannot be used with --segmentation {segmentation}"
+            )
+        segmentation = SegmentationMethod.model
+    elif segmentation is SegmentationMethod.model:
+        exit_usage(console, "--segmentation model needs --segmenter-model FILE.onnx")
     try:
         params = build_params(
             segment_length=segment_length,
@@ -195,6 +213,12 @@ def detect(
         selected = IMAGE_OUTPUTS if outputs is None else parse_outputs(outputs)
     except InvalidParametersError as exc:
         exit_usage(console, str(exc))
+    segmenter = None
+    if segmenter_model is not None:
+        try:
+            segmenter = OnnxSegmenter(segmenter_model)
+        except SegmenterModelError as exc:
+            exit_usage(console, str(exc))
     if max_frames is not None and max_frames < 1:
         exit_usage(console, "--max-frames: must be at least 1")
     camera_model = None
@@ -222,7 +246,13 @@ def detect(
         source = parse_camera(camera)
         load_kernels(console)
         summary = _run_stream(
-            console, lambda: open_camera(source), params, out_dir, stream_outputs, max_frames
+            console,
+            lambda: open_camera(source),
+            params,
+            out_dir,
+            stream_outputs,
+            max_frames,
+            segmenter,
         )
         if summary is not None and summary.interrupted and summary.processed == 0:
             raise typer.Exit(EXIT_INTERRUPTED)
@@ -255,10 +285,15 @@ def detect(
     if files:
         load_kernels(console)
 
-    three_d = {"camera": camera_model, "depth_path": depth, "physics": cable_physics}
+    per_image = {
+        "camera": camera_model,
+        "depth_path": depth,
+        "physics": cable_physics,
+        "segmenter": segmenter,
+    }
     if out_dir is None:
         if files:
-            detection = _process_or_report(console, files[0], params, None, mask, **three_d)
+            detection = _process_or_report(console, files[0], params, None, mask, **per_image)
             if detection is None:
                 failed += 1
             else:
@@ -270,7 +305,7 @@ def detect(
     interrupted = False
     if images:
         images_done, images_failed, interrupted = _detect_images(
-            console, images, params, out_dir, mask, selected, three_d
+            console, images, params, out_dir, mask, selected, per_image
         )
         processed += images_done
         failed += images_failed
@@ -285,7 +320,13 @@ def detect(
             failed += 1
             continue
         summary = _run_stream(
-            console, lambda path=path: open_video(path), params, out_dir, stream_outputs, max_frames
+            console,
+            lambda path=path: open_video(path),
+            params,
+            out_dir,
+            stream_outputs,
+            max_frames,
+            segmenter,
         )
         if summary is None or not (summary.succeeded or summary.interrupted):
             failed += 1
@@ -325,7 +366,7 @@ def _detect_images(
     out_dir: Path,
     mask: Path | None,
     outputs: Iterable[str],
-    three_d: dict,
+    per_image: dict,
 ) -> tuple[int, int, bool]:
     """Process image files into ``out_dir``; returns (processed, failed, interrupted)."""
     outputs = frozenset(outputs)
@@ -353,7 +394,7 @@ def _detect_images(
                     )
                     failed += 1
                 elif (
-                    _process_or_report(console, path, params, out_dir, mask, outputs, **three_d)
+                    _process_or_report(console, path, params, out_dir, mask, outputs, **per_image)
                     is None
                 ):
                     failed += 1
@@ -379,6 +420,7 @@ def _run_stream(
     out_dir: Path,
     outputs: tuple[bool, bool],
     max_frames: int | None,
+    segmenter: Segmenter | None = None,
 ) -> StreamSummary | None:
     """Open a video or camera and process it with a progress bar; report on stderr.
 
@@ -432,6 +474,7 @@ def _run_stream(
                 overlay_video=overlay_video,
                 max_frames=max_frames,
                 on_frame=on_frame,
+                segmenter=segmenter,
             )
         except OutputWriteError as exc:
             print_error(console, str(exc))
@@ -475,6 +518,7 @@ def _process_or_report(
     camera: CameraModel | None = None,
     depth_path: Path | None = None,
     physics: CablePhysics | None = None,
+    segmenter: Segmenter | None = None,
 ) -> Detection | None:
     """Run :func:`process_file`; on failure print the one-line error and return None."""
     try:
@@ -487,6 +531,7 @@ def _process_or_report(
             camera=camera,
             depth_path=depth_path,
             physics=physics,
+            segmenter=segmenter,
         )
     except Exception as exc:  # every failure is reported per file and the batch goes on
         print_error(console, failure_message(path, exc))

@@ -13,6 +13,7 @@ from pydantic import ValidationError
 from service.console import EXIT_USAGE, FIRST_RUN_NOTICE
 from service.http import create_app
 from service.perception import kernels_cached
+from service.perception.segmenter import SegmenterModelError
 from service.runtime.settings import Settings
 
 
@@ -61,6 +62,14 @@ def serve(
             "same keys share the cameras out among themselves.",
         ),
     ] = None,
+    segmenter_model: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="FILE",
+            help="ONNX segmenter for requests with segmentation=model "
+            "(env DLO_SEGMENTER_MODEL; needs pip install 'dlo-service[onnx]').",
+        ),
+    ] = None,
 ) -> None:
     """Serve detection over HTTP (POST /v1/detect; OpenAPI docs at /docs).
 
@@ -77,6 +86,7 @@ def serve(
         "zenoh_config": zenoh_config,
         "zenoh_listen": zenoh_listen or None,
         "zenoh_image_keys": image_keys or None,
+        "segmenter_model": segmenter_model,
     }
     try:
         settings = Settings(**{name: value for name, value in options.items() if value is not None})
@@ -89,10 +99,15 @@ def serve(
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(levelname)s:     %(name)s: %(message)s"
     )
+    try:
+        app = create_app(settings)
+    except SegmenterModelError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(EXIT_USAGE) from None
     if not kernels_cached():  # the app's warm-up compiles them; /readyz waits for it
         typer.echo(f"{FIRST_RUN_NOTICE}; /readyz answers 503 until then", err=True)
     uvicorn.run(
-        create_app(settings),
+        app,
         host=settings.host,
         port=settings.port,
         log_level=settings.log_level,

@@ -15,7 +15,15 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from schemas import Chain, Crossing, Detection, DetectParams, GapCurve, StageTimings
+from schemas import (
+    Chain,
+    Crossing,
+    Detection,
+    DetectParams,
+    GapCurve,
+    SegmentationMethod,
+    StageTimings,
+)
 from service.perception import _pipeline_kernels
 from service.perception._kernel_cache import kernels_cached, write_stamp
 from service.perception.contours import extract_contours
@@ -33,6 +41,7 @@ from service.perception.segmentation import (
     segment_with_cue,
     validate_mask,
 )
+from service.perception.segmenter import Segmenter
 from service.perception.skeleton import (
     distance_transform,
     estimate_radius,
@@ -122,6 +131,7 @@ def detect_full(
     image: np.ndarray | None,
     params: DetectParams | None = None,
     mask: np.ndarray | None = None,
+    segmenter: Segmenter | None = None,
 ) -> DetectionResult:
     """Detect every DLO in an image and return the intermediate products too.
 
@@ -159,7 +169,7 @@ def detect_full(
             validate_mask(mask, shape), params.min_component_area, params.max_hole_area
         )
     else:
-        foreground, cue, image_low = segment_with_cue(image_bgr, params)
+        foreground, cue, image_low = segment_with_cue(image_bgr, params, segmenter)
     watch.lap("segmentation")
     if not foreground.any():
         return _empty(width, height, params, watch, foreground, foreground)
@@ -262,6 +272,7 @@ def detect(
     image: np.ndarray | None,
     params: DetectParams | None = None,
     mask: np.ndarray | None = None,
+    segmenter: Segmenter | None = None,
 ) -> Detection:
     """Detect every deformable linear object in an image as a chain of segments.
 
@@ -278,6 +289,10 @@ def detect(
         Defaults when None.
     mask : ndarray, optional
         ``(H, W)`` foreground mask (nonzero = cable) to use instead of segmentation.
+    segmenter : callable, optional
+        For ``params.segmentation == "model"``: ``segmenter(image_bgr) -> mask``, a
+        learned model (:class:`service.perception.segmenter.OnnxSegmenter`) or any
+        function; see :mod:`service.perception.segmenter` for what it may return.
 
     Returns
     -------
@@ -303,7 +318,7 @@ def detect(
     >>> round(detection.chains[0].length / 10)
     18
     """
-    return detect_full(image, params, mask).detection
+    return detect_full(image, params, mask, segmenter).detection
 
 
 def _numba_cache_dir() -> str:
@@ -334,6 +349,10 @@ def warm_up() -> None:
     # 1. The brightness path (Otsu, hysteresis and clean-up in one pass), the clean-up
     # of other masks, and the growth by a cable's own threshold.
     _, cue, _ = segment_with_cue(image, DetectParams())
+    # The cable-contrast path: a dark line on a light ground, large enough for a level.
+    lines = np.full((96, 96, 3), 210, np.uint8)
+    lines[44:50, 8:88] = (40, 60, 170)
+    segment_with_cue(lines, DetectParams(segmentation=SegmentationMethod.contrast))
     clean_mask(mask, 2, 2)
     line = np.array([[2.0, 20.0], [45.0, 20.0]])
     grow_by_own_thresholds(cue, mask, [line], [3.0], [np.array([False])], [])

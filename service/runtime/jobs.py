@@ -18,6 +18,7 @@ from service.imageio import ImageFileError, decode_image, decode_mask
 from service.perception import InvalidInputError, render_overlay
 from service.perception import detect as detect_dlos
 from service.perception import warm_up as warm_up_kernels
+from service.perception.segmenter import Segmenter
 from service.runtime.errors import RequestError
 from service.runtime.frames import Frame, check_pixels
 
@@ -28,6 +29,15 @@ DetectFunction = Callable[[np.ndarray, DetectParams, np.ndarray | None], Detecti
 def default_detect(image: np.ndarray, params: DetectParams, mask: np.ndarray | None) -> Detection:
     """:func:`service.perception.detect` with positional arguments."""
     return detect_dlos(image, params, mask)
+
+
+def detect_with_segmenter(segmenter: Segmenter) -> DetectFunction:
+    """:func:`default_detect` with ``segmenter`` for requests with ``segmentation=model``."""
+
+    def detect(image: np.ndarray, params: DetectParams, mask: np.ndarray | None) -> Detection:
+        return detect_dlos(image, params, mask, segmenter)
+
+    return detect
 
 
 def decode_frame(frame: Frame, max_pixels: int) -> tuple[np.ndarray, np.ndarray | None]:

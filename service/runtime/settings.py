@@ -89,6 +89,11 @@ class Settings(BaseSettings):
     protect_metrics: bool = Field(
         False, description="Require the bearer token on /metrics too (when a token is set)."
     )
+    segmenter_model: Path | None = Field(
+        None,
+        description="ONNX segmenter model for requests with segmentation=model "
+        "(needs onnxruntime: the dlo-service[onnx] extra).",
+    )
     log_level: Literal["critical", "error", "warning", "info", "debug"] = Field(
         "info", description="Server log level."
     )
