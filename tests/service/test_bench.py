@@ -78,3 +78,21 @@ def test_dlo_bench_times_one_thing_at_a_time():
     )
     assert completed.returncode == 2
     assert "give one" in completed.stderr
+
+
+def test_dlo_bench_rings_times_scenes_of_many_small_rings():
+    """The report's shape and the scenes: one chain per ring."""
+    completed = subprocess.run(
+        [*DLO, "bench", "--rings", "9,40", "--json"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert completed.returncode == 0, completed.stderr
+    rows = json.loads(completed.stdout)["rings"]
+    assert [row["rings"] for row in rows] == [9, 40]
+    assert [row["chains"] for row in rows] == [9, 40]
+    assert [(row["width"], row["height"]) for row in rows] == [(120, 120), (280, 240)]
+    assert all(row["total_ms"] > 0 for row in rows)
+    refused = subprocess.run([*DLO, "bench", "--rings", "ten"], capture_output=True, text=True)
+    assert refused.returncode == 2 and "--rings" in refused.stderr
