@@ -33,8 +33,8 @@ from schemas import DetectParams
 from service.batch import describe_json_validation_error
 from service.bus.config import IMAGE_KEYS, JSON, QUERY_KEY, chains_key, errors_key
 from service.runtime.errors import RequestError
-from service.runtime.frames import Frame, check_declared_size
-from service.runtime.jobs import DetectFunction, default_detect, run_detection
+from service.runtime.frames import Frame, check_upload
+from service.runtime.jobs import OVER_BUDGET, DetectFunction, default_detect, run_detection
 from service.runtime.metrics import Metrics
 
 logger = logging.getLogger(__name__)
@@ -75,13 +75,17 @@ class DetectionBus:
     config : zenoh.Config, optional
         The session's configuration (see :func:`make_config`); default: zenoh's (a peer).
     detect : callable, optional
-        ``detect(image, params, mask) -> Detection``; default :func:`service.perception.detect`.
+        ``detect(image, params, mask, deadline) -> Detection``; default
+        :func:`service.perception.detect`.
     metrics : Metrics, optional
         Counters to update (the HTTP app's when the bus runs inside it); default: its own.
     max_pixels, max_bytes : int
         Largest image accepted, in pixels and in encoded bytes.
     max_queries : int
         Queries that may wait for the detection thread; beyond that they are refused.
+    max_detect_seconds : float, optional
+        Time budget of one detection (decoding included); past it the frame or query
+        gets the error ``time_budget_exceeded`` and the thread goes on. None: no limit.
     """
 
     def __init__(
@@ -93,6 +97,7 @@ class DetectionBus:
         max_pixels: int = 40_000_000,
         max_bytes: int = 25 * 1024 * 1024,
         max_queries: int = 8,
+        max_detect_seconds: float | None = None,
     ) -> None:
         self._config = config if config is not None else zenoh.Config()
         self._detect = detect if detect is not None else default_detect
@@ -100,6 +105,7 @@ class DetectionBus:
         self.max_pixels = max_pixels
         self.max_bytes = max_bytes
         self.max_queries = max_queries
+        self.max_detect_seconds = max_detect_seconds
         self.counts: Counter[str] = Counter()
         """Outcomes so far: ``published``, ``replaced``, ``rejected``, ``failed`` for frames,
         ``query_answered`` ... for queries (also in ``metrics``)."""
@@ -247,9 +253,13 @@ class DetectionBus:
                     f"image: {len(job.image)} bytes, more than the limit of {self.max_bytes}",
                 )
             params = params_from_attachment(job.attachment)
-            check_declared_size(job.image, self.max_pixels)
-            _, detection = run_detection(Frame(job.image, params), self._detect, self.max_pixels)
+            check_upload(job.image, "image", self.max_pixels)
+            _, detection = run_detection(
+                Frame(job.image, params), self._detect, self.max_pixels, self.max_detect_seconds
+            )
         except RequestError as exc:
+            if exc.code == OVER_BUDGET:
+                self.metrics.over_budget.inc()
             logger.warning("%s: sample rejected: %s", where, exc.message)
             self._fail(job, "rejected", exc.code, exc.message)
             return

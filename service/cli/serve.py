@@ -12,6 +12,7 @@ from pydantic import ValidationError
 
 from service.console import EXIT_USAGE, FIRST_RUN_NOTICE
 from service.http import create_app
+from service.http.server import uvicorn_options
 from service.perception import kernels_cached
 from service.runtime.settings import Settings
 
@@ -36,8 +37,7 @@ def serve(
     zenoh_config: Annotated[
         Path | None,
         typer.Option(
-            exists=True,
-            dir_okay=False,
+            metavar="FILE",
             help="zenoh JSON5 configuration file (env DLO_ZENOH_CONFIG; default: a peer).",
         ),
     ] = None,
@@ -45,7 +45,8 @@ def serve(
     """Serve detection over HTTP (POST /v1/detect; OpenAPI docs at /docs).
 
     Other settings come from DLO_* environment variables: DLO_QUEUE_SIZE,
-    DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_ZENOH_MULTICAST, DLO_LOG_LEVEL (see the README).
+    DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_MAX_DETECT_SECONDS, DLO_ZENOH_MULTICAST,
+    DLO_LOG_LEVEL (see the README).
     """
     options = {
         "host": host,
@@ -59,7 +60,8 @@ def serve(
     except ValidationError as exc:
         for detail in exc.errors(include_url=False):
             where = "/".join(str(part) for part in detail["loc"])
-            typer.echo(f"error: {where}: {detail['msg']}", err=True)
+            message = str(detail["msg"]).removeprefix("Value error, ")
+            typer.echo(f"error: {where}: {message}" if where else f"error: {message}", err=True)
         raise typer.Exit(EXIT_USAGE) from None
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(levelname)s:     %(name)s: %(message)s"
@@ -67,8 +69,5 @@ def serve(
     if not kernels_cached():  # the app's warm-up compiles them; /readyz waits for it
         typer.echo(f"{FIRST_RUN_NOTICE}; /readyz answers 503 until then", err=True)
     uvicorn.run(
-        create_app(settings),
-        host=settings.host,
-        port=settings.port,
-        log_level=settings.log_level,
+        create_app(settings), **uvicorn_options(settings.host, settings.port, settings.log_level)
     )

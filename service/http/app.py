@@ -30,7 +30,7 @@ def create_app(settings: Settings | None = None, detect: DetectFunction | None =
     settings : Settings, optional
         Limits and pool size; by default read from ``DLO_*`` environment variables.
     detect : callable, optional
-        ``detect(image, params, mask) -> Detection`` run for each request; by default
+        ``detect(image, params, mask, deadline) -> Detection`` run for each request; by default
         :func:`service.perception.detect`. Tests inject slow or failing ones.
 
     Returns
@@ -98,6 +98,7 @@ async def _open_bus(state: AppState) -> None:
             metrics=state.metrics,
             max_pixels=settings.max_pixels,
             max_bytes=settings.max_body_bytes,
+            max_detect_seconds=settings.max_detect_seconds,
         )
         state.bus = bus  # before opening: close() then waits for open() to finish
         await asyncio.to_thread(bus.open)

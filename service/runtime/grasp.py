@@ -54,7 +54,7 @@ class GraspFrame:
 
 
 def run_grasp(
-    request: GraspFrame, detect: DetectFunction, max_pixels: int
+    request: GraspFrame, detect: DetectFunction, max_pixels: int, budget_s: float | None = None
 ) -> tuple[GraspPlan, Detection]:
     """Decode the depth image (if any), detect the DLOs in the image, then plan the grasp.
 
@@ -67,7 +67,7 @@ def run_grasp(
             depth = decode_depth_image(request.depth)
         except DepthImageError as exc:
             raise RequestError(422, "invalid_depth", f"depth: {exc}") from None
-    _, detection = run_detection(request.frame, detect, max_pixels)
+    _, detection = run_detection(request.frame, detect, max_pixels, budget_s)
     plan = plan_or_refuse(detection, request.camera, request.selector, depth)
     return plan, detection
 
