@@ -1,4 +1,5 @@
-"""Helpers shared by the test modules: free loopback ports and waiting on a condition.
+"""Helpers shared by the test modules: free loopback ports, waiting on a condition, and
+PNGs made without an image (:func:`blank_png`, decompression bombs among them).
 
 Import as ``from tests.helpers import free_port, wait_until`` (the repository root is on
 ``sys.path`` through ``tests/conftest.py``).
@@ -9,6 +10,10 @@ from __future__ import annotations
 import socket
 import time
 from collections.abc import Callable
+
+from service.bench.bombs import blank_png
+
+__all__ = ["blank_png", "free_port", "free_udp_port", "wait_until"]
 
 DEFAULT_TIMEOUT_S = 15.0
 """Generous for a loaded 2-core machine; a wait ends as soon as its condition holds."""
@@ -48,32 +53,3 @@ def wait_until(
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
         time.sleep(POLL_S)
-
-
-def blank_png(width: int, height: int, bit_depth: int = 1) -> bytes:
-    """A valid greyscale PNG of ``width`` x ``height`` zeros, built without decoding anything.
-
-    With the default 1-bit samples a 30000x30000 one is about 110 KB that decodes to
-    900 megapixels (a decompression bomb); built in under a second, row blocks at a time.
-    """
-    import struct
-    import zlib
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        crc = zlib.crc32(kind + data) & 0xFFFFFFFF
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
-
-    row = b"\0" * (1 + (width * bit_depth + 7) // 8)
-    rows_per_block = max(1, 4_000_000 // len(row))
-    compressor = zlib.compressobj(9)
-    parts = []
-    for start in range(0, height, rows_per_block):
-        parts.append(compressor.compress(row * min(rows_per_block, height - start)))
-    parts.append(compressor.flush())
-    header = struct.pack(">IIBBBBB", width, height, bit_depth, 0, 0, 0, 0)
-    return (
-        b"\x89PNG\r\n\x1a\n"
-        + chunk(b"IHDR", header)
-        + chunk(b"IDAT", b"".join(parts))
-        + chunk(b"IEND", b"")
-    )

@@ -71,6 +71,15 @@ def bench(
             "dlo detect, with a warm kernel cache (service/bench/startup.py).",
         ),
     ] = False,
+    bombs: Annotated[
+        bool,
+        typer.Option(
+            "--bombs",
+            help="Time how dlo serve refuses a 110 KB PNG claiming 30000x30000 px, as the "
+            "image and as the mask, and its peak memory before and after "
+            "(service/bench/bombs.py).",
+        ),
+    ] = False,
     rings: Annotated[
         str | None,
         typer.Option(
@@ -92,10 +101,15 @@ def bench(
     ] = None,
 ) -> None:
     """Time the detector per stage on one thread: photographs, generated scenes, scaling."""
-    if service + startup + (rings is not None) > 1:
+    if service + startup + bombs + (rings is not None) > 1:
         exit_usage(
-            stderr_console(), "--service, --startup and --rings time different things: give one"
+            stderr_console(),
+            "--service, --startup, --bombs and --rings time different things: give one",
         )
+    if bombs:
+        from service.bench.bombs import run_bomb_bench
+
+        raise typer.Exit(run_bomb_bench(5 if quick else repeats or 50, as_json))
     ring_counts = None if rings is None else _ring_counts(rings)
     if dlo is not None and not startup:
         exit_usage(stderr_console(), "--dlo applies only with --startup")

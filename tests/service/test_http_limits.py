@@ -8,7 +8,6 @@ import contextlib
 import json
 import logging
 import os
-import re
 import socket
 import subprocess
 import sys
@@ -20,6 +19,7 @@ import httpx
 import numpy as np
 import pytest
 
+from service.bench.bombs import peak_rss_mb
 from service.bench.rings import rings_image
 from service.http import Settings
 from tests.helpers import blank_png, free_port, wait_until
@@ -42,12 +42,6 @@ MEMORY_ALLOWANCE_MB = 64.0
 @pytest.fixture(scope="module")
 def bomb() -> bytes:
     return blank_png(BOMB_SIDE, BOMB_SIDE)
-
-
-def peak_rss_mb(pid: int) -> float:
-    """The peak resident memory (VmHWM) of process ``pid``, in MiB."""
-    status = Path(f"/proc/{pid}/status").read_text()
-    return int(re.search(r"VmHWM:\s+(\d+) kB", status).group(1)) / 1024.0
 
 
 @contextlib.contextmanager
