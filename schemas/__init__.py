@@ -4,6 +4,7 @@ Everything that crosses a process boundary (JSON files, HTTP bodies, zenoh sampl
 is one of these models, so producers and consumers validate the same way.
 """
 
+from schemas.bus import FrameIdentity, ResultAttachment
 from schemas.detection import Chain, Crossing, Detection, StageTimings
 from schemas.grasp import (
     CameraModel,
@@ -30,6 +31,7 @@ __all__ = [
     "Detection",
     "EndPoint",
     "FractionPoint",
+    "FrameIdentity",
     "GapCurve",
     "GraspSelector",
     "GraspTarget",
@@ -38,6 +40,7 @@ __all__ = [
     "PickStep",
     "PixelPoint",
     "PlaneSurface",
+    "ResultAttachment",
     "SegmentPoint",
     "SegmentationMethod",
     "StageTimings",

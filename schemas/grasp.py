@@ -339,7 +339,7 @@ class Motion(BaseModel):
 class GraspPlan(BaseModel):
     """A pick planned without a robot: the target, the motions, and the offline safety check.
 
-    ``within_workspace`` and ``refusal`` tell whether :meth:`adapters.ur3.UR3Picker.pick`
+    ``within_workspace`` and ``refusal`` tell whether :meth:`adapters.ur3.driver.UR3Picker.pick`
     would refuse the motions because of the configured workspace (reach, table clearance,
     keep-out cylinder). The checks that need the robot (``isPoseWithinSafetyLimits``,
     protective and emergency stops, the path from the current tool position) are not run.

@@ -1,5 +1,6 @@
-"""Helpers shared by the test modules: free loopback ports, waiting on a condition, and
-PNGs made without an image (:func:`blank_png`, decompression bombs among them).
+"""Helpers shared by the test modules: free loopback ports, waiting on a condition, a
+``dlo serve`` process, and PNGs made without an image (:func:`blank_png`, decompression
+bombs among them).
 
 Import as ``from tests.helpers import free_port, wait_until`` (the repository root is on
 ``sys.path`` through ``tests/conftest.py``).
@@ -7,18 +8,36 @@ Import as ``from tests.helpers import free_port, wait_until`` (the repository ro
 
 from __future__ import annotations
 
+import contextlib
 import socket
+import subprocess
+import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from pathlib import Path
 
 from service.bench.bombs import blank_png
 
-__all__ = ["blank_png", "free_port", "free_udp_port", "wait_until"]
+__all__ = [
+    "DLO",
+    "READY_TIMEOUT_S",
+    "accepts_connections",
+    "blank_png",
+    "dlo_serve",
+    "free_port",
+    "free_udp_port",
+    "wait_until",
+]
 
 DEFAULT_TIMEOUT_S = 15.0
 """Generous for a loaded 2-core machine; a wait ends as soon as its condition holds."""
 
 POLL_S = 0.01
+
+DLO = [sys.executable, "-c", "from service.cli import main; main()"]
+"""The ``dlo`` command of this checkout, for child processes."""
+READY_TIMEOUT_S = 120.0
+"""A first start on a machine compiles the numba kernels before a service is ready."""
 
 
 def free_port(host: str = "127.0.0.1", kind: int = socket.SOCK_STREAM) -> int:
@@ -31,6 +50,13 @@ def free_port(host: str = "127.0.0.1", kind: int = socket.SOCK_STREAM) -> int:
 def free_udp_port(host: str = "127.0.0.1") -> int:
     """A UDP port on ``host`` that nothing was bound to a moment ago."""
     return free_port(host, socket.SOCK_DGRAM)
+
+
+def accepts_connections(port: int, host: str = "127.0.0.1") -> bool:
+    """True when a TCP connection to ``host:port`` is accepted (something listens)."""
+    with contextlib.suppress(OSError), socket.create_connection((host, port), 1):
+        return True
+    return False
 
 
 def wait_until(
@@ -53,3 +79,38 @@ def wait_until(
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
         time.sleep(POLL_S)
+
+
+@contextlib.contextmanager
+def dlo_serve(
+    arguments: list[str], log: Path, environment: dict[str, str] | None = None
+) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
+    """``dlo serve --port <free> ARGUMENTS``, its output in ``log``, until ``/readyz`` says
+    200; yields the process and its base URL, and terminates it on the way out."""
+    import httpx
+
+    port = free_port()
+    with log.open("wb") as output:
+        process = subprocess.Popen(
+            [*DLO, "serve", "--port", str(port), *arguments],
+            stdout=output,
+            stderr=subprocess.STDOUT,
+            env=environment,
+        )
+    base = f"http://127.0.0.1:{port}"
+
+    def ready_or_exited() -> bool:
+        if process.poll() is not None:
+            return True
+        with contextlib.suppress(httpx.TransportError):
+            return httpx.get(f"{base}/readyz").status_code == 200
+        return False
+
+    try:
+        wait_until(ready_or_exited, "dlo serve to become ready", READY_TIMEOUT_S)
+        assert process.poll() is None, log.read_text()
+        yield process, base
+    finally:
+        if process.poll() is None:
+            process.terminate()
+        process.wait(timeout=30)

@@ -52,8 +52,21 @@ def trial_command(
         str, typer.Option(help="Flavour of the fake: ardupilot (GUIDED) or px4 (OFFBOARD).")
     ] = "ardupilot",
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    realtime: Annotated[
+        bool,
+        typer.Option(
+            "--realtime",
+            help="Run the fake and the adapter on the wall clock (about 4 s a trial) instead "
+            "of in lockstep on the fake's simulated clock (faster, the same table every run).",
+        ),
+    ] = False,
 ) -> None:
-    """Fly grasp approaches to detected cable points with the fake hexarotor; print the errors."""
+    """Fly grasp approaches to detected cable points with the fake hexarotor; print the errors.
+
+    By default the fake vehicle runs on a simulated clock, in lockstep with the adapter
+    over the real MAVLink link: faster than real time, and the same seed gives the same
+    table on every run.
+    """
     console = stderr_console()
     if autopilot not in ("ardupilot", "px4"):
         exit_usage(console, f"--autopilot must be ardupilot or px4, not {autopilot!r}")
@@ -75,7 +88,12 @@ def trial_command(
     disturbance = Disturbance()
     try:
         outcome = run_trials(
-            targets, seed=seed, autopilot=autopilot, disturbance=disturbance, on_trial=progress
+            targets,
+            seed=seed,
+            autopilot=autopilot,
+            disturbance=disturbance,
+            on_trial=progress,
+            realtime=realtime,
         )
     except (MavlinkError, ValueError) as error:
         print_error(console, f"the fake vehicle link failed: {error}")
@@ -86,6 +104,8 @@ def trial_command(
             **summary,
             "seed": seed,
             "autopilot": autopilot,
+            "clock": "wall" if realtime else "lockstep",
+            "simulated_s": round(outcome.simulated_s, 3),
             "errors_mm": [round(e * 1000, 3) for e in outcome.errors_m],
             "measured_errors_mm": [round(e * 1000, 3) for e in outcome.measured_errors_m],
             "failures": outcome.failures,
@@ -94,14 +114,76 @@ def trial_command(
         typer.echo(json.dumps(result, indent=2))
     elif summary["closed"]:
         typer.echo(format_trial_table(summary))
+    clock = "" if realtime else f" ({outcome.simulated_s:.0f} s simulated in lockstep)"
     console.print(
         f"{summary['closed']} of {summary['trials']} approaches closed the gripper "
-        f"in {time.monotonic() - started:.0f} s",
+        f"in {time.monotonic() - started:.1f} s{clock}",
         highlight=False,
     )
     if outcome.failures:
         print_error(console, f"{len(outcome.failures)} approaches failed: {outcome.failures}")
         raise typer.Exit(EXIT_FAILED)
+
+
+@hexa_app.command("fake-vehicle")
+def fake_vehicle_command(
+    url: Annotated[
+        str,
+        typer.Option(
+            metavar="URL",
+            help="pymavlink URL to send from, e.g. udpout:127.0.0.1:14540 (a ground station "
+            "or MAVSDK listening with udpin there).",
+        ),
+    ] = "udpout:127.0.0.1:14550",
+    autopilot: Annotated[
+        str, typer.Option(help="Behave as ardupilot (ArduCopter) or px4 toward the ground station.")
+    ] = "ardupilot",
+    seed: Annotated[int, typer.Option(help="Seed of the gusts and the sensor noise.")] = 0,
+    home: Annotated[
+        tuple[float, float, float] | None,
+        typer.Option(
+            metavar="LAT LON ALT",
+            help="Home: latitude, longitude (deg) and altitude above sea level (m) of the "
+            "local origin. [default: PX4 SITL's, 47.397742 8.545594 488]",
+            show_default=False,
+        ),
+    ] = None,
+    lockstep: Annotated[
+        bool,
+        typer.Option(
+            "--lockstep",
+            help="Step the simulation in lockstep with the ground station (it must answer "
+            "TIMESYNC requests only when it has caught up, as dlo's LockstepClock does) "
+            "instead of following the wall clock.",
+        ),
+    ] = False,
+) -> None:
+    """Run the SITL-free fake hexarotor until Ctrl-C, for a ground station or MAVSDK.
+
+    It runs on the wall clock by default, as SITL without lockstep: a ground station, MAVSDK
+    or QGroundControl keeps real time, and a simulated clock could only run as fast as it
+    allows.
+    """
+    from adapters.hexarotor.fake_dynamics import Disturbance
+    from adapters.hexarotor.fake_vehicle import DEFAULT_HOME, FakeVehicle, run_until_interrupted
+
+    console = stderr_console()
+    if autopilot not in ("ardupilot", "px4"):
+        exit_usage(console, f"--autopilot must be ardupilot or px4, not {autopilot!r}")
+    try:
+        vehicle = FakeVehicle(
+            url,
+            autopilot=autopilot,
+            seed=seed,
+            disturbance=Disturbance(),
+            home=home or DEFAULT_HOME,
+            lockstep=lockstep,
+        ).start()
+    except (OSError, ValueError) as error:  # a URL pymavlink cannot open
+        exit_usage(console, f"--url {url}: {error}")
+    clock = "in lockstep" if lockstep else "in real time"
+    console.print(f"fake {autopilot} hexarotor on {url}, {clock}; Ctrl-C stops it", highlight=False)
+    run_until_interrupted(vehicle)
 
 
 # -- feasibility ----------------------------------------------------------------------------

@@ -43,6 +43,7 @@ from adapters.hexarotor.approach import (
     plan_approach,
     require_positive,
 )
+from adapters.hexarotor.clock import Clock, PeriodicTask, WallClock
 from adapters.hexarotor.protocol import (
     ARDUPILOT_MODES,
     POSITION_YAW_TYPE_MASK,
@@ -92,8 +93,12 @@ class LinkConfig:
     command_timeout_s: float = 1.5
     """Wait for each ``COMMAND_ACK``; the command is resent up to ``command_attempts`` times."""
     command_attempts: int = 3
-    offboard_warmup_s: float = 1.2
-    """PX4: how long setpoints stream before OFFBOARD is requested (PX4 wants about 1 s)."""
+    offboard_warmup_s: float = 0.25
+    """PX4: how long setpoints stream before OFFBOARD is requested. PX4 accepts OFFBOARD
+    once a stream (> 2 Hz) is present (PX4 user guide, "Offboard Mode"); a few setpoints
+    at the stream's 20 Hz make it so."""
+    takeoff_timeout_s: float = 20.0
+    """How long a take-off or a landing may take before it counts as failed."""
     mode_timeout_s: float = 5.0
     """After an accepted mode or arming command, wait this long to see it in the heartbeat."""
 
@@ -109,6 +114,7 @@ class LinkConfig:
                 "link_loss_s",
                 "command_timeout_s",
                 "offboard_warmup_s",
+                "takeoff_timeout_s",
                 "mode_timeout_s",
             ),
         )
@@ -126,7 +132,7 @@ class VehicleState:
     pitch: float
     yaw: float
     received_at: float
-    """``time.monotonic()`` of the newer of the two messages."""
+    """Time, on the adapter's clock, of the newer of the two messages."""
 
 
 @dataclass(frozen=True)
@@ -163,6 +169,7 @@ class _Inbox:
     position_at: float = -math.inf
     attitude: tuple[float, float, float] | None = None
     attitude_at: float = -math.inf
+    landed_state: int | None = None
     acks: list[tuple[int, int]] = field(default_factory=list)
 
 
@@ -183,6 +190,9 @@ class MavlinkVehicle:
         Serial speed (ignored for network URLs).
     source_system, source_component
         Our MAVLink ids (a ground station by default).
+    clock
+        Where time comes from (:mod:`adapters.hexarotor.clock`): the wall clock by default;
+        a :class:`~adapters.hexarotor.clock.LockstepClock` follows a simulator's time.
 
     Examples
     --------
@@ -201,6 +211,7 @@ class MavlinkVehicle:
         baud: int = 57600,
         source_system: int = 255,
         source_component: int = mavlink.MAV_COMP_ID_MISSIONPLANNER,
+        clock: Clock | None = None,
     ) -> None:
         self.url = url
         self.fence = fence or Geofence()
@@ -214,6 +225,9 @@ class MavlinkVehicle:
         self._setpoint: _Setpoint | None = None
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
+        self.clock: Clock = clock or WallClock()
+        self._stream_last: float | None = None
+        self._started_at = 0.0
         self.stream_cycles = 0
         """Cycles of the setpoint stream so far (each sends one setpoint when one streams
         and the link is up): what a test waits on to know the stream had its chance."""
@@ -237,14 +251,17 @@ class MavlinkVehicle:
             source_component=self._source[1],
         )
         self._stop.clear()
-        for target, name in (
-            (self._receive_loop, "mavlink-rx"),
-            (self._heartbeat_loop, "mavlink-heartbeat"),
-            (self._stream_loop, "mavlink-setpoints"),
-        ):
-            thread = threading.Thread(target=target, name=name, daemon=True)
-            thread.start()
-            self._threads.append(thread)
+        self._started_at = self.clock.now()
+        self._stream_last = None
+        period = 1.0 / self.link.setpoint_rate_hz
+        tasks = (
+            PeriodicTask("mavlink-heartbeat", 1.0, self._heartbeat_step, immediately=True),
+            PeriodicTask("mavlink-setpoints", period, self._stream_step),
+        )
+        self._threads.extend(self.clock.start(tasks, self._stop))
+        receiver = threading.Thread(target=self._receive_loop, name="mavlink-rx", daemon=True)
+        receiver.start()
+        self._threads.append(receiver)
         if not self._wait_for(
             lambda: self._inbox.autopilot is not None, self.link.heartbeat_timeout_s
         ):
@@ -257,6 +274,7 @@ class MavlinkVehicle:
     def close(self) -> None:
         """Stop the threads and close the link (idempotent). The vehicle keeps holding."""
         self._stop.set()
+        self.clock.close()
         for thread in self._threads:
             thread.join(timeout=5.0)
         self._threads.clear()
@@ -284,7 +302,7 @@ class MavlinkVehicle:
 
     def heartbeat_age(self) -> float:
         """Seconds since the vehicle's last heartbeat (``inf`` before the first)."""
-        return time.monotonic() - self._inbox.heartbeat_at
+        return self.clock.now() - self._inbox.heartbeat_at
 
     def link_ok(self) -> bool:
         """The vehicle's heartbeat is recent enough to command it."""
@@ -356,13 +374,13 @@ class MavlinkVehicle:
                     self._inbox.system, self._inbox.component, command, c, *padded
                 )
             )
-            deadline = time.monotonic() + self.link.command_timeout_s
+            deadline = self.clock.now() + self.link.command_timeout_s
             while True:
                 result = self._pop_ack(command, deadline)
                 if result is None:
                     break  # timed out: resend
                 if result == mavlink.MAV_RESULT_IN_PROGRESS:
-                    deadline = time.monotonic() + self.link.command_timeout_s
+                    deadline = self.clock.now() + self.link.command_timeout_s
                     continue
                 if result != mavlink.MAV_RESULT_ACCEPTED:
                     label = (
@@ -401,6 +419,81 @@ class MavlinkVehicle:
         self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
         if not self._wait_for(lambda: self.armed, self.link.mode_timeout_s):
             raise VehicleNotReadyError("arming was accepted but the heartbeat never showed it")
+
+    @property
+    def landed(self) -> bool | None:
+        """On the ground, as the vehicle's EXTENDED_SYS_STATE says (None before the first)."""
+        state = self._inbox.landed_state
+        if state is None or state == mavlink.MAV_LANDED_STATE_UNDEFINED:
+            return None
+        return state == mavlink.MAV_LANDED_STATE_ON_GROUND
+
+    def take_off(self, height_m: float, speed_m_s: float = 0.5) -> None:
+        """Climb to ``height_m`` above the local origin and hold there (armed, guided mode).
+
+        ArduCopter does not leave the ground for position targets in GUIDED: it takes off
+        with ``MAV_CMD_NAV_TAKEOFF`` (param7, metres above home; ArduPilot, "Copter Commands
+        in Guided Mode"), after which the climb point is its target. PX4 in OFFBOARD flies
+        the setpoints it is sent, from the ground too, so the stream climbs (a PX4
+        ``NAV_TAKEOFF`` would leave OFFBOARD for AUTO.TAKEOFF). Returns once the measured
+        height is within 10 cm of ``height_m``, with the setpoint there.
+
+        Raises
+        ------
+        UnsafeTargetError
+            The climb point is outside the geofence; nothing was sent.
+        VehicleNotReadyError
+            Not armed in the guided mode, or the climb took longer than
+            ``link.takeoff_timeout_s``.
+        """
+        if not (math.isfinite(height_m) and height_m > 0):
+            raise UnsafeTargetError(f"take-off height must be finite and > 0, got {height_m}")
+        here = self._measured_position()
+        goal = np.array([here[0], here[1], -height_m])
+        self.fence.check(goal, "take-off point")
+        self._require_link()
+        if not (self.armed and self.in_guided_mode):
+            raise VehicleNotReadyError("the vehicle must be armed and in its guided mode")
+        yaw = self.wait_for_state().yaw
+        if self.autopilot == "ardupilot":
+            self.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, height_m)
+        else:
+            self.goto(goal, yaw, speed_m_s)
+
+        def reached() -> bool:
+            position = self._inbox.position
+            return position is not None and abs(position[2] - goal[2]) <= 0.1
+
+        if not self._wait_for(reached, self.link.takeoff_timeout_s):
+            raise VehicleNotReadyError(f"the take-off did not reach {height_m} m in time")
+        with self._condition:
+            if self.autopilot == "ardupilot":  # it holds the climb point: stream that
+                self._setpoint = _Setpoint(goal.copy(), goal.copy(), yaw, speed_m_s)
+        if not self._wait_for(self._setpoint_reached, self.link.takeoff_timeout_s):
+            raise VehicleNotReadyError("the take-off setpoint was not reached in time")
+
+    def land(self) -> None:
+        """Land where the vehicle is (``MAV_CMD_NAV_LAND``) and wait until it is on the ground.
+
+        Both autopilots switch to their landing mode (LAND; AUTO.LAND), descend and disarm
+        on their own after touching down; the setpoint stream stops first.
+
+        Raises
+        ------
+        VehicleNotReadyError
+            Not on the ground within ``link.takeoff_timeout_s``.
+        """
+        with self._condition:
+            self._setpoint = None
+        self.command(mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, math.nan)
+
+        def down() -> bool:
+            if self.landed is not None:
+                return bool(self.landed)
+            return self._inbox.position is not None and self._inbox.position[2] > -0.05
+
+        if not self._wait_for(down, self.link.takeoff_timeout_s):
+            raise VehicleNotReadyError("the vehicle did not land in time")
 
     def disarm(self) -> None:
         """Disarm the motors."""
@@ -496,13 +589,13 @@ class MavlinkVehicle:
         if not (self.armed and self.in_guided_mode):
             raise VehicleNotReadyError("the vehicle must be armed and in its guided mode")
         self.wait_for_state()
-        started = time.monotonic()
+        started = self.clock.now()
         deadline = started + config.timeout_s
 
         def report(ok: bool, error: float | None, reason: str) -> ApproachReport:
             if not ok:
                 self.hold()
-            return ApproachReport(ok, error, reason, time.monotonic() - started)
+            return ApproachReport(ok, error, reason, self.clock.now() - started)
 
         def phase(name: str) -> None:
             if on_phase is not None:
@@ -552,7 +645,7 @@ class MavlinkVehicle:
             return "link lost"
         if not (self.armed and self.in_guided_mode):
             return "left guided mode"  # a pilot or a failsafe took over: do not fight it
-        if time.monotonic() > deadline:
+        if self.clock.now() > deadline:
             return "timeout"
         return None
 
@@ -575,16 +668,25 @@ class MavlinkVehicle:
             try:
                 message = self._connection.recv_match(blocking=True, timeout=0.1)
             except (OSError, ValueError):  # closed underneath us
-                if self._stop.is_set():
+                if self._stop.wait(0.05):
                     return
-                time.sleep(0.05)
                 continue
-            if message is not None:
-                self._dispatch(message)
+            if message is None:
+                continue
+            if message.get_type() == "TIMESYNC" and message.tc1 == 0:
+                request = message.ts1
+                self.clock.vehicle_step(request / 1e9, lambda ts1=request: self._answer_sync(ts1))
+            else:
+                self.clock.deliver(lambda message=message: self._dispatch(message))
+
+    def _answer_sync(self, ts1: int) -> None:
+        """Answer a TIMESYNC request: our time in ``tc1`` (never 0), theirs back in ``ts1``."""
+        ours = time.monotonic_ns() or 1
+        self._send_from_thread(lambda conn: conn.mav.timesync_send(ours, ts1))
 
     def _dispatch(self, message: object) -> None:
         kind = message.get_type()
-        now = time.monotonic()
+        now = self.clock.now()
         with self._condition:
             inbox = self._inbox
             if kind == "HEARTBEAT":
@@ -610,73 +712,69 @@ class MavlinkVehicle:
             elif kind == "ATTITUDE":
                 inbox.attitude = (message.roll, message.pitch, message.yaw)
                 inbox.attitude_at = now
+            elif kind == "EXTENDED_SYS_STATE":
+                inbox.landed_state = message.landed_state
             elif kind == "COMMAND_ACK":
                 inbox.acks.append((message.command, message.result))
             else:
                 return
             self._condition.notify_all()
 
-    def _heartbeat_loop(self) -> None:
-        while not self._stop.is_set():
-            self._send_from_thread(
-                lambda conn: conn.mav.heartbeat_send(
-                    mavlink.MAV_TYPE_GCS,
-                    mavlink.MAV_AUTOPILOT_INVALID,
-                    0,
-                    0,
-                    mavlink.MAV_STATE_ACTIVE,
-                )
+    def _heartbeat_step(self, now: float) -> None:
+        self._send_from_thread(
+            lambda conn: conn.mav.heartbeat_send(
+                mavlink.MAV_TYPE_GCS,
+                mavlink.MAV_AUTOPILOT_INVALID,
+                0,
+                0,
+                mavlink.MAV_STATE_ACTIVE,
             )
-            self._stop.wait(1.0)
+        )
 
-    def _stream_loop(self) -> None:
+    def _stream_step(self, now: float) -> None:
+        """One cycle of the setpoint stream: move the commanded point and send it."""
+        self.stream_cycles += 1
         period = 1.0 / self.link.setpoint_rate_hz
-        started = time.monotonic()
-        last = started
-        while not self._stop.wait(period):
-            self.stream_cycles += 1
-            now = time.monotonic()
-            # A stalled thread must not make the setpoint jump: cap the step at 3 periods.
-            elapsed = min(now - last, 3 * period)
-            last = now
-            if not self.link_ok():
-                continue  # no command without a recent heartbeat; the vehicle holds
-            with self._condition:
-                setpoint = self._setpoint
-                if setpoint is None:
-                    continue
-                offset = setpoint.goal - setpoint.commanded
-                distance = float(np.linalg.norm(offset))
-                step = setpoint.speed * elapsed
-                if distance <= step:
-                    setpoint.commanded = setpoint.goal.copy()
-                else:
-                    setpoint.commanded = setpoint.commanded + offset * (step / distance)
-                x, y, z = setpoint.commanded
-                yaw = setpoint.yaw
-            boot_ms = int((now - started) * 1000) & 0xFFFFFFFF
-            self._send_from_thread(
-                lambda conn, x=x, y=y, z=z, yaw=yaw, t=boot_ms: (
-                    conn.mav.set_position_target_local_ned_send(
-                        t,
-                        self._inbox.system,
-                        self._inbox.component,
-                        mavlink.MAV_FRAME_LOCAL_NED,
-                        POSITION_YAW_TYPE_MASK,
-                        x,
-                        y,
-                        z,
-                        0.0,
-                        0.0,
-                        0.0,
-                        0.0,
-                        0.0,
-                        0.0,
-                        yaw,
-                        0.0,
-                    )
-                )
+        last = self._started_at if self._stream_last is None else self._stream_last
+        # A stalled thread must not make the setpoint jump: cap the step at 3 periods.
+        elapsed = min(now - last, 3 * period)
+        self._stream_last = now
+        if not self.link_ok():
+            return  # no command without a recent heartbeat; the vehicle holds
+        with self._condition:
+            setpoint = self._setpoint
+            if setpoint is None:
+                return
+            offset = setpoint.goal - setpoint.commanded
+            distance = float(np.linalg.norm(offset))
+            step = setpoint.speed * elapsed
+            if distance <= step:
+                setpoint.commanded = setpoint.goal.copy()
+            else:
+                setpoint.commanded = setpoint.commanded + offset * (step / distance)
+            x, y, z = setpoint.commanded
+            yaw = setpoint.yaw
+        boot_ms = int((now - self._started_at) * 1000) & 0xFFFFFFFF
+        self._send_from_thread(
+            lambda conn: conn.mav.set_position_target_local_ned_send(
+                boot_ms,
+                self._inbox.system,
+                self._inbox.component,
+                mavlink.MAV_FRAME_LOCAL_NED,
+                POSITION_YAW_TYPE_MASK,
+                x,
+                y,
+                z,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                yaw,
+                0.0,
             )
+        )
 
     # -- helpers ---------------------------------------------------------------------
 
@@ -705,29 +803,25 @@ class MavlinkVehicle:
         return self.wait_for_state().position_ned
 
     def _wait_for(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
-        deadline = time.monotonic() + timeout_s
-        with self._condition:
-            while not predicate():
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return False
-                self._condition.wait(min(remaining, 0.1))
-            return True
+        """Wait on the clock until ``predicate()`` (evaluated under the lock) holds."""
+        return self.clock.wait_for(self._condition, predicate, timeout_s)
 
     def _pop_ack(self, command: int, deadline: float) -> int | None:
-        with self._condition:
-            while True:
-                for index, (acked, result) in enumerate(self._inbox.acks):
-                    if acked == command:
-                        del self._inbox.acks[index]
-                        return result
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return None
-                self._condition.wait(min(remaining, 0.1))
+        results: list[int] = []
+
+        def arrived() -> bool:
+            for index, (acked, result) in enumerate(self._inbox.acks):
+                if acked == command:
+                    del self._inbox.acks[index]
+                    results.append(result)
+                    return True
+            return False
+
+        if self._wait_for(arrived, deadline - self.clock.now()):
+            return results[0]
+        return None
 
     def _sleep_checking_link(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while (remaining := end - time.monotonic()) > 0:
-            self._require_link()
-            self._stop.wait(min(remaining, 0.1))
+        """Let ``seconds`` pass on the clock; raise :class:`LinkLostError` if the link drops."""
+        self._wait_for(lambda: self._stop.is_set() or not self.link_ok(), seconds)
+        self._require_link()

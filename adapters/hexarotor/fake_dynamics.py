@@ -62,7 +62,6 @@ class Dynamics:
     max_accel_m_s2: float = 3.0
     yaw_rate_rad_s: float = 1.5
     telemetry_hz: float = 40.0
-    setpoint_timeout_s: float = 0.5
 
     def __post_init__(self) -> None:
         for name, value in vars(self).items():
@@ -144,3 +143,40 @@ def yaw_matrix(yaw: float) -> np.ndarray:
     """Rotation about the vertical (NED ``z``) by ``yaw``."""
     c, s = math.cos(yaw), math.sin(yaw)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+@dataclass
+class Battery:
+    """A simple LiPo discharge model: charge drawn at a current set by what the vehicle does.
+
+    The cell voltage falls linearly from 4.2 V (full) to 3.5 V (empty) and sags under load
+    by ``internal_resistance_ohm`` per cell. Currents: ``idle_a`` disarmed, ``armed_a``
+    armed on the ground, ``hover_a`` flying (a 3 kg hexarotor hovers at a few hundred W).
+    """
+
+    capacity_mah: float = 5000.0
+    cells: int = 4
+    idle_a: float = 0.4
+    armed_a: float = 3.0
+    hover_a: float = 18.0
+    internal_resistance_ohm: float = 0.004
+    consumed_mah: float = 0.0
+    current_a: float = 0.4
+
+    def drain(self, current_a: float, dt: float) -> None:
+        """Draw ``current_a`` for ``dt`` seconds."""
+        self.current_a = current_a
+        self.consumed_mah = min(self.capacity_mah, self.consumed_mah + current_a * dt / 3.6)
+
+    @property
+    def remaining(self) -> float:
+        """Charge left, 0..1."""
+        return max(0.0, 1.0 - self.consumed_mah / self.capacity_mah)
+
+    @property
+    def cell_voltage_v(self) -> float:
+        return 3.5 + 0.7 * self.remaining - self.internal_resistance_ohm * self.current_a
+
+    @property
+    def voltage_v(self) -> float:
+        return self.cells * self.cell_voltage_v

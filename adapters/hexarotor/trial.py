@@ -20,6 +20,7 @@ import numpy as np
 from adapters.grasp.errors import GraspPlanningError
 from adapters.grasp.target import plan_grasp
 from adapters.hexarotor.approach import ApproachConfig, ned_from_enu, yaw_ned_from_enu
+from adapters.hexarotor.clock import LockstepClock, WallClock
 from adapters.hexarotor.driver import MavlinkVehicle
 from adapters.hexarotor.fake_dynamics import Disturbance
 from adapters.hexarotor.fake_vehicle import Autopilot, FakeVehicle
@@ -50,6 +51,9 @@ TRIAL_APPROACH = ApproachConfig(approach_speed_m_s=0.4)
 """The adapter's defaults (0.5 m standoff, 10 mm tolerance, 0.3 s dwell, gripper 0.40 m ahead
 of and 0.20 m below the vehicle origin) with a brisker final move (0.4 m/s, not 0.25)."""
 
+TAKEOFF_HEIGHT_M = 1.0
+"""The vehicle takes off from the ground to this height before the first approach."""
+
 TRIAL_SCENE_CABLES = 3
 TRIAL_FRACTIONS = (0.15, 0.85)
 """Grasp points are drawn uniformly between these fractions of a chain's length."""
@@ -75,6 +79,8 @@ class TrialOutcome:
     measured_errors_m: list[float] = field(default_factory=list)
     """What the adapter measured (noisy telemetry) when it decided to close."""
     failures: list[str] = field(default_factory=list)
+    simulated_s: float = 0.0
+    """The vehicle's time the trials took (simulated in lockstep), s."""
 
     def summary(self) -> dict[str, float | int]:
         """Number of tests, max, mean and sample standard deviation of the error, mm."""
@@ -145,11 +151,19 @@ def run_trials(
     disturbance: Disturbance | None = None,
     config: ApproachConfig | None = None,
     on_trial: Callable[[int, TrialTarget, float | None, str], None] | None = None,
+    realtime: bool = False,
 ) -> TrialOutcome:
     """Fly one approach per target against a fresh fake vehicle; collect the errors.
 
     The fake runs in this process on its own thread, sending to a free loopback UDP
-    port that the adapter listens on. Between approaches the gripper opens again.
+    port that the adapter listens on. The vehicle takes off from the ground, flies the
+    approaches (the gripper opens again between them) and lands.
+
+    By default the fake and the adapter run in lockstep on the fake's simulated clock
+    (:class:`~adapters.hexarotor.clock.LockstepClock`): as fast as the two can exchange
+    their messages, and the same outcome for the same seed on every run. ``realtime``
+    runs both on the wall clock instead, as against a vehicle or SITL in real time (the
+    outcome then varies a little from run to run with the machine's timing).
     """
     config = config or TRIAL_APPROACH
     port = free_udp_port()
@@ -160,12 +174,15 @@ def run_trials(
         seed=seed,
         disturbance=disturbance,
         end_effector_frd=config.end_effector_frd,
+        lockstep=not realtime,
     )
-    vehicle = MavlinkVehicle(f"udpin:127.0.0.1:{port}")
+    clock = WallClock() if realtime else LockstepClock()
+    vehicle = MavlinkVehicle(f"udpin:127.0.0.1:{port}", clock=clock)
     with fake, vehicle:
         vehicle.wait_for_state()
         vehicle.set_guided_mode()
         vehicle.arm()
+        vehicle.take_off(TAKEOFF_HEIGHT_M)
         for index, target in enumerate(targets):
             report = vehicle.approach(target.target_ned, target.heading_ned, config)
             if not report.ok:
@@ -182,7 +199,8 @@ def run_trials(
             if on_trial is not None:
                 on_trial(index, target, error, "closed")
             vehicle.set_gripper(False)
-        vehicle.hold()
+        vehicle.land()
+        outcome.simulated_s = fake.sim_time_s
     return outcome
 
 

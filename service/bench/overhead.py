@@ -234,16 +234,6 @@ def _dlo_serve() -> Iterator[tuple[int, str]]:
     http_port = _free_port()
     zenoh_endpoint = f"tcp/127.0.0.1:{_free_port()}"
     with tempfile.TemporaryDirectory(prefix="dlo-bench-") as folder:
-        config = Path(folder) / "zenoh.json5"
-        config.write_text(
-            json.dumps(
-                {
-                    "mode": "peer",
-                    "listen": {"endpoints": [zenoh_endpoint]},
-                    "scouting": {"multicast": {"enabled": False}},
-                }
-            )
-        )
         log = Path(folder) / "server.log"
         environment = {
             **os.environ,  # dlo bench has set the numeric libraries to one thread
@@ -252,9 +242,9 @@ def _dlo_serve() -> Iterator[tuple[int, str]]:
             "DLO_QUEUE_SIZE": str(SERVER_QUEUE),
             "DLO_LOG_LEVEL": "warning",
             "DLO_ZENOH": "true",
-            "DLO_ZENOH_CONFIG": str(config),
-            "DLO_ZENOH_MULTICAST": "false",
+            "DLO_ZENOH_LISTEN": zenoh_endpoint,  # the embedded peer: no scouting
         }
+        environment.pop("DLO_ZENOH_CONFIG", None)
         with log.open("wb") as output:
             process = subprocess.Popen(
                 [*DLO, "serve", "--host", "127.0.0.1", "--port", str(http_port)],

@@ -1,7 +1,7 @@
 """Where things travel on zenoh (the key expressions of the detection service) and
 :func:`make_config`, the session configuration the service, the router and clients share.
 
-Imports zenoh only: ``dlo router`` needs no detector.
+Imports zenoh and the settings only: ``dlo router`` needs no detector.
 """
 
 from __future__ import annotations
@@ -11,8 +11,19 @@ from pathlib import Path
 
 import zenoh
 
-IMAGE_KEYS = "dlo/*/image"
-"""Where cameras publish their frames; ``*`` is the camera's name."""
+from service.runtime.settings import DEFAULT_ZENOH_LISTEN, IMAGE_KEYS
+
+__all__ = [
+    "DEFAULT_ZENOH_LISTEN",
+    "IMAGE_KEYS",
+    "JSON",
+    "QUERY_KEY",
+    "chains_key",
+    "describe_config",
+    "errors_key",
+    "make_config",
+    "service_config",
+]
 QUERY_KEY = "dlo/detect"
 """The queryable: ``get`` with the image as payload."""
 JSON = "application/json"
@@ -48,3 +59,47 @@ def make_config(
     if connect is not None:
         config.insert_json5("connect/endpoints", json.dumps(connect))
     return config
+
+
+def service_config(
+    path: str | Path | None = None,
+    *,
+    listen: list[str] | None = None,
+    multicast: bool | None = None,
+) -> zenoh.Config:
+    """The session of ``dlo serve``: the JSON5 file at ``path`` with ``listen`` and
+    ``multicast`` written over it when given; without a file, a peer that listens on
+    ``listen`` (default :data:`DEFAULT_ZENOH_LISTEN`, loopback only) and scouts nothing
+    unless ``multicast`` says so: reaching the network is an explicit choice."""
+    if path is not None:
+        return make_config(path, listen=listen, multicast=multicast)
+    scouting = bool(multicast)
+    config = make_config(
+        mode="peer", listen=listen or [DEFAULT_ZENOH_LISTEN], connect=[], multicast=scouting
+    )
+    config.insert_json5("scouting/gossip/enabled", json.dumps(scouting))
+    return config
+
+
+def describe_config(config: zenoh.Config) -> str:
+    """Where a session of ``config`` listens and connects, in a few words for a log line,
+    e.g. ``zenoh peer listening on tcp/127.0.0.1:7447, multicast scouting off``."""
+
+    def setting(key: str) -> object:
+        return json.loads(config.get_json(key))
+
+    mode = setting("mode") or "peer"
+    listen = setting("listen/endpoints")
+    if isinstance(listen, dict):  # zenoh's own default: one list per mode
+        listen = listen.get(mode, [])
+    connect = setting("connect/endpoints")
+    if isinstance(connect, dict):
+        connect = connect.get(mode, [])
+    where = []
+    if listen:
+        where.append(f"listening on {', '.join(listen)}")
+    if connect:
+        where.append(f"connecting to {', '.join(connect)}")
+    multicast = setting("scouting/multicast/enabled")  # zenoh's default (None): on
+    where.append(f"multicast scouting {'off' if multicast is False else 'on'}")
+    return f"zenoh {mode} " + ", ".join(where)

@@ -1,15 +1,22 @@
 """Detection over zenoh: images in on ``dlo/<camera>/image``, Detections out on ``.../chains``.
 
-:class:`DetectionBus` opens a zenoh session (an embedded peer unless a configuration says
-otherwise) and
+:class:`DetectionBus` opens a zenoh session (see :func:`~service.bus.config.service_config`)
+and
 
-* subscribes to ``dlo/*/image``: the payload is an encoded JPEG or PNG, the optional
-  attachment the detection parameters as JSON (:class:`schemas.DetectParams`). The
-  Detection JSON is published on ``dlo/<camera>/chains``; a sample that cannot be
-  processed (not an image, bad parameters, too large) gives an error record
-  ``{"camera", "error", "detail"}`` on ``dlo/<camera>/errors`` instead;
-* answers queries on ``dlo/detect``: the query's payload is the image, its attachment
-  the parameters; the reply is the Detection JSON, or an error reply holding
+* subscribes to its image keys (``dlo/*/image`` unless told otherwise): the payload is an
+  encoded JPEG or PNG, the optional attachment a JSON object of detection parameters
+  (:class:`schemas.DetectParams`) and the frame's identity (:class:`schemas.FrameIdentity`:
+  ``frame_id``, ``capture_time``). The Detection JSON is published on
+  ``dlo/<camera>/chains``; a sample that cannot be processed (not an image, bad parameters,
+  too large) gives an error record ``{"camera", "error", "detail"}`` on
+  ``dlo/<camera>/errors`` instead. Both carry :class:`schemas.ResultAttachment` (the
+  identity given back, the frame sample's zenoh timestamp, this replica's id);
+* shares the cameras with the other replicas of its pool (:mod:`service.bus.ownership`):
+  it announces itself with a liveliness token under ``dlo/@replicas/`` and detects only the
+  frames of the cameras it owns; the others' frames are dropped before decoding;
+* answers queries on ``dlo/detect``, declared *complete*, so that a ``get`` with zenoh's
+  default target (``BEST_MATCHING``) reaches one replica: the query's payload is the image,
+  its attachment as a frame's; the reply is the Detection JSON, or an error reply holding
   ``{"error", "detail"}``.
 
 Detection runs in one thread per bus. Latest frame wins: per camera only the newest
@@ -23,15 +30,18 @@ import json
 import logging
 import threading
 from collections import Counter, OrderedDict
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import zenoh
 from pydantic import ValidationError
 
-from schemas import DetectParams
+from schemas import DetectParams, FrameIdentity, ResultAttachment
+from schemas.bus import IDENTITY_FIELDS
 from service.batch import describe_json_validation_error
 from service.bus.config import IMAGE_KEYS, JSON, QUERY_KEY, chains_key, errors_key
+from service.bus.ownership import CAMERA_IDLE_S, Ownership, replicas_key
 from service.runtime.errors import RequestError
 from service.runtime.frames import Frame, check_upload
 from service.runtime.jobs import OVER_BUDGET, DetectFunction, default_detect, run_detection
@@ -39,22 +49,62 @@ from service.runtime.metrics import Metrics
 
 logger = logging.getLogger(__name__)
 
+RENDEZVOUS_LEARN_S = 1.0
+"""How long a newcomer watches the pool before announcing itself, with plain rendezvous."""
 
-def params_from_attachment(attachment: zenoh.ZBytes | None) -> DetectParams:
-    """The parameters sent as JSON in a sample's attachment; defaults without one.
+
+def read_attachment(attachment: zenoh.ZBytes | None) -> tuple[FrameIdentity, DetectParams]:
+    """The frame's identity and the detection parameters a sample's attachment holds.
+
+    The attachment is a JSON object: ``frame_id`` and ``capture_time`` are the identity, any
+    other key a parameter; either part may be missing, or the whole attachment (defaults).
 
     Raises
     ------
     RequestError
-        422 when the attachment is not a JSON object of valid parameters.
+        422 ``invalid_attachment`` when it is not a JSON object or the identity is invalid,
+        ``invalid_params`` when a parameter is (the identity is then in ``identity`` of
+        :class:`AttachmentError`, so that the error record can still carry it).
     """
     if attachment is None:
-        return DetectParams()
+        return FrameIdentity(), DetectParams()
     try:
-        return DetectParams.model_validate_json(attachment.to_bytes())
+        fields = json.loads(attachment.to_bytes())
+    except (ValueError, UnicodeDecodeError) as exc:
+        reason = exc.msg if isinstance(exc, json.JSONDecodeError) else "not UTF-8 text"
+        raise AttachmentError(
+            422, "invalid_params", f"attachment: not JSON ({reason}); send a JSON object"
+        ) from None
+    if not isinstance(fields, dict):
+        raise AttachmentError(
+            422, "invalid_params", f"attachment: a JSON {type(fields).__name__}, not an object"
+        )
+    identity_fields = {name: fields.pop(name) for name in IDENTITY_FIELDS if name in fields}
+    try:
+        identity = FrameIdentity.model_validate(identity_fields)
     except ValidationError as exc:
         problems = describe_json_validation_error(exc, "attachment")
-        raise RequestError(422, "invalid_params", f"parameters: {problems}") from None
+        raise AttachmentError(422, "invalid_attachment", f"frame identity: {problems}") from None
+    try:
+        params = DetectParams.model_validate(fields)
+    except ValidationError as exc:
+        problems = describe_json_validation_error(exc, "attachment")
+        raise AttachmentError(
+            422, "invalid_params", f"parameters: {problems}", identity=identity
+        ) from None
+    return identity, params
+
+
+def params_from_attachment(attachment: zenoh.ZBytes | None) -> DetectParams:
+    """The parameters of :func:`read_attachment` (defaults without an attachment)."""
+    return read_attachment(attachment)[1]
+
+
+@dataclass
+class AttachmentError(RequestError):
+    """An attachment the service cannot use; ``identity``: the frame's, when it was valid."""
+
+    identity: FrameIdentity = field(default_factory=FrameIdentity)
 
 
 @dataclass
@@ -65,6 +115,8 @@ class _Job:
     attachment: zenoh.ZBytes | None
     camera: str | None = None
     query: zenoh.Query | None = None
+    timestamp: zenoh.Timestamp | None = None
+    """The zenoh timestamp of the frame's sample, when it has one."""
 
 
 class DetectionBus:
@@ -73,7 +125,8 @@ class DetectionBus:
     Parameters
     ----------
     config : zenoh.Config, optional
-        The session's configuration (see :func:`make_config`); default: zenoh's (a peer).
+        The session's configuration (see :func:`~service.bus.config.service_config`);
+        default: zenoh's (a peer).
     detect : callable, optional
         ``detect(image, params, mask, deadline) -> Detection``; default
         :func:`service.perception.detect`.
@@ -83,6 +136,18 @@ class DetectionBus:
         Largest image accepted, in pixels and in encoded bytes.
     max_queries : int
         Queries that may wait for the detection thread; beyond that they are refused.
+    image_keys : sequence of str
+        The key expressions of the frames to take (``dlo/<camera or pattern>/image``).
+        Replicas with the same keys share their cameras; other keys make another pool.
+    balanced : bool
+        How the pool splits its cameras (:func:`service.bus.ownership.assign`).
+    camera_idle_s : float
+        A camera without a frame for this long no longer counts as active.
+    learn_s : float, optional
+        A replica that finds others already serving watches this long before it announces
+        itself (and takes cameras), so that it knows the replicas and, balanced, the active
+        cameras as they do; default ``camera_idle_s`` balanced, else
+        :data:`RENDEZVOUS_LEARN_S`. A replica alone announces itself at once.
     max_detect_seconds : float, optional
         Time budget of one detection (decoding included); past it the frame or query
         gets the error ``time_budget_exceeded`` and the thread goes on. None: no limit.
@@ -97,6 +162,10 @@ class DetectionBus:
         max_pixels: int = 40_000_000,
         max_bytes: int = 25 * 1024 * 1024,
         max_queries: int = 8,
+        image_keys: Sequence[str] = (IMAGE_KEYS,),
+        balanced: bool = True,
+        camera_idle_s: float = CAMERA_IDLE_S,
+        learn_s: float | None = None,
         max_detect_seconds: float | None = None,
     ) -> None:
         self._config = config if config is not None else zenoh.Config()
@@ -105,10 +174,18 @@ class DetectionBus:
         self.max_pixels = max_pixels
         self.max_bytes = max_bytes
         self.max_queries = max_queries
+        self.image_keys = tuple(dict.fromkeys(image_keys))
+        self.balanced = balanced
+        self.camera_idle_s = camera_idle_s
+        if learn_s is None:
+            learn_s = camera_idle_s if balanced else RENDEZVOUS_LEARN_S
+        self.learn_s = learn_s
+        self.replicas_key = replicas_key(self.image_keys)
+        """The pool's liveliness prefix; this replica's token is ``<it>/<replica id>``."""
         self.max_detect_seconds = max_detect_seconds
         self.counts: Counter[str] = Counter()
-        """Outcomes so far: ``published``, ``replaced``, ``rejected``, ``failed`` for frames,
-        ``query_answered`` ... for queries (also in ``metrics``)."""
+        """Outcomes so far: ``published``, ``replaced``, ``rejected``, ``failed``,
+        ``not_owned`` for frames, ``query_answered`` ... for queries (also in ``metrics``)."""
         self._pending: OrderedDict[tuple[str, Any], _Job] = OrderedDict()
         self._queries_waiting = 0
         self._next_query = 0
@@ -116,7 +193,9 @@ class DetectionBus:
         self._stopping = False
         self._session: zenoh.Session | None = None
         self._thread: threading.Thread | None = None
+        self._announcing: threading.Timer | None = None
         self._declared: list[Any] = []
+        self._ownership: Ownership | None = None
         self._open = False
         self._life = threading.Lock()
 
@@ -133,23 +212,81 @@ class DetectionBus:
             raise RuntimeError("the bus is not open")
         return self._session
 
+    @property
+    def ownership(self) -> Ownership:
+        """Which cameras this replica detects, among which replicas (once open)."""
+        if self._ownership is None:
+            raise RuntimeError("the bus is not open")
+        return self._ownership
+
+    @property
+    def replica_id(self) -> str:
+        """This replica's id: its zenoh session's id (once open)."""
+        return self.ownership.me
+
     def open(self) -> DetectionBus:
-        """Open the session, start the detection thread, subscribe and declare the queryable."""
+        """Open the session, start the detection thread, join the pool of replicas,
+        subscribe to the frames and declare the queryable."""
         with self._life:
             if self._session is not None:
                 raise RuntimeError("the bus is already open")
             self._stopping = False
             session = zenoh.open(self._config)
             self._session = session
+            ownership = Ownership(
+                str(session.zid()),
+                balanced=self.balanced,
+                camera_idle_s=self.camera_idle_s,
+                on_handover=self._count_handover,
+            )
+            self._ownership = ownership
+            self._watch_metrics(ownership)
             self._thread = threading.Thread(target=self._work, name="dlo-zenoh", daemon=True)
             self._thread.start()
+            liveliness = session.liveliness()
+            # Asked before the subscriber is declared: zenoh answers a get that follows a
+            # liveliness subscriber at once from that subscriber's (still empty) view. The
+            # answer only decides whether to watch first; the members come from the
+            # subscriber alone, whose history and removals are one consistent stream.
+            others = {
+                _replica_of(reply.ok.key_expr)
+                for reply in liveliness.get(f"{self.replicas_key}/*", timeout=2.0)
+                if reply.ok is not None
+            }
             self._declared = [
-                session.declare_subscriber(IMAGE_KEYS, self._on_sample),
-                session.declare_queryable(QUERY_KEY, self._on_query),
+                liveliness.declare_subscriber(
+                    f"{self.replicas_key}/*", self._on_replica, history=True
+                ),
+                *(session.declare_subscriber(key, self._on_sample) for key in self.image_keys),
+                session.declare_queryable(QUERY_KEY, self._on_query, complete=True),
             ]
+            if others and self.learn_s > 0:
+                # learn the members (and, balanced, the active cameras) before taking any
+                self._announcing = threading.Timer(self.learn_s, self._announce)
+                self._announcing.daemon = True
+                self._announcing.start()
+            else:
+                self._announce_now(session, ownership)
             self._open = True
-        logger.info("zenoh bus open (session %s)", session.zid())
+        logger.info(
+            "zenoh bus open: replica %s, %s other replica(s) under %s/, frames of %s",
+            ownership.me,
+            len(others),
+            self.replicas_key,
+            ", ".join(self.image_keys),
+        )
         return self
+
+    def _announce(self) -> None:
+        with self._life:
+            if self._session is not None and self._ownership is not None and self._open:
+                self._announce_now(self._session, self._ownership)
+
+    def _announce_now(self, session: zenoh.Session, ownership: Ownership) -> None:
+        key = f"{self.replicas_key}/{ownership.me}"
+        self._declared.append(session.liveliness().declare_token(key))
+        ownership.announce()
+        logger.info("replica %s announced on %s; owns %s", ownership.me, key, ownership.owned())
 
     def close(self) -> None:
         """Stop taking samples, let the running detection finish, close the session.
@@ -157,11 +294,15 @@ class DetectionBus:
         Frames still waiting are dropped; waiting queries get an error reply. Waits for an
         :meth:`open` running in another thread, so that no session is left behind.
         """
+        if self._announcing is not None:
+            self._announcing.cancel()
         with self._life:
             if self._session is None:
                 return
             self._open = False
-            for entity in self._declared:
+            if self._ownership is not None:
+                self._ownership.withdraw()  # from now on, the others' cameras only
+            for entity in reversed(self._declared):  # the token first: hand the cameras over
                 entity.undeclare()
             self._declared = []
             with self._condition:
@@ -189,13 +330,35 @@ class DetectionBus:
         with self._condition:
             return sum(1 for kind, name in self._pending if kind == "camera" and name == camera)
 
+    def _watch_metrics(self, ownership: Ownership) -> None:
+        metrics = self.metrics
+        metrics.bus_replica.info({"replica": ownership.me})
+        metrics.bus_replicas.set_function(lambda: len(ownership.replicas))
+        metrics.bus_cameras_owned.set_function(lambda: len(ownership.owned()))
+        metrics.bus_cameras_active.set_function(ownership.active)
+
     # -- zenoh callbacks (zenoh's threads: keep them short) -------------------------------
+
+    def _on_replica(self, sample: zenoh.Sample) -> None:
+        replica = _replica_of(sample.key_expr)
+        ownership = self.ownership
+        if sample.kind == zenoh.SampleKind.PUT:
+            if ownership.replica_seen(replica):
+                logger.info("replica %s joined; owning %s", replica, ownership.owned())
+        elif ownership.replica_gone(replica):
+            logger.info("replica %s left; owning %s", replica, ownership.owned())
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         if sample.kind != zenoh.SampleKind.PUT:
             return
         camera = str(sample.key_expr).split("/")[1]
-        job = _Job(sample.payload.to_bytes(), sample.attachment, camera=camera)
+        if not self.ownership.owns(camera):  # another replica's: not even copied
+            with self._condition:
+                self._count("not_owned")
+            return
+        job = _Job(
+            sample.payload.to_bytes(), sample.attachment, camera=camera, timestamp=sample.timestamp
+        )
         with self._condition:
             if self._stopping:
                 return
@@ -243,7 +406,9 @@ class DetectionBus:
 
     def _process(self, job: _Job) -> None:
         where = f"camera {job.camera}" if job.query is None else "query dlo/detect"
+        identity = FrameIdentity()
         try:
+            identity, params = read_attachment(job.attachment)
             if not job.image:
                 raise RequestError(422, "invalid_image", "image: empty payload (0 bytes)")
             if len(job.image) > self.max_bytes:
@@ -252,48 +417,68 @@ class DetectionBus:
                     "image_too_large",
                     f"image: {len(job.image)} bytes, more than the limit of {self.max_bytes}",
                 )
-            params = params_from_attachment(job.attachment)
             check_upload(job.image, "image", self.max_pixels)
             _, detection = run_detection(
                 Frame(job.image, params), self._detect, self.max_pixels, self.max_detect_seconds
             )
         except RequestError as exc:
+            if isinstance(exc, AttachmentError):
+                identity = exc.identity
             if exc.code == OVER_BUDGET:
                 self.metrics.over_budget.inc()
             logger.warning("%s: sample rejected: %s", where, exc.message)
-            self._fail(job, "rejected", exc.code, exc.message)
+            self._fail(job, identity, "rejected", exc.code, exc.message)
             return
         except Exception:
             logger.exception("%s: detection failed", where)
             self.metrics.detection_failures.inc()
-            self._fail(job, "failed", "internal", "detection failed inside the service")
+            self._fail(job, identity, "failed", "internal", "detection failed inside the service")
             return
         self.metrics.observe_detection(detection)
         body = detection.model_dump_json()
+        attachment = self._result_attachment(job, identity)
         # counted first, so that whoever receives the result sees the count already
         if job.query is not None:
             self._count_query("answered")
             with job.query:  # finalised (dropped) on exit, so the querier is not left waiting
-                job.query.reply(QUERY_KEY, body, encoding=JSON)
+                job.query.reply(QUERY_KEY, body, encoding=JSON, attachment=attachment)
         else:
             assert job.camera is not None
             self._count("published")
-            self.session.put(chains_key(job.camera), body, encoding=JSON)
+            self.session.put(chains_key(job.camera), body, encoding=JSON, attachment=attachment)
 
-    def _fail(self, job: _Job, outcome: str, code: str, message: str) -> None:
+    def _result_attachment(self, job: _Job, identity: FrameIdentity) -> str:
+        """The :class:`ResultAttachment` of every result of ``job``'s frame, as JSON."""
+        stamp = job.timestamp
+        return ResultAttachment(
+            **identity.model_dump(),
+            sample_timestamp=None if stamp is None else stamp.to_string_rfc3339_lossy(),
+            replica=self.replica_id,
+        ).model_dump_json()
+
+    def _fail(
+        self, job: _Job, identity: FrameIdentity, outcome: str, code: str, message: str
+    ) -> None:
         if job.query is not None:
             self._count_query(outcome)
             self._reply_error(job.query, code, message)
             return
         assert job.camera is not None
+        attachment = self._result_attachment(job, identity)
         self._count(outcome)
         record = {"camera": job.camera, "error": code, "detail": message}
-        self.session.put(errors_key(job.camera), json.dumps(record), encoding=JSON)
+        self.session.put(
+            errors_key(job.camera), json.dumps(record), encoding=JSON, attachment=attachment
+        )
 
     @staticmethod
     def _reply_error(query: zenoh.Query, code: str, message: str) -> None:
+        # zenoh's error replies carry no attachment; the querier knows which query it asked
         with query:
             query.reply_err(json.dumps({"error": code, "detail": message}), encoding=JSON)
+
+    def _count_handover(self, direction: str, cameras: int) -> None:
+        self.metrics.bus_handovers.labels(direction).inc(cameras)
 
     def _count(self, outcome: str) -> None:
         self.counts[outcome] += 1
@@ -302,3 +487,8 @@ class DetectionBus:
     def _count_query(self, outcome: str) -> None:
         self.counts[f"query_{outcome}"] += 1
         self.metrics.bus_queries.labels(outcome).inc()
+
+
+def _replica_of(key_expr: zenoh.KeyExpr) -> str:
+    """The replica id at the end of a liveliness key ``dlo/@replicas/.../<id>``."""
+    return str(key_expr).rsplit("/", 1)[1]

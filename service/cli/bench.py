@@ -13,6 +13,7 @@ import os
 import shlex
 import subprocess
 import sys
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
@@ -20,6 +21,14 @@ import typer
 
 from service.bench.detector import DEFAULT_DATASET, THREAD_VARIABLES
 from service.console import exit_usage, stderr_console
+
+
+class Assignment(StrEnum):
+    """How zenoh replicas share the cameras (the setting DLO_ZENOH_ASSIGNMENT)."""
+
+    balanced = "balanced"
+    rendezvous = "rendezvous"
+
 
 CHILD_FLAG = "DLO_BENCH_CHILD"
 """Set in the one-thread process that ``dlo bench`` starts for the timing itself."""
@@ -90,6 +99,34 @@ def bench(
             show_default=False,
         ),
     ] = None,
+    replicas: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            metavar="N",
+            help="With --service: frames per second through 1, then N zenoh replicas behind "
+            "a router instead (service/bench/replicas.py).",
+            show_default=False,
+        ),
+    ] = None,
+    cameras: Annotated[
+        int, typer.Option(min=1, metavar="N", help="With --replicas: cameras sending frames.")
+    ] = 3,
+    detect_ms: Annotated[
+        float,
+        typer.Option(
+            min=0,
+            metavar="MS",
+            help="With --replicas: each detection sleeps this long without CPU, so that the "
+            "figure measures the distribution, not the cores; 0: the real detector.",
+        ),
+    ] = 50.0,
+    assignment: Annotated[
+        Assignment,
+        typer.Option(
+            help="With --replicas: how the replicas share the cameras (DLO_ZENOH_ASSIGNMENT).",
+        ),
+    ] = Assignment.balanced,
     dlo: Annotated[
         str | None,
         typer.Option(
@@ -113,6 +150,13 @@ def bench(
     ring_counts = None if rings is None else _ring_counts(rings)
     if dlo is not None and not startup:
         exit_usage(stderr_console(), "--dlo applies only with --startup")
+    if replicas is not None:
+        if not service:
+            exit_usage(stderr_console(), "--replicas applies only with --service")
+        from service.bench.replicas import run_replica_bench
+
+        code = run_replica_bench(replicas, cameras, detect_ms, quick, as_json, assignment.value)
+        raise typer.Exit(code)
     if startup:
         from service.bench.startup import dlo_command, run_startup_bench
 

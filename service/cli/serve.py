@@ -38,15 +38,36 @@ def serve(
         Path | None,
         typer.Option(
             metavar="FILE",
-            help="zenoh JSON5 configuration file (env DLO_ZENOH_CONFIG; default: a peer).",
+            help="zenoh JSON5 configuration file (env DLO_ZENOH_CONFIG; default: a peer "
+            "listening on tcp/127.0.0.1:7447 only, no scouting).",
+        ),
+    ] = None,
+    zenoh_listen: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="ENDPOINT",
+            help="zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 to be reachable from "
+            "the network (repeatable; env DLO_ZENOH_LISTEN, comma separated; default: the "
+            "configuration file's, else tcp/127.0.0.1:7447).",
+        ),
+    ] = None,
+    image_keys: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="KEYEXPR",
+            help="The frames this replica takes, dlo/<camera or pattern>/image, e.g. "
+            "dlo/line1-$*/image for a fixed group of cameras (repeatable; env "
+            "DLO_ZENOH_IMAGE_KEYS, comma separated; default dlo/*/image). Replicas with the "
+            "same keys share the cameras out among themselves.",
         ),
     ] = None,
 ) -> None:
     """Serve detection over HTTP (POST /v1/detect; OpenAPI docs at /docs).
 
-    Other settings come from DLO_* environment variables: DLO_QUEUE_SIZE,
+    Other settings come from DLO_* variables (see the README): DLO_QUEUE_SIZE,
     DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_MAX_DETECT_SECONDS, DLO_ZENOH_MULTICAST,
-    DLO_LOG_LEVEL (see the README).
+    DLO_ZENOH_ASSIGNMENT, DLO_API_TOKEN or DLO_API_TOKEN_FILE (a bearer token
+    on /v1/*), DLO_PROTECT_METRICS, DLO_LOG_LEVEL.
     """
     options = {
         "host": host,
@@ -54,6 +75,8 @@ def serve(
         "workers": workers,
         "zenoh": zenoh,
         "zenoh_config": zenoh_config,
+        "zenoh_listen": zenoh_listen or None,
+        "zenoh_image_keys": image_keys or None,
     }
     try:
         settings = Settings(**{name: value for name, value in options.items() if value is not None})

@@ -1,16 +1,29 @@
 """Scoring detections against a labelled data set of photographs (``dlo eval DIR``).
 
-The layout is that of ``../shared/datasets/mbest``: one folder per subset, each with an
-``images`` and a ``labels`` folder; an image and its label image share a file stem::
+The layout is that of ``../shared/datasets/mbest`` and ``../shared/datasets/ariadne``: one
+folder per subset, each with an ``images`` and a ``labels`` folder and optionally a
+``masks`` folder; an image, its label image and its mask share a file stem::
 
     DATASET_DIR/S1/images/img0.jpg    the photograph
-    DATASET_DIR/S1/labels/img0.png    0 = background, 1..K = cable instance (top one at a crossing)
+    DATASET_DIR/S1/labels/img0.png    0 = background, 1..K = cable instance
+    DATASET_DIR/S1/masks/img0.png     optional: the true foreground (nonzero = cable)
 
-Two scores per image:
+In an 8-bit label image the value 255 (:data:`IGNORE_LABEL`) marks pixels that belong to
+no single cable: ariadne labels every cable in full, so where two cables' masks overlap
+(at a crossing) the pixels carry 255. They are left out of the instance score, in the
+prediction and in the truth alike. The true foreground is the ``masks/`` image where
+there is one, otherwise ``labels > 0`` (255 included: those pixels are cable).
+
+Three scores per image:
 
 instance DICE
     :func:`service.evaluation.metrics.instance_dice` of the ground-truth labels and the
-    label image :func:`service.perception.render_labels` makes of the detection.
+    label image :func:`service.perception.render_labels` makes of the detection, with
+    the 255 pixels left out.
+foreground DICE
+    :func:`service.evaluation.metrics.foreground_dice` of the detector's foreground mask
+    and the true foreground: how good the segmentation is, apart from the instances
+    (1.0 by construction when the detector is given the true mask).
 crossing order
     The label images show only the cable on top at a crossing, which is enough to
     judge the order the detector gave a crossing: each chain is matched to a
@@ -22,7 +35,9 @@ crossing order
     crossing is correct when that is the instance matched to ``over``. Crossings of a
     chain with itself (a loop) cannot be judged from labels, nor crossings whose
     chains are unmatched or matched to one instance, nor those with no labelled pixel
-    in the disc; they are counted but not judged.
+    in the disc; they are counted but not judged. A data set whose label images mark
+    overlaps with 255 (ariadne) says nothing about which cable is on top, so its
+    crossings are not judged at all (:func:`has_crossing_order_truth`).
 
 Everything here is a pure function of arrays except the two readers of files.
 """
@@ -41,12 +56,15 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from schemas import Detection, DetectParams
-from service.evaluation.metrics import instance_dice, pairwise_dice
+from service.evaluation.metrics import foreground_dice, instance_dice, pairwise_dice
 from service.imageio import IMAGE_SUFFIXES, ImageFileError
 from service.perception import DetectionResult, detect_full, render_labels
 
 IMAGES_FOLDER = "images"
 LABELS_FOLDER = "labels"
+MASKS_FOLDER = "masks"
+IGNORE_LABEL = 255
+"""In an 8-bit label image: a pixel of two cables at once (left out of the score)."""
 
 
 class DatasetLayoutError(ValueError):
@@ -55,11 +73,12 @@ class DatasetLayoutError(ValueError):
 
 @dataclass(frozen=True)
 class LabelledImage:
-    """One image of a data set and its ground-truth label image."""
+    """One image of a data set, its ground-truth label image and its mask, if any."""
 
     subset: str
     image: Path
     labels: Path
+    mask: Path | None = None
 
     @property
     def name(self) -> str:
@@ -100,6 +119,8 @@ class ImageScore:
         Subset folder name and image stem.
     dice : float
         Mean instance DICE.
+    foreground_dice : float
+        DICE of the detector's foreground mask against the true foreground.
     n_gt, n_chains : int
         Ground-truth instances and detected chains.
     crossings : CrossingOrderScore
@@ -110,6 +131,7 @@ class ImageScore:
     subset: str
     image: str
     dice: float
+    foreground_dice: float
     n_gt: int
     n_chains: int
     crossings: CrossingOrderScore
@@ -126,6 +148,8 @@ class SubsetSummary:
     images : int
     mean_dice, min_dice : float
         NaN when ``images`` is 0.
+    mean_foreground_dice : float
+        Mean of the images' foreground DICE; NaN when ``images`` is 0.
     worst : tuple of (str, float)
         The lowest-scoring images, lowest first, as (stem, DICE).
     crossings_detected, crossings_self, crossings_judged, crossings_correct : int
@@ -138,6 +162,7 @@ class SubsetSummary:
     images: int
     mean_dice: float
     min_dice: float
+    mean_foreground_dice: float
     worst: tuple[tuple[str, float], ...]
     crossings_detected: int
     crossings_self: int
@@ -170,7 +195,8 @@ def find_labelled_images(root: str | os.PathLike[str]) -> tuple[list[LabelledIma
     root : str or Path
         The data-set folder: its subfolders holding ``images/`` and ``labels/`` are the
         subsets (sorted by name, numbers by value). A folder that itself holds
-        ``images/`` and ``labels/`` is one subset named after the folder.
+        ``images/`` and ``labels/`` is one subset named after the folder. A subset's
+        ``masks/<stem>.png``, where present, is the image's true foreground.
 
     Returns
     -------
@@ -199,11 +225,8 @@ def find_labelled_images(root: str | os.PathLike[str]) -> tuple[list[LabelledIma
     items: list[LabelledImage] = []
     unlabelled: list[str] = []
     for folder in subsets:
-        labels = {
-            entry.stem: entry
-            for entry in (folder / LABELS_FOLDER).iterdir()
-            if entry.suffix.lower() in IMAGE_SUFFIXES and entry.is_file()
-        }
+        labels = _files_by_stem(folder / LABELS_FOLDER)
+        masks = _files_by_stem(folder / MASKS_FOLDER) if (folder / MASKS_FOLDER).is_dir() else {}
         images = sorted(
             (
                 entry
@@ -216,7 +239,9 @@ def find_labelled_images(root: str | os.PathLike[str]) -> tuple[list[LabelledIma
         )
         for image in images:
             if image.stem in labels:
-                items.append(LabelledImage(folder.name, image, labels[image.stem]))
+                items.append(
+                    LabelledImage(folder.name, image, labels[image.stem], masks.get(image.stem))
+                )
             else:
                 unlabelled.append(f"{image}: no label image")
     if not items:
@@ -225,6 +250,14 @@ def find_labelled_images(root: str | os.PathLike[str]) -> tuple[list[LabelledIma
             f"with <subset>/{LABELS_FOLDER}/<name>.png)"
         )
     return items, unlabelled
+
+
+def _files_by_stem(folder: Path) -> dict[str, Path]:
+    return {
+        entry.stem: entry
+        for entry in folder.iterdir()
+        if entry.suffix.lower() in IMAGE_SUFFIXES and entry.is_file()
+    }
 
 
 def _is_subset(folder: Path) -> bool:
@@ -258,18 +291,56 @@ def read_labels(path: str | os.PathLike[str]) -> np.ndarray:
     return labels
 
 
-def match_chains(truth: np.ndarray, predicted: np.ndarray) -> dict[int, int]:
+def read_mask(path: str | os.PathLike[str]) -> np.ndarray:
+    """Read a true-foreground mask (nonzero = cable) as a boolean array.
+
+    Raises
+    ------
+    ImageFileError
+        As :func:`read_labels`.
+    """
+    return read_labels(path) > 0
+
+
+def ignored_pixels(truth: np.ndarray) -> np.ndarray | None:
+    """Pixels of an 8-bit label image marked :data:`IGNORE_LABEL`, or None if there are none."""
+    if truth.dtype != np.uint8:
+        return None
+    ignore = truth == IGNORE_LABEL
+    return ignore if ignore.any() else None
+
+
+def has_crossing_order_truth(items: Sequence[LabelledImage]) -> bool:
+    """Whether the label images show the cable on top at a crossing.
+
+    A data set that labels every cable in full marks the overlaps with
+    :data:`IGNORE_LABEL` and so says nothing about the order: False when any of its
+    label images has such a pixel. Unreadable label images are passed over here (the
+    evaluation reports them).
+    """
+    for item in items:
+        try:
+            if ignored_pixels(read_labels(item.labels)) is not None:
+                return False
+        except ImageFileError:
+            continue
+    return True
+
+
+def match_chains(
+    truth: np.ndarray, predicted: np.ndarray, ignore: np.ndarray | None = None
+) -> dict[int, int]:
     """Predicted instance -> ground-truth instance, by Hungarian assignment on DICE.
 
-    The assignment is the one :func:`~service.evaluation.metrics.instance_dice` makes;
-    pairs that do not overlap at all are left out.
+    The assignment is the one :func:`~service.evaluation.metrics.instance_dice` makes
+    (``ignore``: pixels left out of both); pairs that do not overlap at all are left out.
 
     Returns
     -------
     dict
         Predicted label value -> ground-truth label value.
     """
-    dice, truth_ids, predicted_ids = pairwise_dice(truth, predicted)
+    dice, truth_ids, predicted_ids = pairwise_dice(truth, predicted, ignore)
     if dice.size == 0:
         return {}
     rows, cols = linear_sum_assignment(dice, maximize=True)
@@ -353,12 +424,18 @@ def score_crossing_order(
 
 
 def score_detection(
-    result: DetectionResult, truth: np.ndarray, image: np.ndarray | None = None
+    result: DetectionResult,
+    truth: np.ndarray,
+    image: np.ndarray | None = None,
+    *,
+    judge_crossings: bool = True,
 ) -> tuple[float, CrossingOrderScore, np.ndarray]:
     """Instance DICE and crossing order of one detection against its label image.
 
     ``image`` (BGR), when given, lets the label image split crossings by colour, as
-    ``dlo detect`` does (:func:`service.perception.render_labels`).
+    ``dlo detect`` does (:func:`service.perception.render_labels`). Pixels labelled
+    :data:`IGNORE_LABEL` are left out of the DICE. With ``judge_crossings`` False (a data
+    set without over/under truth) the crossings are counted but none is judged.
 
     Returns
     -------
@@ -373,8 +450,16 @@ def score_detection(
             f"{result.mask.shape[1]}x{result.mask.shape[0]}"
         )
     predicted = render_labels(result.detection, result.mask, image)
-    dice = instance_dice(truth, predicted)
-    return dice, score_crossing_order(result.detection, truth, predicted), predicted
+    dice = instance_dice(truth, predicted, ignored_pixels(truth))
+    if judge_crossings:
+        crossings = score_crossing_order(result.detection, truth, predicted)
+    else:
+        detected = result.detection.crossings
+        crossings = CrossingOrderScore(
+            detected=len(detected),
+            self_crossings=sum(crossing.over == crossing.under for crossing in detected),
+        )
+    return dice, crossings, predicted
 
 
 def evaluate_image(
@@ -385,6 +470,8 @@ def evaluate_image(
     name: str = "",
     params: DetectParams | None = None,
     mask_from_labels: bool = False,
+    truth_mask: np.ndarray | None = None,
+    judge_crossings: bool = True,
 ) -> tuple[ImageScore, DetectionResult, np.ndarray]:
     """Detect the cables in one image and score the detection.
 
@@ -399,8 +486,12 @@ def evaluate_image(
     params : DetectParams, optional
         Defaults when None.
     mask_from_labels : bool
-        Give the detector ``truth > 0`` as the foreground mask (the image is still
-        given, for the order of the strands at crossings).
+        Give the detector the true foreground as its mask (the image is still given,
+        for the order of the strands at crossings).
+    truth_mask : ndarray of bool, optional
+        The true foreground (a data set's ``masks/`` image); ``truth > 0`` when None.
+    judge_crossings : bool
+        False for a data set whose labels have no over/under truth.
 
     Returns
     -------
@@ -412,25 +503,32 @@ def evaluate_image(
     Raises
     ------
     ValueError
-        The image and the labels differ in size.
+        The image, the labels and the mask differ in size.
     InvalidInputError
         The detector cannot use the image or the mask.
     """
-    if truth.shape != image.shape[:2]:
-        raise ValueError(
-            f"labels are {truth.shape[1]}x{truth.shape[0]} but the image is "
-            f"{image.shape[1]}x{image.shape[0]}"
-        )
-    mask = truth > 0 if mask_from_labels else None
+    for what, array in (("labels", truth), ("mask", truth_mask)):
+        if array is not None and array.shape[:2] != image.shape[:2]:
+            raise ValueError(
+                f"{what} are {array.shape[1]}x{array.shape[0]} but the image is "
+                f"{image.shape[1]}x{image.shape[0]}"
+            )
+    foreground = truth > 0 if truth_mask is None else np.asarray(truth_mask, dtype=bool)
     started = time.perf_counter()
-    result = detect_full(image, params, mask=mask)
+    result = detect_full(image, params, mask=foreground if mask_from_labels else None)
     elapsed_ms = (time.perf_counter() - started) * 1000.0
-    dice, crossings, predicted = score_detection(result, truth, image)
+    dice, crossings, predicted = score_detection(
+        result, truth, image, judge_crossings=judge_crossings
+    )
+    instances = np.unique(truth[truth > 0])
+    if ignored_pixels(truth) is not None:
+        instances = instances[instances != IGNORE_LABEL]
     score = ImageScore(
         subset=subset,
         image=name,
         dice=dice,
-        n_gt=len(np.unique(truth[truth > 0])),
+        foreground_dice=foreground_dice(foreground, result.mask),
+        n_gt=len(instances),
         n_chains=len(result.detection.chains),
         crossings=crossings,
         ms=elapsed_ms,
@@ -460,6 +558,9 @@ def summarise(
         images=len(scores),
         mean_dice=float(dice.mean()) if len(dice) else float("nan"),
         min_dice=float(dice.min()) if len(dice) else float("nan"),
+        mean_foreground_dice=(
+            float(np.mean([score.foreground_dice for score in scores])) if scores else float("nan")
+        ),
         worst=tuple(
             (
                 f"{scores[k].subset}/{scores[k].image}" if qualify else scores[k].image,
@@ -490,6 +591,7 @@ CSV_COLUMNS = (
     "subset",
     "image",
     "dice",
+    "foreground_dice",
     "n_gt",
     "n_chains",
     "crossings_judged",
@@ -504,6 +606,7 @@ def csv_row(score: ImageScore) -> dict[str, str]:
         "subset": score.subset,
         "image": score.image,
         "dice": f"{score.dice:.4f}",
+        "foreground_dice": f"{score.foreground_dice:.4f}",
         "n_gt": str(score.n_gt),
         "n_chains": str(score.n_chains),
         "crossings_judged": str(score.crossings.judged),

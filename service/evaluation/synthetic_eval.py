@@ -23,9 +23,10 @@ merges
     Each join of the merging step (:attr:`DetectionResult.joins`) is correct when both
     joined ends lie on the same cable. An end lies on the cable whose centreline is
     nearest to the end's position, among cables within ``2 r + 3`` px of it; when
-    several cables are that near (the end is at a crossing), on the one whose local
-    centreline direction is closest to the end's direction (either sense). An end near
-    no cable lies on none, and its join is incorrect.
+    several cables are about as near (within ``max(r, 3 px)`` of the nearest distance:
+    the end is at a crossing), on the one whose local centreline direction is closest to
+    the end's direction (either sense). A cable lying alongside, a cable's width further
+    away, does not compete. An end near no cable lies on none, and its join is incorrect.
 crossings
     A ground-truth crossing between two different cables is correct when the detected
     crossing nearest to it, within 10 px, has as ``over`` and ``under`` the chains
@@ -34,6 +35,13 @@ crossings
     crossing of the chain matched to that cable with itself whose ``over`` segment runs
     closer to the direction of the top strand than to that of the bottom strand. The two
     kinds are counted apart.
+
+foreground DICE
+    The detector's foreground mask against the scene's visible-cable mask (about 1 when
+    the detector is given that mask).
+
+Seeds (:mod:`service.evaluation.conventions`): seeds 0-99999 are for tuning and for
+looking at failures; seeds from 100000 up are held out, to be run only to report a result.
 
 All functions are pure; only :func:`evaluate_scene` runs the detector.
 """
@@ -48,7 +56,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from schemas import Detection, DetectParams
-from service.evaluation.metrics import instance_dice
+from service.evaluation.metrics import foreground_dice, instance_dice
 from service.perception import DetectionResult, detect_full, render_labels
 from service.synthetic import SyntheticCable, SyntheticCrossing, SyntheticScene
 
@@ -249,6 +257,12 @@ def cable_at(
             near.append((k, distance))
     if not near:
         return None
+    nearest = min(distance for _, distance in near)
+    near = [
+        (k, distance)
+        for k, distance in near
+        if distance <= nearest + max(cables[k].radius, MERGE_END_SLACK_PX)
+    ]
     if len(near) == 1:
         return near[0][0]
     best, best_alignment = near[0][0], -1.0
@@ -376,6 +390,8 @@ class SceneScore:
     crossings : CrossingScore
     dice : float
         Mean instance DICE of the rendered labels against the scene's labels.
+    foreground_dice : float
+        DICE of the detector's foreground mask against the scene's mask.
     ms : float
         Wall time of the detection alone, milliseconds.
     """
@@ -385,6 +401,7 @@ class SceneScore:
     merges: tuple[bool, ...]
     crossings: CrossingScore
     dice: float
+    foreground_dice: float
     ms: float
 
 
@@ -403,6 +420,7 @@ def score_scene(scene: SyntheticScene, result: DetectionResult, seed: int, ms: f
         merges=score_merges(result.joins, scene.cables),
         crossings=score_crossings(scene.crossings, scene.cables, detection, chain_ids),
         dice=instance_dice(scene.labels, predicted),
+        foreground_dice=foreground_dice(scene.mask, result.mask),
         ms=ms,
     )
 
@@ -465,7 +483,7 @@ class SyntheticSummary:
         Crossing order between two cables, and of loops.
     crossings_found, self_crossings_found : int
         Ground-truth crossings with a detected crossing within 10 px.
-    mean_dice : float
+    mean_dice, mean_foreground_dice : float
     mean_ms : float
     failed_frames : tuple of int
         Seeds of the incorrect frames.
@@ -479,6 +497,7 @@ class SyntheticSummary:
     crossings_found: int
     self_crossings_found: int
     mean_dice: float
+    mean_foreground_dice: float
     mean_ms: float
     failed_frames: tuple[int, ...] = field(default_factory=tuple)
 
@@ -502,6 +521,9 @@ def summarise_scenes(scores: Sequence[SceneScore]) -> SyntheticSummary:
         crossings_found=sum(s.crossings.between_found for s in scores),
         self_crossings_found=sum(s.crossings.self_found for s in scores),
         mean_dice=float(np.mean([s.dice for s in scores])) if scores else float("nan"),
+        mean_foreground_dice=(
+            float(np.mean([s.foreground_dice for s in scores])) if scores else float("nan")
+        ),
         mean_ms=float(np.mean([s.ms for s in scores])) if scores else float("nan"),
         failed_frames=tuple(s.seed for s in scores if not s.frame.correct),
     )
@@ -550,6 +572,7 @@ def csv_row(score: SceneScore) -> dict[str, str]:
         "self_crossings": str(crossings.self_total),
         "self_crossings_correct": str(crossings.self_correct),
         "dice": f"{score.dice:.4f}",
+        "foreground_dice": f"{score.foreground_dice:.4f}",
         "ms": f"{score.ms:.1f}",
     }
 
@@ -569,5 +592,6 @@ CSV_COLUMNS = (
     "self_crossings",
     "self_crossings_correct",
     "dice",
+    "foreground_dice",
     "ms",
 )

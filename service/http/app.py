@@ -6,13 +6,14 @@ import asyncio
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
 
 from service.http.middleware import RequestContextMiddleware, error_payload, request_id_of
-from service.http.routes import router
+from service.http.routes import api, router
 from service.http.state import AppState
 from service.runtime.errors import RequestError
 from service.runtime.jobs import DetectFunction, default_detect, warm_up
@@ -42,11 +43,13 @@ def create_app(settings: Settings | None = None, detect: DetectFunction | None =
     settings = Settings() if settings is None else settings
     detect = default_detect if detect is None else detect
     metrics = Metrics()
+    api_token = settings.read_api_token()
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        state = AppState.start(settings, metrics, detect)
+        state = AppState.start(settings, metrics, detect, api_token)
         app.state.dlo = state
+        logger.info("%s", _where_it_listens(settings, api_token is not None))
         state.background.append(asyncio.create_task(_warm_up(state)))
         if settings.zenoh:
             state.background.append(asyncio.create_task(_open_bus(state)))
@@ -61,11 +64,37 @@ def create_app(settings: Settings | None = None, detect: DetectFunction | None =
         version="0.1.0",
         lifespan=lifespan,
     )
+    app.include_router(api)
     app.include_router(router)
     app.add_middleware(RequestContextMiddleware, metrics=metrics)
     app.add_exception_handler(RequestError, _request_error)
     app.add_exception_handler(HTTPException, _http_exception)
     return app
+
+
+def _where_it_listens(settings: Settings, token_required: bool) -> str:
+    """One line: where HTTP listens (and whether it asks for a token), and where zenoh does."""
+    access = "bearer token required on /v1/*" if token_required else "no token required"
+    if token_required and settings.protect_metrics:
+        access += " and /metrics"
+    http = f"HTTP on http://{settings.host}:{settings.port} ({access})"
+    if not settings.zenoh:
+        return f"listening: {http}; zenoh off"
+    from service.bus.config import describe_config  # only load zenoh when enabled
+
+    try:
+        zenoh = describe_config(_zenoh_config(settings))
+    except Exception as exc:  # a bad file: _open_bus reports it (and /readyz)
+        zenoh = f"zenoh configuration unusable ({type(exc).__name__})"
+    return f"listening: {http}; {zenoh}"
+
+
+def _zenoh_config(settings: Settings) -> Any:
+    from service.bus.config import service_config
+
+    return service_config(
+        settings.zenoh_config, listen=settings.zenoh_listen, multicast=settings.zenoh_multicast
+    )
 
 
 async def _warm_up(state: AppState) -> None:
@@ -86,18 +115,19 @@ async def _warm_up(state: AppState) -> None:
 async def _open_bus(state: AppState) -> None:
     """Open the zenoh front end (in a thread: opening may take a moment)."""
     # only load zenoh when enabled
-    from service.bus.config import make_config
     from service.bus.detection import DetectionBus
 
     settings = state.settings
     try:
-        config = make_config(settings.zenoh_config, multicast=settings.zenoh_multicast)
+        config = _zenoh_config(settings)
         bus = DetectionBus(
             config,
             detect=state.detect,
             metrics=state.metrics,
             max_pixels=settings.max_pixels,
             max_bytes=settings.max_body_bytes,
+            image_keys=settings.zenoh_image_keys,
+            balanced=settings.zenoh_assignment == "balanced",
             max_detect_seconds=settings.max_detect_seconds,
         )
         state.bus = bus  # before opening: close() then waits for open() to finish
@@ -108,7 +138,9 @@ async def _open_bus(state: AppState) -> None:
         state.bus_error = f"zenoh session failed to open: {type(exc).__name__}: {exc}"
         logger.exception("zenoh session failed to open; /readyz answers 503")
         return
-    logger.info("zenoh session open; serving dlo/*/image and dlo/detect")
+    logger.info(
+        "zenoh session open; serving %s and dlo/detect", ", ".join(settings.zenoh_image_keys)
+    )
 
 
 async def _request_error(request: Request, exc: Exception) -> JSONResponse:

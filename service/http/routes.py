@@ -12,6 +12,7 @@ from pydantic import BaseModel
 
 from schemas import Detection, DetectParams
 from schemas.grasp import GraspPlan
+from service.http.auth import API_TOKEN, METRICS_TOKEN
 from service.http.inputs import JSON_TYPE, RAW_IMAGE_TYPES, read_frame, read_grasp_request
 from service.http.state import AppState
 from service.runtime.errors import RequestError
@@ -21,6 +22,9 @@ from service.runtime.jobs import OVER_BUDGET, run_detection, run_overlay
 from service.runtime.pool import PoolBusyError
 
 router = APIRouter()
+"""Open routes: probes and metrics."""
+api = APIRouter(dependencies=[API_TOKEN])
+"""The data routes (``/v1/*``): the bearer token is required on each, when one is set."""
 
 
 def app_state(request: Request) -> AppState:
@@ -143,23 +147,33 @@ _GRASP_OPENAPI = {
 }
 
 
-def _error(description: str) -> dict[str, Any]:
-    return {
-        "description": description,
-        "content": {
-            "application/json": {
-                "example": {
-                    "status": 422,
-                    "error": "invalid_image",
-                    "detail": "image: truncated PNG file",
-                    "request_id": "5b0c3c8e-1f0e-4a43-9f57-3f6c4b0c2a61",
-                }
-            }
-        },
+def _error(
+    description: str,
+    status: int = 422,
+    code: str = "invalid_image",
+    detail: str = "image: truncated PNG file",
+) -> dict[str, Any]:
+    example = {
+        "status": status,
+        "error": code,
+        "detail": detail,
+        "request_id": "5b0c3c8e-1f0e-4a43-9f57-3f6c4b0c2a61",
     }
+    return {"description": description, "content": {"application/json": {"example": example}}}
+
+
+_UNAUTHORIZED = {
+    "status": 401,
+    "code": "unauthorized",
+    "detail": "a bearer token is required: send the header 'Authorization: Bearer <token>'",
+}
 
 
 _ERRORS: dict[int | str, dict[str, Any]] = {
+    401: _error(
+        "A bearer token is set (DLO_API_TOKEN) and the request's is missing or wrong.",
+        **_UNAUTHORIZED,
+    ),
     413: _error(
         "Body, image or mask larger than the configured limits (read from the PNG or JPEG "
         "header, before decoding)."
@@ -178,6 +192,10 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
 
 
 _GRASP_ERRORS: dict[int | str, dict[str, Any]] = {
+    401: _error(
+        "A bearer token is set (DLO_API_TOKEN) and the request's is missing or wrong.",
+        **_UNAUTHORIZED,
+    ),
     **_ERRORS,
     415: _error("Content type other than multipart/form-data or application/json."),
     422: _error(
@@ -227,7 +245,7 @@ async def _in_pool(state: AppState, job: Any, *args: Any) -> Any:
         raise  # logged and answered with a 500 by RequestContextMiddleware
 
 
-@router.post(
+@api.post(
     "/v1/detect",
     summary="Detect the cables in an image",
     response_model=None,
@@ -240,7 +258,7 @@ async def detect(request: Request) -> Response:
     return Response(detection.model_dump_json(), media_type="application/json")
 
 
-@router.post(
+@api.post(
     "/v1/detect/overlay",
     summary="Draw the detected cables on the image",
     response_model=None,
@@ -254,7 +272,7 @@ async def detect_overlay(request: Request) -> Response:
     return Response(png, media_type="image/png")
 
 
-@router.post(
+@api.post(
     "/v1/grasp",
     summary="Plan a grasp on a detected cable and the UR3 motions to pick it (no robot moves)",
     response_model=None,
@@ -315,6 +333,16 @@ async def readyz(request: Request) -> JSONResponse:
     return JSONResponse({"status": status}, status_code=503, headers={"Retry-After": "1"})
 
 
-@router.get("/metrics", summary="Prometheus metrics", response_class=Response)
+@router.get(
+    "/metrics",
+    summary="Prometheus metrics",
+    response_class=Response,
+    dependencies=[METRICS_TOKEN],
+    responses={
+        401: _error(
+            "DLO_PROTECT_METRICS is on and the bearer token is missing or wrong.", **_UNAUTHORIZED
+        )
+    },
+)
 async def metrics(request: Request) -> Response:
     return Response(app_state(request).metrics.render(), media_type=CONTENT_TYPE_LATEST)

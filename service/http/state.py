@@ -29,6 +29,8 @@ class AppState:
     metrics: Metrics
     detect: DetectFunction
     pool: WorkerPool
+    api_token: str | None = None
+    """The bearer token required on /v1/* (:mod:`service.http.auth`); None: open."""
     ready: bool = False
     warm_up_error: str | None = None
     background: list[asyncio.Task[Any] | Future[Any]] = field(default_factory=list)
@@ -41,10 +43,18 @@ class AppState:
         return not self.settings.zenoh or (self.bus is not None and self.bus.is_open)
 
     @classmethod
-    def start(cls, settings: Settings, metrics: Metrics, detect: DetectFunction) -> AppState:
+    def start(
+        cls,
+        settings: Settings,
+        metrics: Metrics,
+        detect: DetectFunction,
+        api_token: str | None = None,
+    ) -> AppState:
         pool = WorkerPool(settings.workers, settings.queue_size)
         metrics.in_flight.set_function(lambda: pool.admitted)
-        return cls(settings=settings, metrics=metrics, detect=detect, pool=pool)
+        return cls(
+            settings=settings, metrics=metrics, detect=detect, pool=pool, api_token=api_token
+        )
 
     async def close(self) -> None:
         for task in self.background:

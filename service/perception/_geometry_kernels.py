@@ -8,6 +8,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from service.perception._shared_kernels import solve_small
+
 
 @njit(cache=True, nogil=True)
 def resample_kernel(points, step):
@@ -110,9 +112,9 @@ def end_fit(backwards, skip, span):
     for r in range(3):
         for c in range(3):
             normal[r, c] = sums[r + c]
-    if abs(np.linalg.det(normal)) < 1e-12:
+    determinant, coefficients = solve_small(normal, rhs)
+    if abs(determinant) < 1e-12:
         return False, backwards[0, 0], backwards[0, 1], 0.0, 0.0, last
-    coefficients = np.linalg.solve(normal, rhs)
     x0, y0 = backwards[0, 0], backwards[0, 1]
     if skip > 0:
         x0, y0 = coefficients[0, 0], coefficients[0, 1]

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from service.perception._shared_kernels import solve_small
+
 # --------------------------------------------------------------------------- end widths
 
 
@@ -259,12 +261,12 @@ def natural_curve_kernel(start, leaving, end, arriving, step):
         matrix[0, 1] = arriving[0]
         matrix[1, 0] = leaving[1]
         matrix[1, 1] = arriving[1]
-        rhs = np.empty(2)
-        rhs[0] = gap_x
-        rhs[1] = gap_y
-        solution = np.linalg.solve(matrix, rhs)
-        t_a = solution[0]
-        t_b = solution[1]
+        rhs = np.empty((2, 1))
+        rhs[0, 0] = gap_x
+        rhs[1, 0] = gap_y
+        _, solution = solve_small(matrix, rhs)
+        t_a = solution[0, 0]
+        t_b = solution[1, 0]
         if t_a > 0 and t_b > 0:
             tangent = min(t_a, t_b)
             corner_x = start[0] + t_a * leaving[0]

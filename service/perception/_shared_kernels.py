@@ -313,3 +313,45 @@ def pairwise_sum(values, start, stop):
         phase[depth] = 0
         depth += 1
     return result
+
+
+@njit(cache=True, nogil=True)
+def solve_small(matrix, rhs):
+    """Solve ``matrix @ x = rhs`` for a tiny square system by Gaussian elimination.
+
+    Partial pivoting, as LAPACK's ``gesv``; ``rhs`` has one column per right-hand side.
+    Returns ``(determinant, x)``; ``x`` is meaningless when the determinant is 0. Used
+    instead of ``np.linalg`` so that no kernel needs LAPACK: numba would otherwise load
+    SciPy's linear algebra (about 0.2 s) in every process that runs a detection.
+    """
+    n = matrix.shape[0]
+    a = matrix.copy()
+    x = rhs.copy()
+    determinant = 1.0
+    for column in range(n):
+        pivot = column
+        for row in range(column + 1, n):
+            if abs(a[row, column]) > abs(a[pivot, column]):
+                pivot = row
+        if a[pivot, column] == 0.0:
+            return 0.0, x
+        if pivot != column:
+            determinant = -determinant
+            for k in range(n):
+                a[column, k], a[pivot, k] = a[pivot, k], a[column, k]
+            for k in range(x.shape[1]):
+                x[column, k], x[pivot, k] = x[pivot, k], x[column, k]
+        determinant *= a[column, column]
+        for row in range(column + 1, n):
+            factor = a[row, column] / a[column, column]
+            for k in range(column, n):
+                a[row, k] -= factor * a[column, k]
+            for k in range(x.shape[1]):
+                x[row, k] -= factor * x[column, k]
+    for column in range(n - 1, -1, -1):
+        for k in range(x.shape[1]):
+            total = x[column, k]
+            for j in range(column + 1, n):
+                total -= a[column, j] * x[j, k]
+            x[column, k] = total / a[column, column]
+    return determinant, x

@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from schemas import Chain, Crossing, Detection, DetectParams, GapCurve, StageTimings
@@ -390,5 +391,8 @@ def warm_up() -> None:
     # End extension, resampling and the inferred flags; the crossings' sweep.
     _finalise_path(MergedPath(line, np.array([False])), mask, distance, DetectParams(), radius)
     find_intersections(strands)
+    # OpenCV builds its Lab tables on the first conversion (about 60 ms), which the
+    # crossings step and the labels would otherwise report as their own time.
+    cv2.cvtColor(image[:1, :1], cv2.COLOR_BGR2LAB)
     if not kernels_cached():
         write_stamp(_numba_cache_dir())

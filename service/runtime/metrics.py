@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
-from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
+from prometheus_client import (
+    CollectorRegistry,
+    Counter,
+    Gauge,
+    Histogram,
+    Info,
+    generate_latest,
+)
 
 from schemas import Detection, StageTimings
 
@@ -63,8 +70,38 @@ class Metrics:
             "dlo_zenoh_frames",
             "Samples received on the zenoh bus, by outcome: published, replaced (a newer "
             "frame of the same camera arrived before it was processed), rejected (not an "
-            "image or bad parameters) or failed (detection failed inside the service).",
+            "image or bad parameters), failed (detection failed inside the service) or "
+            "not_owned (another replica's camera, dropped before decoding).",
             ("outcome",),
+            registry=self.registry,
+        )
+        self.bus_replica = Info(
+            "dlo_zenoh_replica",
+            "This replica's id (its zenoh session's), as in its token dlo/@replicas/<id> and "
+            "in the attachment of its results.",
+            registry=self.registry,
+        )
+        self.bus_replicas = Gauge(
+            "dlo_zenoh_replicas",
+            "Live replicas sharing this one's cameras (liveliness tokens under "
+            "dlo/@replicas/), itself included once announced.",
+            registry=self.registry,
+        )
+        self.bus_cameras_active = Gauge(
+            "dlo_zenoh_cameras_active",
+            "Cameras that sent a frame lately (the ones the replicas share out).",
+            registry=self.registry,
+        )
+        self.bus_cameras_owned = Gauge(
+            "dlo_zenoh_cameras_owned",
+            "Active cameras this replica detects; the other replicas drop their frames.",
+            registry=self.registry,
+        )
+        self.bus_handovers = Counter(
+            "dlo_zenoh_handovers",
+            "Cameras handed over when replicas came or went: gained by this replica, or lost "
+            "to another.",
+            ("direction",),
             registry=self.registry,
         )
         self.bus_queries = Counter(

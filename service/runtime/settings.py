@@ -4,10 +4,22 @@ input limits both transports check, and the zenoh session; read from ``DLO_*`` v
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import Field, field_validator, model_validator
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic import Field, SecretStr, field_validator, model_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
+
+DEFAULT_ZENOH_LISTEN = "tcp/127.0.0.1:7447"
+"""Where the embedded zenoh peer listens when nothing else is configured: loopback only."""
+IMAGE_KEYS = "dlo/*/image"
+"""Where cameras publish their frames; ``*`` is the camera's name."""
+
+
+def _comma_separated(value: object) -> object:
+    """``"a, b"`` (an environment variable) as ``["a", "b"]``; lists pass unchanged."""
+    if isinstance(value, str):
+        return [item.strip() for item in value.split(",") if item.strip()]
+    return value
 
 
 class Settings(BaseSettings):
@@ -47,11 +59,42 @@ class Settings(BaseSettings):
         True, description="Also serve detection over zenoh (dlo/*/image, dlo/detect)."
     )
     zenoh_config: Path | None = Field(
-        None, description="zenoh JSON5 configuration file; default: an embedded peer."
+        None,
+        description="zenoh JSON5 configuration file; default: an embedded peer listening on "
+        f"{DEFAULT_ZENOH_LISTEN} only, without scouting.",
+    )
+    zenoh_listen: Annotated[list[str] | None, NoDecode] = Field(
+        None,
+        description="zenoh endpoints to listen on, comma separated (e.g. tcp/0.0.0.0:7447), "
+        "written over the configuration file's; default: the file's, else "
+        f"{DEFAULT_ZENOH_LISTEN}.",
+    )
+    zenoh_image_keys: Annotated[list[str], NoDecode] = Field(
+        [IMAGE_KEYS],
+        min_length=1,
+        description="Key expressions of the frames this replica takes, comma separated, each "
+        "dlo/<camera or pattern>/image (e.g. dlo/line1-*/image): a static group of cameras.",
+    )
+    zenoh_assignment: Literal["balanced", "rendezvous"] = Field(
+        "balanced",
+        description="How replicas sharing image keys split the cameras: rendezvous hashing "
+        "with loads kept within one camera of each other (balanced), or plain rendezvous "
+        "hashing, which moves fewest cameras when replicas come and go.",
     )
     zenoh_multicast: bool | None = Field(
         None,
-        description="Multicast scouting on/off; default: as the configuration file (or zenoh).",
+        description="Multicast scouting on/off; default: as the configuration file, else off.",
+    )
+    api_token: SecretStr | None = Field(
+        None,
+        description="Bearer token required on /v1/* (and on /metrics with protect_metrics); "
+        "default: none required.",
+    )
+    api_token_file: Path | None = Field(
+        None, description="File holding the bearer token (e.g. a mounted Secret); not both."
+    )
+    protect_metrics: bool = Field(
+        False, description="Require the bearer token on /metrics too (when a token is set)."
     )
     log_level: Literal["critical", "error", "warning", "info", "debug"] = Field(
         "info", description="Server log level."
@@ -72,6 +115,69 @@ class Settings(BaseSettings):
                 f"zenoh configuration {path}: {problem} (--zenoh-config, DLO_ZENOH_CONFIG)"
             )
         return self
+
+    @field_validator("zenoh_listen", mode="before")
+    @classmethod
+    def _endpoints(cls, value: object) -> object:
+        return _comma_separated(value) or None  # an empty variable: as if unset
+
+    @field_validator("zenoh_image_keys", mode="before")
+    @classmethod
+    def _key_list(cls, value: object) -> object:
+        return _comma_separated(value) or [IMAGE_KEYS]  # an empty variable: as if unset
+
+    @field_validator("zenoh_image_keys")
+    @classmethod
+    def _image_keys(cls, keys: list[str]) -> list[str]:
+        for key in keys:
+            chunks = key.split("/")
+            if len(chunks) != 3 or chunks[0] != "dlo" or chunks[2] != "image" or not chunks[1]:
+                raise ValueError(
+                    f"{key!r} is not dlo/<camera>/image (the camera's name or a pattern of "
+                    "them, e.g. dlo/*/image, dlo/line1-$*/image)"
+                )
+            if chunks[1] == "**":
+                raise ValueError(f"{key!r}: the camera is one chunk: use * instead of **")
+        return list(dict.fromkeys(keys))
+
+    @field_validator("api_token")
+    @classmethod
+    def _token_not_blank(cls, value: SecretStr | None) -> SecretStr | None:
+        if value is not None and not value.get_secret_value().strip():
+            raise ValueError("the token is empty")
+        return value
+
+    @model_validator(mode="after")
+    def _one_token_source(self) -> Settings:
+        if self.api_token is not None and self.api_token_file is not None:
+            raise ValueError("set DLO_API_TOKEN or DLO_API_TOKEN_FILE, not both")
+        if self.api_token_file is not None:
+            self.read_api_token()  # unreadable or empty: refuse to start, not every request
+        return self
+
+    def read_api_token(self) -> str | None:
+        """The bearer token (from ``api_token``, or ``api_token_file`` without its trailing
+        line break); None when no token is required.
+
+        Raises
+        ------
+        ValueError
+            The file cannot be read or holds no token.
+        """
+        if self.api_token is not None:
+            return self.api_token.get_secret_value().strip()
+        if self.api_token_file is None:
+            return None
+        try:
+            token = self.api_token_file.read_text(encoding="utf-8").strip()
+        except (OSError, UnicodeDecodeError) as exc:
+            reason = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
+            raise ValueError(
+                f"cannot read the token file {self.api_token_file}: {reason}"
+            ) from None
+        if not token:
+            raise ValueError(f"the token file {self.api_token_file} is empty")
+        return token
 
     @property
     def max_body_bytes(self) -> int:

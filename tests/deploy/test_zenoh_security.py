@@ -179,3 +179,43 @@ def test_a_robot_may_not_publish_frames_nor_subscribe_to_them(router: int, site:
         results.put(b"chains")
         assert later.next() == ("dlo/cam1/chains", b"chains")
         assert seen_by_robot.samples.qsize() == 1  # only its own put, delivered locally
+
+
+def test_two_service_replicas_share_the_cameras_through_the_locked_down_router(
+    router: int, site: Path
+) -> None:
+    """The replicas' liveliness tokens, their complete queryable and their results are
+    allowed by the rules: each frame gives one result, and a camera's query one reply."""
+    from schemas import ResultAttachment
+    from service.bus.detection import DetectionBus
+    from tests.service.test_replicas import Cameras, Results, quick_detect
+
+    def replica() -> DetectionBus:
+        config = client_config(router, site / "tls", "service")
+        return DetectionBus(config, detect=quick_detect, learn_s=0.0)
+
+    with (
+        replica() as first,
+        replica() as second,
+        joined(router, site, "robot") as robot,
+        joined(router, site, "camera") as camera,
+    ):
+        wait_until(
+            lambda: len(first.ownership.replicas) == len(second.ownership.replicas) == 2,
+            "the replicas to see each other's tokens",
+        )
+        results = Results(robot)
+        cameras = Cameras(camera, ["cam1", "cam2", "cam3", "cam4"])
+        rounds = []
+        for _ in range(3):
+            rounds.append(cameras.send_round())
+            assert results.wait_for(rounds[-1])
+        everything = [frame for frames in rounds for frame in frames]
+        assert [results.times_answered(frame) for frame in everything] == [1] * 12
+        # both replicas answered the last round: any second answer would have come before
+        assert results.replicas_of(rounds[-1]) == {first.replica_id, second.replica_id}
+
+        replies = list(camera.get("dlo/detect", payload=cameras.image))
+        assert len(replies) == 1 and replies[0].ok is not None
+        reply = ResultAttachment.model_validate_json(replies[0].ok.attachment.to_bytes())
+        assert reply.replica in {first.replica_id, second.replica_id}

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from service.evaluation.metrics import instance_dice, pairwise_dice
+from service.evaluation.metrics import foreground_dice, instance_dice, pairwise_dice
 
 
 def test_identical_labellings_score_one_whatever_the_ids():
@@ -45,3 +45,26 @@ def test_empty_cases():
     assert instance_dice(np.ones((3, 3), int), empty) == 0.0
     with pytest.raises(ValueError, match="shape"):
         instance_dice(np.ones((3, 3), int), np.ones((3, 4), int))
+
+
+def test_ignored_pixels_are_left_out_of_both_sides():
+    # ariadne marks the pixels of two cables at once 255; they count for neither.
+    truth = np.array([[1, 1, 255, 2, 2, 0]])
+    predicted = np.array([[5, 5, 7, 7, 7, 7]])
+    ignore = truth == 255
+    # T1 = {0, 1} = P5: 1; T2 = {3, 4}, P7 = {3, 4, 5} without pixel 2: 2*2 / (2 + 3).
+    assert instance_dice(truth, predicted, ignore) == pytest.approx((1.0 + 0.8) / 2)
+    # Counted, 255 would be a third cable, and pixel 2 would cost P7 as well.
+    assert instance_dice(truth, predicted) < 0.7
+    dice, truth_ids, _ = pairwise_dice(truth, predicted, ignore)
+    assert list(truth_ids) == [1, 2] and dice.shape == (2, 2)
+    with pytest.raises(ValueError, match="ignore"):
+        instance_dice(truth, predicted, np.zeros((2, 6), bool))
+
+
+def test_foreground_dice():
+    truth = np.array([[1, 1, 1, 0, 0]], bool)
+    assert foreground_dice(truth, truth) == 1.0
+    assert foreground_dice(truth, np.array([[0, 1, 1, 1, 0]], bool)) == pytest.approx(4 / 6)
+    assert foreground_dice(np.zeros(3, bool), np.zeros(3, bool)) == 1.0
+    assert foreground_dice(truth, np.zeros_like(truth)) == 0.0

@@ -26,7 +26,7 @@ from service.evaluation.synthetic_eval import (
 )
 from service.perception import DetectionResult
 from service.perception.merging import ChainEnd, Join
-from service.synthetic import SyntheticCable, SyntheticCrossing, make_scene
+from service.synthetic import FAMILY_NAMES, SyntheticCable, SyntheticCrossing, make_scene
 
 ANSI_ESCAPE = re.compile(r"\x1b\[[0-9;]*m")
 runner = CliRunner()
@@ -181,6 +181,19 @@ def test_merges_are_correct_when_both_ends_lie_on_one_cable() -> None:
     assert cable_at(np.array([150.0, 103.0]), np.array([0.0, -1.0]), cables) == 1
     assert cable_at(np.array([150.0, 103.0]), np.array([1.0, 0.1]), cables) == 0
     assert cable_at(np.array([150.0, 140.0]), np.array([1.0, 0.0]), cables) == 1
+
+
+def test_an_end_lies_on_its_cable_not_on_one_alongside() -> None:
+    # Two cables side by side, touching: centrelines 8 px apart, both within 2 r + 3 of an
+    # end on the first, in the same direction; the nearer one is the end's cable.
+    first = straight_cable((0, 100), (300, 100), radius=4.0)
+    second = straight_cable((0, 108), (300, 108), radius=4.0)
+
+    assert cable_at(np.array([150.0, 101.0]), np.array([1.0, 0.02]), [first, second]) == 0
+    assert cable_at(np.array([150.0, 107.5]), np.array([1.0, -0.02]), [first, second]) == 1
+    joins = [Join(end((100, 101), (1, 0)), end((140, 100.5), (-1, 0)), 0.1)]
+    assert score_merges(joins, [first, second]) == (True,)
+    assert score_merges(joins, [second, first]) == (True,)
 
 
 # --------------------------------------------------------------------------- crossings
@@ -347,10 +360,74 @@ def test_dlo_eval_params_reach_the_detector(tmp_path) -> None:
     assert chains == ["1", "1"]
 
 
+def test_dlo_eval_family_scores_each_family_and_the_total(tmp_path) -> None:
+    rows = tmp_path / "families.csv"
+    result = run_dlo(
+        "eval", "--synthetic", 2, "--seed", 1, "--family", "loops,edge", "--width", 640,
+        "--height", 480, "--mask-from-labels", "--json", "--csv", rows,
+    )  # fmt: skip
+
+    assert result.exit_code == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert data["setup"]["families"] == ["loops", "edge"]
+    assert [f["family"] for f in data["families"]] == ["loops", "edge"]
+    assert [f["frames"]["total"] for f in data["families"]] == [2, 2]
+    assert data["total"]["frames"]["total"] == 4
+    assert data["total"]["frames"]["correct"] == sum(
+        f["frames"]["correct"] for f in data["families"]
+    )
+    assert all(f["mean_foreground_dice"] > 0.99 for f in data["families"])
+    lines = rows.read_text().splitlines()
+    assert lines[0].startswith("family,seed,")
+    assert [line.split(",")[:2] for line in lines[1:]] == [
+        ["loops", "1"], ["loops", "2"], ["edge", "1"], ["edge", "2"],
+    ]  # fmt: skip
+
+
+def test_dlo_eval_family_all_prints_one_row_per_family(tmp_path) -> None:
+    out_dir = tmp_path / "out"
+    result = run_dlo(
+        "eval", "--synthetic", 1, "--seed", 3, "--family", "all", "--width", 640,
+        "--height", 480, "--mask-from-labels", "--out-dir", out_dir,
+    )  # fmt: skip
+
+    assert result.exit_code == 0, result.stderr
+    text = ANSI_ESCAPE.sub("", result.stdout)
+    for name in (*FAMILY_NAMES, "total", "frames", "occlusions", "merges", "fg DICE"):
+        assert name in text
+    assert (out_dir / "side_by_side_3.png").is_file()
+    assert (out_dir / "side_by_side_3.overlay.png").is_file()
+
+
+def test_dlo_eval_one_family_prints_the_paper_table() -> None:
+    result = run_dlo(
+        "eval", "--synthetic", 1, "--seed", 2, "--family", "doubled_back", "--width", 640,
+        "--height", 480, "--json",
+    )  # fmt: skip
+
+    assert result.exit_code == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert data["setup"]["family"] == "doubled_back"
+    assert data["frames"]["total"] == 1
+    assert 0.0 <= data["mean_foreground_dice"] <= 1.0
+
+
+def test_dlo_eval_help_states_the_seed_convention() -> None:
+    result = run_dlo("eval", "--help")
+
+    text = " ".join(ANSI_ESCAPE.sub("", result.stdout).split())
+    assert "0-99999" in text and "100000" in text and "held out" in text
+    assert "--family" in text
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
         ((), "give a DATASET_DIR or --synthetic N"),
+        (("--synthetic", "2", "--family", "spirals"), "unknown family 'spirals'"),
+        (("--synthetic", "2", "--family", "loops", "--cables", "2"), "only without --family"),
+        (("--synthetic", "2", "--family", "loops", "--width", "300"), "--family needs"),
+        (("some_dir", "--family", "loops"), "--family apply only with --synthetic N"),
         (("some_dir", "--synthetic", "2"), "not both"),
         (("some_dir", "--seed", "2"), "--seed apply only with --synthetic N"),
         (("--synthetic", "0"), "--synthetic must be 1 or more"),

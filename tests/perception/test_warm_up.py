@@ -194,3 +194,35 @@ def test_an_unwritable_stamp_is_no_error(tmp_path, monkeypatch):
     assert _kernel_cache.write_stamp(str(tmp_path)) is False
     warm_up()
     assert not kernels_cached()
+
+
+@pytest.mark.parametrize("path", KERNEL_FILES, ids=lambda path: path.stem)
+def test_no_kernel_needs_blas_or_lapack(path: Path):
+    """`dlo` tells numba not to probe for BLAS (service.console.skip_numba_blas_probe):
+    that holds only while no kernel multiplies matrices or calls np.linalg."""
+    for node in ast.walk(ast.parse(path.read_text())):
+        assert not (isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult)), path
+        if isinstance(node, ast.Attribute):
+            assert node.attr not in {"linalg", "dot", "matmul", "vdot", "inner", "outer"}, (
+                f"{path.name}:{node.lineno} uses np.{node.attr}"
+            )
+
+
+def test_a_dlo_process_loads_the_kernels_without_scipy():
+    """With the probe skipped, warm-up and a detection never import scipy.linalg."""
+    script = (
+        "import sys\n"
+        "from service.console import skip_numba_blas_probe\n"
+        "skip_numba_blas_probe()\n"
+        "import numpy as np\n"
+        "from service.perception import detect, warm_up\n"
+        "warm_up()\n"
+        "image = np.zeros((120, 160, 3), np.uint8)\n"
+        "image[50:60, 10:150] = 255\n"
+        "assert len(detect(image).chains) == 1\n"
+        "print('scipy.linalg' in sys.modules)\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, cwd=ROOT, check=True
+    )
+    assert result.stdout.strip() == "False"

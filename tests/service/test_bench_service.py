@@ -61,3 +61,30 @@ def test_the_table_shows_every_path_and_the_targets(results: dict, capsys) -> No
     for path in ("http", "zenoh"):
         assert f"{path}: adds" in printed and "target <=" in printed
     assert "503 when full:" in printed
+
+
+def test_the_replica_benchmark_reports_both_configurations() -> None:
+    """`dlo bench --service --replicas 2`: one replica, then two; the shape, not a speed."""
+    completed = subprocess.run(
+        [*DLO, "bench", "--service", "--replicas", "2", "--cameras", "2", "--quick", "--json"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert completed.returncode == 0, completed.stderr
+    results = json.loads(completed.stdout)
+    assert [run["replicas"] for run in results["runs"]] == [1, 2]
+    assert results["assignment"] == "balanced" and "no CPU" in results["detection"]
+    for run in results["runs"]:
+        assert run["frames"] > 0 and sum(run["frames_by_replica"]) == run["frames"]
+        assert sum(run["cameras_by_replica"]) == 2  # each camera answered by one replica
+    assert results["ratio"] == results["runs"][1]["per_second"] / results["runs"][0]["per_second"]
+
+
+def test_replicas_go_with_service_only() -> None:
+    completed = subprocess.run(
+        [*DLO, "bench", "--replicas", "3"], capture_output=True, text=True, timeout=60
+    )
+    assert completed.returncode == 2 and "--replicas applies only with --service" in (
+        completed.stderr
+    )

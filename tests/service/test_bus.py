@@ -4,11 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 import queue
-import socket
-import subprocess
-import sys
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -235,7 +231,7 @@ def test_http_app_runs_the_bus(tmp_path: Path) -> None:
         '{ mode: "peer", listen: { endpoints: ["ENDPOINT"] }, // the bus\n'
         "  scouting: { multicast: { enabled: false } } }\n".replace("ENDPOINT", endpoint)
     )
-    app = create_app(Settings(workers=1, zenoh=True, zenoh_config=config_file))
+    app = create_app(Settings(workers=1, zenoh=True, zenoh_config=config_file, zenoh_listen=None))
     with serving(app) as base, client_of(endpoint) as client:
         assert httpx.get(f"{base}/readyz").json() == {"status": "ready"}
         chains = subscribe(client, "dlo/cam7/chains")
@@ -251,7 +247,7 @@ def test_readyz_fails_when_zenoh_cannot_open(tmp_path: Path) -> None:
 
     config_file = tmp_path / "zenoh.json5"
     config_file.write_text('{ mode: "peer", listen: { endpoints: ["nonsense/1.2.3.4:5"] } }')
-    settings = Settings(workers=1, zenoh=True, zenoh_config=config_file)
+    settings = Settings(workers=1, zenoh=True, zenoh_config=config_file, zenoh_listen=None)
     with running_server(settings, wait_ready=False) as base:
         wait_until(
             lambda: httpx.get(f"{base}/readyz").json()["status"] == "failed",
@@ -266,98 +262,3 @@ def test_http_app_without_zenoh() -> None:
 
     with running_server(Settings(workers=1, zenoh=False)) as base:
         assert httpx.get(f"{base}/readyz").json() == {"status": "ready"}
-
-
-# --- dlo router with two dlo serve processes ---------------------------------------------------
-
-DLO = [sys.executable, "-c", "from service.cli import main; main()"]
-
-
-def listening(address: tuple[str, int]) -> bool:
-    """True when a TCP connection to ``address`` is accepted."""
-    with contextlib.suppress(OSError), socket.create_connection(address, 1):
-        return True
-    return False
-
-
-def ready_or_exited(base: str, processes: list[subprocess.Popen]) -> bool:
-    """True once the service at ``base`` is ready, failed, or any process has exited."""
-    if any(process.poll() is not None for process in processes):
-        return True
-    with contextlib.suppress(httpx.TransportError):
-        answer = httpx.get(f"{base}/readyz")
-        return answer.status_code == 200 or answer.json()["status"] == "failed"
-    return False
-
-
-def test_router_with_two_services(tmp_path: Path) -> None:
-    router_address = ("127.0.0.1", free_port())
-    router = f"tcp/127.0.0.1:{router_address[1]}"
-    config_file = tmp_path / "zenoh.json5"
-    config_file.write_text(
-        json.dumps(
-            {
-                # clients: everything goes through the router (peers would rather
-                # connect to each other directly, once the router told them where)
-                "mode": "client",
-                "connect": {"endpoints": [router]},
-                "scouting": {"multicast": {"enabled": False}},
-            }
-        )
-    )
-    environment = {**os.environ, "DLO_LOG_LEVEL": "WARNING"}
-    processes = [
-        subprocess.Popen(
-            [*DLO, "router", "--listen", router, "--no-multicast"],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-    ]
-    try:
-        # the router listens before any service starts (clients give up when it is not there)
-        wait_until(
-            lambda: processes[0].poll() is not None or listening(router_address),
-            "dlo router to listen",
-            30,
-        )
-        assert processes[0].poll() is None, "dlo router exited"
-        bases = []
-        for _ in range(2):
-            port = free_port()
-            processes.append(
-                subprocess.Popen(
-                    [*DLO, "serve", "--port", str(port), *("--zenoh-config", str(config_file))],
-                    stdout=subprocess.DEVNULL,
-                    stderr=subprocess.DEVNULL,
-                    env=environment,
-                )
-            )
-            bases.append(f"http://127.0.0.1:{port}")
-        for base in bases:
-            wait_until(
-                lambda base=base: ready_or_exited(base, processes),
-                "both dlo serve to become ready",
-                READY_TIMEOUT_S,
-            )
-            assert all(process.poll() is None for process in processes)
-            answer = httpx.get(f"{base}/readyz")
-            assert answer.status_code == 200, answer.text
-        # Both services declared their subscribers before they were ready, so the router
-        # forwards the frame to both once it matches; the client declares its subscriber
-        # before it publishes, over the same link, so the router (and through it each
-        # service) knows where the results go before any is published.
-        with client_of(router, "client") as client:
-            chains = subscribe(client, "dlo/*/chains")
-            publisher = publisher_to_bus(client, "dlo/cam3/image")
-            publisher.put(encoded_scene())
-            for _ in range(2):  # one Detection from each service
-                key, payload = take(chains)
-                assert key == "dlo/cam3/chains"
-                Detection.model_validate_json(payload)
-            reply = query(client, encoded_scene())
-            assert reply.ok is not None
-    finally:
-        for process in reversed(processes):
-            process.terminate()
-        for process in processes:
-            process.wait(timeout=10)

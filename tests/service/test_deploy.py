@@ -108,6 +108,26 @@ def test_kubernetes_manifests() -> None:
         assert {port["targetPort"] for port in service["spec"]["ports"]} <= port_names
 
 
+def test_the_service_reads_its_api_token_from_a_secret() -> None:
+    """The bearer token comes from a Secret's file, never from a value in the manifest."""
+    deployment = manifests()["Deployment/dlo"]
+    dlo = only_container(deployment)
+    environment = {variable["name"]: variable for variable in dlo["env"]}
+    assert "DLO_API_TOKEN" not in environment
+    token_file = Path(environment["DLO_API_TOKEN_FILE"]["value"])
+    (mount,) = [m for m in dlo["volumeMounts"] if token_file.parent == Path(m["mountPath"])]
+    assert mount["readOnly"] is True
+    volumes = {
+        volume["name"]: volume for volume in deployment["spec"]["template"]["spec"]["volumes"]
+    }
+    secret = volumes[mount["name"]]["secret"]
+    assert secret["secretName"] == "dlo-api-token"
+    assert secret.get("optional") is not True  # without the Secret, no pod: never open by mistake
+    assert {"key": "token", "path": token_file.name} in secret["items"]
+    # a Secret with a value checked into the repository would defeat it
+    assert not any(kind.startswith("Secret/") for kind in manifests())
+
+
 def test_the_config_map_holds_the_zenoh_files_unchanged() -> None:
     data = manifests()["ConfigMap/zenoh-config"]["data"]
     assert data["router.json5"] == (DEPLOY / "zenoh" / "router.json5").read_text()

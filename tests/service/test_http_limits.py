@@ -4,14 +4,9 @@ over-long request targets and malformed requests (issue 20)."""
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
-import os
 import socket
-import subprocess
-import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import cv2
@@ -22,17 +17,10 @@ import pytest
 from service.bench.bombs import peak_rss_mb
 from service.bench.rings import rings_image
 from service.http import Settings
-from tests.helpers import blank_png, free_port, wait_until
-from tests.service.test_http import (
-    READY_TIMEOUT_S,
-    answers,
-    assert_error,
-    encode,
-    running_server,
-)
+from tests.helpers import blank_png, dlo_serve, wait_until
+from tests.service.test_http import assert_error, encode, running_server
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "docs" / "examples"
-DLO = [sys.executable, "-c", "from service.cli import main; main()"]
 BOMB_SIDE = 30_000
 """A 1-bit PNG of 30000x30000 px: about 110 KB that decodes to 900 megapixels."""
 MEMORY_ALLOWANCE_MB = 64.0
@@ -44,35 +32,14 @@ def bomb() -> bytes:
     return blank_png(BOMB_SIDE, BOMB_SIDE)
 
 
-@contextlib.contextmanager
-def dlo_serve(**environment: str) -> Iterator[tuple[str, subprocess.Popen]]:
-    """``dlo serve`` in a process of its own (HTTP only), until ready; yields URL, process."""
-    port = free_port()
-    env = dict(os.environ, DLO_PORT=str(port), DLO_ZENOH="false", DLO_WORKERS="1")
-    env.update(environment)
-    process = subprocess.Popen([*DLO, "serve"], env=env, stderr=subprocess.DEVNULL)
-    base = f"http://127.0.0.1:{port}"
-    try:
-        wait_until(
-            lambda: answers(f"{base}/readyz") or process.poll() is not None,
-            "dlo serve to become ready",
-            READY_TIMEOUT_S,
-        )
-        assert process.poll() is None, f"dlo serve exited with {process.returncode}"
-        yield base, process
-    finally:
-        process.terminate()
-        process.wait(timeout=30)
-
-
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc")
-def test_bombs_in_every_upload_are_refused_from_the_header(bomb: bytes) -> None:
+def test_bombs_in_every_upload_are_refused_from_the_header(bomb: bytes, tmp_path: Path) -> None:
     """The image, the mask, /v1/grasp's mask and depth image: a 110 KB PNG that claims
     900 megapixels is refused before it is decoded, and the server's memory stays put."""
     small = encode(np.zeros((360, 640, 3), np.uint8))
     camera = (EXAMPLES / "camera.json").read_bytes()
     depth_camera = (EXAMPLES / "camera_depth.json").read_bytes()
-    with dlo_serve() as (base, process):
+    with dlo_serve(["--no-zenoh", "--workers", "1"], tmp_path / "serve.log") as (process, base):
         before = peak_rss_mb(process.pid)
         raw = httpx.post(f"{base}/v1/detect", content=bomb, headers={"Content-Type": "image/png"})
         assert_error(raw, 413, "image is 30000x30000", "megapixels")

@@ -26,8 +26,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import subprocess
-import sys
 import threading
 import time
 from collections import Counter
@@ -40,8 +38,7 @@ import httpx
 import numpy as np
 
 from service.synthetic import make_scene
-from tests.helpers import free_port, wait_until
-from tests.service.test_http import answers
+from tests.helpers import dlo_serve as serving_process
 
 CLIENTS = 8
 WORKERS, QUEUE_SIZE = 2, 4
@@ -55,9 +52,6 @@ which arena a request's buffers land in depends on the thread that ran it). 12 M
 room for that and still catches a leak of 6 KiB or more per request."""
 REQUEST_TIMEOUT_S = 60.0
 """A request with no answer by then counts as unexpected (a hung server), not as slow."""
-READY_TIMEOUT_S = 120.0
-"""A first start on a machine compiles the numba kernels before the service is ready."""
-DLO = [sys.executable, "-c", "from service.cli import main; main()"]
 
 
 @dataclass(frozen=True)
@@ -117,32 +111,15 @@ def request_mix() -> list[Call]:
 @contextlib.contextmanager
 def dlo_serve(log: Path) -> Iterator[tuple[int, str]]:
     """A ``dlo serve`` process on a free loopback port, ready; yields its pid and base URL."""
-    port = free_port()
     environment = {
         **os.environ,
         "DLO_WORKERS": str(WORKERS),
         "DLO_QUEUE_SIZE": str(QUEUE_SIZE),
         "DLO_LOG_LEVEL": "warning",  # uvicorn's access log would be 2,000 lines
     }
-    with log.open("wb") as output:
-        process = subprocess.Popen(
-            [*DLO, "serve", "--host", "127.0.0.1", "--port", str(port), "--no-zenoh"],
-            stdout=output,
-            stderr=subprocess.STDOUT,
-            env=environment,
-        )
-    base = f"http://127.0.0.1:{port}"
-    try:
-        wait_until(
-            lambda: process.poll() is not None or answers(f"{base}/readyz"),
-            "dlo serve to become ready",
-            READY_TIMEOUT_S,
-        )
-        assert process.poll() is None, log.read_text()
+    arguments = ["--host", "127.0.0.1", "--no-zenoh"]
+    with serving_process(arguments, log, environment) as (process, base):
         yield process.pid, base
-    finally:
-        process.terminate()
-        process.wait(timeout=30)
 
 
 def resident_mib(pid: int) -> float:

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from service import synthetic
-from service.synthetic import SyntheticScene, make_scene
+from service.synthetic import SyntheticScene, make_scene, render
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +80,7 @@ def test_image_does_not_depend_on_the_band_size(monkeypatch, background):
     """
     arguments = dict(seed=5, occluders=1, background=background)
     whole = make_scene(641, 363, 3, **arguments)
-    monkeypatch.setattr(synthetic, "_BAND_PIXELS", 1)  # bands of 4 rows
+    monkeypatch.setattr(render, "_BAND_PIXELS", 1)  # bands of 4 rows
     banded = make_scene(641, 363, 3, **arguments)
     assert np.array_equal(whole.image, banded.image)
     assert np.array_equal(whole.labels, banded.labels)

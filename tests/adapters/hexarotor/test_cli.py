@@ -137,15 +137,22 @@ def test_summary_and_table() -> None:
     assert "| 3 | 11.00 | 7.00 |" in table
 
 
-def test_one_approach_in_process_reports_the_ground_truth_error() -> None:
-    grasp = grasp_target(0.0, 0.0, 0.0, yaw=0.0)
-    target = TrialTarget(grasp, target_ned=(0.6, 0.0, -0.8), heading_ned=0.0)
+TWO_TARGETS = [
+    TrialTarget(grasp_target(0.0, 0.0, 0.0, yaw=0.0), target_ned=(0.6, 0.0, -0.8), heading_ned=0.0),
+    TrialTarget(grasp_target(0.1, 0.2, 0.0, yaw=0.5), target_ned=(0.9, 0.4, -0.9), heading_ned=0.5),
+]
+
+
+@pytest.mark.parametrize("realtime", [False, True], ids=["lockstep", "wall clock"])
+def test_one_approach_in_process_reports_the_ground_truth_error(realtime) -> None:
+    target = TWO_TARGETS[0]
     seen: list[tuple[int, float | None, str]] = []
     outcome = run_trials(
         [target],
         seed=3,
         disturbance=Disturbance(),
         on_trial=lambda index, _, error, reason: seen.append((index, error, reason)),
+        realtime=realtime,
     )
     assert outcome.failures == []
     (error,) = outcome.errors_m
@@ -153,6 +160,29 @@ def test_one_approach_in_process_reports_the_ground_truth_error() -> None:
     assert outcome.measured_errors_m[0] <= TRIAL_APPROACH.tolerance_m
     assert 0.0 < error < 0.03
     assert math.isfinite(outcome.summary()["mean_mm"])
+    assert outcome.simulated_s > 1.0
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_lockstep_trials_give_the_same_result_for_the_same_seed(autopilot) -> None:
+    def fly(seed: int):
+        return run_trials(TWO_TARGETS, seed=seed, autopilot=autopilot, disturbance=Disturbance())
+
+    first, second, other = fly(3), fly(3), fly(4)
+    assert first.failures == second.failures == other.failures == []
+    # Bit for bit: the same simulated time and the same errors, ground truth and measured.
+    assert second.simulated_s == first.simulated_s
+    assert second.errors_m == first.errors_m
+    assert second.measured_errors_m == first.measured_errors_m
+    assert other.errors_m != first.errors_m  # the seed drives the gusts and the noise
+
+
+def test_the_trial_command_prints_the_same_table_twice() -> None:
+    arguments = ("hexa", "trial", "--trials", "2", "--seed", "1")
+    first, second = invoke(*arguments), invoke(*arguments)
+    assert first.exit_code == second.exit_code == 0, first.output
+    assert "| 2 |" in first.stdout
+    assert second.stdout == first.stdout
 
 
 def test_trial_rejects_bad_options() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 import time
@@ -16,7 +17,9 @@ from adapters.hexarotor.fake_vehicle import FakeVehicle
 from adapters.hexarotor.protocol import (
     ARDUPILOT_MODES,
     POSITION_YAW_TYPE_MASK,
+    PX4_MAIN_AUTO,
     PX4_MAIN_OFFBOARD,
+    PX4_SUB_AUTO_LOITER,
     mavlink,
     mavutil,
     px4_custom_mode,
@@ -28,7 +31,12 @@ QUIET = Disturbance(gust_std_m_s2=0.0, position_noise_m=0.0, attitude_noise_rad=
 
 
 class GroundStation:
-    """A minimal pymavlink peer listening with ``udpin:`` as the adapter does."""
+    """A minimal pymavlink peer listening with ``udpin:`` as the adapter does.
+
+    It answers the vehicle's TIMESYNC requests at once, as a ground station that is not in
+    lockstep does, while it waits for a message: a lockstep vehicle then runs as fast as
+    the exchange allows, and stands still between the station's waits.
+    """
 
     def __init__(self, port: int) -> None:
         self.connection = mavutil.mavlink_connection(
@@ -39,8 +47,12 @@ class GroundStation:
     def receive(self, kind: str, condition: Callable[[object], bool] = lambda m: True):
         deadline = time.monotonic() + DEFAULT_TIMEOUT_S
         while time.monotonic() < deadline:
-            message = self.connection.recv_match(type=kind, blocking=True, timeout=0.2)
-            if message is not None and condition(message):
+            message = self.connection.recv_match(blocking=True, timeout=0.2)
+            if message is None:
+                continue
+            if message.get_type() == "TIMESYNC" and message.tc1 == 0:
+                self.connection.mav.timesync_send(time.monotonic_ns(), message.ts1)
+            elif message.get_type() == kind and condition(message):
                 return message
         raise AssertionError(f"no matching {kind} within {DEFAULT_TIMEOUT_S} s")
 
@@ -117,30 +129,49 @@ def test_mode_and_arming_commands_are_acknowledged(link_pair) -> None:
     vehicle, station = link_pair(autopilot="ardupilot")
     custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     assert station.command(mavlink.MAV_CMD_DO_SET_MODE, custom, 4) == mavlink.MAV_RESULT_ACCEPTED
-    assert station.command(mavlink.MAV_CMD_DO_SET_MODE, custom, 77) == mavlink.MAV_RESULT_DENIED
+    # ArduCopter refuses a mode it does not have with FAILED (GCS_MAVLINK::_set_mode_common).
+    assert station.command(mavlink.MAV_CMD_DO_SET_MODE, custom, 77) == mavlink.MAV_RESULT_FAILED
     assert station.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_ACCEPTED
     beat = station.receive("HEARTBEAT", lambda m: m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
     assert beat.custom_mode == ARDUPILOT_MODES["GUIDED"]
     assert vehicle.armed and vehicle.guided
-    assert station.command(mavlink.MAV_CMD_NAV_TAKEOFF) == mavlink.MAV_RESULT_UNSUPPORTED
+    assert station.command(mavlink.MAV_CMD_DO_ORBIT) == mavlink.MAV_RESULT_UNSUPPORTED
 
 
-def test_px4_refuses_offboard_until_setpoints_have_streamed(link_pair) -> None:
-    vehicle, station = link_pair(autopilot="px4", offboard_warmup_s=0.3)
+def stream_setpoints(station: GroundStation, vehicle: FakeVehicle, count: int) -> None:
+    """Send ``count`` setpoints, each once the vehicle has taken the one before."""
+    for _ in range(count):
+        received = vehicle.setpoints_received
+        station.setpoint(0.0, 0.0, -1.0)
+        wait_until(lambda r=received: vehicle.setpoints_received > r, "the setpoint")
+
+
+def test_px4_takes_offboard_only_with_a_setpoint_stream(link_pair) -> None:
+    vehicle, station = link_pair(autopilot="px4", lockstep=True)
     custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     offboard = (mavlink.MAV_CMD_DO_SET_MODE, custom, PX4_MAIN_OFFBOARD, 0)
-    assert station.command(*offboard) == mavlink.MAV_RESULT_DENIED
-    stream_started = time.monotonic()
-    while time.monotonic() - stream_started < 0.6:
-        station.setpoint(0.0, 0.0, -1.0)
-        time.sleep(0.05)
-    station.setpoint(0.0, 0.0, -1.0)
+    rejected = mavlink.MAV_RESULT_TEMPORARILY_REJECTED  # PX4's commander
+    assert station.command(*offboard) == rejected
+    stream_setpoints(station, vehicle, 2)
+    # PX4 takes OFFBOARD once the stream is present: no warm-up beyond that.
     assert station.command(*offboard) == mavlink.MAV_RESULT_ACCEPTED
     assert vehicle.custom_mode == px4_custom_mode(PX4_MAIN_OFFBOARD)
 
 
+def test_px4_falls_back_to_hold_when_the_stream_stops(link_pair) -> None:
+    vehicle, station = link_pair(autopilot="px4", disturbance=QUIET, start_ned=(0.0, 0.0, -1.0))
+    custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    stream_setpoints(station, vehicle, 2)
+    assert station.command(mavlink.MAV_CMD_DO_SET_MODE, custom, PX4_MAIN_OFFBOARD, 0) == (
+        mavlink.MAV_RESULT_ACCEPTED
+    )
+    # Silence: after COM_OF_LOSS_T the offboard-loss failsafe switches to Hold.
+    beat = station.receive("HEARTBEAT", lambda m: (m.custom_mode >> 16) & 0xFF == PX4_MAIN_AUTO)
+    assert (beat.custom_mode >> 24) & 0xFF == PX4_SUB_AUTO_LOITER
+
+
 def test_follows_position_setpoints_and_ignores_other_masks(link_pair) -> None:
-    vehicle, station = link_pair(disturbance=QUIET)
+    vehicle, station = link_pair(disturbance=QUIET, start_ned=(0.0, 0.0, -1.0))
     custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     station.command(mavlink.MAV_CMD_DO_SET_MODE, custom, ARDUPILOT_MODES["GUIDED"])
     station.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
@@ -155,22 +186,52 @@ def test_follows_position_setpoints_and_ignores_other_masks(link_pair) -> None:
     wait_until(lambda: abs(vehicle.true_yaw - 0.5) < 0.01, "the yaw")
 
 
-def test_holds_where_it_is_when_setpoints_stop(link_pair) -> None:
-    vehicle, station = link_pair(disturbance=QUIET)
+def test_ardupilot_keeps_flying_to_the_last_target_when_setpoints_stop(link_pair) -> None:
+    vehicle, station = link_pair(disturbance=QUIET, start_ned=(0.0, 0.0, -1.0))
     custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     station.command(mavlink.MAV_CMD_DO_SET_MODE, custom, ARDUPILOT_MODES["GUIDED"])
     station.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-    far = (4.0, 0.0, -1.0)
+    station.setpoint(1.0, 0.0, -1.0)  # one position target, then silence
     wait_until(
-        lambda: vehicle.true_position[0] > 0.3,
-        "the vehicle to get going",
-        action=lambda: station.setpoint(*far),
+        lambda: np.linalg.norm(vehicle.true_position - [1.0, 0.0, -1.0]) < 0.01,
+        "the vehicle to reach the last target",
     )
-    # Setpoints stop: the fake brakes and holds well short of the far target.
-    wait_until(lambda: np.linalg.norm(vehicle.true_velocity) < 0.01, "the vehicle to stop")
-    stopped = vehicle.true_position
-    assert stopped[0] < 3.0
-    assert vehicle.guided  # ArduPilot stays in GUIDED and holds
+    assert vehicle.guided  # ArduCopter stays in GUIDED
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_take_off_land_and_disarm_by_command(link_pair, autopilot) -> None:
+    vehicle, station = link_pair(autopilot=autopilot, disturbance=QUIET, lockstep=True)
+    custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    if autopilot == "ardupilot":  # ArduCopter takes off in GUIDED
+        station.command(mavlink.MAV_CMD_DO_SET_MODE, custom, ARDUPILOT_MODES["GUIDED"])
+    takeoff = (mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0)
+    height = 1.0 if autopilot == "ardupilot" else vehicle.home[2] + 1.0  # PX4: AMSL
+    assert station.command(*takeoff, height) == vehicle.rules.refused  # not armed yet
+    assert station.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_ACCEPTED
+    assert station.command(*takeoff, height) == mavlink.MAV_RESULT_ACCEPTED
+    station.receive(
+        "EXTENDED_SYS_STATE", lambda m: m.landed_state == mavlink.MAV_LANDED_STATE_IN_AIR
+    )
+    assert vehicle.true_position[2] == pytest.approx(-1.0, abs=0.11)
+    assert station.command(mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, math.nan) == (
+        mavlink.MAV_RESULT_ACCEPTED
+    )
+    station.receive("HEARTBEAT", lambda m: not m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+    assert vehicle.landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND
+
+
+def test_battery_and_home_telemetry(link_pair) -> None:
+    _, station = link_pair(home=(10.0, 20.0, 100.0), start_ned=(3.0, 4.0, 0.0))
+    battery = station.receive("BATTERY_STATUS")
+    assert battery.battery_remaining == 100 and battery.voltages[4] == 65535
+    status = station.receive("SYS_STATUS")
+    assert status.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    position = station.receive("GLOBAL_POSITION_INT")
+    assert position.lat / 1e7 == pytest.approx(10.0 + math.degrees(3.0 / 6378137.0), abs=1e-7)
+    assert position.alt == 100_000 and position.relative_alt == 0
+    home = station.receive("HOME_POSITION")
+    assert (home.latitude, home.longitude, home.altitude) == (100_000_000, 200_000_000, 100_000)
 
 
 def test_gripper_command_records_the_ground_truth(link_pair) -> None:

@@ -1,0 +1,67 @@
+"""The optional bearer token (``DLO_API_TOKEN`` or ``DLO_API_TOKEN_FILE``), as FastAPI
+dependencies: :data:`API_TOKEN` on every data route (``/v1/*``, and the viewer's data
+routes when there are some), :data:`METRICS_TOKEN` on ``/metrics`` (only with
+``DLO_PROTECT_METRICS``). ``/healthz`` and ``/readyz`` stay open for probes.
+
+The token is compared in constant time (as SHA-256 digests, so that not even its length
+leaks) and never written anywhere: errors say only that it is missing or wrong.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+
+from fastapi import Depends, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+
+from service.runtime.errors import RequestError
+
+CHALLENGE = 'Bearer realm="dlo"'
+
+_bearer = HTTPBearer(
+    auto_error=False,  # a missing token is answered below, in the service's error shape
+    description="The service's token (DLO_API_TOKEN), when it is set; otherwise none needed.",
+)
+_CREDENTIALS = Depends(_bearer)
+
+
+def require_token(
+    request: Request, credentials: HTTPAuthorizationCredentials | None = _CREDENTIALS
+) -> None:
+    """401 unless the request carries ``Authorization: Bearer <token>`` when one is set."""
+    expected = request.app.state.dlo.api_token
+    if expected is None:
+        return
+    if credentials is None or not credentials.credentials.strip():
+        raise RequestError(
+            401,
+            "unauthorized",
+            "a bearer token is required: send the header 'Authorization: Bearer <token>'",
+            headers={"WWW-Authenticate": CHALLENGE},
+        )
+    if not _same(credentials.credentials.strip(), expected):
+        raise RequestError(
+            401,
+            "unauthorized",
+            "the bearer token is not the service's",
+            headers={"WWW-Authenticate": f'{CHALLENGE}, error="invalid_token"'},
+        )
+
+
+def require_token_for_metrics(
+    request: Request, credentials: HTTPAuthorizationCredentials | None = _CREDENTIALS
+) -> None:
+    """:func:`require_token`, when the settings protect ``/metrics`` too."""
+    if request.app.state.dlo.settings.protect_metrics:
+        require_token(request, credentials)
+
+
+def _same(given: str, expected: str) -> bool:
+    digest = hashlib.sha256
+    return hmac.compare_digest(digest(given.encode()).digest(), digest(expected.encode()).digest())
+
+
+API_TOKEN = Depends(require_token)
+"""Add to a route's ``dependencies`` to require the token."""
+METRICS_TOKEN = Depends(require_token_for_metrics)
