@@ -5,8 +5,8 @@ progress, summaries and errors go to stderr, each error on one line ``error: <fi
 <problem>`` (``warning: ...`` for frames of a video that were skipped while the rest went
 through). Exit status (:mod:`service.console`): 0 when everything worked, 1 when any input
 failed (a video fails only when none of its frames could be processed), 2 for a usage
-error, 130 when Ctrl-C stopped the run before anything was processed (a Ctrl-C after that
-is a clean stop).
+error, 130 when Ctrl-C stopped the run (every output written so far is whole, but a
+script must not take the run for complete).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from service.batch import (
     find_output_clashes,
     parse_outputs,
     process_file,
+    read_params,
 )
 from service.console import (
     EXIT_FAILED,
@@ -158,6 +159,17 @@ def detect(
             "--segmentation model. Needs onnxruntime: pip install 'dlo-service[onnx]'.",
         ),
     ] = None,
+    params_text: Annotated[
+        str | None,
+        typer.Option(
+            "--params",
+            metavar="JSON|FILE",
+            help="Any detection parameters, as a JSON object such as "
+            '\'{"gap_curve": "natural", "max_gap": 150}\' or a file holding one (as dlo eval '
+            "--params); the options above override the fields they set.",
+            show_default=False,
+        ),
+    ] = None,
     out_dir: Annotated[
         Path | None,
         typer.Option(
@@ -189,9 +201,10 @@ def detect(
 ) -> None:
     """Detect the cables in each image, or in every frame of a video or camera stream.
 
-    Videos (.mp4 .avi .mkv .mov .webm .m4v .mpg .mpeg) and cameras write one line of
-    JSON per frame to <stem>.jsonl: {"frame": i, "timestamp_s": t, "detection": {...}}.
-    Ctrl-C stops cleanly, keeping every line written so far.
+    One image without --out-dir: its Detection JSON on stdout, one line per chain and per
+    crossing. Videos (.mp4 .avi .mkv .mov .webm .m4v .mpg .mpeg) and cameras write one
+    line of JSON per frame to <stem>.jsonl: {"frame": i, "timestamp_s": t, "detection":
+    {...}}. Ctrl-C stops cleanly, keeping every line written so far, and exits with 130.
     """
     console = stderr_console()
     if segmenter_model is not None:
@@ -204,6 +217,7 @@ def detect(
         exit_usage(console, "--segmentation model needs --segmenter-model FILE.onnx")
     try:
         params = build_params(
+            None if params_text is None else read_params(params_text),
             segment_length=segment_length,
             expected_count=expected_count,
             segmentation=segmentation,
@@ -254,13 +268,13 @@ def detect(
             max_frames,
             segmenter,
         )
-        if summary is not None and summary.interrupted and summary.processed == 0:
+        if summary is not None and summary.interrupted:
             raise typer.Exit(EXIT_INTERRUPTED)
         raise typer.Exit(0 if summary is not None and summary.succeeded else EXIT_FAILED)
 
     if not paths:
         exit_usage(console, "give image or video files (PATH...), or --camera SRC")
-    files, problems = expand_inputs(paths)
+    files, problems, skipped = expand_inputs(paths)
     videos = [path for path in files if is_video_path(path)]
     images = [path for path in files if not is_video_path(path)]
     if mask is not None and (len(paths) != 1 or len(files) > 1 or videos):
@@ -279,6 +293,8 @@ def detect(
         _stream_outputs(console, outputs, selected, overlay_video) if videos else (False, False)
     )
 
+    for note in skipped:
+        print_warning(console, note)
     for problem in problems:
         print_error(console, problem)
     failed = len(problems)
@@ -301,13 +317,11 @@ def detect(
         raise typer.Exit(EXIT_FAILED if failed else 0)
 
     _make_out_dir(console, out_dir)
-    processed = 0
     interrupted = False
     if images:
-        images_done, images_failed, interrupted = _detect_images(
+        _, images_failed, interrupted = _detect_images(
             console, images, params, out_dir, mask, selected, per_image
         )
-        processed += images_done
         failed += images_failed
     clashes = find_output_clashes(videos)
     for path in videos:
@@ -331,10 +345,9 @@ def detect(
         if summary is None or not (summary.succeeded or summary.interrupted):
             failed += 1
         if summary is not None:
-            processed += summary.processed
             interrupted = summary.interrupted
 
-    if interrupted and processed == 0:
+    if interrupted:
         raise typer.Exit(EXIT_INTERRUPTED)
     raise typer.Exit(EXIT_FAILED if failed else 0)
 

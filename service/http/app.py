@@ -32,8 +32,8 @@ def create_app(settings: Settings | None = None, detect: DetectFunction | None =
     settings : Settings, optional
         Limits and pool size; by default read from ``DLO_*`` environment variables.
     detect : callable, optional
-        ``detect(image, params, mask) -> Detection`` run for each request; by default
-        :func:`service.perception.detect`, with the ONNX segmenter of
+        ``detect(image, params, mask, deadline) -> Detection`` run for each request; by
+        default :func:`service.perception.detect`, with the ONNX segmenter of
         ``settings.segmenter_model`` for requests with ``segmentation=model``. Tests
         inject slow or failing ones.
 
@@ -139,6 +139,7 @@ async def _open_bus(state: AppState) -> None:
             max_bytes=settings.max_body_bytes,
             image_keys=settings.zenoh_image_keys,
             balanced=settings.zenoh_assignment == "balanced",
+            max_detect_seconds=settings.max_detect_seconds,
         )
         state.bus = bus  # before opening: close() then waits for open() to finish
         await asyncio.to_thread(bus.open)

@@ -28,11 +28,19 @@ from service.perception import _pipeline_kernels
 from service.perception._kernel_cache import kernels_cached, write_stamp
 from service.perception.contours import extract_contours
 from service.perception.crossings import detect_crossings, find_intersections
+from service.perception.deadline import Deadline, check
 from service.perception.end_extension import extend_ends
 from service.perception.errors import InvalidInputError
 from service.perception.fitting import fit_chains, junction_zones
 from service.perception.geometry import polyline_length, resample
-from service.perception.merging import Join, MergedPath, chain_ends, gap_curve, merge_chains
+from service.perception.merging import (
+    Join,
+    MergedPath,
+    chain_ends,
+    choose_joins,
+    gap_curve,
+    merge_chains,
+)
 from service.perception.pruning import prune_overlaps
 from service.perception.segmentation import (
     as_bgr,
@@ -70,6 +78,10 @@ class DetectionResult:
     mask: np.ndarray
     skeleton: np.ndarray
     joins: list[Join] = field(default_factory=list)
+
+
+# Merged paths finished between two looks at the deadline.
+DEADLINE_CHECK_EVERY = 256
 
 
 class _Stopwatch:
@@ -131,7 +143,9 @@ def detect_full(
     image: np.ndarray | None,
     params: DetectParams | None = None,
     mask: np.ndarray | None = None,
+    *,
     segmenter: Segmenter | None = None,
+    deadline: Deadline | None = None,
 ) -> DetectionResult:
     """Detect every DLO in an image and return the intermediate products too.
 
@@ -171,6 +185,7 @@ def detect_full(
     else:
         foreground, cue, image_low = segment_with_cue(image_bgr, params, segmenter)
     watch.lap("segmentation")
+    check(deadline, "segmentation")
     if not foreground.any():
         return _empty(width, height, params, watch, foreground, foreground)
 
@@ -183,33 +198,40 @@ def detect_full(
     if spur_length > 0:
         skeleton = remove_spurs(skeleton, spur_length)
     watch.lap("skeleton")
+    check(deadline, "skeleton")
 
     # 3. Contours (Suzuki-Abe) of the skeleton.
     contours = extract_contours(skeleton)
     watch.lap("contours")
+    check(deadline, "contours")
 
     # 4. Fitting: chains of l_s segments, split at tips and junction zones.
     zones = junction_zones(skeleton, radius)
     pieces = fit_chains(contours, skeleton, zones, params.segment_length)
     watch.lap("fitting")
+    check(deadline, "fitting")
 
     # 5. Pruning of segments that repeat kept ones.
     pieces = prune_overlaps(pieces, shape)
     # Scraps shorter than the cable is wide carry no direction worth merging on.
     pieces = [p for p in pieces if polyline_length(p) >= min(radius, params.min_chain_length)]
     watch.lap("pruning")
+    check(deadline, "pruning")
 
     # 6. Merging across gaps and crossings; each path's free ends extended to the
     # cable's ends and the path resampled; then crossings and their order.
-    merged = merge_chains(pieces, params, radius, zones, distance)
+    merged = merge_chains(pieces, params, radius, zones, distance, deadline)
     finals = []
-    for path in merged.paths:
+    for index, path in enumerate(merged.paths):
+        if index % DEADLINE_CHECK_EVERY == 0:
+            check(deadline, "merging")
         if polyline_length(path.vertices) < params.min_chain_length:
             continue
         finals.append(_finalise_path(path, foreground, distance, params, radius))
     finals.sort(key=lambda item: -polyline_length(item[0]))
     joint_arrays = [joints for joints, _, _ in finals]
     radii = [chain_radius for _, _, chain_radius in finals]
+    check(deadline, "merging")
     found = detect_crossings(joint_arrays, radii, image_bgr)
     inferred_flags = [inferred.copy() for _, inferred, _ in finals]
     for crossing in found:
@@ -220,6 +242,7 @@ def detect_full(
         near = np.hypot(midpoints[:, 0] - crossing.x, midpoints[:, 1] - crossing.y) < reach
         inferred_flags[crossing.under][near] = True
     watch.lap("merging")
+    check(deadline, "merging")
 
     if cue is not None and joint_arrays:
         # Back to step 1 with the chains known: a cable dimmer than the rest gets the
@@ -272,7 +295,9 @@ def detect(
     image: np.ndarray | None,
     params: DetectParams | None = None,
     mask: np.ndarray | None = None,
+    *,
     segmenter: Segmenter | None = None,
+    deadline: Deadline | None = None,
 ) -> Detection:
     """Detect every deformable linear object in an image as a chain of segments.
 
@@ -293,6 +318,9 @@ def detect(
         For ``params.segmentation == "model"``: ``segmenter(image_bgr) -> mask``, a
         learned model (:class:`service.perception.segmenter.OnnxSegmenter`) or any
         function; see :mod:`service.perception.segmenter` for what it may return.
+    deadline : Deadline, optional
+        A time budget (:class:`service.perception.deadline.Deadline`), checked between
+        the steps and inside the loops that grow with the number of cable pieces.
 
     Returns
     -------
@@ -302,6 +330,8 @@ def detect(
     ------
     InvalidInputError
         The image or mask cannot be used (wrong type or shape, empty mask ...).
+    DeadlineExceeded
+        ``deadline`` passed before the detection was done.
 
     Notes
     -----
@@ -318,7 +348,7 @@ def detect(
     >>> round(detection.chains[0].length / 10)
     18
     """
-    return detect_full(image, params, mask, segmenter).detection
+    return detect_full(image, params, mask, segmenter=segmenter, deadline=deadline).detection
 
 
 def _numba_cache_dir() -> str:
@@ -369,7 +399,8 @@ def warm_up() -> None:
         np.array([[0.0, 5.0], [4.0, 5.0], [8.0, 5.0], [12.0, 5.0]]),
         np.array([[6.0, 0.0], [6.0, 4.0], [6.0, 8.0], [6.0, 12.0]]),
     ]
-    chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
+    ends = chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
+    choose_joins(ends, len(strands), DetectParams(), radius)  # the candidates' grid
     east, north = np.array([1.0, 0.0]), np.array([0.0, 1.0])
     for shape in GapCurve:
         for end, arriving in (

@@ -390,6 +390,12 @@ def grow_by_own_thresholds(
     before = np.ascontiguousarray(mask, dtype=bool).view(np.uint8)
     grown = before.copy()
     cue = np.ascontiguousarray(cue, dtype=np.uint8)
+    # Each cable's crossings, gathered once (in their order): a scene of thousands of
+    # cables must not scan every crossing for every cable.
+    crossings_of: dict[int, list[tuple[float, float, int, int]]] = {}
+    for crossing in crossings:
+        for cable in dict.fromkeys(crossing[2:4]):
+            crossings_of.setdefault(cable, []).append(crossing)
     for index, (points, radius) in enumerate(zip(centrelines, radii, strict=True)):
         points = np.ascontiguousarray(points, np.float64)
         if len(points) < 2:
@@ -399,7 +405,7 @@ def grow_by_own_thresholds(
             seen = ~np.asarray(hidden[index], bool)
         radius = max(float(radius), 1.0)
         span = int(np.ceil(OWN_SURROUNDINGS_RADII * radius))
-        mine = [c for c in crossings if index in (c[2], c[3])]
+        mine = crossings_of.get(index, [])
         avoid_xy = np.array([(c[0], c[1]) for c in mine], np.float64).reshape(-1, 2)
         avoid_reach = np.array(
             [span + radii[c[3] if c[2] == index else c[2]] for c in mine], np.float64
