@@ -45,6 +45,7 @@ from pydantic import BaseModel, Field
 from schemas import Detection, DetectParams
 from service.imageio import OutputWriteError, _opencv_quiet
 from service.perception import InvalidInputError, detect, render_overlay
+from service.perception.segmenter import Segmenter
 
 # FFmpeg, which OpenCV reads most videos with, prints its own complaints about damaged
 # files straight to stderr; this program reports problems itself, on one line. Read by
@@ -413,6 +414,7 @@ def process_stream(
     overlay_video: bool = False,
     max_frames: int | None = None,
     on_frame: Callable[[FrameOutcome], None] | None = None,
+    segmenter: Segmenter | None = None,
 ) -> StreamSummary:
     """Detect the cables in every frame of a source and write the outputs as it goes.
 
@@ -432,6 +434,9 @@ def process_stream(
         Stop after taking this many frames from the source.
     on_frame : callable, optional
         Called with a :class:`FrameOutcome` after each frame (progress, messages).
+    segmenter : callable, optional
+        The segmenter for ``params.segmentation == "model"`` (see
+        :mod:`service.perception.segmenter`).
 
     Returns
     -------
@@ -479,7 +484,7 @@ def process_stream(
         lines = _JsonLinesWriter(outputs.jsonl) if jsonl else None
         if overlay_video:
             overlay = _OverlayVideoWriter(outputs.overlay_video, source.fps or DEFAULT_FPS)
-        _run(source, params, summary, lines, overlay, max_frames, on_frame)
+        _run(source, params, summary, lines, overlay, max_frames, on_frame, segmenter)
     except KeyboardInterrupt:
         summary.interrupted = True
     finally:
@@ -527,6 +532,7 @@ def _run(
     overlay: _OverlayVideoWriter | None,
     max_frames: int | None,
     on_frame: Callable[[FrameOutcome], None] | None,
+    segmenter: Segmenter | None = None,
 ) -> None:
     """The frame loop of :func:`process_stream`; fills ``summary`` in place."""
     frames = iter(source.frames)
@@ -552,7 +558,7 @@ def _run(
             problem = f"frame {index}: unreadable frame, skipped"
         else:
             try:
-                detection = detect(frame.image, params)
+                detection = detect(frame.image, params, segmenter=segmenter)
             except InvalidInputError as exc:
                 problem = f"frame {index}: {_one_line(exc)}"
             except Exception as exc:  # one bad frame does not end the stream

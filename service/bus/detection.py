@@ -43,8 +43,8 @@ from service.batch import describe_json_validation_error
 from service.bus.config import IMAGE_KEYS, JSON, QUERY_KEY, chains_key, errors_key
 from service.bus.ownership import CAMERA_IDLE_S, Ownership, replicas_key
 from service.runtime.errors import RequestError
-from service.runtime.frames import Frame, check_declared_size
-from service.runtime.jobs import DetectFunction, default_detect, run_detection
+from service.runtime.frames import Frame, check_upload
+from service.runtime.jobs import OVER_BUDGET, DetectFunction, default_detect, run_detection
 from service.runtime.metrics import Metrics
 
 logger = logging.getLogger(__name__)
@@ -128,7 +128,8 @@ class DetectionBus:
         The session's configuration (see :func:`~service.bus.config.service_config`);
         default: zenoh's (a peer).
     detect : callable, optional
-        ``detect(image, params, mask) -> Detection``; default :func:`service.perception.detect`.
+        ``detect(image, params, mask, deadline) -> Detection``; default
+        :func:`service.perception.detect`.
     metrics : Metrics, optional
         Counters to update (the HTTP app's when the bus runs inside it); default: its own.
     max_pixels, max_bytes : int
@@ -147,6 +148,9 @@ class DetectionBus:
         itself (and takes cameras), so that it knows the replicas and, balanced, the active
         cameras as they do; default ``camera_idle_s`` balanced, else
         :data:`RENDEZVOUS_LEARN_S`. A replica alone announces itself at once.
+    max_detect_seconds : float, optional
+        Time budget of one detection (decoding included); past it the frame or query
+        gets the error ``time_budget_exceeded`` and the thread goes on. None: no limit.
     """
 
     def __init__(
@@ -162,6 +166,7 @@ class DetectionBus:
         balanced: bool = True,
         camera_idle_s: float = CAMERA_IDLE_S,
         learn_s: float | None = None,
+        max_detect_seconds: float | None = None,
     ) -> None:
         self._config = config if config is not None else zenoh.Config()
         self._detect = detect if detect is not None else default_detect
@@ -177,6 +182,7 @@ class DetectionBus:
         self.learn_s = learn_s
         self.replicas_key = replicas_key(self.image_keys)
         """The pool's liveliness prefix; this replica's token is ``<it>/<replica id>``."""
+        self.max_detect_seconds = max_detect_seconds
         self.counts: Counter[str] = Counter()
         """Outcomes so far: ``published``, ``replaced``, ``rejected``, ``failed``,
         ``not_owned`` for frames, ``query_answered`` ... for queries (also in ``metrics``)."""
@@ -411,11 +417,15 @@ class DetectionBus:
                     "image_too_large",
                     f"image: {len(job.image)} bytes, more than the limit of {self.max_bytes}",
                 )
-            check_declared_size(job.image, self.max_pixels)
-            _, detection = run_detection(Frame(job.image, params), self._detect, self.max_pixels)
+            check_upload(job.image, "image", self.max_pixels)
+            _, detection = run_detection(
+                Frame(job.image, params), self._detect, self.max_pixels, self.max_detect_seconds
+            )
         except RequestError as exc:
             if isinstance(exc, AttachmentError):
                 identity = exc.identity
+            if exc.code == OVER_BUDGET:
+                self.metrics.over_budget.inc()
             logger.warning("%s: sample rejected: %s", where, exc.message)
             self._fail(job, identity, "rejected", exc.code, exc.message)
             return

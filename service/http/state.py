@@ -16,6 +16,7 @@ from service.runtime.settings import Settings
 if TYPE_CHECKING:
     from service.bus.detection import DetectionBus
     from service.bus.live import LiveHub
+    from service.perception.segmenter import Segmenter
 
 
 @dataclass
@@ -32,6 +33,9 @@ class AppState:
     pool: WorkerPool
     api_token: str | None = None
     """The bearer token required on /v1/* (:mod:`service.http.auth`); None: open."""
+    segmenter: Segmenter | None = None
+    """The model for ``segmentation=model`` (``DLO_SEGMENTER_MODEL``), for the routes that
+    run the pipeline themselves (the label image); None: none loaded."""
     ready: bool = False
     warm_up_error: str | None = None
     background: list[asyncio.Task[Any] | Future[Any]] = field(default_factory=list)
@@ -52,11 +56,17 @@ class AppState:
         metrics: Metrics,
         detect: DetectFunction,
         api_token: str | None = None,
+        segmenter: Segmenter | None = None,
     ) -> AppState:
         pool = WorkerPool(settings.workers, settings.queue_size)
         metrics.in_flight.set_function(lambda: pool.admitted)
         return cls(
-            settings=settings, metrics=metrics, detect=detect, pool=pool, api_token=api_token
+            settings=settings,
+            metrics=metrics,
+            detect=detect,
+            pool=pool,
+            api_token=api_token,
+            segmenter=segmenter,
         )
 
     async def close(self) -> None:

@@ -63,7 +63,8 @@ async def page() -> FileResponse:
 
 @viewer.get("/viewer/config")
 async def config(request: Request) -> JSONResponse:
-    """Whether a token is needed, whether the live mode can work, limits and defaults."""
+    """Whether a token is needed, whether the live mode can work, limits, defaults and the
+    segmentation methods (``model`` only when the service has a segmenter model)."""
     state = request.app.state.dlo
     settings = state.settings
     return JSONResponse(
@@ -73,7 +74,11 @@ async def config(request: Request) -> JSONResponse:
             "max_body_bytes": settings.max_body_bytes,
             "max_pixels": settings.max_pixels,
             "defaults": DetectParams().model_dump(mode="json"),
-            "segmentation_methods": [method.value for method in SegmentationMethod],
+            "segmentation_methods": [
+                method.value
+                for method in SegmentationMethod
+                if method != SegmentationMethod.model or settings.segmenter_model is not None
+            ],
         },
         headers={"Cache-Control": "no-cache"},
     )

@@ -37,6 +37,13 @@ def test_dlo_bench_quick_runs_on_one_thread_and_reports_json(tmp_path):
         assert 0 < stats["total"]["p50"] <= stats["total"]["max"]
         assert case["fps"] > 0
     assert [row["cables"] for row in results["scaling_cables"]] == [1, 2, 3]
+    assert [row["case"].split(",")[0] for row in results["lifting"]] == [
+        "plane",
+        "plane",
+        "depth image",
+    ]
+    for row in results["lifting"]:
+        assert row["joints"] > 0 and 0 < row["lift_ms"]["p50"] <= row["lift_ms"]["max"]
     assert results["peak_rss_mb"] > 0
 
 
@@ -48,7 +55,13 @@ def test_dlo_bench_prints_tables_by_default(tmp_path):
         timeout=300,
     )
     assert completed.returncode == 0, completed.stderr
-    for heading in ("one thread", "after warm-up", "p50 per stage", "scaling with image area"):
+    for heading in (
+        "one thread",
+        "after warm-up",
+        "p50 per stage",
+        "scaling with image area",
+        "a camera model",
+    ):
         assert heading in completed.stdout
     assert "peak resident memory" in completed.stdout
 
@@ -78,3 +91,31 @@ def test_dlo_bench_times_one_thing_at_a_time():
     )
     assert completed.returncode == 2
     assert "give one" in completed.stderr
+
+
+def bench(*options: str) -> subprocess.CompletedProcess:
+    """``dlo bench OPTIONS`` in a process of its own, its output captured."""
+    return subprocess.run([*DLO, "bench", *options], capture_output=True, text=True, timeout=300)
+
+
+def test_dlo_bench_rings_times_scenes_of_many_small_rings():
+    """The report's shape and the scenes: one chain per ring."""
+    completed = bench("--rings", "9,40", "--json")
+    assert completed.returncode == 0, completed.stderr
+    rows = json.loads(completed.stdout)["rings"]
+    assert [row["rings"] for row in rows] == [9, 40]
+    assert [row["chains"] for row in rows] == [9, 40]
+    assert [(row["width"], row["height"]) for row in rows] == [(120, 120), (280, 240)]
+    assert all(row["total_ms"] > 0 for row in rows)
+    refused = bench("--rings", "ten")
+    assert refused.returncode == 2 and "--rings" in refused.stderr
+
+
+def test_dlo_bench_bombs_reports_refusals_and_the_servers_memory():
+    completed = bench("--bombs", "--quick", "--json")
+    assert completed.returncode == 0, completed.stderr
+    results = json.loads(completed.stdout)
+    assert [row["upload"] for row in results["rows"]] == ["image (raw body)", "mask (multipart)"]
+    assert all(row["requests"] == 5 and row["p50_ms"] > 0 for row in results["rows"])
+    memory = results["server_peak_rss_mb"]
+    assert memory["after"] - memory["before"] < 64  # decoding one bomb: 2.7 GB

@@ -95,7 +95,7 @@ def test_the_configuration_says_what_the_page_needs(server) -> None:
     config = httpx.get(f"{server}/viewer/config").json()
     assert config["token_required"] is False and config["zenoh"] is False
     assert config["defaults"]["segment_length"] == 10.0
-    assert config["segmentation_methods"] == ["auto", "hsv"]
+    assert config["segmentation_methods"] == ["auto", "contrast", "brightness", "hsv"]
     with running_server(Settings(workers=1, zenoh=False, api_token=TOKEN)) as base:
         assert httpx.get(f"{base}/viewer/config").json()["token_required"] is True
         assert httpx.get(f"{base}/").status_code == 200  # the page itself stays open
