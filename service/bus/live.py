@@ -39,7 +39,7 @@ import numpy as np
 import zenoh
 
 from service.runtime.errors import RequestError
-from service.runtime.frames import check_declared_size
+from service.runtime.frames import check_upload
 
 logger = logging.getLogger(__name__)
 
@@ -110,7 +110,7 @@ class LiveFrame:
 
 def _to_jpeg(payload: bytes, max_pixels: int) -> bytes:
     try:
-        check_declared_size(payload, max_pixels)
+        check_upload(payload, "frame", max_pixels)  # the header, before decoding
     except RequestError as exc:
         raise ValueError(exc.message) from None
     image = cv2.imdecode(np.frombuffer(payload, np.uint8), cv2.IMREAD_COLOR)
