@@ -171,7 +171,7 @@ class GatedDetect:
     def __call__(self, image: np.ndarray, params: DetectParams, mask: np.ndarray | None, deadline):
         self.entered.set()
         assert self.release.wait(TIMEOUT), "the test never released the detection"
-        return real_detect(image, params, mask, deadline)
+        return real_detect(image, params, mask, deadline=deadline)
 
 
 def numbered_frame(publisher: zenoh.Publisher, number: int) -> None:

@@ -125,7 +125,7 @@ class Controls:
         if self.fail:
             raise RuntimeError("injected failure")
         assert self.gate.wait(timeout=10), "test gate never opened"
-        return real_detect(image, params, mask, deadline)
+        return real_detect(image, params, mask, deadline=deadline)
 
 
 # --- detection --------------------------------------------------------------------------------

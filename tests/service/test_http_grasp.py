@@ -259,7 +259,7 @@ def test_busy_pool_answers_503_at_once(png) -> None:
 
     def held_detect(image, params, mask, deadline) -> Detection:
         assert gate.wait(timeout=20), "test gate never opened"
-        return real_detect(image, params, mask, deadline)
+        return real_detect(image, params, mask, deadline=deadline)
 
     settings = Settings(workers=1, queue_size=0, zenoh=False)
     gate.set()  # let the warm-up through
