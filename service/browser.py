@@ -94,13 +94,17 @@ def chromium() -> Iterator[Browser]:
 
 
 @contextlib.contextmanager
-def serving(app: FastAPI, ready_timeout_s: float = 180.0) -> Iterator[str]:
-    """Serve ``app`` with uvicorn on a free loopback port in a thread until ``/readyz``
-    says 200 (a first run compiles the kernels); yields the base URL."""
+def serving(
+    app: FastAPI, options: dict[str, Any] | None = None, ready_timeout_s: float = 180.0
+) -> Iterator[str]:
+    """Serve ``app`` with uvicorn (``options``: its keyword arguments, as ``dlo serve``
+    gives them; host and port are replaced) on a free loopback port in a thread until
+    ``/readyz`` says 200 (a first run compiles the kernels); yields the base URL."""
     import httpx
     import uvicorn
 
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
+    config = {"log_level": "warning", **(options or {}), "host": "127.0.0.1", "port": 0}
+    server = uvicorn.Server(uvicorn.Config(app, **config))
     thread = threading.Thread(target=server.run, name="dlo-viewer-server", daemon=True)
     thread.start()
     try:

@@ -109,10 +109,11 @@ def _screenshot_viewer(example: Path, detection: Detection, out: Path) -> None:
     """Serve the viewer here (no zenoh, no token) and photograph it with ``example``."""
     from service.browser import screenshot_viewer, serving
     from service.http import create_app
+    from service.http.server import uvicorn_options
     from service.runtime.settings import Settings
 
     settings = Settings(workers=1, zenoh=False, api_token=None, api_token_file=None)
-    with serving(create_app(settings)) as base:
+    with serving(create_app(settings), uvicorn_options("127.0.0.1", 0, "warning")) as base:
         screenshot_viewer(base, example, detection, out)
 
 
