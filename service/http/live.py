@@ -152,12 +152,14 @@ class _Disconnected(Exception):
 
 
 def _same_origin(websocket: WebSocket) -> bool:
-    """False for a browser page of another site (its ``Origin`` is not this host): no
-    cross-site page may read the cameras. Clients that are not browsers send no Origin."""
+    """False for a browser page of another site (its ``Origin`` is not this host, nor the
+    host a reverse proxy says it forwarded): no cross-site page may read the cameras.
+    Clients that are not browsers send no Origin."""
     origin = websocket.headers.get("origin")
     if origin is None:
         return True
-    return urlsplit(origin).netloc.lower() == websocket.headers.get("host", "").lower()
+    hosts = {websocket.headers.get(name, "").lower() for name in ("host", "x-forwarded-host")}
+    return urlsplit(origin).netloc.lower() in hosts - {""}
 
 
 async def _authenticate(websocket: WebSocket, expected: str | None) -> None:

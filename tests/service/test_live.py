@@ -324,6 +324,11 @@ def test_bad_cameras_other_sites_and_zenoh_off_are_refused() -> None:
         assert refused.value.response.status_code == 403
         with open_socket(base, "cam1", origin=base) as socket:  # the viewer's own page
             next_text(socket, "hello")
+        behind_a_proxy = {"X-Forwarded-Host": "cell.example"}
+        with open_socket(
+            base, "cam1", origin="https://cell.example", additional_headers=behind_a_proxy
+        ) as socket:
+            next_text(socket, "hello")
     with running_server(Settings(workers=1, zenoh=False)) as base:
         response = httpx.get(f"{base}/v1/live/cameras")
         assert response.status_code == 503 and "zenoh is off" in response.json()["detail"]
