@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import subprocess
 import threading
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -30,7 +31,7 @@ from service.browser import (
 )
 from service.http import Settings
 from service.synthetic import make_scene
-from tests.helpers import free_port, wait_until
+from tests.helpers import DLO, free_port, wait_until
 
 from .test_bus import client_of
 from .test_http import Controls, running_server
@@ -307,3 +308,35 @@ def test_the_live_mode_shows_the_frames_of_a_camera(browser, service, scene_file
         camera.stop.set()
         thread.join(timeout=10)
         page.close()
+
+
+# --- the commands that drive the page ------------------------------------------------------------
+
+
+def test_the_readme_screenshot_command(browser, tmp_path) -> None:
+    """``dlo demo --viewer-screenshot`` (the README's picture) makes a picture of the page."""
+    shot = tmp_path / "viewer.png"
+    completed = subprocess.run(
+        [*DLO, "demo", "--out-dir", str(tmp_path / "demo"), "--viewer-screenshot", str(shot)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert completed.returncode == 0, completed.stderr
+    picture = cv2.imread(str(shot))
+    assert picture is not None and picture.shape[1] == 1400
+
+
+def test_the_viewer_benchmark_reports_what_the_page_did(browser) -> None:
+    """``dlo bench --viewer`` (BENCHMARKS.md, "Viewer"): a short run, for the report's shape."""
+    completed = subprocess.run(
+        [*DLO, "bench", "--viewer", "--seconds", "2", "--json"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert completed.returncode == 0, completed.stderr
+    report = json.loads(completed.stdout)
+    assert report["frames_sent"] > 0 and report["frames_shown"] > 0
+    assert report["heap_start_bytes"] > 0 and report["heap_end_bytes"] > 0
+    assert report["page_problems"] == []
