@@ -26,8 +26,11 @@ from service.imageio import (
 )
 from service.perception import InvalidInputError, detect_full, render_labels, render_overlay
 
-OUTPUT_KINDS = ("json", "labels", "overlay")
-"""The outputs written per image, as named on the command line (``--outputs``)."""
+IMAGE_OUTPUTS = ("json", "labels", "overlay")
+"""The outputs written per image, by default."""
+OUTPUT_KINDS = (*IMAGE_OUTPUTS, "mcap")
+"""Every output, as named on the command line (``--outputs``); ``mcap`` (a ROS 2 recording
+of all the images, or of each video or camera) is written only when asked for."""
 
 
 class InvalidParametersError(ValueError):
@@ -198,7 +201,7 @@ def process_file(
     params: DetectParams | None,
     out_dir: str | os.PathLike[str] | None,
     mask_path: str | os.PathLike[str] | None = None,
-    outputs: Collection[str] = OUTPUT_KINDS,
+    outputs: Collection[str] = IMAGE_OUTPUTS,
 ) -> Detection:
     """Detect the DLOs in one image file and write the outputs.
 
@@ -214,8 +217,9 @@ def process_file(
     mask_path : str or Path, optional
         Foreground mask file of the image's size; replaces segmentation.
     outputs : collection of str
-        Which of :data:`OUTPUT_KINDS` to write in ``out_dir`` (all by default); the
-        images that are not asked for are not rendered.
+        Which of :data:`IMAGE_OUTPUTS` to write in ``out_dir`` (all by default); the
+        images that are not asked for are not rendered (``mcap`` is the caller's: one
+        recording holds many images).
 
     Returns
     -------

@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.console import Console
@@ -22,7 +22,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from schemas import Detection, DetectParams, SegmentationMethod
 from service.batch import (
-    OUTPUT_KINDS,
+    IMAGE_OUTPUTS,
     InvalidParametersError,
     build_params,
     detection_to_json,
@@ -53,6 +53,9 @@ from service.video import (
     parse_camera,
     process_stream,
 )
+
+if TYPE_CHECKING:
+    from service.ros.recording import McapRecorder
 
 FRAME_MESSAGES_PER_STREAM = 5
 """Skipped frames reported one by one per video; the rest only counted in the summary."""
@@ -136,9 +139,11 @@ def detect(
         str | None,
         typer.Option(
             metavar="LIST",
-            help="What to write, comma-separated from json, labels, overlay. Default: all "
-            "three per image; json (the <stem>.jsonl) per video. For videos, overlay is "
-            "the overlay video and labels are not available.",
+            help="What to write, comma-separated from json, labels, overlay, mcap. Default: "
+            "json, labels and overlay per image; json (the <stem>.jsonl) per video. For "
+            "videos, overlay is the overlay video and labels are not available. mcap: a ROS 2 "
+            "recording (frames and chains as markers, for Foxglove), <stem>.mcap per video or "
+            "camera, one for all the images (named after the one PATH, else images.mcap).",
             show_default=False,
         ),
     ] = None,
@@ -166,7 +171,7 @@ def detect(
             hsv_low=hsv_low,
             hsv_high=hsv_high,
         )
-        selected = OUTPUT_KINDS if outputs is None else parse_outputs(outputs)
+        selected = IMAGE_OUTPUTS if outputs is None else parse_outputs(outputs)
     except InvalidParametersError as exc:
         exit_usage(console, str(exc))
     if max_frames is not None and max_frames < 1:
@@ -204,8 +209,13 @@ def detect(
     if out_dir is None and outputs is not None:
         exit_usage(console, "--outputs needs --out-dir")
     stream_outputs = (
-        _stream_outputs(console, outputs, selected, overlay_video) if videos else (False, False)
+        _stream_outputs(console, outputs, selected, overlay_video)
+        if videos
+        else (False, False, False)
     )
+    recording = None
+    if "mcap" in selected and images:
+        recording = out_dir / f"{recording_stem(paths)}.mcap"
 
     for problem in problems:
         print_error(console, problem)
@@ -227,11 +237,13 @@ def detect(
     interrupted = False
     if images:
         images_done, images_failed, interrupted = _detect_images(
-            console, images, params, out_dir, mask, selected
+            console, images, params, out_dir, mask, selected, recording
         )
         processed += images_done
         failed += images_failed
     clashes = find_output_clashes(videos)
+    if recording is not None:  # the images' recording is named like a video's outputs
+        clashes.update({path: images[0] for path in videos if path.stem == recording.stem})
     for path in videos:
         if interrupted:
             break
@@ -257,14 +269,25 @@ def detect(
 
 def _stream_outputs(
     console: Console, given: str | None, selected: Iterable[str], overlay_video: bool
-) -> tuple[bool, bool]:
-    """Which outputs videos get: (JSON Lines, overlay video); labels are a usage error."""
+) -> tuple[bool, bool, bool]:
+    """Which outputs videos get: (JSON Lines, overlay video, MCAP recording); labels are a
+    usage error."""
     chosen = set(selected)
     if given is None:
-        return True, overlay_video
+        return True, overlay_video, False
     if "labels" in chosen:
-        exit_usage(console, "--outputs: labels are not available for videos (use json, overlay)")
-    return "json" in chosen, "overlay" in chosen or overlay_video
+        exit_usage(
+            console, "--outputs: labels are not available for videos (use json, overlay, mcap)"
+        )
+    return "json" in chosen, "overlay" in chosen or overlay_video, "mcap" in chosen
+
+
+def recording_stem(paths: list[Path]) -> str:
+    """The name of the one recording of a run's images: the stem of the one PATH given
+    (a folder's name, or an image's stem), else ``images``."""
+    if len(paths) == 1:
+        return paths[0].stem or paths[0].resolve().name or "images"
+    return "images"
 
 
 def _make_out_dir(console: Console, out_dir: Path) -> None:
@@ -282,12 +305,19 @@ def _detect_images(
     out_dir: Path,
     mask: Path | None,
     outputs: Iterable[str],
+    recording_path: Path | None = None,
 ) -> tuple[int, int, bool]:
-    """Process image files into ``out_dir``; returns (processed, failed, interrupted)."""
+    """Process image files into ``out_dir``; returns (processed, failed, interrupted).
+
+    With ``recording_path``, every image processed also goes into that one MCAP recording.
+    """
     outputs = frozenset(outputs)
     clashes = find_output_clashes(images)
     processed = failed = 0
     interrupted = False
+    recording = _open_recording(console, recording_path)
+    if recording_path is not None and recording is None:
+        failed += 1
     progress = Progress(
         TextColumn("{task.description}"),
         BarColumn(),
@@ -308,16 +338,26 @@ def _detect_images(
                         f"{path}: outputs would overwrite those of {clashes[path]} (same name)",
                     )
                     failed += 1
-                elif _process_or_report(console, path, params, out_dir, mask, outputs) is None:
+                elif (
+                    detection := _process_or_report(console, path, params, out_dir, mask, outputs)
+                ) is None:
                     failed += 1
                 else:
                     processed += 1
+                    if recording is not None and not _record_image(
+                        console, recording, path, detection
+                    ):
+                        failed += 1
                 progress.advance(task)
     except KeyboardInterrupt:
         interrupted = True
+    finally:
+        if recording is not None and not _close_recording(console, recording):
+            failed += 1
     state = " (interrupted)" if interrupted else ""
+    into = f" (recorded in {recording.path})" if recording is not None and recording.frames else ""
     console.print(
-        f"{processed} of {len(images)} image(s) processed into {out_dir}{state}",
+        f"{processed} of {len(images)} image(s) processed into {out_dir}{into}{state}",
         markup=False,
         highlight=False,
         soft_wrap=True,
@@ -325,12 +365,47 @@ def _detect_images(
     return processed, failed, interrupted
 
 
+def _open_recording(console: Console, path: Path | None) -> McapRecorder | None:
+    """The images' recording at ``path`` (None when not asked for, or when it cannot be
+    created: the error is printed)."""
+    if path is None:
+        return None
+    from service.ros.recording import McapRecorder
+
+    try:
+        return McapRecorder(path)
+    except OutputWriteError as exc:
+        print_error(console, str(exc))
+        return None
+
+
+def _record_image(
+    console: Console, recording: McapRecorder, path: Path, detection: Detection
+) -> bool:
+    """Add an image's frame to the recording; on failure print the error, return False."""
+    try:
+        recording.write_file(path, detection)
+    except Exception as exc:  # reported per file, as every other output
+        print_error(console, failure_message(path, exc))
+        return False
+    return True
+
+
+def _close_recording(console: Console, recording: McapRecorder) -> bool:
+    try:
+        recording.close()
+    except OutputWriteError as exc:
+        print_error(console, str(exc))
+        return False
+    return True
+
+
 def _run_stream(
     console: Console,
     open_source: Callable[[], FrameSource],
     params: DetectParams,
     out_dir: Path,
-    outputs: tuple[bool, bool],
+    outputs: tuple[bool, bool, bool],
     max_frames: int | None,
 ) -> StreamSummary | None:
     """Open a video or camera and process it with a progress bar; report on stderr.
@@ -346,7 +421,7 @@ def _run_stream(
     except KeyboardInterrupt:
         return StreamSummary(source="", interrupted=True)
 
-    jsonl, overlay_video = outputs
+    jsonl, overlay_video, mcap = outputs
     reported = 0
     started = time.perf_counter()
     progress = Progress(
@@ -383,6 +458,7 @@ def _run_stream(
                 out_dir,
                 jsonl=jsonl,
                 overlay_video=overlay_video,
+                mcap=mcap,
                 max_frames=max_frames,
                 on_frame=on_frame,
             )
@@ -412,7 +488,8 @@ def _stream_summary_line(summary: StreamSummary) -> str:
     state = " (interrupted)" if summary.interrupted else ""
     if summary.stop_reason is not None or summary.output_error is not None:
         state = " (stopped early)"
-    written = [str(path) for path in (summary.jsonl_path, summary.overlay_path) if path is not None]
+    outputs = (summary.jsonl_path, summary.overlay_path, summary.mcap_path)
+    written = [str(path) for path in outputs if path is not None]
     into = f" -> {', '.join(written)}" if written and summary.processed else ""
     return f"{summary.source}: {counts}{timing}{state}{into}"
 
@@ -423,7 +500,7 @@ def _process_or_report(
     params: DetectParams,
     out_dir: Path | None,
     mask: Path | None,
-    outputs: Iterable[str] = OUTPUT_KINDS,
+    outputs: Iterable[str] = IMAGE_OUTPUTS,
 ) -> Detection | None:
     """Run :func:`process_file`; on failure print the one-line error and return None."""
     try:
