@@ -32,6 +32,7 @@ These are plain functions behind the ``dlo`` command line; they print nothing.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
@@ -649,17 +650,30 @@ class _Recording:
     the source's epoch (when live) plus their timestamp."""
 
     def __init__(self, path: Path, epoch_s: float | None) -> None:
-        from service.ros.recording import McapRecorder
+        from service.ros.messages import seconds_to_ns
+        from service.ros.recording import McapRecorder, RecordingError
 
-        self._recorder = McapRecorder(path)
-        self._epoch_s = epoch_s or 0.0
+        self._failed = RecordingError
+        with self._errors():
+            self._recorder = McapRecorder(path)
+        self._epoch_ns = 0 if epoch_s is None else seconds_to_ns(epoch_s)
+        self._to_ns = seconds_to_ns
 
     def write(self, timestamp_s: float, detection: Detection, image: np.ndarray) -> None:
-        stamp_ns = round((self._epoch_s + timestamp_s) * 1e9)
-        self._recorder.write(stamp_ns, detection, image=image)
+        stamp_ns = self._epoch_ns + self._to_ns(timestamp_s)
+        with self._errors():
+            self._recorder.write(stamp_ns, detection, image=image)
 
     def close(self) -> None:
-        self._recorder.close()
+        with self._errors():
+            self._recorder.close()
+
+    @contextlib.contextmanager
+    def _errors(self) -> Iterator[None]:
+        try:
+            yield
+        except self._failed as exc:
+            raise OutputWriteError(str(exc)) from exc
 
 
 class _OverlayVideoWriter:

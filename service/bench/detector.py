@@ -11,7 +11,8 @@ the p50 wall time. The cases:
   otherwise);
 * generated 1280x720 scenes with 1, 2 and 3 cables, and 1920x1080 scenes;
 * scaling: 3 cables at 640x360, 1280x720, 1920x1080 and 3840x2160, and 1 to 5 cables
-  (with their crossings) at 1280x720.
+  (with their crossings) at 1280x720;
+* what a ROS 2 recording adds per frame (``--outputs mcap``, :mod:`service.bench.recording`).
 
 One thread: the numeric libraries size their thread pools when they are first
 imported, so ``dlo bench`` runs this in a process of its own (``python -m service.cli
@@ -211,6 +212,10 @@ def run_detector_bench(quick: bool, as_json: bool, dataset: Path, frames: int, r
         )
         results["scaling_cables"].append(row)
 
+    from service.bench.recording import run_recording_cases
+
+    results["recording"] = run_recording_cases(quick, frames, repeats)
+
     # ru_maxrss is in KiB on Linux (bytes on macOS).
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     results["peak_rss_mb"] = peak / (1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0)
@@ -333,4 +338,7 @@ def _print_tables(results: dict[str, Any]) -> None:
             f"{row['fps']:.1f}",
         )
     console.print(table)
+    from service.bench.recording import print_recording_table
+
+    print_recording_table(console, results["recording"])
     console.print(f"peak resident memory: {results['peak_rss_mb']:.0f} MB", highlight=False)

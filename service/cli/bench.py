@@ -18,7 +18,7 @@ from typing import Annotated
 
 import typer
 
-from service.bench.detector import DEFAULT_DATASET, THREAD_VARIABLES
+from service.bench.detector import DEFAULT_DATASET, THREAD_VARIABLES, cpu_name
 from service.console import exit_usage, stderr_console
 
 
@@ -71,6 +71,14 @@ def bench(
             "(service/bench/overhead.py).",
         ),
     ] = False,
+    recording: Annotated[
+        bool,
+        typer.Option(
+            "--recording",
+            help="Time only what a ROS 2 recording (--outputs mcap) adds per frame "
+            "(service/bench/recording.py); the full run includes it.",
+        ),
+    ] = False,
     startup: Annotated[
         bool,
         typer.Option(
@@ -118,8 +126,10 @@ def bench(
     ] = None,
 ) -> None:
     """Time the detector per stage on one thread: photographs, generated scenes, scaling."""
-    if service and startup:
-        exit_usage(stderr_console(), "--service and --startup time different things: give one")
+    if sum((service, startup, recording)) > 1:
+        exit_usage(
+            stderr_console(), "--service, --startup and --recording time different things: give one"
+        )
     if dlo is not None and not startup:
         exit_usage(stderr_console(), "--dlo applies only with --startup")
     if replicas is not None:
@@ -137,6 +147,10 @@ def bench(
         raise typer.Exit(run_startup_bench(command, dataset, runs, as_json))
     repeats = repeats or 3
     if os.environ.get(CHILD_FLAG) == "1":
+        if recording:
+            from service.bench.recording import run_recording_bench
+
+            raise typer.Exit(run_recording_bench(quick, as_json, frames, repeats, cpu_name()))
         if service:
             from service.bench.overhead import run_service_bench
 
@@ -148,4 +162,5 @@ def bench(
     args = [sys.executable, "-m", "service.cli", "bench", "--dataset", str(dataset)]
     args += ["--frames", str(frames), "--repeats", str(repeats)]
     args += ["--quick"] * quick + ["--json"] * as_json + ["--service"] * service
+    args += ["--recording"] * recording
     raise typer.Exit(subprocess.call(args, env=env))

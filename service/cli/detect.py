@@ -370,11 +370,11 @@ def _open_recording(console: Console, path: Path | None) -> McapRecorder | None:
     created: the error is printed)."""
     if path is None:
         return None
-    from service.ros.recording import McapRecorder
+    from service.ros.recording import McapRecorder, RecordingError
 
     try:
         return McapRecorder(path)
-    except OutputWriteError as exc:
+    except RecordingError as exc:
         print_error(console, str(exc))
         return None
 
@@ -383,18 +383,25 @@ def _record_image(
     console: Console, recording: McapRecorder, path: Path, detection: Detection
 ) -> bool:
     """Add an image's frame to the recording; on failure print the error, return False."""
+    from service.ros.recording import RecordingError
+
     try:
         recording.write_file(path, detection)
-    except Exception as exc:  # reported per file, as every other output
+    except RecordingError as exc:  # reported per file, as every other output
+        print_error(console, str(exc))
+        return False
+    except Exception as exc:
         print_error(console, failure_message(path, exc))
         return False
     return True
 
 
 def _close_recording(console: Console, recording: McapRecorder) -> bool:
+    from service.ros.recording import RecordingError
+
     try:
         recording.close()
-    except OutputWriteError as exc:
+    except RecordingError as exc:
         print_error(console, str(exc))
         return False
     return True

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -105,6 +105,19 @@ def message_definition(msgtype: str) -> str:
     """The ``ros2msg`` schema text of ``msgtype`` with its dependencies, as MCAP holds it."""
     text, _ = typestore().generate_msgdef(msgtype, ros_version=2)
     return text
+
+
+def seconds_to_ns(seconds: float) -> int:
+    """Seconds (e.g. since the Unix epoch) as whole nanoseconds, the whole seconds kept
+    exact (a float of about 1.8e18 ns would be off by up to 128 ns).
+
+    Examples
+    --------
+    >>> seconds_to_ns(1767225600.125)
+    1767225600125000000
+    """
+    whole = math.floor(seconds)
+    return whole * NANOSECONDS + round((seconds - whole) * NANOSECONDS)
 
 
 def serialize(message: Any, msgtype: str) -> bytes:
@@ -355,27 +368,28 @@ def read_compressed_image_message(payload: bytes) -> ReceivedImage:
     return ReceivedImage(_stamp_s(message.header.stamp), encoded=message.data.tobytes())
 
 
-def read_image_message(payload: bytes, max_pixels: int) -> ReceivedImage:
+def read_image_message(
+    payload: bytes, check_size: Callable[[int, int], None] | None = None
+) -> ReceivedImage:
     """A CDR ``sensor_msgs/msg/Image`` as a BGR (or gray) ``uint8`` array and its stamp.
 
     Parameters
     ----------
     payload : bytes
-    max_pixels : int
-        Larger images are refused before their pixels are converted.
+    check_size : callable, optional
+        Called with the image's width and height before its pixels are converted; raises
+        to refuse it (too large).
 
     Raises
     ------
     RosMessageError
         The payload is not such a message, its encoding is not one of
         :data:`IMAGE_ENCODINGS`, or its size, step and data disagree.
-    ImageTooLargeError
-        It has more than ``max_pixels`` pixels.
     """
     message = _deserialize(payload, IMAGE)
     width, height, step = int(message.width), int(message.height), int(message.step)
-    if width * height > max_pixels:
-        raise ImageTooLargeError(width, height)
+    if check_size is not None:
+        check_size(width, height)
     if width == 0 or height == 0:
         raise RosMessageError(f"sensor_msgs/msg/Image: empty image ({width}x{height})")
     encoding = str(message.encoding)
@@ -401,18 +415,10 @@ def read_image_message(payload: bytes, max_pixels: int) -> ReceivedImage:
     if channels == 1:
         pixels = pixels[:, :, 0]
     if item == 2:
-        pixels = cv2.normalize(pixels.astype(np.float32), None, 0, 255, cv2.NORM_MINMAX)
-        pixels = pixels.astype(np.uint8)
+        wide = pixels.astype(np.float32)  # native byte order, whatever the message's
+        pixels = cv2.normalize(wide, None, 0, 255, cv2.NORM_MINMAX, dtype=cv2.CV_8U)
     image = np.ascontiguousarray(pixels) if conversion is None else cv2.cvtColor(pixels, conversion)
     return ReceivedImage(_stamp_s(message.header.stamp), image=image)
-
-
-class ImageTooLargeError(RosMessageError):
-    """An image message with more pixels than allowed."""
-
-    def __init__(self, width: int, height: int) -> None:
-        self.width, self.height = width, height
-        super().__init__(f"image is {width}x{height}")
 
 
 def _deserialize(payload: bytes, msgtype: str) -> Any:

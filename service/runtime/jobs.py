@@ -65,11 +65,17 @@ def run_detection(
 ) -> tuple[np.ndarray, Detection]:
     """Decode ``frame`` and detect the DLOs in it; returns the image and the Detection."""
     image, mask = decode_frame(frame, max_pixels)
+    return image, detect_decoded(image, frame.params, detect, mask)
+
+
+def detect_decoded(
+    image: np.ndarray, params: DetectParams, detect: DetectFunction, mask: np.ndarray | None = None
+) -> Detection:
+    """Detect the DLOs in an image already decoded (and checked); 422 for unusable input."""
     try:
-        detection = detect(image, frame.params, mask)
+        return detect(image, params, mask)
     except InvalidInputError as exc:
         raise RequestError(422, "invalid_input", str(exc)) from None
-    return image, detection
 
 
 def run_overlay(frame: Frame, detect: DetectFunction, max_pixels: int) -> tuple[bytes, Detection]:
