@@ -11,9 +11,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from pydantic import ValidationError
 
-from schemas import Detection, DetectParams
+from schemas import CameraModel, Detection, DetectParams
+from schemas.model import CablePhysics
+from service.geometry3d import LiftError, lift
+from service.geometry3d.depth import check_depth_image, read_depth_file
 from service.imageio import (
     IMAGE_SUFFIXES,
     ImageFileError,
@@ -25,12 +29,15 @@ from service.imageio import (
     write_text,
 )
 from service.perception import InvalidInputError, detect_full, render_labels, render_overlay
+from service.simulation import ModelError, to_mjcf
+from service.simulation.mjcf import with_surface
 
 IMAGE_OUTPUTS = ("json", "labels", "overlay")
-"""The outputs written per image, by default."""
-OUTPUT_KINDS = (*IMAGE_OUTPUTS, "mcap")
-"""Every output, as named on the command line (``--outputs``); ``mcap`` (a ROS 2 recording
-of all the images, or of each video or camera) is written only when asked for."""
+"""The outputs written per image by default."""
+OUTPUT_KINDS = (*IMAGE_OUTPUTS, "mjcf", "mcap")
+"""Every output, as named on the command line (``--outputs``); ``mjcf`` (the MuJoCo model)
+needs a camera model, and is then written by default too; ``mcap`` (a ROS 2 recording of all
+the images, or of each video or camera) is written only when asked for."""
 
 
 class InvalidParametersError(ValueError):
@@ -47,6 +54,8 @@ class OutputPaths:
     """``<stem>.labels.png``: 16-bit label image, pixel value = chain id + 1, 0 elsewhere."""
     overlay_png: Path
     """``<stem>.overlay.png``: the chains drawn over the input image."""
+    mjcf_xml: Path
+    """``<stem>.mjcf.xml``: the MuJoCo model of the lifted chains (with a camera model)."""
 
     @classmethod
     def for_input(
@@ -59,10 +68,11 @@ class OutputPaths:
             detection_json=directory / f"{stem}.json",
             labels_png=directory / f"{stem}.labels.png",
             overlay_png=directory / f"{stem}.overlay.png",
+            mjcf_xml=directory / f"{stem}.mjcf.xml",
         )
 
     def all(self) -> tuple[Path, Path, Path]:
-        """The three paths, in the order they are written (JSON last)."""
+        """The three image outputs' paths, in the order they are written (JSON last)."""
         return (self.labels_png, self.overlay_png, self.detection_json)
 
 
@@ -202,6 +212,9 @@ def process_file(
     out_dir: str | os.PathLike[str] | None,
     mask_path: str | os.PathLike[str] | None = None,
     outputs: Collection[str] = IMAGE_OUTPUTS,
+    camera: CameraModel | None = None,
+    depth_path: str | os.PathLike[str] | None = None,
+    physics: CablePhysics | None = None,
 ) -> Detection:
     """Detect the DLOs in one image file and write the outputs.
 
@@ -217,34 +230,70 @@ def process_file(
     mask_path : str or Path, optional
         Foreground mask file of the image's size; replaces segmentation.
     outputs : collection of str
-        Which of :data:`IMAGE_OUTPUTS` to write in ``out_dir`` (all by default); the
-        images that are not asked for are not rendered (``mcap`` is the caller's: one
-        recording holds many images).
+        Which of :data:`OUTPUT_KINDS` to write in ``out_dir`` (:data:`IMAGE_OUTPUTS` by
+        default); the images that are not asked for are not rendered. ``mjcf`` needs
+        ``camera``; ``mcap`` is the caller's (one recording holds many images).
+    camera : CameraModel, optional
+        Lift the chains to the robot base frame (``points_3d``, ``radius_m``).
+    depth_path : str or Path, optional
+        The depth image (16-bit PNG or ``.npy``) when the camera's surface is a depth image.
+    physics : CablePhysics, optional
+        The cables' physics in ``<stem>.mjcf.xml``; the defaults when None.
 
     Returns
     -------
     Detection
+        Lifted when ``camera`` is given.
 
     Raises
     ------
     InvalidInputError
-        The image or mask cannot be used; an :class:`ImageFileError` when the
-        message already names the file (the image or the mask).
+        The image, mask or depth image cannot be used; an :class:`ImageFileError` when the
+        message already names the file.
+    LiftError
+        The chains cannot be lifted with this camera (its image size differs).
+    ModelError
+        The physics would make an unstable model.
     OutputWriteError
         An output cannot be written.
     """
     image = read_image(path)
     mask = None if mask_path is None else read_mask(mask_path, image.shape)
+    depth = None if depth_path is None or camera is None else read_depth(depth_path, camera)
     result = detect_full(image, params, mask=mask)
+    detection = result.detection
+    if camera is not None:
+        detection = lift(detection, camera, depth)
     if out_dir is not None:
         paths = OutputPaths.for_input(path, out_dir)
         if "labels" in outputs:
-            write_png(paths.labels_png, render_labels(result.detection, result.mask, image))
+            write_png(paths.labels_png, render_labels(detection, result.mask, image))
         if "overlay" in outputs:
-            write_png(paths.overlay_png, render_overlay(image, result.detection))
+            write_png(paths.overlay_png, render_overlay(image, detection))
+        if "mjcf" in outputs and camera is not None:
+            model = to_mjcf(detection, **with_surface(physics, camera).model_dump())
+            write_text(paths.mjcf_xml, model)
         if "json" in outputs:
-            write_text(paths.detection_json, detection_to_json(result.detection) + "\n")
-    return result.detection
+            write_text(paths.detection_json, detection_to_json(detection) + "\n")
+    return detection
+
+
+def read_depth(path: str | os.PathLike[str], camera: CameraModel) -> np.ndarray:
+    """The depth image at ``path`` checked against ``camera``.
+
+    Raises
+    ------
+    ImageFileError
+        It cannot be read, is not a usable depth image or does not fit the camera.
+    """
+    from service.geometry3d import DepthImageError
+
+    try:
+        return check_depth_image(camera, read_depth_file(path))
+    except OSError as error:
+        raise ImageFileError(path, f"cannot read depth image: {error.strerror or error}") from None
+    except DepthImageError as error:
+        raise ImageFileError(path, str(error)) from None
 
 
 def detection_to_json(detection: Detection) -> str:
@@ -271,7 +320,7 @@ def failure_message(path: str | os.PathLike[str], error: BaseException) -> str:
     """
     if isinstance(error, ImageFileError):
         message = str(error)
-    elif isinstance(error, InvalidInputError | OutputWriteError):
+    elif isinstance(error, InvalidInputError | OutputWriteError | LiftError | ModelError):
         message = f"{path}: {error}"
     else:
         message = f"{path}: internal error: {type(error).__name__}: {error}"

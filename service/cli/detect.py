@@ -17,14 +17,17 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
+from pydantic import ValidationError
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from schemas import Detection, DetectParams, SegmentationMethod
+from schemas import CameraModel, DepthSurface, Detection, DetectParams, SegmentationMethod
+from schemas.model import CablePhysics
 from service.batch import (
     IMAGE_OUTPUTS,
     InvalidParametersError,
     build_params,
+    describe_json_validation_error,
     detection_to_json,
     expand_inputs,
     failure_message,
@@ -59,6 +62,8 @@ if TYPE_CHECKING:
 
 FRAME_MESSAGES_PER_STREAM = 5
 """Skipped frames reported one by one per video; the rest only counted in the summary."""
+CAMERA_MODEL_SUFFIXES = (".json", ".yaml", ".yml")
+"""A ``--camera`` naming a file with one of these suffixes is a camera model, not a source."""
 
 
 def _default_of(field: str) -> str:
@@ -83,9 +88,29 @@ def detect(
     camera: Annotated[
         str | None,
         typer.Option(
-            metavar="SRC",
+            metavar="SRC|CAMERA.json",
             help="Read a camera (device index such as 0) or a stream URL instead of files; "
-            "needs --out-dir. Stop with Ctrl-C or --max-frames.",
+            "needs --out-dir. Stop with Ctrl-C or --max-frames. Or, with image files, a "
+            "camera model (.json, .yaml, .yml; see docs/examples/camera.json): the chains "
+            "are lifted to the robot base frame (points_3d, radius_m) and <stem>.mjcf.xml, "
+            "a MuJoCo model of the cables, is written too.",
+        ),
+    ] = None,
+    depth: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="DEPTH",
+            help="Depth image aligned with the single input image (16-bit PNG or .npy), "
+            "for a camera model whose surface is a depth image.",
+        ),
+    ] = None,
+    physics: Annotated[
+        str | None,
+        typer.Option(
+            metavar="JSON|FILE",
+            help="The cables' physics in <stem>.mjcf.xml, a JSON object (e.g. "
+            "'{\"bending_stiffness\": 1e-3}') or a file holding one; see the README.",
+            show_default=False,
         ),
     ] = None,
     mask: Annotated[
@@ -139,11 +164,12 @@ def detect(
         str | None,
         typer.Option(
             metavar="LIST",
-            help="What to write, comma-separated from json, labels, overlay, mcap. Default: "
-            "json, labels and overlay per image; json (the <stem>.jsonl) per video. For "
-            "videos, overlay is the overlay video and labels are not available. mcap: a ROS 2 "
-            "recording (frames and chains as markers, for Foxglove), <stem>.mcap per video or "
-            "camera, one for all the images (named after the one PATH, else images.mcap).",
+            help="What to write, comma-separated from json, labels, overlay, mjcf, mcap. "
+            "Default: json, labels and overlay per image (and mjcf with a camera model); json "
+            "(the <stem>.jsonl) per video. For videos, overlay is the overlay video and labels "
+            "are not available. mcap: a ROS 2 recording (frames and chains as markers, for "
+            "Foxglove), <stem>.mcap per video or camera, one for all the images (named after "
+            "the one PATH, else images.mcap).",
             show_default=False,
         ),
     ] = None,
@@ -176,6 +202,18 @@ def detect(
         exit_usage(console, str(exc))
     if max_frames is not None and max_frames < 1:
         exit_usage(console, "--max-frames: must be at least 1")
+    camera_model = None
+    if camera is not None and Path(camera).suffix.lower() in CAMERA_MODEL_SUFFIXES:
+        camera_model = _load_camera_model(console, Path(camera))
+        camera = None
+        if not paths:
+            exit_usage(
+                console,
+                "a camera model (--camera FILE) lifts the chains of image files: give PATH...",
+            )
+        if outputs is None:
+            selected = (*IMAGE_OUTPUTS, "mjcf")
+    cable_physics = _three_d_options(console, camera_model, depth, physics, selected)
 
     if camera is not None:
         if paths:
@@ -202,6 +240,10 @@ def detect(
     images = [path for path in files if not is_video_path(path)]
     if mask is not None and (len(paths) != 1 or len(files) > 1 or videos):
         exit_usage(console, "--mask applies to a single input image")
+    if depth is not None and (len(paths) != 1 or len(files) > 1 or videos):
+        exit_usage(console, "--depth applies to a single input image")
+    if camera_model is not None and videos:
+        exit_usage(console, "a camera model (--camera FILE) applies to images, not videos")
     if out_dir is None and videos:
         exit_usage(console, "videos need --out-dir")
     if out_dir is None and len(files) > 1:
@@ -223,9 +265,10 @@ def detect(
     if files:
         load_kernels(console)
 
+    three_d = {"camera": camera_model, "depth_path": depth, "physics": cable_physics}
     if out_dir is None:
         if files:
-            detection = _process_or_report(console, files[0], params, None, mask)
+            detection = _process_or_report(console, files[0], params, None, mask, **three_d)
             if detection is None:
                 failed += 1
             else:
@@ -237,7 +280,7 @@ def detect(
     interrupted = False
     if images:
         images_done, images_failed, interrupted = _detect_images(
-            console, images, params, out_dir, mask, selected, recording
+            console, images, params, out_dir, mask, selected, three_d, recording
         )
         processed += images_done
         failed += images_failed
@@ -305,6 +348,7 @@ def _detect_images(
     out_dir: Path,
     mask: Path | None,
     outputs: Iterable[str],
+    three_d: dict,
     recording_path: Path | None = None,
 ) -> tuple[int, int, bool]:
     """Process image files into ``out_dir``; returns (processed, failed, interrupted).
@@ -339,7 +383,9 @@ def _detect_images(
                     )
                     failed += 1
                 elif (
-                    detection := _process_or_report(console, path, params, out_dir, mask, outputs)
+                    detection := _process_or_report(
+                        console, path, params, out_dir, mask, outputs, **three_d
+                    )
                 ) is None:
                     failed += 1
                 else:
@@ -508,10 +554,77 @@ def _process_or_report(
     out_dir: Path | None,
     mask: Path | None,
     outputs: Iterable[str] = IMAGE_OUTPUTS,
+    *,
+    camera: CameraModel | None = None,
+    depth_path: Path | None = None,
+    physics: CablePhysics | None = None,
 ) -> Detection | None:
     """Run :func:`process_file`; on failure print the one-line error and return None."""
     try:
-        return process_file(path, params, out_dir, mask_path=mask, outputs=frozenset(outputs))
+        return process_file(
+            path,
+            params,
+            out_dir,
+            mask_path=mask,
+            outputs=frozenset(outputs),
+            camera=camera,
+            depth_path=depth_path,
+            physics=physics,
+        )
     except Exception as exc:  # every failure is reported per file and the batch goes on
         print_error(console, failure_message(path, exc))
         return None
+
+
+def _load_camera_model(console: Console, path: Path) -> CameraModel:
+    """:meth:`CameraModel.from_file`; a bad file is a usage error naming it (exit 2)."""
+    try:
+        return CameraModel.from_file(path)
+    except OSError as exc:
+        exit_usage(console, f"--camera {path}: {exc.strerror or exc}")
+    except ValidationError as exc:
+        exit_usage(console, f"--camera {path}: {describe_json_validation_error(exc, 'camera')}")
+    except ValueError as exc:  # unknown suffix, YAML syntax
+        exit_usage(console, f"--camera {path}: {str(exc).removeprefix(f'{path}: ')}")
+
+
+def _three_d_options(
+    console: Console,
+    camera_model: CameraModel | None,
+    depth: Path | None,
+    physics: str | None,
+    selected: Iterable[str],
+) -> CablePhysics | None:
+    """Check --depth, --physics and --outputs mjcf against the camera model; the physics."""
+    if camera_model is None:
+        for given, option in ((depth, "--depth"), (physics, "--physics")):
+            if given is not None:
+                exit_usage(console, f"{option} needs a camera model: --camera CAMERA.json")
+        if "mjcf" in selected:
+            exit_usage(console, "--outputs mjcf needs a camera model: --camera CAMERA.json")
+        return None
+    surface = camera_model.surface
+    if isinstance(surface, DepthSurface) and depth is None:
+        exit_usage(
+            console,
+            "the camera model's surface is a depth image (kind 'depth'): give --depth DEPTH "
+            "(a 16-bit PNG or a .npy array aligned with the image)",
+        )
+    if not isinstance(surface, DepthSurface) and depth is not None:
+        exit_usage(
+            console,
+            f"--depth: the camera model's surface is the plane z = {surface.plane_z} m; a "
+            'depth image needs the surface {"kind": "depth", "depth_scale": ...}',
+        )
+    if physics is None:
+        return None
+    text = physics
+    if not physics.lstrip().startswith("{"):
+        try:
+            text = Path(physics).read_text(encoding="utf-8")
+        except OSError as exc:
+            exit_usage(console, f"--physics {physics}: {exc.strerror or exc}")
+    try:
+        return CablePhysics.model_validate_json(text)
+    except ValidationError as exc:
+        exit_usage(console, f"--physics: {describe_json_validation_error(exc, 'physics')}")

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -155,7 +155,7 @@ def marker_array(detection: Detection, stamp_ns: int, frame_id: str | None = Non
     """
     types = _types()
     metric = bool(detection.chains) and all(
-        _points_3d(chain) is not None for chain in detection.chains
+        chain.points_3d is not None for chain in detection.chains
     )
     if frame_id is None:
         frame_id = BASE_FRAME if metric else PIXEL_FRAME
@@ -223,22 +223,17 @@ def markers_cdr(detection: Detection, stamp_ns: int, frame_id: str | None = None
     return serialize(marker_array(detection, stamp_ns, frame_id), MARKER_ARRAY)
 
 
-def _points_3d(chain: Chain) -> Sequence[Sequence[float] | None] | None:
-    return getattr(chain, "points_3d", None)  # set by 3-D lifting (issue 17)
-
-
 def _placed(chain: Chain, metric: bool) -> list[Any]:
     """The chain's joints as ``geometry_msgs/Point`` (None where a 3-D joint is unknown)."""
     point = _types()["Point"]
     if metric:
-        return [None if p is None else point(x=p[0], y=p[1], z=p[2]) for p in _points_3d(chain)]
+        return [None if p is None else point(x=p[0], y=p[1], z=p[2]) for p in chain.points_3d]
     return [point(x=x, y=y, z=0.0) for x, y in chain.points]
 
 
 def _width(chain: Chain, metric: bool) -> float:
     if metric:
-        radius_m = getattr(chain, "radius_m", None)
-        return 2.0 * (DEFAULT_RADIUS_M if radius_m is None else radius_m)
+        return 2.0 * (DEFAULT_RADIUS_M if chain.radius_m is None else chain.radius_m)
     return max(2.0 * chain.radius, MIN_WIDTH_PX)
 
 

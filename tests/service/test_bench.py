@@ -39,6 +39,13 @@ def test_dlo_bench_quick_runs_on_one_thread_and_reports_json(tmp_path):
         assert 0 < stats["total"]["p50"] <= stats["total"]["max"]
         assert case["fps"] > 0
     assert [row["cables"] for row in results["scaling_cables"]] == [1, 2, 3]
+    assert [row["case"].split(",")[0] for row in results["lifting"]] == [
+        "plane",
+        "plane",
+        "depth image",
+    ]
+    for row in results["lifting"]:
+        assert row["joints"] > 0 and 0 < row["lift_ms"]["p50"] <= row["lift_ms"]["max"]
     assert [row["case"] for row in results["recording"]] == [
         "640x480, 1 cable(s)",
         "640x480, 3 cable(s)",
@@ -64,6 +71,7 @@ def test_dlo_bench_prints_tables_by_default(tmp_path):
         "after warm-up",
         "p50 per stage",
         "scaling with image area",
+        "a camera model",
         "a ROS 2 recording per frame",
     ):
         assert heading in completed.stdout

@@ -10,8 +10,11 @@ import pytest
 from schemas import Chain, Crossing, Detection
 from service.perception.render import chain_colour
 from service.ros.messages import (
+    BASE_FRAME,
+    DEFAULT_RADIUS_M,
     MARKER_ARRAY,
     PIXEL_FRAME,
+    TEXT_HEIGHT_M,
     RosMessageError,
     compressed_image_cdr,
     markers_cdr,
@@ -193,3 +196,34 @@ def test_the_size_is_checked_before_the_pixels_are_converted() -> None:
     with pytest.raises(OverflowError):
         read_image_message(image_message(np.zeros((3, 5), np.uint8), "mono8"), refuse)
     assert sizes == [(5, 3)]
+
+
+def test_a_lifted_detection_gives_markers_in_metres_in_the_base_frame() -> None:
+    flat = two_crossing_chains()
+    lifted_chains = [
+        flat.chains[0].model_copy(
+            update={
+                "points_3d": [(0.1, 0.2, 0.0), (0.11, 0.2, 0.0), None, (0.13, 0.2, 0.001)],
+                "radius_m": 0.004,
+            }
+        ),
+        flat.chains[1].model_copy(
+            update={"points_3d": [(0.2, 0.1, 0.0), (0.2, 0.11, 0.002), (0.2, 0.13, 0.002)]}
+        ),
+    ]
+    lifted = flat.model_copy(update={"chains": lifted_chains})
+
+    markers = decode_cdr(markers_cdr(lifted, STAMP_NS), MARKER_ARRAY)
+
+    assert {marker.header.frame_id for marker in markers.markers} == {BASE_FRAME}
+    assert line_strips(markers) == {  # a joint without a 3-D point is left out
+        3: [(0.1, 0.2, 0.0), (0.11, 0.2, 0.0), (0.13, 0.2, 0.001)],
+        7: [(0.2, 0.1, 0.0), (0.2, 0.11, 0.002), (0.2, 0.13, 0.002)],
+    }
+    by_kind = {(marker.ns, marker.id): marker for marker in markers.markers}
+    assert by_kind[("chains", 3)].scale.x == pytest.approx(0.008)
+    assert by_kind[("chains", 7)].scale.x == pytest.approx(2 * DEFAULT_RADIUS_M)
+    assert ("inferred", 3) not in by_kind  # its inferred segment ends at the unknown joint
+    (crossing,) = by_kind[("crossings", 0)].points  # halfway along chain 7's segment 1
+    assert (crossing.x, crossing.y, crossing.z) == pytest.approx((0.2, 0.12, 0.002))
+    assert by_kind[("ids", 7)].scale.z == TEXT_HEIGHT_M

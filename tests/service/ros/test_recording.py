@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 from schemas import Detection
 from service.cli import app
-from service.ros.messages import CAMERA_FRAME, PIXEL_FRAME
+from service.ros.messages import BASE_FRAME, CAMERA_FRAME, PIXEL_FRAME
 from service.ros.recording import (
     CHAINS_TOPIC,
     IMAGE_TOPIC,
@@ -26,6 +26,7 @@ from service.ros.recording import (
     _interrupts_held,
 )
 from service.synthetic import make_scene
+from service.synthetic.scene3d import make_scene_3d
 from tests.helpers import DLO, wait_until
 from tests.service.ros.decoding import (
     DELETEALL,
@@ -237,3 +238,25 @@ def test_ctrl_c_leaves_a_readable_recording_of_whole_frames(tmp_path: Path) -> N
     assert len(frames) in (len(records), len(records) - 1)
     for (image, markers), record in zip(frames, records, strict=False):
         assert_frame_matches(image, markers, Detection.model_validate(record["detection"]))
+
+
+def test_with_a_camera_model_the_markers_are_in_metres_in_the_base_frame(tmp_path: Path) -> None:
+    scene = make_scene_3d("down", seed=7, width=640, height=480, focal=700.0)
+    assert cv2.imwrite(str(tmp_path / "flat.png"), scene.image)
+    scene.camera.to_json_file(tmp_path / "camera.json")
+
+    result = run_dlo(
+        "detect", tmp_path / "flat.png", "--camera", tmp_path / "camera.json",
+        "--out-dir", tmp_path / "out", "--outputs", "json,mcap",
+    )  # fmt: skip
+
+    assert result.exit_code == 0, result.stderr
+    detection = Detection.model_validate_json((tmp_path / "out" / "flat.json").read_text())
+    assert detection.chains and all(chain.points_3d for chain in detection.chains)
+    ((image, markers),) = frames_of(read_recording(tmp_path / "out" / "flat.mcap"))
+    assert {marker.header.frame_id for marker in markers.message.markers} == {BASE_FRAME}
+    assert line_strips(markers.message) == {
+        chain.id: [tuple(point) for point in chain.points_3d if point is not None]
+        for chain in detection.chains
+    }
+    assert decoded_image(image.message).shape[:2] == (480, 640)
