@@ -5,6 +5,7 @@ These are the plain functions behind the ``dlo`` command line; they print nothin
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass
@@ -22,13 +23,14 @@ from service.imageio import (
     IMAGE_SUFFIXES,
     ImageFileError,
     OutputWriteError,
-    list_images,
+    images_in_directory,
     read_image,
     read_mask,
     write_png,
     write_text,
 )
 from service.perception import InvalidInputError, detect_full, render_labels, render_overlay
+from service.perception.segmenter import Segmenter
 from service.simulation import ModelError, to_mjcf
 from service.simulation.mjcf import with_surface
 
@@ -76,13 +78,17 @@ class OutputPaths:
         return (self.labels_png, self.overlay_png, self.detection_json)
 
 
-def build_params(**options: Any) -> DetectParams:
+def build_params(base: DetectParams | None = None, **options: Any) -> DetectParams:
     """Validate detection options given on a command line into :class:`DetectParams`.
 
     Parameters
     ----------
+    base : DetectParams, optional
+        Parameters given as a whole (``--params``, :func:`read_params`); the fields it
+        sets are kept unless an option sets them too.
     **options
-        :class:`DetectParams` fields; those that are None are left at their default.
+        :class:`DetectParams` fields; those that are None are left as ``base`` has them
+        (by default, at their default).
 
     Returns
     -------
@@ -94,11 +100,44 @@ def build_params(**options: Any) -> DetectParams:
         A value is out of range or inconsistent; the message is one line such as
         ``--segment-length: Input should be greater than 0.5``.
     """
-    given = {name: value for name, value in options.items() if value is not None}
+    given = {} if base is None else base.model_dump(exclude_unset=True)
+    given.update((name, value) for name, value in options.items() if value is not None)
     try:
         return DetectParams(**given)
     except ValidationError as exc:
         raise InvalidParametersError(describe_validation_error(exc)) from None
+
+
+def read_params(text: str) -> DetectParams:
+    """``--params``: :class:`DetectParams` from a JSON object, or from a file holding one.
+
+    Parameters
+    ----------
+    text : str
+        A JSON object such as ``{"gap_curve": "natural"}`` (it starts with ``{``), else
+        the path of a file holding one.
+
+    Raises
+    ------
+    InvalidParametersError
+        Neither a JSON object nor a readable file, or invalid parameters; one line
+        starting with ``--params:``.
+    """
+    source = text
+    if not text.lstrip().startswith("{"):
+        path = Path(text)
+        if not path.is_file():
+            shown = text if len(text) <= 80 else text[:77] + "..."
+            raise InvalidParametersError(f"--params: {shown!r} is neither a JSON object nor a file")
+        try:
+            source = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InvalidParametersError(f"--params: cannot read {text}: {exc}") from None
+    try:
+        return DetectParams.model_validate_json(source)
+    except ValidationError as exc:
+        problems = describe_json_validation_error(exc, "value")
+        raise InvalidParametersError(f"--params: {_one_line(problems)}") from None
 
 
 def parse_outputs(text: str) -> frozenset[str]:
@@ -160,7 +199,9 @@ def describe_validation_error(error: ValidationError) -> str:
     return _one_line("; ".join(parts))
 
 
-def expand_inputs(paths: Iterable[str | os.PathLike[str]]) -> tuple[list[Path], list[str]]:
+def expand_inputs(
+    paths: Iterable[str | os.PathLike[str]],
+) -> tuple[list[Path], list[str], list[str]]:
     """Turn command-line paths into the image files to process.
 
     Parameters
@@ -175,16 +216,24 @@ def expand_inputs(paths: Iterable[str | os.PathLike[str]]) -> tuple[list[Path], 
         processing them reports the problem.
     problems : list of str
         One-line messages for directories that hold no image.
+    skipped : list of str
+        One-line notes for what directories hold but is not processed: subdirectories
+        and broken symbolic links (:func:`service.imageio.images_in_directory`).
     """
     files: list[Path] = []
     problems: list[str] = []
+    skipped: list[str] = []
     for path in map(Path, paths):
-        found = list_images([path])
+        if not path.is_dir():
+            files.append(path)
+            continue
+        found, passed_over = images_in_directory(path)
+        skipped.extend(passed_over)
         if not found:
             suffixes = " ".join(IMAGE_SUFFIXES)
             problems.append(f"{path}: directory holds no image ({suffixes})")
         files.extend(found)
-    return files, problems
+    return files, problems, skipped
 
 
 def find_output_clashes(files: Sequence[Path]) -> dict[Path, Path]:
@@ -215,6 +264,7 @@ def process_file(
     camera: CameraModel | None = None,
     depth_path: str | os.PathLike[str] | None = None,
     physics: CablePhysics | None = None,
+    segmenter: Segmenter | None = None,
 ) -> Detection:
     """Detect the DLOs in one image file and write the outputs.
 
@@ -239,6 +289,9 @@ def process_file(
         The depth image (16-bit PNG or ``.npy``) when the camera's surface is a depth image.
     physics : CablePhysics, optional
         The cables' physics in ``<stem>.mjcf.xml``; the defaults when None.
+    segmenter : callable, optional
+        The segmenter for ``params.segmentation == "model"`` (see
+        :mod:`service.perception.segmenter`).
 
     Returns
     -------
@@ -260,7 +313,7 @@ def process_file(
     image = read_image(path)
     mask = None if mask_path is None else read_mask(mask_path, image.shape)
     depth = None if depth_path is None or camera is None else read_depth(depth_path, camera)
-    result = detect_full(image, params, mask=mask)
+    result = detect_full(image, params, mask=mask, segmenter=segmenter)
     detection = result.detection
     if camera is not None:
         detection = lift(detection, camera, depth)
@@ -297,8 +350,28 @@ def read_depth(path: str | os.PathLike[str], camera: CameraModel) -> np.ndarray:
 
 
 def detection_to_json(detection: Detection) -> str:
-    """The wire form of a detection: JSON indented by two spaces, no trailing newline."""
-    return detection.model_dump_json(indent=2)
+    """A detection as JSON for people and files: one line per field, per chain and per
+    crossing, no trailing newline.
+
+    Indenting every level (``model_dump_json(indent=2)``) would put each coordinate on a
+    line of its own, a thousand lines for a photograph; on one line per chain it reads
+    at a glance, diffs by chain, and any JSON reader (``jq``) takes it as it is.
+    """
+    fields = detection.model_dump(mode="json")
+    lines = []
+    for key, value in fields.items():
+        if isinstance(value, list) and value:
+            items = [f"    {_compact_json(item)}," for item in value]
+            items[-1] = items[-1].removesuffix(",")
+            lines.append(f'  "{key}": [\n' + "\n".join(items) + "\n  ],")
+        else:
+            lines.append(f'  "{key}": {_compact_json(value)},')
+    lines[-1] = lines[-1].removesuffix(",")
+    return "{\n" + "\n".join(lines) + "\n}"
+
+
+def _compact_json(value: Any) -> str:
+    return json.dumps(value, separators=(", ", ": "), allow_nan=False)
 
 
 def failure_message(path: str | os.PathLike[str], error: BaseException) -> str:

@@ -51,6 +51,7 @@ from pydantic import BaseModel, Field
 from schemas import Detection, DetectParams
 from service.imageio import OutputWriteError, _opencv_quiet
 from service.perception import InvalidInputError, detect, render_overlay
+from service.perception.segmenter import Segmenter
 
 # FFmpeg, which OpenCV reads most videos with, prints its own complaints about damaged
 # files straight to stderr; this program reports problems itself, on one line. Read by
@@ -435,6 +436,7 @@ def process_stream(
     mcap: bool = False,
     max_frames: int | None = None,
     on_frame: Callable[[FrameOutcome], None] | None = None,
+    segmenter: Segmenter | None = None,
 ) -> StreamSummary:
     """Detect the cables in every frame of a source and write the outputs as it goes.
 
@@ -456,6 +458,9 @@ def process_stream(
         Stop after taking this many frames from the source.
     on_frame : callable, optional
         Called with a :class:`FrameOutcome` after each frame (progress, messages).
+    segmenter : callable, optional
+        The segmenter for ``params.segmentation == "model"`` (see
+        :mod:`service.perception.segmenter`).
 
     Returns
     -------
@@ -508,7 +513,8 @@ def process_stream(
             overlay = _OverlayVideoWriter(outputs.overlay_video, source.fps or DEFAULT_FPS)
         if mcap:
             recording = _Recording(outputs.mcap, source.epoch_s)
-        _run(source, params, summary, (lines, overlay, recording), max_frames, on_frame)
+        writers = (lines, overlay, recording)
+        _run(source, params, summary, writers, max_frames, on_frame, segmenter)
     except KeyboardInterrupt:
         summary.interrupted = True
     finally:
@@ -555,6 +561,7 @@ def _run(
     writers: tuple[_JsonLinesWriter | None, _OverlayVideoWriter | None, _Recording | None],
     max_frames: int | None,
     on_frame: Callable[[FrameOutcome], None] | None,
+    segmenter: Segmenter | None = None,
 ) -> None:
     """The frame loop of :func:`process_stream`; fills ``summary`` in place."""
     lines, overlay, recording = writers
@@ -581,7 +588,7 @@ def _run(
             problem = f"frame {index}: unreadable frame, skipped"
         else:
             try:
-                detection = detect(frame.image, params)
+                detection = detect(frame.image, params, segmenter=segmenter)
             except InvalidInputError as exc:
                 problem = f"frame {index}: {_one_line(exc)}"
             except Exception as exc:  # one bad frame does not end the stream

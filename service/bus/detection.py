@@ -68,9 +68,11 @@ from service.bus.ros import (
 )
 from service.ros.messages import warm_up as warm_up_ros_messages
 from service.runtime.errors import RequestError
-from service.runtime.frames import Frame, check_declared_size
+from service.runtime.frames import Frame, check_upload
 from service.runtime.jobs import (
+    OVER_BUDGET,
     DetectFunction,
+    budget,
     default_detect,
     detect_decoded,
     run_detection,
@@ -160,7 +162,8 @@ class DetectionBus:
         The session's configuration (see :func:`~service.bus.config.service_config`);
         default: zenoh's (a peer).
     detect : callable, optional
-        ``detect(image, params, mask) -> Detection``; default :func:`service.perception.detect`.
+        ``detect(image, params, mask, deadline) -> Detection``; default
+        :func:`service.perception.detect`.
     metrics : Metrics, optional
         Counters to update (the HTTP app's when the bus runs inside it); default: its own.
     max_pixels, max_bytes : int
@@ -180,6 +183,9 @@ class DetectionBus:
         itself (and takes cameras), so that it knows the replicas and, balanced, the active
         cameras as they do; default ``camera_idle_s`` balanced, else
         :data:`RENDEZVOUS_LEARN_S`. A replica alone announces itself at once.
+    max_detect_seconds : float, optional
+        Time budget of one detection (decoding included); past it the frame or query
+        gets the error ``time_budget_exceeded`` and the thread goes on. None: no limit.
     """
 
     def __init__(
@@ -195,6 +201,7 @@ class DetectionBus:
         balanced: bool = True,
         camera_idle_s: float = CAMERA_IDLE_S,
         learn_s: float | None = None,
+        max_detect_seconds: float | None = None,
     ) -> None:
         self._config = config if config is not None else zenoh.Config()
         self._detect = detect if detect is not None else default_detect
@@ -210,6 +217,7 @@ class DetectionBus:
         self.learn_s = learn_s
         self.replicas_key = replicas_key(self.image_keys)
         """The pool's liveliness prefix; this replica's token is ``<it>/<replica id>``."""
+        self.max_detect_seconds = max_detect_seconds
         self.counts: Counter[str] = Counter()
         """Outcomes so far: ``published``, ``replaced``, ``rejected``, ``failed``,
         ``not_owned`` for frames, ``query_answered`` ... for queries (also in ``metrics``)."""
@@ -459,17 +467,22 @@ class DetectionBus:
                 )
             encoded = job.image
             if ros:
+                deadline = budget(self.max_detect_seconds)  # counted from here, as below
                 frame = read_ros_frame(job.kind, job.image, self.max_pixels)
                 identity = with_stamp(identity, frame.stamp_s)
                 if frame.image is not None:
-                    detection = detect_decoded(frame.image, params, self._detect)
+                    detection = detect_decoded(frame.image, params, self._detect, None, deadline)
                 encoded = frame.encoded
             if encoded is not None:
-                check_declared_size(encoded, self.max_pixels)
-                _, detection = run_detection(Frame(encoded, params), self._detect, self.max_pixels)
+                check_upload(encoded, "image", self.max_pixels)
+                _, detection = run_detection(
+                    Frame(encoded, params), self._detect, self.max_pixels, self.max_detect_seconds
+                )
         except RequestError as exc:
             if isinstance(exc, AttachmentError):
                 identity = exc.identity
+            if exc.code == OVER_BUDGET:
+                self.metrics.over_budget.inc()
             logger.warning("%s: sample rejected: %s", where, exc.message)
             self._fail(job, identity, "rejected", exc.code, exc.message)
             return

@@ -5,8 +5,8 @@ progress, summaries and errors go to stderr, each error on one line ``error: <fi
 <problem>`` (``warning: ...`` for frames of a video that were skipped while the rest went
 through). Exit status (:mod:`service.console`): 0 when everything worked, 1 when any input
 failed (a video fails only when none of its frames could be processed), 2 for a usage
-error, 130 when Ctrl-C stopped the run before anything was processed (a Ctrl-C after that
-is a clean stop).
+error, 130 when Ctrl-C stopped the run (every output written so far is whole, but a
+script must not take the run for complete).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from service.batch import (
     find_output_clashes,
     parse_outputs,
     process_file,
+    read_params,
 )
 from service.console import (
     EXIT_FAILED,
@@ -45,6 +46,7 @@ from service.console import (
     stderr_console,
 )
 from service.imageio import OutputWriteError
+from service.perception.segmenter import OnnxSegmenter, Segmenter, SegmenterModelError
 from service.video import (
     FrameOutcome,
     FrameSource,
@@ -151,6 +153,26 @@ def detect(
             show_default=_default_of("hsv_high"),
         ),
     ] = None,
+    segmenter_model: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="FILE",
+            help="A learned segmenter in ONNX format (input 1x3xHxW RGB, output a cable "
+            "probability or logit map; see the README) that makes the mask; implies "
+            "--segmentation model. Needs onnxruntime: pip install 'dlo-service[onnx]'.",
+        ),
+    ] = None,
+    params_text: Annotated[
+        str | None,
+        typer.Option(
+            "--params",
+            metavar="JSON|FILE",
+            help="Any detection parameters, as a JSON object such as "
+            '\'{"gap_curve": "natural", "max_gap": 150}\' or a file holding one (as dlo eval '
+            "--params); the options above override the fields they set.",
+            show_default=False,
+        ),
+    ] = None,
     out_dir: Annotated[
         Path | None,
         typer.Option(
@@ -184,13 +206,23 @@ def detect(
 ) -> None:
     """Detect the cables in each image, or in every frame of a video or camera stream.
 
-    Videos (.mp4 .avi .mkv .mov .webm .m4v .mpg .mpeg) and cameras write one line of
-    JSON per frame to <stem>.jsonl: {"frame": i, "timestamp_s": t, "detection": {...}}.
-    Ctrl-C stops cleanly, keeping every line written so far.
+    One image without --out-dir: its Detection JSON on stdout, one line per chain and per
+    crossing. Videos (.mp4 .avi .mkv .mov .webm .m4v .mpg .mpeg) and cameras write one
+    line of JSON per frame to <stem>.jsonl: {"frame": i, "timestamp_s": t, "detection":
+    {...}}. Ctrl-C stops cleanly, keeping every line written so far, and exits with 130.
     """
     console = stderr_console()
+    if segmenter_model is not None:
+        if segmentation not in (None, SegmentationMethod.model):
+            exit_usage(
+                console, f"--segmenter-model cannot be used with --segmentation {segmentation}"
+            )
+        segmentation = SegmentationMethod.model
+    elif segmentation is SegmentationMethod.model:
+        exit_usage(console, "--segmentation model needs --segmenter-model FILE.onnx")
     try:
         params = build_params(
+            None if params_text is None else read_params(params_text),
             segment_length=segment_length,
             expected_count=expected_count,
             segmentation=segmentation,
@@ -200,6 +232,12 @@ def detect(
         selected = IMAGE_OUTPUTS if outputs is None else parse_outputs(outputs)
     except InvalidParametersError as exc:
         exit_usage(console, str(exc))
+    segmenter = None
+    if segmenter_model is not None:
+        try:
+            segmenter = OnnxSegmenter(segmenter_model)
+        except SegmenterModelError as exc:
+            exit_usage(console, str(exc))
     if max_frames is not None and max_frames < 1:
         exit_usage(console, "--max-frames: must be at least 1")
     camera_model = None
@@ -227,15 +265,21 @@ def detect(
         source = parse_camera(camera)
         load_kernels(console)
         summary = _run_stream(
-            console, lambda: open_camera(source), params, out_dir, stream_outputs, max_frames
+            console,
+            lambda: open_camera(source),
+            params,
+            out_dir,
+            stream_outputs,
+            max_frames,
+            segmenter,
         )
-        if summary is not None and summary.interrupted and summary.processed == 0:
+        if summary is not None and summary.interrupted:
             raise typer.Exit(EXIT_INTERRUPTED)
         raise typer.Exit(0 if summary is not None and summary.succeeded else EXIT_FAILED)
 
     if not paths:
         exit_usage(console, "give image or video files (PATH...), or --camera SRC")
-    files, problems = expand_inputs(paths)
+    files, problems, skipped = expand_inputs(paths)
     videos = [path for path in files if is_video_path(path)]
     images = [path for path in files if not is_video_path(path)]
     if mask is not None and (len(paths) != 1 or len(files) > 1 or videos):
@@ -259,16 +303,23 @@ def detect(
     if "mcap" in selected and images:
         recording = out_dir / f"{recording_stem(paths)}.mcap"
 
+    for note in skipped:
+        print_warning(console, note)
     for problem in problems:
         print_error(console, problem)
     failed = len(problems)
     if files:
         load_kernels(console)
 
-    three_d = {"camera": camera_model, "depth_path": depth, "physics": cable_physics}
+    per_image = {
+        "camera": camera_model,
+        "depth_path": depth,
+        "physics": cable_physics,
+        "segmenter": segmenter,
+    }
     if out_dir is None:
         if files:
-            detection = _process_or_report(console, files[0], params, None, mask, **three_d)
+            detection = _process_or_report(console, files[0], params, None, mask, **per_image)
             if detection is None:
                 failed += 1
             else:
@@ -276,13 +327,11 @@ def detect(
         raise typer.Exit(EXIT_FAILED if failed else 0)
 
     _make_out_dir(console, out_dir)
-    processed = 0
     interrupted = False
     if images:
-        images_done, images_failed, interrupted = _detect_images(
-            console, images, params, out_dir, mask, selected, three_d, recording
+        _, images_failed, interrupted = _detect_images(
+            console, images, params, out_dir, mask, selected, per_image, recording
         )
-        processed += images_done
         failed += images_failed
     clashes = find_output_clashes(videos)
     if recording is not None:  # the images' recording is named like a video's outputs
@@ -297,15 +346,20 @@ def detect(
             failed += 1
             continue
         summary = _run_stream(
-            console, lambda path=path: open_video(path), params, out_dir, stream_outputs, max_frames
+            console,
+            lambda path=path: open_video(path),
+            params,
+            out_dir,
+            stream_outputs,
+            max_frames,
+            segmenter,
         )
         if summary is None or not (summary.succeeded or summary.interrupted):
             failed += 1
         if summary is not None:
-            processed += summary.processed
             interrupted = summary.interrupted
 
-    if interrupted and processed == 0:
+    if interrupted:
         raise typer.Exit(EXIT_INTERRUPTED)
     raise typer.Exit(EXIT_FAILED if failed else 0)
 
@@ -348,7 +402,7 @@ def _detect_images(
     out_dir: Path,
     mask: Path | None,
     outputs: Iterable[str],
-    three_d: dict,
+    per_image: dict,
     recording_path: Path | None = None,
 ) -> tuple[int, int, bool]:
     """Process image files into ``out_dir``; returns (processed, failed, interrupted).
@@ -384,7 +438,7 @@ def _detect_images(
                     failed += 1
                 elif (
                     detection := _process_or_report(
-                        console, path, params, out_dir, mask, outputs, **three_d
+                        console, path, params, out_dir, mask, outputs, **per_image
                     )
                 ) is None:
                     failed += 1
@@ -460,6 +514,7 @@ def _run_stream(
     out_dir: Path,
     outputs: tuple[bool, bool, bool],
     max_frames: int | None,
+    segmenter: Segmenter | None = None,
 ) -> StreamSummary | None:
     """Open a video or camera and process it with a progress bar; report on stderr.
 
@@ -514,6 +569,7 @@ def _run_stream(
                 mcap=mcap,
                 max_frames=max_frames,
                 on_frame=on_frame,
+                segmenter=segmenter,
             )
         except OutputWriteError as exc:
             print_error(console, str(exc))
@@ -558,6 +614,7 @@ def _process_or_report(
     camera: CameraModel | None = None,
     depth_path: Path | None = None,
     physics: CablePhysics | None = None,
+    segmenter: Segmenter | None = None,
 ) -> Detection | None:
     """Run :func:`process_file`; on failure print the one-line error and return None."""
     try:
@@ -570,6 +627,7 @@ def _process_or_report(
             camera=camera,
             depth_path=depth_path,
             physics=physics,
+            segmenter=segmenter,
         )
     except Exception as exc:  # every failure is reported per file and the batch goes on
         print_error(console, failure_message(path, exc))

@@ -20,7 +20,7 @@ from starlette.requests import Request
 
 from schemas import CameraModel, DepthSurface, DetectParams, GraspSelector
 from schemas.model import CablePhysics
-from service.runtime.errors import RequestError, describe_fields
+from service.runtime.errors import RequestError, describe_fields, shortened
 from service.runtime.frames import PNG_SIGNATURE, Frame, image_size
 from service.runtime.grasp import GraspFrame
 from service.runtime.model import ModelFrame
@@ -338,7 +338,7 @@ def parse_params(query: QueryParams) -> DetectParams:
     for name in dict.fromkeys(query.keys()):
         given = query.getlist(name)
         if name not in DetectParams.model_fields:
-            problems.append(f"{name}: unknown parameter")
+            problems.append(f"{shortened(name)}: unknown parameter")
         elif name in _TUPLE_FIELDS:
             values[name] = [part.strip() for item in given for part in item.split(",")]
         elif len(given) > 1:
@@ -363,5 +363,5 @@ def _describe(error: ValidationError) -> list[str]:
             continue
         name = str(location[0])
         name += "".join(f"[{index}]" for index in location[1:])
-        problems.append(f"{name}: {message} (got {detail.get('input')!r})")
+        problems.append(f"{name}: {message} (got {shortened(repr(detail.get('input')))})")
     return problems

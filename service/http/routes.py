@@ -23,9 +23,9 @@ from service.http.inputs import (
 )
 from service.http.state import AppState
 from service.runtime.errors import RequestError
-from service.runtime.frames import check_declared_size
+from service.runtime.frames import check_frame, check_upload
 from service.runtime.grasp import GraspFrame, GraspRequest, plan_from_json, run_grasp
-from service.runtime.jobs import run_detection, run_overlay
+from service.runtime.jobs import OVER_BUDGET, run_detection, run_overlay
 from service.runtime.model import run_model
 from service.runtime.pool import PoolBusyError
 
@@ -212,9 +212,18 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
         "A bearer token is set (DLO_API_TOKEN) and the request's is missing or wrong.",
         **_UNAUTHORIZED,
     ),
-    413: _error("Body or image larger than the configured limits."),
-    415: _error("Content type other than image/jpeg, image/png or multipart/form-data."),
-    422: _error("Image or mask unreadable, mask of another size or empty, bad parameters."),
+    413: _error(
+        "Body, image or mask larger than the configured limits (read from the PNG or JPEG "
+        "header, before decoding)."
+    ),
+    415: _error(
+        "Content type other than image/jpeg, image/png or multipart/form-data, or an "
+        "uploaded file in another image format than PNG or JPEG."
+    ),
+    422: _error(
+        "Image or mask unreadable, mask of another size or empty, bad parameters; "
+        "`time_budget_exceeded`: the detection ran past DLO_MAX_DETECT_SECONDS and was stopped."
+    ),
     500: _error("Detection failed inside the service; the body holds the request id."),
     503: _error("Every worker and queue slot is busy; retry after `Retry-After` seconds."),
 }
@@ -233,7 +242,8 @@ _GRASP_ERRORS: dict[int | str, dict[str, Any]] = {
         "unreadable, not 16-bit single-channel or of another size than the camera's "
         "(`invalid_depth`); a point on an inferred segment not allowed (`inferred_segment`); "
         "no grasp: no chain, unknown chain id or segment, image size other than the "
-        "camera's, a ray missing the table, no valid depth around the point (`ungraspable`)."
+        "camera's, a ray missing the table, no valid depth around the point (`ungraspable`); "
+        "the detection ran past DLO_MAX_DETECT_SECONDS (`time_budget_exceeded`)."
     ),
 }
 
@@ -256,8 +266,10 @@ async def _run(request: Request, job: Any) -> Any:
     state = app_state(request)
     settings = state.settings
     frame = await read_frame(request, settings.max_body_bytes)
-    check_declared_size(frame.image, settings.max_pixels)
-    result = await _in_pool(state, job, frame, state.detect, settings.max_pixels)
+    check_frame(frame, settings.max_pixels)
+    result = await _in_pool(
+        state, job, frame, state.detect, settings.max_pixels, settings.max_detect_seconds
+    )
     state.metrics.observe_detection(result[1])
     return result
 
@@ -275,7 +287,9 @@ async def _in_pool(state: AppState, job: Any, *args: Any) -> Any:
             "are busy; retry in a second",
             headers={"Retry-After": "1"},
         ) from None
-    except RequestError:
+    except RequestError as exc:
+        if exc.code == OVER_BUDGET:
+            state.metrics.over_budget.inc()
         raise
     except Exception:
         state.metrics.detection_failures.inc()
@@ -330,11 +344,16 @@ async def grasp(request: Request) -> Response:
     settings = state.settings
     inputs = await read_grasp_request(request, settings.max_body_bytes)
     if isinstance(inputs, GraspFrame):
-        check_declared_size(inputs.frame.image, settings.max_pixels)
+        check_frame(inputs.frame, settings.max_pixels)
         if inputs.depth is not None:
-            check_declared_size(inputs.depth, settings.max_pixels)
+            check_upload(inputs.depth, "depth", settings.max_pixels)
         plan, detection = await _in_pool(
-            state, run_grasp, inputs, state.detect, settings.max_pixels
+            state,
+            run_grasp,
+            inputs,
+            state.detect,
+            settings.max_pixels,
+            settings.max_detect_seconds,
         )
         state.metrics.observe_detection(detection)
     else:
@@ -361,10 +380,17 @@ async def model(request: Request) -> Response:
     state = app_state(request)
     settings = state.settings
     inputs = await read_model_request(request, settings.max_body_bytes)
-    check_declared_size(inputs.frame.image, settings.max_pixels)
+    check_frame(inputs.frame, settings.max_pixels)
     if inputs.depth is not None:
-        check_declared_size(inputs.depth, settings.max_pixels)
-    text, detection = await _in_pool(state, run_model, inputs, state.detect, settings.max_pixels)
+        check_upload(inputs.depth, "depth", settings.max_pixels)
+    text, detection = await _in_pool(
+        state,
+        run_model,
+        inputs,
+        state.detect,
+        settings.max_pixels,
+        settings.max_detect_seconds,
+    )
     state.metrics.observe_detection(detection)
     return Response(text, media_type="application/xml")
 

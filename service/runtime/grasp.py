@@ -54,7 +54,7 @@ class GraspFrame:
 
 
 def run_grasp(
-    request: GraspFrame, detect: DetectFunction, max_pixels: int
+    request: GraspFrame, detect: DetectFunction, max_pixels: int, budget_s: float | None = None
 ) -> tuple[GraspPlan, Detection]:
     """Decode the depth image (if any), detect the DLOs in the image, then plan the grasp.
 
@@ -62,7 +62,7 @@ def run_grasp(
     one is refused (422 ``invalid_depth``) before the detection is paid for.
     """
     depth = decode_depth_part(request.depth)
-    _, detection = run_detection(request.frame, detect, max_pixels)
+    _, detection = run_detection(request.frame, detect, max_pixels, budget_s)
     plan = plan_or_refuse(detection, request.camera, request.selector, depth)
     return plan, detection
 

@@ -35,7 +35,7 @@ class ModelFrame:
 
 
 def run_model(
-    request: ModelFrame, detect: DetectFunction, max_pixels: int
+    request: ModelFrame, detect: DetectFunction, max_pixels: int, budget_s: float | None = None
 ) -> tuple[str, Detection]:
     """Decode the depth image (if any), detect, lift and write the MJCF.
 
@@ -50,7 +50,7 @@ def run_model(
         ``invalid_physics`` (physics the model would not be stable with).
     """
     depth = decode_depth_part(request.depth)
-    _, detection = run_detection(request.frame, detect, max_pixels)
+    _, detection = run_detection(request.frame, detect, max_pixels, budget_s)
     try:
         lifted = lift(detection, request.camera, depth)
     except DepthImageError as exc:

@@ -121,3 +121,31 @@ def test_dlo_bench_times_one_thing_at_a_time(options):
     )
     assert completed.returncode == 2
     assert "give one" in completed.stderr
+
+
+def bench(*options: str) -> subprocess.CompletedProcess:
+    """``dlo bench OPTIONS`` in a process of its own, its output captured."""
+    return subprocess.run([*DLO, "bench", *options], capture_output=True, text=True, timeout=300)
+
+
+def test_dlo_bench_rings_times_scenes_of_many_small_rings():
+    """The report's shape and the scenes: one chain per ring."""
+    completed = bench("--rings", "9,40", "--json")
+    assert completed.returncode == 0, completed.stderr
+    rows = json.loads(completed.stdout)["rings"]
+    assert [row["rings"] for row in rows] == [9, 40]
+    assert [row["chains"] for row in rows] == [9, 40]
+    assert [(row["width"], row["height"]) for row in rows] == [(120, 120), (280, 240)]
+    assert all(row["total_ms"] > 0 for row in rows)
+    refused = bench("--rings", "ten")
+    assert refused.returncode == 2 and "--rings" in refused.stderr
+
+
+def test_dlo_bench_bombs_reports_refusals_and_the_servers_memory():
+    completed = bench("--bombs", "--quick", "--json")
+    assert completed.returncode == 0, completed.stderr
+    results = json.loads(completed.stdout)
+    assert [row["upload"] for row in results["rows"]] == ["image (raw body)", "mask (multipart)"]
+    assert all(row["requests"] == 5 and row["p50_ms"] > 0 for row in results["rows"])
+    memory = results["server_peak_rss_mb"]
+    assert memory["after"] - memory["before"] < 64  # decoding one bomb: 2.7 GB

@@ -44,7 +44,9 @@ FAILOVER_S = 3.0
 """The issue's bound: a dead replica's cameras answered again by then."""
 
 
-def quick_detect(image: np.ndarray, params: DetectParams, mask: np.ndarray | None) -> Detection:
+def quick_detect(
+    image: np.ndarray, params: DetectParams, mask: np.ndarray | None, deadline: object
+) -> Detection:
     """A detection that costs nothing: these tests are about who answers, not what."""
     return Detection(width=image.shape[1], height=image.shape[0], segment_length=10.0)
 

@@ -11,11 +11,13 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 import zenoh
 
 from schemas import Detection, DetectParams, ResultAttachment
 from service.bus.config import markers_key, ros_image_keys
 from service.perception import detect as real_detect
+from service.perception import warm_up
 from service.ros.messages import MARKER_ARRAY
 from service.synthetic import make_scene
 from tests.service.ros.decoding import (
@@ -34,6 +36,13 @@ from tests.service.test_bus import (
 from tests.service.test_replicas import Cameras, Results, two_replicas
 
 CAPTURE_NS = 1_767_225_600_125_000_000
+
+
+@pytest.fixture(scope="module", autouse=True)
+def kernels_loaded() -> None:
+    """The detector's kernels loaded (compiled, on a machine's first run) before any wait
+    on a result starts its clock."""
+    warm_up()
 
 
 def scene_bgr(seed: int = 0) -> np.ndarray:
