@@ -472,6 +472,9 @@ class FakeClock:
     def monotonic(self) -> float:
         return self.now
 
+    def time(self) -> float:  # the wall clock, which cameras' recordings are stamped with
+        return 1_767_225_600.0 + self.now
+
     def sleep(self, seconds: float) -> None:
         self.now += seconds
 
