@@ -629,7 +629,7 @@ class _JsonLinesWriter:
         self.path = path
         self._committed = 0
         try:
-            self._file = open(path, "wb")  # noqa: SIM115  (closed in close())
+            self._file = open(path, "w+b")  # noqa: SIM115  (closed in close())
         except OSError as exc:
             raise OutputWriteError(f"cannot write {path}: {exc.strerror or exc}") from exc
 
@@ -646,6 +646,14 @@ class _JsonLinesWriter:
         if self._file.closed:
             return
         try:
+            self._file.flush()
+            size = self._file.seek(0, os.SEEK_END)
+            if size > self._committed:
+                # Ctrl-C may land after a line's bytes went out but before write() noted
+                # them: keep every line that ends in its newline, drop only a broken tail.
+                self._file.seek(self._committed)
+                tail = self._file.read(size - self._committed)
+                self._committed += tail.rfind(b"\n") + 1
             self._file.truncate(self._committed)
             self._file.close()
         except OSError as exc:
