@@ -36,9 +36,10 @@ from service.simulation.mjcf import with_surface
 
 IMAGE_OUTPUTS = ("json", "labels", "overlay")
 """The outputs written per image by default."""
-OUTPUT_KINDS = (*IMAGE_OUTPUTS, "mjcf")
+OUTPUT_KINDS = (*IMAGE_OUTPUTS, "mjcf", "mcap")
 """Every output, as named on the command line (``--outputs``); ``mjcf`` (the MuJoCo model)
-needs a camera model, and is then written by default too."""
+needs a camera model, and is then written by default too; ``mcap`` (a ROS 2 recording of all
+the images, or of each video or camera) is written only when asked for."""
 
 
 class InvalidParametersError(ValueError):
@@ -281,7 +282,7 @@ def process_file(
     outputs : collection of str
         Which of :data:`OUTPUT_KINDS` to write in ``out_dir`` (:data:`IMAGE_OUTPUTS` by
         default); the images that are not asked for are not rendered. ``mjcf`` needs
-        ``camera``.
+        ``camera``; ``mcap`` is the caller's (one recording holds many images).
     camera : CameraModel, optional
         Lift the chains to the robot base frame (``points_3d``, ``radius_m``).
     depth_path : str or Path, optional

@@ -20,7 +20,7 @@ from typing import Annotated
 
 import typer
 
-from service.bench.detector import DEFAULT_DATASET, THREAD_VARIABLES
+from service.bench.detector import DEFAULT_DATASET, THREAD_VARIABLES, cpu_name
 from service.console import exit_usage, stderr_console
 
 
@@ -71,6 +71,14 @@ def bench(
             "--service",
             help="Time the service instead: HTTP and zenoh latency against bare detection "
             "(service/bench/overhead.py).",
+        ),
+    ] = False,
+    recording: Annotated[
+        bool,
+        typer.Option(
+            "--recording",
+            help="Time only what a ROS 2 recording (--outputs mcap) adds per frame "
+            "(service/bench/recording.py); the full run includes it.",
         ),
     ] = False,
     startup: Annotated[
@@ -161,10 +169,11 @@ def bench(
     ] = None,
 ) -> None:
     """Time the detector per stage on one thread: photographs, generated scenes, scaling."""
-    if service + startup + bombs + (rings is not None) > 1:
+    if service + startup + bombs + (rings is not None) + recording > 1:
         exit_usage(
             stderr_console(),
-            "--service, --startup, --bombs and --rings time different things: give one",
+            "--service, --startup, --bombs, --rings and --recording time different things: "
+            "give one",
         )
     if bombs:
         from service.bench.bombs import run_bomb_bench
@@ -196,6 +205,10 @@ def bench(
         raise typer.Exit(run_startup_bench(command, dataset, runs, as_json))
     repeats = repeats or 3
     if os.environ.get(CHILD_FLAG) == "1":
+        if recording:
+            from service.bench.recording import run_recording_bench
+
+            raise typer.Exit(run_recording_bench(quick, as_json, frames, repeats, cpu_name()))
         if ring_counts is not None:
             from service.bench.rings import run_rings_bench
 
@@ -211,6 +224,7 @@ def bench(
     args = [sys.executable, "-m", "service.cli", "bench", "--dataset", str(dataset)]
     args += ["--frames", str(frames), "--repeats", str(repeats)]
     args += ["--quick"] * quick + ["--json"] * as_json + ["--service"] * service
+    args += ["--recording"] * recording
     args += [] if rings is None else ["--rings", rings]
     raise typer.Exit(subprocess.call(args, env=env))
 

@@ -103,15 +103,31 @@ def run_detection(
         422 :data:`OVER_BUDGET` when the budget ran out (the detection stopped, the
         thread is free again).
     """
-    deadline = None if budget_s is None else Deadline(budget_s)
+    deadline = budget(budget_s)
     image, mask = decode_frame(frame, max_pixels)
+    return image, detect_decoded(image, frame.params, detect, mask, deadline)
+
+
+def budget(seconds: float | None) -> Deadline | None:
+    """The deadline ``seconds`` from now (None: no limit)."""
+    return None if seconds is None else Deadline(seconds)
+
+
+def detect_decoded(
+    image: np.ndarray,
+    params: DetectParams,
+    detect: DetectFunction,
+    mask: np.ndarray | None = None,
+    deadline: Deadline | None = None,
+) -> Detection:
+    """Detect the DLOs in an image already decoded (and checked): as :func:`run_detection`
+    after the decoding (422 for unusable input, or when ``deadline`` passes)."""
     try:
-        detection = detect(image, frame.params, mask, deadline)
+        return detect(image, params, mask, deadline)
     except InvalidInputError as exc:
         raise RequestError(422, "invalid_input", str(exc)) from None
     except DeadlineExceeded as exc:
         raise over_budget(exc) from None
-    return image, detection
 
 
 def over_budget(exc: DeadlineExceeded) -> RequestError:
