@@ -220,7 +220,9 @@ def detect_full(
 
     # 6. Merging across gaps and crossings; each path's free ends extended to the
     # cable's ends and the path resampled; then crossings and their order.
-    merged = merge_chains(pieces, params, radius, zones, distance, deadline)
+    merged = merge_chains(
+        pieces, params, radius, zones, distance, deadline, image=image_bgr, mask=foreground
+    )
     finals = []
     for index, path in enumerate(merged.paths):
         if index % DEADLINE_CHECK_EVERY == 0:
