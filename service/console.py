@@ -136,42 +136,17 @@ def load_kernels(console: Console) -> None:
     alone, not compiling or loading machine code. Ctrl-C meanwhile exits with
     :data:`EXIT_INTERRUPTED` (nothing was processed yet).
     """
+    from service.numba_start import load_cached_kernels_lightly, skip_numba_blas_probe
     from service.perception import kernels_cached, warm_up
 
     skip_numba_blas_probe()
+    load_cached_kernels_lightly()
     if not kernels_cached():
         console.print(FIRST_RUN_NOTICE, markup=False, highlight=False, soft_wrap=True)
     try:
         warm_up()
     except KeyboardInterrupt:
         raise typer.Exit(EXIT_INTERRUPTED) from None
-
-
-def skip_numba_blas_probe() -> None:
-    """Tell numba, in this ``dlo`` process, not to look for a BLAS library.
-
-    The first time numba compiles or loads a kernel it imports its array-maths support,
-    which probes for BLAS by importing all of ``scipy.linalg``: about 0.2 s of a one-image
-    ``dlo detect``. The detector's kernels use neither BLAS nor LAPACK (a test in
-    tests/perception/test_warm_up.py reads their sources to keep it so), so the probe only
-    costs time. Only the CLI does this, never the library: a program that imports
-    ``service.perception`` may compile numba code of its own that needs BLAS. A numba
-    whose internals differ keeps its probe.
-    """
-    import sys
-
-    if "numba.np.arraymath" in sys.modules:  # too late: numba has probed already
-        return
-    try:
-        from numba.np import linalg
-    except ImportError:
-        return
-
-    def no_blas() -> None:
-        raise ImportError("BLAS not probed: the dlo kernels need none")
-
-    if hasattr(linalg, "ensure_blas"):
-        linalg.ensure_blas = no_blas
 
 
 def stderr_console() -> Console:

@@ -198,7 +198,7 @@ def test_an_unwritable_stamp_is_no_error(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("path", KERNEL_FILES, ids=lambda path: path.stem)
 def test_no_kernel_needs_blas_or_lapack(path: Path):
-    """`dlo` tells numba not to probe for BLAS (service.console.skip_numba_blas_probe):
+    """`dlo` tells numba not to probe for BLAS (service.numba_start.skip_numba_blas_probe):
     that holds only while no kernel multiplies matrices or calls np.linalg."""
     for node in ast.walk(ast.parse(path.read_text())):
         assert not (isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult)), path
@@ -212,7 +212,7 @@ def test_a_dlo_process_loads_the_kernels_without_scipy():
     """With the probe skipped, warm-up and a detection never import scipy.linalg."""
     script = (
         "import sys\n"
-        "from service.console import skip_numba_blas_probe\n"
+        "from service.numba_start import skip_numba_blas_probe\n"
         "skip_numba_blas_probe()\n"
         "import numpy as np\n"
         "from service.perception import detect, warm_up\n"
