@@ -7,12 +7,15 @@ when present, else a generated 1280x720 scene with three cables). One untimed
 and the files are in the page cache: the figures are those of a warm kernel cache.
 Then the commands run round after round, one of each per round, so that a busy spell of a
 shared machine slows all of them alike; each is reported as min, median and max over its
-runs, against the targets of issue 15.
+runs, against the targets of issue 15. With ``PYTHONDONTWRITEBYTECODE`` set, Python compiles
+every module of ``dlo`` from source in every process (about 0.15 s of a ``dlo detect``), so
+the table says so: those are not the figures of an installed ``dlo``.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -67,6 +70,7 @@ def run_startup_bench(dlo: list[str], dataset: Path, runs: int, as_json: bool) -
             ],
         }
         _run(commands["dlo detect IMAGE --out-dir DIR"])  # warm: kernels, page cache
+        load_before = os.getloadavg()
         seconds: dict[str, list[float]] = {name: [] for name in commands}
         for _ in range(runs):
             for name, command in commands.items():
@@ -87,6 +91,8 @@ def run_startup_bench(dlo: list[str], dataset: Path, runs: int, as_json: bool) -
         "image": image_note,
         "rows": [asdict(row) for row in rows],
         "cpu": cpu_name(),
+        "bytecode_cached": not os.environ.get("PYTHONDONTWRITEBYTECODE"),
+        "load_average": {"before": load_before, "after": os.getloadavg()},
     }
     if as_json:
         print(json.dumps(results, indent=2))
@@ -149,3 +155,17 @@ def _print_table(results: dict[str, Any], rows: list[StartupRow]) -> None:
             target,
         )
     console.print(table)
+    load = results["load_average"]
+    console.print(
+        "load average (1, 5, 15 min) before "
+        + " / ".join(f"{value:.1f}" for value in load["before"])
+        + ", after "
+        + " / ".join(f"{value:.1f}" for value in load["after"]),
+        highlight=False,
+    )
+    if not results["bytecode_cached"]:
+        console.print(
+            "PYTHONDONTWRITEBYTECODE is set: every run compiled dlo's modules from source "
+            "(unset it for an installed dlo's figures)",
+            highlight=False,
+        )

@@ -95,6 +95,8 @@ def test_dlo_bench_startup_times_whole_processes(tmp_path):
         assert row["runs"] == 2
         assert 0 < row["min_s"] <= row["median_s"] <= row["max_s"]
     assert rows["dlo --help"]["target_s"] == 0.3
+    assert len(results["load_average"]["before"]) == len(results["load_average"]["after"]) == 3
+    assert results["bytecode_cached"] in (True, False)
 
 
 def test_dlo_bench_recording_alone_reports_its_table_and_the_load(tmp_path):
