@@ -64,8 +64,23 @@ def _wrap(angle):
 
 
 @njit(cache=True, nogil=True)
+def _bending(turn, first, second, distance, length, kappa_a, kappa_b, weights, radius):
+    """The direction and turning parts of the join cost, less what curvatures explain."""
+    expected = 0.5 * (kappa_a + kappa_b) * length
+    cost = weights[1] * abs(_wrap(turn - expected)) / np.pi
+    if distance > 1e-9:
+        expected_first = length * (2.0 * kappa_a + kappa_b) / 6.0
+        expected_second = expected - expected_first
+        turning = abs(_wrap(first - expected_first)) + abs(_wrap(second - expected_second))
+        fade = min(1.0, distance / max(3.0 * radius, 1e-9))
+        cost += weights[2] * fade * turning / (2.0 * np.pi)
+    return cost
+
+
+@njit(cache=True, nogil=True)
 def join_cost(ax, ay, adx, ady, ak, bx, by, bdx, bdy, bk, weights, max_gap, radius):
-    """merging.join_cost: the paper's three parts, less the turn the ends' curvature explains."""
+    """merging.join_cost: the paper's three parts, its direction and turning parts less
+    the turn the ends' curvature explains when that is cheaper."""
     gap_x = bx - ax
     gap_y = by - ay
     distance = np.hypot(gap_x, gap_y)
@@ -78,20 +93,16 @@ def join_cost(ax, ay, adx, ady, ak, bx, by, bdx, bdy, bk, weights, max_gap, radi
     kappa_b = min(max(-bk, -limit), limit)
     half = 0.5 * abs(turn)
     length = distance * half / np.sin(half) if half > 1e-6 else distance
-    expected = 0.5 * (kappa_a + kappa_b) * length
-    cost = weights[0] * distance / max(max_gap, 1e-9)
-    cost += weights[1] * abs(_wrap(turn - expected)) / np.pi
+    first = 0.0
+    second = 0.0
     if distance > 1e-9:
         heading_x = gap_x / distance
         heading_y = gap_y / distance
         first = _signed_angle(adx, ady, heading_x, heading_y)
         second = _signed_angle(heading_x, heading_y, arriving_x, arriving_y)
-        expected_first = length * (2.0 * kappa_a + kappa_b) / 6.0
-        expected_second = expected - expected_first
-        turning = abs(_wrap(first - expected_first)) + abs(_wrap(second - expected_second))
-        fade = min(1.0, distance / max(3.0 * radius, 1e-9))
-        cost += weights[2] * fade * turning / (2.0 * np.pi)
-    return cost
+    bent = _bending(turn, first, second, distance, length, kappa_a, kappa_b, weights, radius)
+    straight = _bending(turn, first, second, distance, length, 0.0, 0.0, weights, radius)
+    return weights[0] * distance / max(max_gap, 1e-9) + min(bent, straight)
 
 
 @njit(cache=True, nogil=True)

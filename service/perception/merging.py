@@ -158,9 +158,10 @@ def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> 
     radius))``.
 
     A cable bends smoothly: across a gap of length ``L`` an end whose stretch curves
-    by ``kappa`` (at most a tight loop's, ``1 / (MIN_BEND_RADII * radius)``) is expected
-    to go on turning, by about ``kappa L`` in all, so a hidden stretch of a loop or a
-    bend costs no more than a straight one.
+    by ``kappa`` (at most a tight loop's, ``1 / (MIN_BEND_RADII * radius)``) may go on
+    turning, by about ``kappa L`` in all, so a hidden stretch of a loop or a bend costs
+    no more than a straight one. It may as well straighten out of sight: the direction
+    and turning parts are the cheaper of the two readings, never dearer than the paper's.
 
     Parameters
     ----------

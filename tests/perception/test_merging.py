@@ -1,6 +1,7 @@
 """Step 6, merging: join costs, joins, gap curves and bridges, and their kernels."""
 
 from collections import Counter
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -275,6 +276,9 @@ def test_join_cost_kernel_equals_the_plain_reference(seed):
         radius = float(rng.uniform(1, 8))
         expected = reference.join_cost(a, b, params, radius)
         assert join_cost(a, b, params, radius) == pytest.approx(expected, rel=1e-12, abs=1e-12)
+        # The ends' bending only ever explains a turn: never dearer than the paper's cost.
+        flat = join_cost(replace(a, curvature=0.0), replace(b, curvature=0.0), params, radius)
+        assert join_cost(a, b, params, radius) <= flat
 
 
 def test_join_cost_of_a_hidden_bend_follows_the_ends_curvature():

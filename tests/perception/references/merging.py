@@ -115,10 +115,23 @@ def _wrapped(angle):
     return float((angle + np.pi) % (2.0 * np.pi) - np.pi)
 
 
+def _bending(turn, first, second, distance, length, kappa_a, kappa_b, params, radius):
+    expected = (kappa_a + kappa_b) / 2.0 * length
+    cost = params.direction_weight * abs(_wrapped(turn - expected)) / np.pi
+    if distance > 1e-9:
+        expected_first = length * (2.0 * kappa_a + kappa_b) / 6.0
+        turning = abs(_wrapped(first - expected_first))
+        turning += abs(_wrapped(second - (expected - expected_first)))
+        fade = min(1.0, distance / max(3.0 * radius, 1e-9))
+        cost += params.curvature_weight * fade * turning / (2.0 * np.pi)
+    return cost
+
+
 def join_cost(a, b, params, radius):
     """:func:`service.perception.merging.join_cost` in plain Python: the paper's three
-    parts, less the turning that the ends' curvature (capped at a bend of
-    MIN_BEND_RADII radii) carries on across the gap."""
+    parts, the direction and turning ones less the turning that the ends' curvature
+    (capped at a bend of MIN_BEND_RADII radii) carries on across the gap when that is
+    cheaper than the paper's."""
     gap = b.position - a.position
     distance = float(np.hypot(*gap))
     leaving, arriving = a.direction, -b.direction
@@ -129,17 +142,14 @@ def join_cost(a, b, params, radius):
     # The arc length of a circle through both ends with that turn.
     half = abs(turn) / 2.0
     length = distance * half / np.sin(half) if half > 1e-6 else distance
-    expected = (kappa_a + kappa_b) / 2.0 * length
-    cost = params.distance_weight * distance / max(params.max_gap, 1e-9)
-    cost += params.direction_weight * abs(_wrapped(turn - expected)) / np.pi
+    first = second = 0.0
     if distance > 1e-9:
         heading = gap / distance
-        expected_first = length * (2.0 * kappa_a + kappa_b) / 6.0
-        turning = abs(_wrapped(_signed_angle(leaving, heading) - expected_first))
-        turning += abs(_wrapped(_signed_angle(heading, arriving) - (expected - expected_first)))
-        fade = min(1.0, distance / max(3.0 * radius, 1e-9))
-        cost += params.curvature_weight * fade * turning / (2.0 * np.pi)
-    return cost
+        first, second = _signed_angle(leaving, heading), _signed_angle(heading, arriving)
+    shape = (turn, first, second, distance, length)
+    bent = _bending(*shape, kappa_a, kappa_b, params, radius)
+    straight = _bending(*shape, 0.0, 0.0, params, radius)
+    return params.distance_weight * distance / max(params.max_gap, 1e-9) + min(bent, straight)
 
 
 def runs_to_border(mask, positions, directions, reach, margin):
