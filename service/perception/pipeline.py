@@ -95,11 +95,11 @@ class _Stopwatch:
         self._last = now
 
 
-def _finalise_path(path: MergedPath, mask, distance, params: DetectParams, radius: float):
+def _finalise_path(path: MergedPath, mask, params: DetectParams, radius: float):
     """A merged path with its ends extended, as joints exactly ``l_s`` apart.
 
-    Returns the joints, the per-segment "inferred" flags and the chain's radius (the
-    median distance to the border at its joints on the cable, less half a pixel).
+    Returns the joints, the per-segment "inferred" flags and the chain's radius
+    (:func:`chain_radius`).
     """
     span = max(2.0 * params.segment_length, 3.0 * radius)
     vertices, filled = extend_ends(path.vertices, path.filled, mask, radius, span)
@@ -117,15 +117,48 @@ def _finalise_path(path: MergedPath, mask, distance, params: DetectParams, radiu
         np.ascontiguousarray(edge_lengths, np.float64),
         np.ascontiguousarray(hidden_edge, bool),
     )
-    cols = np.clip(np.rint(joints[:, 0]).astype(int), 0, width - 1)
-    rows = np.clip(np.rint(joints[:, 1]).astype(int), 0, height - 1)
-    on_cable = distance[rows, cols] > 0
-    chain_radius = (
-        max(float(np.median(distance[rows, cols][on_cable])) - 0.5, 0.5)
-        if on_cable.any()
-        else radius
+    return joints, inferred, chain_radius(joints, mask, radius)
+
+
+# Each side of a width across a chain is off by at most half a pixel's diagonal: the ray
+# leaves the cable on a pixel's border, the cable's edge runs somewhere in that pixel.
+ACROSS_QUANTISATION_PX = float(np.sqrt(2.0))
+# How far out a side's edge is looked for, in typical radii (a ray along a crossing
+# strand stops there), plus a few pixels for thin cables.
+ACROSS_REACH_RADII = 6.0
+ACROSS_REACH_PX = 6.0
+
+
+def chain_radius(joints: np.ndarray, mask: np.ndarray, radius: float) -> float:
+    """A chain's radius in pixels: half the mask's width across it, where it is seen.
+
+    The width is measured across the chain at each joint and at each segment's middle,
+    from border to border of the mask's pixels (:func:`_pipeline_kernels.edge_distance`),
+    so a cable drawn ``w`` pixels wide measures ``w`` at any angle and curvature on
+    average (a distance transform at the centreline runs about half a pixel short off
+    the axes). The widths near their median (within two sides' quantisation, so those
+    across a crossing strand or a touching cable drop out) are averaged.
+
+    Parameters
+    ----------
+    joints : ndarray
+        ``(N, 2)`` joints ``(x, y)`` of the chain.
+    mask : ndarray of bool
+        The foreground mask.
+    radius : float
+        The cables' typical radius (``estimate_radius``): sets how far out an edge is
+        looked for, and is the answer where no width can be measured (a chain seen
+        nowhere, or only where it leaves the image).
+    """
+    limit = ACROSS_REACH_RADII * radius + ACROSS_REACH_PX
+    widths = _pipeline_kernels.widths_across(
+        np.ascontiguousarray(joints, np.float64), np.ascontiguousarray(mask, bool), limit
     )
-    return joints, inferred, chain_radius
+    widths = widths[np.isfinite(widths)]
+    if widths.size == 0:
+        return radius
+    near = widths[np.abs(widths - np.median(widths)) <= ACROSS_QUANTISATION_PX]
+    return max(0.5 * float(np.mean(near)), 0.5)
 
 
 def _empty(width, height, params, watch, mask, skeleton) -> DetectionResult:
@@ -227,7 +260,7 @@ def detect_full(
             check(deadline, "merging")
         if polyline_length(path.vertices) < params.min_chain_length:
             continue
-        finals.append(_finalise_path(path, foreground, distance, params, radius))
+        finals.append(_finalise_path(path, foreground, params, radius))
     finals.sort(key=lambda item: -polyline_length(item[0]))
     joint_arrays = [joints for joints, _, _ in finals]
     radii = [chain_radius for _, _, chain_radius in finals]
@@ -410,7 +443,7 @@ def warm_up() -> None:
         ):
             gap_curve(strands[0][0], east, end, arriving, shape=shape)
     # End extension, resampling and the inferred flags; the crossings' sweep.
-    _finalise_path(MergedPath(line, np.array([False])), mask, distance, DetectParams(), radius)
+    _finalise_path(MergedPath(line, np.array([False])), mask, DetectParams(), radius)
     find_intersections(strands)
     # OpenCV builds its Lab tables on the first conversion (about 60 ms), which the
     # crossings step and the labels would otherwise report as their own time.

@@ -62,6 +62,51 @@ def test_one_straight_cable_with_an_occlusion_is_one_chain_bridged_and_flagged()
     assert chain.radius == pytest.approx(5.5, abs=1.0)
 
 
+def straight_cable_mask(shape, angle_deg, half_width, length):
+    """The pixels whose centres lie within ``half_width`` of a segment through the middle."""
+    height, width = shape
+    rows, cols = np.mgrid[0:height, 0:width].astype(float)
+    centre = np.array([width // 2, height // 2], float)
+    along = np.array([np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))])
+    t = np.clip(
+        (cols - centre[0]) * along[0] + (rows - centre[1]) * along[1], -length / 2, length / 2
+    )
+    return np.hypot(cols - centre[0] - t * along[0], rows - centre[1] - t * along[1]) <= half_width
+
+
+def ring_cable_mask(shape, ring_radius, half_width, centre_offset=(0.0, 0.0)):
+    """The pixels whose centres lie within ``half_width`` of a circle."""
+    height, width = shape
+    rows, cols = np.mgrid[0:height, 0:width].astype(float)
+    centre_x, centre_y = width // 2 + centre_offset[0], height // 2 + centre_offset[1]
+    return np.abs(np.hypot(cols - centre_x, rows - centre_y) - ring_radius) <= half_width
+
+
+# Half widths whose axis-aligned masks are exactly twice as wide (odd pixel counts).
+HALF_WIDTHS = (2.5, 4.5, 7.5)
+
+
+@pytest.mark.parametrize("half_width", HALF_WIDTHS)
+def test_a_straight_cables_radius_is_half_its_width_at_any_angle(half_width):
+    for angle in (0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0, 112.5, 135.0, 160.0):
+        mask = straight_cable_mask((300, 300), angle, half_width, 240.0)
+        chains = detect(None, mask=mask).chains
+        assert len(chains) == 1, angle
+        assert chains[0].radius == pytest.approx(half_width, abs=0.25), angle
+
+
+@pytest.mark.parametrize("half_width", HALF_WIDTHS)
+def test_a_curved_cables_radius_is_half_its_width(half_width):
+    # A distance transform read at the centreline gave 3.89 for the 4.5 of a ring.
+    for ring_radius, offset in ((25.0, (0.0, 0.0)), (45.0, (0.3, 0.6)), (90.0, (0.5, 0.2))):
+        if ring_radius < 4 * half_width:
+            continue
+        mask = ring_cable_mask((240, 240), ring_radius, half_width, offset)
+        chains = detect(None, mask=mask).chains
+        assert chains, ring_radius
+        assert chains[0].radius == pytest.approx(half_width, abs=0.25), ring_radius
+
+
 def test_a_crossing_is_passed_straight_through_and_the_top_strand_is_found():
     image = np.full((300, 300, 3), 30, np.uint8)
     cv2.line(image, (20, 40), (280, 260), (200, 80, 40), 13, cv2.LINE_AA)  # under
@@ -261,6 +306,26 @@ def test_inferred_segments_kernel_equals_the_reference(seed):
         np.testing.assert_array_equal(
             _pipeline_kernels.inferred_segments(source_edge, edge_lengths, hidden_edge),
             reference.inferred_segments(source_edge, edge_lengths, hidden_edge),
+        )
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_widths_across_kernel_equals_the_reference(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(20):
+        mask = rng.random((int(rng.integers(5, 60)), int(rng.integers(5, 60)))) < rng.random()
+        mask |= straight_cable_mask(mask.shape, rng.uniform(0, 180), rng.uniform(0.5, 6), 50.0)
+        height, width = mask.shape
+        joints = np.cumsum(rng.normal(0.0, 4.0, (int(rng.integers(1, 12)), 2)), axis=0)
+        joints += (width / 2, height / 2)
+        if rng.random() < 0.2:
+            joints[1:2] = joints[:1]  # a segment of no length has no normal
+        limit = float(rng.uniform(1.0, 40.0))
+        np.testing.assert_allclose(
+            _pipeline_kernels.widths_across(joints, mask, limit),
+            reference.widths_across(joints, mask, limit),
+            rtol=0,
+            atol=1e-9,
         )
 
 
