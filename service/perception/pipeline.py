@@ -157,8 +157,10 @@ def chain_radius(joints: np.ndarray, mask: np.ndarray, radius: float) -> float:
     widths = widths[np.isfinite(widths)]
     if widths.size == 0:
         return radius
-    near = widths[np.abs(widths - np.median(widths)) <= ACROSS_QUANTISATION_PX]
-    return max(0.5 * float(np.mean(near)), 0.5)
+    median = float(np.median(widths))
+    near = widths[np.abs(widths - median) <= ACROSS_QUANTISATION_PX]
+    # An even count split far apart has none near its median: the median it is.
+    return max(0.5 * (float(np.mean(near)) if near.size else median), 0.5)
 
 
 def _empty(width, height, params, watch, mask, skeleton) -> DetectionResult:

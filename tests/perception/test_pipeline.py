@@ -17,6 +17,7 @@ from service.perception import (
 )
 from service.perception.contours import extract_contours
 from service.perception.fitting import fit_chains, junction_zones
+from service.perception.pipeline import chain_radius
 from service.perception.pruning import prune_overlaps
 from service.perception.skeleton import (
     distance_transform,
@@ -105,6 +106,15 @@ def test_a_curved_cables_radius_is_half_its_width(half_width):
         chains = detect(None, mask=mask).chains
         assert chains, ring_radius
         assert chains[0].radius == pytest.approx(half_width, abs=0.25), ring_radius
+
+
+def test_a_chains_radius_is_the_median_width_when_no_width_lies_near_it():
+    mask = np.zeros((40, 80), bool)
+    mask[19:22, :30] = True  # 3 px wide
+    mask[13:28, 50:] = True  # 15 px wide; the chain's middle (x = 40) is off the mask
+    joints = np.array([[10.0, 20.0], [70.0, 20.0]])
+    assert chain_radius(joints, mask, 2.0) == pytest.approx(4.5)
+    assert chain_radius(joints[:1], mask, 2.0) == 2.0  # one joint has no direction
 
 
 def test_a_crossing_is_passed_straight_through_and_the_top_strand_is_found():
