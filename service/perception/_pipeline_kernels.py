@@ -82,15 +82,16 @@ def edge_distance(mask, x, y, dx, dy, limit):
 
 
 @njit(cache=True, nogil=True)
-def widths_across(joints, mask, limit):
-    """The mask's width across a chain at each joint and at each segment's middle.
+def sides_across(joints, mask, limit):
+    """How far the mask reaches on each side of a chain, at each joint and segment middle.
 
     Across is along the normal of the chord between a joint's neighbours (the one
-    segment at an end) and of the segment itself at its middle: ``2n - 1`` widths for
-    ``n`` joints, NaN where either side has no edge (see :func:`edge_distance`).
+    segment at an end) and of the segment itself at its middle: ``(2n - 1, 2)`` distances
+    (left, right) for ``n`` joints, NaN where a side has no edge (see
+    :func:`edge_distance`) or the chord has no length.
     """
     n = joints.shape[0]
-    widths = np.full(max(2 * n - 1, 0), np.nan)
+    sides = np.full((max(2 * n - 1, 0), 2), np.nan)
     for k in range(2 * n - 1):
         if k < n:
             before, after = max(k - 1, 0), min(k + 1, n - 1)
@@ -105,7 +106,6 @@ def widths_across(joints, mask, limit):
         if norm == 0.0:
             continue
         nx, ny = -ty / norm, tx / norm
-        widths[k] = edge_distance(mask, x, y, nx, ny, limit) + edge_distance(
-            mask, x, y, -nx, -ny, limit
-        )
-    return widths
+        sides[k, 0] = edge_distance(mask, x, y, nx, ny, limit)
+        sides[k, 1] = edge_distance(mask, x, y, -nx, -ny, limit)
+    return sides

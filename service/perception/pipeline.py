@@ -126,6 +126,8 @@ ACROSS_QUANTISATION_PX = float(np.sqrt(2.0))
 # How far out a side's edge is looked for, in typical radii (a ray along a crossing
 # strand stops there), plus a few pixels for thin cables.
 ACROSS_REACH_RADII = 6.0
+# The share of a width either side must span for the chain to count as on its middle.
+CENTRED_SHARE = 1.0 / 3.0
 ACROSS_REACH_PX = 6.0
 
 
@@ -136,8 +138,8 @@ def chain_radius(joints: np.ndarray, mask: np.ndarray, radius: float) -> float:
     from border to border of the mask's pixels (:func:`_pipeline_kernels.edge_distance`),
     so a cable drawn ``w`` pixels wide measures ``w`` at any angle and curvature on
     average (a distance transform at the centreline runs about half a pixel short off
-    the axes). The widths near their median (within two sides' quantisation, so those
-    across a crossing strand or a touching cable drop out) are averaged.
+    the axes). Widths the chain does not run through the middle third of are left out;
+    the rest near their median (within two sides' quantisation) are averaged.
 
     Parameters
     ----------
@@ -151,10 +153,15 @@ def chain_radius(joints: np.ndarray, mask: np.ndarray, radius: float) -> float:
         nowhere, or only where it leaves the image).
     """
     limit = ACROSS_REACH_RADII * radius + ACROSS_REACH_PX
-    widths = _pipeline_kernels.widths_across(
+    sides = _pipeline_kernels.sides_across(
         np.ascontiguousarray(joints, np.float64), np.ascontiguousarray(mask, bool), limit
     )
-    widths = widths[np.isfinite(widths)]
+    widths = sides.sum(axis=1)
+    # A chain runs along its cable's middle: where it lies off the middle third of what
+    # the mask spans across it, the span is something else (the other side of a cable
+    # it touches, a strand it crosses, a blob it runs along the edge of).
+    centred = sides.min(axis=1) >= CENTRED_SHARE * widths
+    widths = widths[np.isfinite(widths) & centred]
     if widths.size == 0:
         return radius
     median = float(np.median(widths))

@@ -320,7 +320,7 @@ def test_inferred_segments_kernel_equals_the_reference(seed):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_widths_across_kernel_equals_the_reference(seed):
+def test_sides_across_kernel_equals_the_reference(seed):
     rng = np.random.default_rng(seed)
     for _ in range(20):
         mask = rng.random((int(rng.integers(5, 60)), int(rng.integers(5, 60)))) < rng.random()
@@ -332,8 +332,8 @@ def test_widths_across_kernel_equals_the_reference(seed):
             joints[1:2] = joints[:1]  # a segment of no length has no normal
         limit = float(rng.uniform(1.0, 40.0))
         np.testing.assert_allclose(
-            _pipeline_kernels.widths_across(joints, mask, limit),
-            reference.widths_across(joints, mask, limit),
+            _pipeline_kernels.sides_across(joints, mask, limit),
+            reference.sides_across(joints, mask, limit),
             rtol=0,
             atol=1e-9,
         )

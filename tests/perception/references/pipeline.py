@@ -15,25 +15,29 @@ def inferred_segments(source_edge, edge_lengths, hidden_edge):
     return inferred
 
 
-def widths_across(joints, mask, limit):
-    """The mask's width across the chain at each joint, then at each segment's middle."""
+def sides_across(joints, mask, limit):
+    """How far the mask reaches each side of the chain at each joint, then at each
+    segment's middle."""
     n = len(joints)
     widths = []
     for k in range(n):
         tangent = joints[min(k + 1, n - 1)] - joints[max(k - 1, 0)]
-        widths.append(_width(mask, joints[k], tangent, limit))
+        widths.append(_sides(mask, joints[k], tangent, limit))
     for k in range(n - 1):
         middle = 0.5 * (joints[k] + joints[k + 1])
-        widths.append(_width(mask, middle, joints[k + 1] - joints[k], limit))
-    return np.array(widths, float)
+        widths.append(_sides(mask, middle, joints[k + 1] - joints[k], limit))
+    return np.array(widths, float).reshape(-1, 2)
 
 
-def _width(mask, point, tangent, limit):
+def _sides(mask, point, tangent, limit):
     length = np.hypot(*tangent)
     if length == 0:
-        return np.nan
+        return (np.nan, np.nan)
     normal = np.array([-tangent[1], tangent[0]]) / length
-    return _edge_distance(mask, point, normal, limit) + _edge_distance(mask, point, -normal, limit)
+    return (
+        _edge_distance(mask, point, normal, limit),
+        _edge_distance(mask, point, -normal, limit),
+    )
 
 
 def _edge_distance(mask, point, direction, limit):
