@@ -95,11 +95,13 @@ class _Stopwatch:
         self._last = now
 
 
-def _finalise_path(path: MergedPath, mask, params: DetectParams, radius: float):
+def _finalise_path(path: MergedPath, mask, distance, params: DetectParams, radius: float):
     """A merged path with its ends extended, as joints exactly ``l_s`` apart.
 
-    Returns the joints, the per-segment "inferred" flags and the chain's radius
-    (:func:`chain_radius`).
+    Returns the joints, the per-segment "inferred" flags, the chain's scale for the
+    later steps' thresholds (the median distance transform at its joints on the cable,
+    less half a pixel: what the crossings' window, the hidden segments' reach and each
+    cable's own threshold were built on) and its radius (:func:`chain_radius`).
     """
     span = max(2.0 * params.segment_length, 3.0 * radius)
     vertices, filled = extend_ends(path.vertices, path.filled, mask, radius, span)
@@ -117,7 +119,15 @@ def _finalise_path(path: MergedPath, mask, params: DetectParams, radius: float):
         np.ascontiguousarray(edge_lengths, np.float64),
         np.ascontiguousarray(hidden_edge, bool),
     )
-    return joints, inferred, chain_radius(joints, mask, radius)
+    cols = np.clip(np.rint(joints[:, 0]).astype(int), 0, width - 1)
+    rows = np.clip(np.rint(joints[:, 1]).astype(int), 0, height - 1)
+    on_cable = distance[rows, cols] > 0
+    scale = (
+        max(float(np.median(distance[rows, cols][on_cable])) - 0.5, 0.5)
+        if on_cable.any()
+        else radius
+    )
+    return joints, inferred, scale, chain_radius(joints, mask, radius)
 
 
 # Each side of a width across a chain is off by at most half a pixel's diagonal: the ray
@@ -269,13 +279,14 @@ def detect_full(
             check(deadline, "merging")
         if polyline_length(path.vertices) < params.min_chain_length:
             continue
-        finals.append(_finalise_path(path, foreground, params, radius))
+        finals.append(_finalise_path(path, foreground, distance, params, radius))
     finals.sort(key=lambda item: -polyline_length(item[0]))
-    joint_arrays = [joints for joints, _, _ in finals]
-    radii = [chain_radius for _, _, chain_radius in finals]
+    joint_arrays = [joints for joints, *_ in finals]
+    # The thresholds of the steps below are in the scale they were built on.
+    radii = [scale for _, _, scale, _ in finals]
     check(deadline, "merging")
     found = detect_crossings(joint_arrays, radii, image_bgr)
-    inferred_flags = [inferred.copy() for _, inferred, _ in finals]
+    inferred_flags = [inferred.copy() for _, inferred, *_ in finals]
     for crossing in found:
         # The strand underneath is hidden where the top strand covers it.
         under = joint_arrays[crossing.under]
@@ -304,10 +315,10 @@ def detect_full(
         Chain(
             id=index,
             points=joints.tolist(),
-            radius=chain_radius,
+            radius=measured,
             inferred=inferred_flags[index].tolist(),
         )
-        for index, (joints, _, chain_radius) in enumerate(finals)
+        for index, (joints, _, _, measured) in enumerate(finals)
     ]
     crossings = [
         Crossing(
@@ -452,7 +463,7 @@ def warm_up() -> None:
         ):
             gap_curve(strands[0][0], east, end, arriving, shape=shape)
     # End extension, resampling and the inferred flags; the crossings' sweep.
-    _finalise_path(MergedPath(line, np.array([False])), mask, DetectParams(), radius)
+    _finalise_path(MergedPath(line, np.array([False])), mask, distance, DetectParams(), radius)
     find_intersections(strands)
     # OpenCV builds its Lab tables on the first conversion (about 60 ms), which the
     # crossings step and the labels would otherwise report as their own time.
