@@ -117,6 +117,15 @@ def test_a_chains_radius_is_the_median_width_when_no_width_lies_near_it():
     assert chain_radius(joints[:1], mask, 2.0) == 2.0  # one joint has no direction
 
 
+def test_a_span_the_chain_lies_off_the_middle_of_is_not_its_width():
+    mask = np.zeros((40, 120), bool)
+    mask[10:19, 5:115] = True  # a cable 9 px wide along row 14
+    joints = np.column_stack((np.arange(20.0, 101.0, 10.0), np.full(9, 14.0)))
+    assert chain_radius(joints, mask, 3.0) == pytest.approx(4.5)
+    mask[19:28, 5:115] = True  # another one touching it: 18 px of mask, 4.5 above the chain
+    assert chain_radius(joints, mask, 3.0) == 3.0  # nothing measured: the typical radius
+
+
 def test_a_crossing_is_passed_straight_through_and_the_top_strand_is_found():
     image = np.full((300, 300, 3), 30, np.uint8)
     cv2.line(image, (20, 40), (280, 260), (200, 80, 40), 13, cv2.LINE_AA)  # under
