@@ -1,7 +1,8 @@
 """Detection output: each DLO as a chain of fixed-length segments.
 
 Coordinates are pixels, ``x`` the column and ``y`` the row, with the origin at the
-centre of the top-left pixel.
+centre of the top-left pixel. A chain lifted to 3-D (``service.geometry3d.lift``) also
+carries its joints in the robot base frame, in metres (``points_3d``, ``radius_m``).
 """
 
 from __future__ import annotations
@@ -9,6 +10,12 @@ from __future__ import annotations
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 Point = tuple[float, float]
+Point3 = tuple[float, float, float]
+
+
+def _absent(value: object) -> bool:
+    """Fields that only a lifted detection has are left out of its JSON until set."""
+    return value is None
 
 
 class Chain(BaseModel):
@@ -26,12 +33,31 @@ class Chain(BaseModel):
     points: list[Point] = Field(min_length=2, description="Joint positions [x, y] in px.")
     radius: float = Field(ge=0, description="Half width of the cable in px.")
     inferred: list[bool] = Field(description="Per segment: filled across a gap, not seen.")
+    points_3d: list[Point3 | None] | None = Field(
+        None,
+        exclude_if=_absent,
+        description="Only when a camera model was given: each joint's point on the cable's "
+        "centreline [x, y, z] in the robot base frame, metres, in the order of `points`; "
+        "null for a joint that could not be located (no valid depth around a seen joint, "
+        "or its ray misses the table). Hidden joints (on inferred segments) lie on their "
+        "rays at a depth interpolated between the located joints on either side.",
+    )
+    radius_m: float | None = Field(
+        None,
+        ge=0,
+        exclude_if=_absent,
+        description="Only when a camera model was given: the cable's radius in metres.",
+    )
 
     @model_validator(mode="after")
     def _one_flag_per_segment(self) -> Chain:
         if len(self.inferred) != len(self.points) - 1:
             raise ValueError(
                 f"inferred has {len(self.inferred)} flags for {len(self.points) - 1} segments"
+            )
+        if self.points_3d is not None and len(self.points_3d) != len(self.points):
+            raise ValueError(
+                f"points_3d has {len(self.points_3d)} entries for {len(self.points)} points"
             )
         return self
 

@@ -23,10 +23,20 @@ class SegmentationMethod(StrEnum):
     """How the foreground mask is found when the caller gives none."""
 
     auto = "auto"
+    """``brightness`` when the image shows what it needs (bright, thin cables on a darker,
+    plain background: brightness is clearly two-class and its bright class is thin);
+    ``contrast`` otherwise."""
+    contrast = "contrast"
+    """Cable contrast: lines of one colour that differ from both sides and from the local
+    background, at every cable width, on any background (bright, dark or textured)."""
+    brightness = "brightness"
     """Otsu with hysteresis on brightness (again per cable once the chains are known);
-    colourfulness when brightness is not two-class."""
+    colourfulness when brightness is not two-class (``auto`` before cable contrast)."""
     hsv = "hsv"
     """Fixed HSV range ``hsv_low`` .. ``hsv_high`` (OpenCV ranges: H 0-179, S and V 0-255)."""
+    model = "model"
+    """A segmenter the caller supplies: a learned model (ONNX, ``--segmenter-model``) or,
+    in Python, any callable from the image to a mask."""
 
 
 class DetectParams(BaseModel):
@@ -51,8 +61,12 @@ class DetectParams(BaseModel):
     segmentation: SegmentationMethod = Field(
         SegmentationMethod.auto, description="Segmentation when no mask is given."
     )
-    hsv_low: tuple[int, int, int] = Field((0, 0, 60), description="Lower HSV bound (hsv).")
-    hsv_high: tuple[int, int, int] = Field((179, 255, 255), description="Upper HSV bound (hsv).")
+    hsv_low: tuple[int, int, int] = Field(
+        (0, 0, 60), description="Lower HSV bound; only with segmentation hsv."
+    )
+    hsv_high: tuple[int, int, int] = Field(
+        (179, 255, 255), description="Upper HSV bound; only with segmentation hsv."
+    )
     min_component_area: int = Field(
         120, ge=0, le=1_000_000, description="Foreground specks smaller than this are removed."
     )
@@ -103,4 +117,16 @@ class DetectParams(BaseModel):
                     raise ValueError(f"{name} {bound} is outside 0..{limits}")
         if any(lo > hi for lo, hi in zip(self.hsv_low, self.hsv_high, strict=True)):
             raise ValueError(f"hsv_low {self.hsv_low} exceeds hsv_high {self.hsv_high}")
+        # An HSV box without the hsv segmentation would be ignored without a word: refuse
+        # it. (The defaults are let through, so that a saved DetectParams reloads.)
+        fields = type(self).model_fields
+        boxed = (self.hsv_low, self.hsv_high) != (
+            fields["hsv_low"].default,
+            fields["hsv_high"].default,
+        )
+        if boxed and self.segmentation is not SegmentationMethod.hsv:
+            raise ValueError(
+                f"hsv_low/hsv_high apply only to segmentation 'hsv', and segmentation is "
+                f"'{self.segmentation.value}': set segmentation to hsv too"
+            )
         return self

@@ -5,29 +5,41 @@ These are the plain functions behind the ``dlo`` command line; they print nothin
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from pydantic import ValidationError
 
-from schemas import Detection, DetectParams
+from schemas import CameraModel, Detection, DetectParams
+from schemas.model import CablePhysics
+from service.geometry3d import LiftError, lift
+from service.geometry3d.depth import check_depth_image, read_depth_file
 from service.imageio import (
     IMAGE_SUFFIXES,
     ImageFileError,
     OutputWriteError,
-    list_images,
+    images_in_directory,
     read_image,
     read_mask,
     write_png,
     write_text,
 )
 from service.perception import InvalidInputError, detect_full, render_labels, render_overlay
+from service.perception.segmenter import Segmenter
+from service.simulation import ModelError, to_mjcf
+from service.simulation.mjcf import with_surface
 
-OUTPUT_KINDS = ("json", "labels", "overlay")
-"""The outputs written per image, as named on the command line (``--outputs``)."""
+IMAGE_OUTPUTS = ("json", "labels", "overlay")
+"""The outputs written per image by default."""
+OUTPUT_KINDS = (*IMAGE_OUTPUTS, "mjcf", "mcap")
+"""Every output, as named on the command line (``--outputs``); ``mjcf`` (the MuJoCo model)
+needs a camera model, and is then written by default too; ``mcap`` (a ROS 2 recording of all
+the images, or of each video or camera) is written only when asked for."""
 
 
 class InvalidParametersError(ValueError):
@@ -44,6 +56,8 @@ class OutputPaths:
     """``<stem>.labels.png``: 16-bit label image, pixel value = chain id + 1, 0 elsewhere."""
     overlay_png: Path
     """``<stem>.overlay.png``: the chains drawn over the input image."""
+    mjcf_xml: Path
+    """``<stem>.mjcf.xml``: the MuJoCo model of the lifted chains (with a camera model)."""
 
     @classmethod
     def for_input(
@@ -56,20 +70,25 @@ class OutputPaths:
             detection_json=directory / f"{stem}.json",
             labels_png=directory / f"{stem}.labels.png",
             overlay_png=directory / f"{stem}.overlay.png",
+            mjcf_xml=directory / f"{stem}.mjcf.xml",
         )
 
     def all(self) -> tuple[Path, Path, Path]:
-        """The three paths, in the order they are written (JSON last)."""
+        """The three image outputs' paths, in the order they are written (JSON last)."""
         return (self.labels_png, self.overlay_png, self.detection_json)
 
 
-def build_params(**options: Any) -> DetectParams:
+def build_params(base: DetectParams | None = None, **options: Any) -> DetectParams:
     """Validate detection options given on a command line into :class:`DetectParams`.
 
     Parameters
     ----------
+    base : DetectParams, optional
+        Parameters given as a whole (``--params``, :func:`read_params`); the fields it
+        sets are kept unless an option sets them too.
     **options
-        :class:`DetectParams` fields; those that are None are left at their default.
+        :class:`DetectParams` fields; those that are None are left as ``base`` has them
+        (by default, at their default).
 
     Returns
     -------
@@ -81,11 +100,44 @@ def build_params(**options: Any) -> DetectParams:
         A value is out of range or inconsistent; the message is one line such as
         ``--segment-length: Input should be greater than 0.5``.
     """
-    given = {name: value for name, value in options.items() if value is not None}
+    given = {} if base is None else base.model_dump(exclude_unset=True)
+    given.update((name, value) for name, value in options.items() if value is not None)
     try:
         return DetectParams(**given)
     except ValidationError as exc:
         raise InvalidParametersError(describe_validation_error(exc)) from None
+
+
+def read_params(text: str) -> DetectParams:
+    """``--params``: :class:`DetectParams` from a JSON object, or from a file holding one.
+
+    Parameters
+    ----------
+    text : str
+        A JSON object such as ``{"gap_curve": "natural"}`` (it starts with ``{``), else
+        the path of a file holding one.
+
+    Raises
+    ------
+    InvalidParametersError
+        Neither a JSON object nor a readable file, or invalid parameters; one line
+        starting with ``--params:``.
+    """
+    source = text
+    if not text.lstrip().startswith("{"):
+        path = Path(text)
+        if not path.is_file():
+            shown = text if len(text) <= 80 else text[:77] + "..."
+            raise InvalidParametersError(f"--params: {shown!r} is neither a JSON object nor a file")
+        try:
+            source = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InvalidParametersError(f"--params: cannot read {text}: {exc}") from None
+    try:
+        return DetectParams.model_validate_json(source)
+    except ValidationError as exc:
+        problems = describe_json_validation_error(exc, "value")
+        raise InvalidParametersError(f"--params: {_one_line(problems)}") from None
 
 
 def parse_outputs(text: str) -> frozenset[str]:
@@ -147,7 +199,9 @@ def describe_validation_error(error: ValidationError) -> str:
     return _one_line("; ".join(parts))
 
 
-def expand_inputs(paths: Iterable[str | os.PathLike[str]]) -> tuple[list[Path], list[str]]:
+def expand_inputs(
+    paths: Iterable[str | os.PathLike[str]],
+) -> tuple[list[Path], list[str], list[str]]:
     """Turn command-line paths into the image files to process.
 
     Parameters
@@ -162,16 +216,24 @@ def expand_inputs(paths: Iterable[str | os.PathLike[str]]) -> tuple[list[Path], 
         processing them reports the problem.
     problems : list of str
         One-line messages for directories that hold no image.
+    skipped : list of str
+        One-line notes for what directories hold but is not processed: subdirectories
+        and broken symbolic links (:func:`service.imageio.images_in_directory`).
     """
     files: list[Path] = []
     problems: list[str] = []
+    skipped: list[str] = []
     for path in map(Path, paths):
-        found = list_images([path])
+        if not path.is_dir():
+            files.append(path)
+            continue
+        found, passed_over = images_in_directory(path)
+        skipped.extend(passed_over)
         if not found:
             suffixes = " ".join(IMAGE_SUFFIXES)
             problems.append(f"{path}: directory holds no image ({suffixes})")
         files.extend(found)
-    return files, problems
+    return files, problems, skipped
 
 
 def find_output_clashes(files: Sequence[Path]) -> dict[Path, Path]:
@@ -198,7 +260,11 @@ def process_file(
     params: DetectParams | None,
     out_dir: str | os.PathLike[str] | None,
     mask_path: str | os.PathLike[str] | None = None,
-    outputs: Collection[str] = OUTPUT_KINDS,
+    outputs: Collection[str] = IMAGE_OUTPUTS,
+    camera: CameraModel | None = None,
+    depth_path: str | os.PathLike[str] | None = None,
+    physics: CablePhysics | None = None,
+    segmenter: Segmenter | None = None,
 ) -> Detection:
     """Detect the DLOs in one image file and write the outputs.
 
@@ -214,38 +280,98 @@ def process_file(
     mask_path : str or Path, optional
         Foreground mask file of the image's size; replaces segmentation.
     outputs : collection of str
-        Which of :data:`OUTPUT_KINDS` to write in ``out_dir`` (all by default); the
-        images that are not asked for are not rendered.
+        Which of :data:`OUTPUT_KINDS` to write in ``out_dir`` (:data:`IMAGE_OUTPUTS` by
+        default); the images that are not asked for are not rendered. ``mjcf`` needs
+        ``camera``; ``mcap`` is the caller's (one recording holds many images).
+    camera : CameraModel, optional
+        Lift the chains to the robot base frame (``points_3d``, ``radius_m``).
+    depth_path : str or Path, optional
+        The depth image (16-bit PNG or ``.npy``) when the camera's surface is a depth image.
+    physics : CablePhysics, optional
+        The cables' physics in ``<stem>.mjcf.xml``; the defaults when None.
+    segmenter : callable, optional
+        The segmenter for ``params.segmentation == "model"`` (see
+        :mod:`service.perception.segmenter`).
 
     Returns
     -------
     Detection
+        Lifted when ``camera`` is given.
 
     Raises
     ------
     InvalidInputError
-        The image or mask cannot be used; an :class:`ImageFileError` when the
-        message already names the file (the image or the mask).
+        The image, mask or depth image cannot be used; an :class:`ImageFileError` when the
+        message already names the file.
+    LiftError
+        The chains cannot be lifted with this camera (its image size differs).
+    ModelError
+        The physics would make an unstable model.
     OutputWriteError
         An output cannot be written.
     """
     image = read_image(path)
     mask = None if mask_path is None else read_mask(mask_path, image.shape)
-    result = detect_full(image, params, mask=mask)
+    depth = None if depth_path is None or camera is None else read_depth(depth_path, camera)
+    result = detect_full(image, params, mask=mask, segmenter=segmenter)
+    detection = result.detection
+    if camera is not None:
+        detection = lift(detection, camera, depth)
     if out_dir is not None:
         paths = OutputPaths.for_input(path, out_dir)
         if "labels" in outputs:
-            write_png(paths.labels_png, render_labels(result.detection, result.mask, image))
+            write_png(paths.labels_png, render_labels(detection, result.mask, image))
         if "overlay" in outputs:
-            write_png(paths.overlay_png, render_overlay(image, result.detection))
+            write_png(paths.overlay_png, render_overlay(image, detection))
+        if "mjcf" in outputs and camera is not None:
+            model = to_mjcf(detection, **with_surface(physics, camera).model_dump())
+            write_text(paths.mjcf_xml, model)
         if "json" in outputs:
-            write_text(paths.detection_json, detection_to_json(result.detection) + "\n")
-    return result.detection
+            write_text(paths.detection_json, detection_to_json(detection) + "\n")
+    return detection
+
+
+def read_depth(path: str | os.PathLike[str], camera: CameraModel) -> np.ndarray:
+    """The depth image at ``path`` checked against ``camera``.
+
+    Raises
+    ------
+    ImageFileError
+        It cannot be read, is not a usable depth image or does not fit the camera.
+    """
+    from service.geometry3d import DepthImageError
+
+    try:
+        return check_depth_image(camera, read_depth_file(path))
+    except OSError as error:
+        raise ImageFileError(path, f"cannot read depth image: {error.strerror or error}") from None
+    except DepthImageError as error:
+        raise ImageFileError(path, str(error)) from None
 
 
 def detection_to_json(detection: Detection) -> str:
-    """The wire form of a detection: JSON indented by two spaces, no trailing newline."""
-    return detection.model_dump_json(indent=2)
+    """A detection as JSON for people and files: one line per field, per chain and per
+    crossing, no trailing newline.
+
+    Indenting every level (``model_dump_json(indent=2)``) would put each coordinate on a
+    line of its own, a thousand lines for a photograph; on one line per chain it reads
+    at a glance, diffs by chain, and any JSON reader (``jq``) takes it as it is.
+    """
+    fields = detection.model_dump(mode="json")
+    lines = []
+    for key, value in fields.items():
+        if isinstance(value, list) and value:
+            items = [f"    {_compact_json(item)}," for item in value]
+            items[-1] = items[-1].removesuffix(",")
+            lines.append(f'  "{key}": [\n' + "\n".join(items) + "\n  ],")
+        else:
+            lines.append(f'  "{key}": {_compact_json(value)},')
+    lines[-1] = lines[-1].removesuffix(",")
+    return "{\n" + "\n".join(lines) + "\n}"
+
+
+def _compact_json(value: Any) -> str:
+    return json.dumps(value, separators=(", ", ": "), allow_nan=False)
 
 
 def failure_message(path: str | os.PathLike[str], error: BaseException) -> str:
@@ -267,7 +393,7 @@ def failure_message(path: str | os.PathLike[str], error: BaseException) -> str:
     """
     if isinstance(error, ImageFileError):
         message = str(error)
-    elif isinstance(error, InvalidInputError | OutputWriteError):
+    elif isinstance(error, InvalidInputError | OutputWriteError | LiftError | ModelError):
         message = f"{path}: {error}"
     else:
         message = f"{path}: internal error: {type(error).__name__}: {error}"

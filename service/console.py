@@ -7,17 +7,20 @@ Exit statuses (the same for every command):
 0      everything worked
 1      at least one input could not be processed (:data:`EXIT_FAILED`)
 2      the command line itself is wrong, or a robot refused before moving (:data:`EXIT_USAGE`)
-130    Ctrl-C stopped the run before anything was processed (:data:`EXIT_INTERRUPTED`)
+130    Ctrl-C stopped the run, whatever it had done so far (:data:`EXIT_INTERRUPTED`)
 =====  ==========================================================================
 """
 
 from __future__ import annotations
 
+import inspect
 from typing import Any, NoReturn
 
+import click
 import typer
 from rich.console import Console
 from rich.text import Text
+from typer.core import TyperArgument, TyperCommand, TyperGroup, TyperOption
 
 EXIT_OK = 0
 """Everything worked."""
@@ -26,22 +29,100 @@ EXIT_FAILED = 1
 EXIT_USAGE = 2
 """The command line itself is wrong (options, parameters)."""
 EXIT_INTERRUPTED = 130
-"""Ctrl-C before anything was processed (128 + SIGINT, as shells report it)."""
+"""Ctrl-C stopped the run (128 + SIGINT, as shells report it), even when some inputs were
+done: a script running ``dlo ... && next-step`` must not go on with part of the outputs."""
+
+
+class _Option(TyperOption):
+    """An option in ``--help``: no value type for a flag, a default shown as written."""
+
+    def display_type_rich(self, ctx: click.Context) -> str | None:
+        if self.is_flag or self.count:  # "--help <bool>" would say it takes a value
+            return None
+        return super().display_type_rich(ctx)
+
+    def _get_default_string(self, *, ctx: click.Context, show_default_is_str: bool, **kw: Any):
+        if show_default_is_str:  # Typer would print "(10.0)"
+            return str(self.show_default)
+        return super()._get_default_string(ctx=ctx, show_default_is_str=False, **kw)
+
+
+class _Argument(TyperArgument):
+    """An argument in ``--help``: named by its metavar alone, required without braces."""
+
+    def display_type_rich(self, ctx: click.Context) -> str | None:
+        return None if self.metavar else super().display_type_rich(ctx)
+
+    def _usage_display_name(self) -> str:
+        name = self.display_name_raw if self.required else f"[{self.display_name_raw}]"
+        return name + ("..." if self.nargs != 1 else "")
+
+
+def _tidy_params(params: list[click.Parameter]) -> list[click.Parameter]:
+    for param in params:
+        if type(param) is TyperOption:
+            param.__class__ = _Option
+        elif type(param) is TyperArgument:
+            param.__class__ = _Argument
+    return params
+
+
+def _rewrapped(text: str | None) -> str | None:
+    """Help text with each paragraph on one line, for the terminal to wrap: a docstring's
+    own line breaks would otherwise break lines mid-sentence. ``\b`` paragraphs are kept."""
+    if not text:
+        return text
+    paragraphs = inspect.cleandoc(text).split("\n\n")
+    return "\n\n".join(
+        part if part.startswith("\b") else " ".join(part.split("\n")) for part in paragraphs
+    )
+
+
+class DloCommand(TyperCommand):
+    """A ``dlo`` command: help paragraphs rewrapped, flags and arguments shown plainly."""
+
+    def __init__(self, name: str | None, **settings: Any) -> None:
+        settings["help"] = _rewrapped(settings.get("help"))
+        super().__init__(name, **settings)
+
+    def get_params(self, ctx: click.Context) -> list[click.Parameter]:
+        return _tidy_params(super().get_params(ctx))
+
+
+class DloGroup(TyperGroup):
+    """A ``dlo`` command group, with the help of :class:`DloCommand`."""
+
+    def __init__(self, **settings: Any) -> None:
+        settings["help"] = _rewrapped(settings.get("help"))
+        super().__init__(**settings)
+
+    def get_params(self, ctx: click.Context) -> list[click.Parameter]:
+        return _tidy_params(super().get_params(ctx))
+
+
+class _DloTyper(typer.Typer):
+    """A Typer whose commands are :class:`DloCommand` unless told otherwise."""
+
+    def command(self, *args: Any, cls: type[TyperCommand] | None = None, **kwargs: Any) -> Any:
+        return super().command(*args, cls=cls or DloCommand, **kwargs)
 
 
 def typer_app(**settings: Any) -> typer.Typer:
     """A :class:`typer.Typer` set up as every ``dlo`` command (group) is.
 
     Help when called without arguments, no shell-completion options, and no rich
-    tracebacks: ``dlo`` reports failures on one line (see :func:`print_error`).
+    tracebacks: ``dlo`` reports failures on one line (see :func:`print_error`). Help
+    text is rewrapped by paragraph, flags show no value type, and required arguments
+    appear plainly in usage lines (:class:`DloCommand`, :class:`DloGroup`).
     ``settings`` (``name``, ``help``, ``cls`` ...) are passed on to Typer.
     """
     defaults: dict[str, Any] = {
         "no_args_is_help": True,
         "add_completion": False,
         "pretty_exceptions_enable": False,
+        "cls": DloGroup,
     }
-    return typer.Typer(**{**defaults, **settings})
+    return _DloTyper(**{**defaults, **settings})
 
 
 FIRST_RUN_NOTICE = "compiling the detection kernels, once per machine, about 20 s"

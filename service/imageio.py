@@ -10,6 +10,10 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
+import sys
+import tempfile
+import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -27,6 +31,12 @@ JPEG_SIGNATURE = b"\xff\xd8\xff"
 _DECODE_FLAGS = cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH
 """Three BGR channels (grey expanded, alpha dropped, EXIF orientation applied), and
 16-bit samples kept as 16-bit so that they can be scaled rather than truncated."""
+
+PNG_MAX_SIDE = 1_000_000
+"""The longest side libpng decodes (its default user limit); checked from the header."""
+DECODER_MAX_SIDE = int(os.environ.get("OPENCV_IO_MAX_IMAGE_WIDTH", 1 << 20))
+DECODER_MAX_PIXELS = int(os.environ.get("OPENCV_IO_MAX_IMAGE_PIXELS", 1 << 30))
+"""OpenCV's limits on what it decodes (its defaults, or the variables that set them)."""
 
 
 class ImageFileError(InvalidInputError):
@@ -100,7 +110,7 @@ def read_mask(path: str | os.PathLike[str], shape: tuple[int, ...]) -> np.ndarra
     ImageFileError
         The file cannot be read as an image, or its size differs from ``shape``.
     """
-    image, is_jpeg = _decode_file(path)
+    image, is_jpeg = _decode_file(path, shape)
     return _binary_mask(path, image, is_jpeg, shape)
 
 
@@ -135,21 +145,17 @@ def decode_mask(data: bytes, shape: tuple[int, ...], name: str = "mask") -> np.n
     Raises
     ------
     ImageFileError
-        ``data`` cannot be decoded, or its size differs from ``shape``.
+        ``data`` cannot be decoded, or its size differs from ``shape`` (from its PNG or
+        JPEG header, before decoding, when it has one).
     """
-    image, is_jpeg = _decode_buffer(name, np.frombuffer(data, dtype=np.uint8))
+    image, is_jpeg = _decode_buffer(name, np.frombuffer(data, dtype=np.uint8), shape)
     return _binary_mask(name, image, is_jpeg, shape)
 
 
 def _binary_mask(
     name: str | os.PathLike[str], image: np.ndarray, is_jpeg: bool, shape: tuple[int, ...]
 ) -> np.ndarray:
-    height, width = shape[:2]
-    if image.shape[:2] != (height, width):
-        raise ImageFileError(
-            name,
-            f"mask is {image.shape[1]}x{image.shape[0]} but the image is {width}x{height}",
-        )
+    _check_mask_size(name, image.shape[1], image.shape[0], shape)
     if image.dtype.kind == "f":
         threshold = 0.5 if is_jpeg else 0.0
     else:
@@ -221,30 +227,61 @@ def list_images(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
     images: list[Path] = []
     for path in map(Path, paths):
         if path.is_dir():
-            images.extend(_images_in_directory(path))
+            images.extend(images_in_directory(path)[0])
         else:
             images.append(path)
     return images
 
 
-def _images_in_directory(directory: Path) -> list[Path]:
+def images_in_directory(directory: str | os.PathLike[str]) -> tuple[list[Path], list[str]]:
+    """The image files of one directory, and what was passed over that a user may miss.
+
+    Returns
+    -------
+    images : list of Path
+        As :func:`list_images` expands a directory: files whose name ends in one of
+        :data:`IMAGE_SUFFIXES`, sorted by name, hidden ones and subdirectories left out.
+    skipped : list of str
+        One line per subdirectory (not searched) and per broken symbolic link with an
+        image's name, e.g. ``shots/old: a folder, not searched (name it to include it)``.
+    """
+    directory = Path(directory)
     try:
-        entries = list(directory.iterdir())
+        entries = sorted(directory.iterdir())
     except OSError:
-        return []
-    return sorted(
-        entry
-        for entry in entries
-        if entry.suffix.lower() in IMAGE_SUFFIXES
-        and not entry.name.startswith(".")
-        and entry.is_file()
-    )
+        return [], []
+    images, skipped = [], []
+    for entry in entries:
+        if entry.name.startswith("."):
+            continue
+        if entry.is_dir():
+            skipped.append(f"{entry}: a folder, not searched (name it to include it)")
+        elif entry.suffix.lower() not in IMAGE_SUFFIXES:
+            continue
+        elif entry.is_file():
+            images.append(entry)
+        elif entry.is_symlink() and not entry.exists():
+            skipped.append(f"{entry}: broken symbolic link (to {os.readlink(entry)}), skipped")
+    return images, skipped
 
 
-def _decode_file(path: str | os.PathLike[str]) -> tuple[np.ndarray, bool]:
+def _check_mask_size(
+    name: str | os.PathLike[str], width: int, height: int, shape: tuple[int, ...]
+) -> None:
+    if (height, width) != tuple(shape[:2]):
+        raise ImageFileError(
+            name, f"mask is {width}x{height} but the image is {shape[1]}x{shape[0]}"
+        )
+
+
+def _decode_file(
+    path: str | os.PathLike[str], mask_of: tuple[int, ...] | None = None
+) -> tuple[np.ndarray, bool]:
     """Read and decode ``path`` with :data:`_DECODE_FLAGS`, checking every failure.
 
-    Returns the ``(H, W, 3)`` image (any depth) and whether the file is a JPEG.
+    Returns the ``(H, W, 3)`` image (any depth) and whether the file is a JPEG. What the
+    image libraries print on stderr meanwhile (libpng's warnings) is kept off the terminal
+    and, when decoding fails, said in the error instead.
     """
     file_path = Path(path)
     if not file_path.exists():
@@ -255,27 +292,63 @@ def _decode_file(path: str | os.PathLike[str]) -> tuple[np.ndarray, bool]:
         buffer = np.fromfile(file_path, dtype=np.uint8)
     except OSError as exc:
         raise ImageFileError(path, f"cannot read: {exc.strerror or exc}") from exc
-    return _decode_buffer(path, buffer)
+    failure = None
+    with _native_stderr_kept() as native_lines:
+        try:
+            decoded = _decode_buffer(path, buffer, mask_of)
+        except ImageFileError as exc:
+            failure = exc
+    if failure is None:
+        return decoded
+    if not native_lines:
+        raise failure
+    said = "; ".join(native_lines)  # e.g. "libpng error: IDAT: CRC error"
+    head = buffer[:8].tobytes()
+    kind = (
+        "PNG"
+        if head.startswith(PNG_SIGNATURE)
+        else "JPEG"
+        if head.startswith(JPEG_SIGNATURE)
+        else ""
+    )
+    problem = (
+        f"damaged {kind} file"
+        if kind and failure.problem.startswith("not an image")
+        else failure.problem
+    )
+    raise ImageFileError(path, f"{problem} ({said})")
 
 
-def _decode_buffer(name: str | os.PathLike[str], buffer: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Decode ``buffer`` (``uint8`` encoded bytes) read from ``name``; as :func:`_decode_file`."""
+def _decode_buffer(
+    name: str | os.PathLike[str], buffer: np.ndarray, mask_of: tuple[int, ...] | None = None
+) -> tuple[np.ndarray, bool]:
+    """Decode ``buffer`` (``uint8`` encoded bytes) read from ``name``; as :func:`_decode_file`.
+
+    The size a PNG or JPEG header declares is checked first, against the decoders' limits
+    and, for the mask of an image of ``mask_of`` shape, against that image's: nothing too
+    large for the decoder, and no mask of the wrong size, is ever decompressed.
+    """
     path = name
     if buffer.size == 0:
         raise ImageFileError(path, "empty file (0 bytes)")
 
     head = buffer[:8].tobytes()
     is_jpeg = head.startswith(JPEG_SIGNATURE)
-    if head.startswith(PNG_SIGNATURE) and not _png_is_complete(buffer.tobytes()):
+    if head.startswith(PNG_SIGNATURE) and not png_is_complete(buffer.tobytes()):
         raise ImageFileError(path, "truncated PNG file")
-    if is_jpeg and not _jpeg_is_complete(buffer.tobytes()):
+    if is_jpeg and not jpeg_is_complete(buffer.tobytes()):
         raise ImageFileError(path, "truncated JPEG file")
+    declared = image_size(buffer[:65536].tobytes())
+    if declared is not None:
+        _check_decodable(path, *declared, is_png=head.startswith(PNG_SIGNATURE))
+        if mask_of is not None:
+            _check_mask_size(path, *declared, mask_of)
 
     try:
         with _opencv_quiet():
             image = cv2.imdecode(buffer, _DECODE_FLAGS)
     except cv2.error as exc:
-        raise ImageFileError(path, f"cannot decode image: {_one_line(exc)}") from exc
+        raise ImageFileError(path, _decoder_problem(exc)) from exc
     if image is None:
         raise ImageFileError(path, "not an image, or a format OpenCV cannot decode")
     if image.size == 0:
@@ -283,6 +356,80 @@ def _decode_buffer(name: str | os.PathLike[str], buffer: np.ndarray) -> tuple[np
     if image.ndim == 2:
         image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     return image, is_jpeg
+
+
+def image_size(data: bytes) -> tuple[int, int] | None:
+    """``(width, height)`` from a PNG or JPEG header, without decoding; None otherwise.
+
+    Lets a huge image be refused before it is decoded (the service's 413, the decoder's
+    limits in :func:`read_image`). None for other formats and for headers this does not
+    understand.
+    """
+    if data.startswith(PNG_SIGNATURE) and data[12:16] == b"IHDR" and len(data) >= 24:
+        return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    if data.startswith(b"\xff\xd8"):
+        return _jpeg_size(data)
+    return None
+
+
+_JPEG_FRAME_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+"""Start-of-frame markers (baseline, progressive, lossless...): they hold the size."""
+
+
+def _jpeg_size(data: bytes) -> tuple[int, int] | None:
+    position = 2
+    while position + 4 <= len(data):
+        if data[position] != 0xFF:
+            return None
+        marker = data[position + 1]
+        if marker == 0xFF:  # fill byte
+            position += 1
+            continue
+        if 0xD0 <= marker <= 0xD9 or marker == 0x01:  # markers without a payload
+            position += 2
+            continue
+        length = int.from_bytes(data[position + 2 : position + 4], "big")
+        if marker in _JPEG_FRAME_MARKERS:
+            if position + 9 > len(data):
+                return None
+            height = int.from_bytes(data[position + 5 : position + 7], "big")
+            width = int.from_bytes(data[position + 7 : position + 9], "big")
+            return width, height
+        if marker == 0xDA or length < 2:  # scan data before any frame header: give up
+            return None
+        position += 2 + length
+    return None
+
+
+def _check_decodable(path: str | os.PathLike[str], width: int, height: int, is_png: bool) -> None:
+    """One-line errors, from the header, for images the decoders would refuse or choke on."""
+    size = f"image is {width}x{height} px"
+    if width == 0 or height == 0:
+        raise ImageFileError(path, f"{size}: empty image (no pixels)")
+    if is_png and max(width, height) > PNG_MAX_SIDE:
+        raise ImageFileError(
+            path, f"{size}: too large, the PNG decoder takes at most {PNG_MAX_SIDE} px a side"
+        )
+    if max(width, height) > DECODER_MAX_SIDE or width * height > DECODER_MAX_PIXELS:
+        raise ImageFileError(path, f"{size}: {_too_large_to_decode()}")
+
+
+def _too_large_to_decode() -> str:
+    return (
+        f"too large to decode (at most {DECODER_MAX_PIXELS / 1e6:.1f} megapixels and "
+        f"{DECODER_MAX_SIDE} px a side)"
+    )
+
+
+def _decoder_problem(exc: cv2.error) -> str:
+    """OpenCV's exception as a problem statement, without its source file and line."""
+    text = _one_line(exc)
+    if "validateInputImageSize" in text:
+        return f"image {_too_large_to_decode()}"
+    # "OpenCV(5.0.0) /io/opencv/.../loadsave.cpp:79: error: (-215:Assertion failed) x in
+    # function 'f'" -> "x"
+    match = re.search(r"error: \([-\d]+:[^)]*\) (.*?)(?: in function '[^']*')?$", text)
+    return f"cannot decode image: {match.group(1) if match else text}"
 
 
 def _to_uint8(path: str | os.PathLike[str], image: np.ndarray) -> np.ndarray:
@@ -297,7 +444,7 @@ def _to_uint8(path: str | os.PathLike[str], image: np.ndarray) -> np.ndarray:
     raise ImageFileError(path, f"unsupported sample type {image.dtype}")
 
 
-def _png_is_complete(data: bytes) -> bool:
+def png_is_complete(data: bytes) -> bool:
     """Walk the PNG chunks; True when the IEND chunk is reached whole."""
     position = len(PNG_SIGNATURE)
     while position + 8 <= len(data):
@@ -310,7 +457,7 @@ def _png_is_complete(data: bytes) -> bool:
     return False
 
 
-def _jpeg_is_complete(data: bytes) -> bool:
+def jpeg_is_complete(data: bytes) -> bool:
     """Walk the JPEG markers; True when the end-of-image marker (FFD9) is reached.
 
     Data after the end-of-image marker (camera trailers) is allowed. When the
@@ -371,6 +518,37 @@ def _write_atomically(path: str | os.PathLike[str], data: bytes) -> None:
         with contextlib.suppress(OSError):
             temporary.unlink(missing_ok=True)
         raise OutputWriteError(f"cannot write {path}: {exc.strerror or exc}") from exc
+
+
+_NATIVE_STDERR_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _native_stderr_kept() -> Iterator[list[str]]:
+    """Keep what C libraries (libpng, libjpeg) write to file descriptor 2 meanwhile.
+
+    Yields a list that holds those lines, stripped, once the block ends. Used around
+    decoding a file (the command line's inputs), where libpng prints warnings such as
+    ``libpng warning: iCCP: known incorrect sRGB profile`` straight to the terminal; the
+    service decodes uploads from memory without it (other threads write to stderr too).
+    """
+    lines: list[str] = []
+    with _NATIVE_STDERR_LOCK, tempfile.TemporaryFile() as sink:
+        try:
+            sys.stderr.flush()
+            saved = os.dup(2)
+        except (AttributeError, OSError, ValueError):  # no file descriptor 2 to borrow
+            yield lines
+            return
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            text = sink.read().decode("utf-8", errors="replace")
+            lines.extend(line.strip() for line in text.splitlines() if line.strip())
 
 
 @contextlib.contextmanager

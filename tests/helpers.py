@@ -1,5 +1,6 @@
-"""Helpers shared by the test modules: free loopback ports, waiting on a condition, and a
-``dlo serve`` process.
+"""Helpers shared by the test modules: free loopback ports, waiting on a condition, a
+``dlo serve`` process, and PNGs made without an image (:func:`blank_png`, decompression
+bombs among them).
 
 Import as ``from tests.helpers import free_port, wait_until`` (the repository root is on
 ``sys.path`` through ``tests/conftest.py``).
@@ -14,6 +15,19 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+
+from service.bench.bombs import blank_png
+
+__all__ = [
+    "DLO",
+    "READY_TIMEOUT_S",
+    "accepts_connections",
+    "blank_png",
+    "dlo_serve",
+    "free_port",
+    "free_udp_port",
+    "wait_until",
+]
 
 DEFAULT_TIMEOUT_S = 15.0
 """Generous for a loaded 2-core machine; a wait ends as soon as its condition holds."""

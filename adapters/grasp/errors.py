@@ -1,6 +1,15 @@
-"""Why a grasp cannot be planned: the errors of :mod:`adapters.grasp`."""
+"""Why a grasp cannot be planned: the errors of :mod:`adapters.grasp`.
+
+A depth image that does not fit the camera is a :class:`DepthImageError` of
+:mod:`service.geometry3d` (which reads depth images for grasping and lifting alike); it is
+re-exported here so that callers of the grasp planning find every refusal in one place.
+"""
 
 from __future__ import annotations
+
+from service.geometry3d.errors import DepthImageError
+
+__all__ = ["DepthImageError", "GraspPlanningError", "InferredSegmentError"]
 
 
 class GraspPlanningError(ValueError):
@@ -9,10 +18,3 @@ class GraspPlanningError(ValueError):
 
 class InferredSegmentError(GraspPlanningError):
     """The chosen point lies on a segment that was inferred, and that was not allowed."""
-
-
-class DepthImageError(GraspPlanningError):
-    """The depth image is missing, unreadable, of another size or type, or not wanted.
-
-    Not wanted: a depth image given with a camera whose surface is a plane.
-    """

@@ -3,18 +3,15 @@
 Everything here is a pure function of a :class:`~schemas.Detection`, a
 :class:`~schemas.CameraModel` and a :class:`~schemas.GraspSelector`; no hardware.
 
-The pixel is undistorted with OpenCV (``cv2.undistortPoints``), turned into a ray from
-the camera centre, carried to the base frame with ``T_base_camera`` and met with the
-surface:
+The pixel is placed in the base frame by :mod:`service.geometry3d` (the same camera, ray
+and depth code that lifts whole chains to 3-D):
 
-* a :class:`~schemas.grasp.PlaneSurface`: intersected with the table plane ``z = plane_z``;
-* a :class:`~schemas.grasp.DepthSurface`: scaled so that its camera ``z`` is the depth
-  measured at the pixel. The depth is the sample of the *nearest* pixel, not a bilinear
-  blend: across the edge of a box or a cable lying on another, a blend would invent a
-  point in mid-air, while the nearest sample always lies on something seen (on a smooth
-  slope it costs at most half a pixel's change of depth). A missing sample is filled with
-  the median of the valid samples in the surface's window around the pixel; none there
-  refuses the grasp.
+* a :class:`~schemas.grasp.PlaneSurface`: its ray intersected with the table plane
+  ``z = plane_z``;
+* a :class:`~schemas.grasp.DepthSurface`: its ray scaled so that its camera ``z`` is the
+  depth measured at the nearest pixel (:mod:`service.geometry3d.depth`). A missing sample
+  is filled with the median of the valid samples in the surface's window around the
+  pixel; none there refuses the grasp.
 
 The gripper yaw comes from the segment the point lies on: its two end joints located the
 same way (on a depth surface each from its own depth, or, when none is valid around a
@@ -25,10 +22,8 @@ from __future__ import annotations
 
 import math
 
-import cv2
 import numpy as np
 
-from adapters.grasp.depth import depth_at, depth_in_metres, describe_valid_depth
 from adapters.grasp.errors import GraspPlanningError, InferredSegmentError
 from schemas import (
     CameraModel,
@@ -40,15 +35,11 @@ from schemas import (
     GraspSelector,
     GraspTarget,
     PixelPoint,
-    PlaneSurface,
     SegmentPoint,
 )
-
-PARALLEL_TOLERANCE = 1e-9
-"""Rays whose base-frame direction has ``|d_z| / |d|`` below this count as parallel."""
-
-REPROJECTION_TOLERANCE_PX = 1e-3
-"""Undistortion is checked by distorting the result again; a larger error is refused."""
+from service.geometry3d.camera import pixel_to_depth_point, pixel_to_plane
+from service.geometry3d.depth import depth_at, depth_in_metres, describe_valid_depth
+from service.geometry3d.errors import DepthImageError, LiftError
 
 
 def plan_grasp(
@@ -107,29 +98,12 @@ def plan_grasp(
             "set allow_inferred to grasp it anyway"
         )
     joints = (chain.points[segment], chain.points[segment + 1])
-    if depth_m is None:
-        position = pixel_to_plane(camera, pixel)
-        start, end = (pixel_to_plane(camera, joint) for joint in joints)
-    else:
-        surface = camera.surface
-        assert isinstance(surface, DepthSurface)  # depth_in_metres refuses a depth for a plane
-        grasp_depth = depth_at(depth_m, pixel, surface.window)
-        if grasp_depth is None:
-            raise GraspPlanningError(
-                f"no valid depth at pixel ({pixel[0]:.1f}, {pixel[1]:.1f}) nor in the "
-                f"{surface.window}x{surface.window} px window around it "
-                f"({describe_valid_depth(surface)}); the surface there was not measured"
-            )
-        position = pixel_to_depth_point(camera, pixel, grasp_depth)
-        # A joint with no valid depth around it (off the measured surface) is put on its own
-        # ray at the grasp point's depth: exact on a surface facing the camera, and the yaw
-        # needs only the joint's direction from the grasp point, not its height.
-        start, end = (
-            pixel_to_depth_point(
-                camera, joint, _or(depth_at(depth_m, joint, surface.window), grasp_depth)
-            )
-            for joint in joints
-        )
+    try:
+        position, start, end = _locate(camera, depth_m, pixel, joints)
+    except DepthImageError:
+        raise
+    except LiftError as error:  # the ray misses the table, or undistortion fails
+        raise GraspPlanningError(str(error)) from None
     tangent = end - start
     if math.hypot(tangent[0], tangent[1]) < 1e-12:
         raise GraspPlanningError(
@@ -144,6 +118,39 @@ def plan_grasp(
         inferred=inferred,
         pixel=(float(pixel[0]), float(pixel[1])),
     )
+
+
+def _locate(
+    camera: CameraModel,
+    depth_m: np.ndarray | None,
+    pixel: tuple[float, float],
+    joints: tuple[tuple[float, float], tuple[float, float]],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The grasp point and the two joints of its segment in the base frame."""
+    if depth_m is None:
+        position = pixel_to_plane(camera, pixel)
+        start, end = (pixel_to_plane(camera, joint) for joint in joints)
+        return position, start, end
+    surface = camera.surface
+    assert isinstance(surface, DepthSurface)  # depth_in_metres refuses a depth for a plane
+    grasp_depth = depth_at(depth_m, pixel, surface.window)
+    if grasp_depth is None:
+        raise GraspPlanningError(
+            f"no valid depth at pixel ({pixel[0]:.1f}, {pixel[1]:.1f}) nor in the "
+            f"{surface.window}x{surface.window} px window around it "
+            f"({describe_valid_depth(surface)}); the surface there was not measured"
+        )
+    position = pixel_to_depth_point(camera, pixel, grasp_depth)
+    # A joint with no valid depth around it (off the measured surface) is put on its own
+    # ray at the grasp point's depth: exact on a surface facing the camera, and the yaw
+    # needs only the joint's direction from the grasp point, not its height.
+    start, end = (
+        pixel_to_depth_point(
+            camera, joint, _or(depth_at(depth_m, joint, surface.window), grasp_depth)
+        )
+        for joint in joints
+    )
+    return position, start, end
 
 
 def select_chain(detection: Detection, choice: int | str) -> Chain:
@@ -239,79 +246,6 @@ def normalize_half_turn(angle: float) -> float:
     if folded > math.pi / 2:  # rounding at the upper edge
         folded -= math.pi
     return folded
-
-
-def camera_matrix(camera: CameraModel) -> np.ndarray:
-    """The 3x3 intrinsic matrix ``K`` of ``camera``."""
-    return np.array(
-        [[camera.fx, 0.0, camera.cx], [0.0, camera.fy, camera.cy], [0.0, 0.0, 1.0]], dtype=float
-    )
-
-
-def undistort_pixel(camera: CameraModel, pixel: tuple[float, float]) -> tuple[float, float]:
-    """Normalised, undistorted image coordinates ``(x, y)`` (the ray ``(x, y, 1)``) of a pixel.
-
-    Raises
-    ------
-    GraspPlanningError
-        When distorting the result again misses the pixel by more than
-        :data:`REPROJECTION_TOLERANCE_PX` (the iteration did not converge, typically
-        far outside the calibrated field of view).
-    """
-    K = camera_matrix(camera)
-    dist = np.asarray(camera.dist, dtype=float)
-    source = np.array([[pixel]], dtype=np.float64)
-    if not any(camera.dist):
-        return (pixel[0] - camera.cx) / camera.fx, (pixel[1] - camera.cy) / camera.fy
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
-    try:
-        normalised = cv2.undistortPoints(source, K, dist, None, None, None, criteria)
-    except cv2.error:
-        # OpenCV releases whose undistortPoints takes no criteria have undistortPointsIter.
-        normalised = cv2.undistortPointsIter(source, K, dist, None, None, criteria)
-    x, y = (float(v) for v in normalised.reshape(2))
-    again, _ = cv2.projectPoints(np.array([[x, y, 1.0]]), np.zeros(3), np.zeros(3), K, dist)
-    error = float(np.hypot(*(again.reshape(2) - np.asarray(pixel, dtype=float))))
-    if not error <= REPROJECTION_TOLERANCE_PX:
-        raise GraspPlanningError(
-            f"pixel {pixel} could not be undistorted (reprojection error {error:.3g} px)"
-        )
-    return x, y
-
-
-def pixel_to_plane(camera: CameraModel, pixel: tuple[float, float]) -> np.ndarray:
-    """Intersect the ray through ``pixel`` with the table plane; the point in the base frame.
-
-    Raises
-    ------
-    GraspPlanningError
-        When the ray is parallel to the plane or meets it behind the camera.
-    """
-    surface = camera.surface
-    if not isinstance(surface, PlaneSurface):
-        raise GraspPlanningError("the camera's surface is a depth image, not a plane")
-    x, y = undistort_pixel(camera, pixel)
-    transform = np.asarray(camera.T_base_camera, dtype=float)
-    rotation, origin = transform[:3, :3], transform[:3, 3]
-    direction = rotation @ np.array([x, y, 1.0])
-    if abs(direction[2]) < PARALLEL_TOLERANCE * np.linalg.norm(direction):
-        raise GraspPlanningError(f"the ray through pixel {pixel} is parallel to the table plane")
-    distance = (surface.plane_z - origin[2]) / direction[2]
-    if distance <= 0:
-        raise GraspPlanningError(
-            f"the ray through pixel {pixel} meets the table plane z = "
-            f"{surface.plane_z} m behind the camera"
-        )
-    return origin + distance * direction
-
-
-def pixel_to_depth_point(
-    camera: CameraModel, pixel: tuple[float, float], depth_m: float
-) -> np.ndarray:
-    """The point seen at ``pixel`` at ``depth_m`` along the optical axis, in the base frame."""
-    x, y = undistort_pixel(camera, pixel)
-    transform = np.asarray(camera.T_base_camera, dtype=float)
-    return transform[:3, :3] @ (depth_m * np.array([x, y, 1.0])) + transform[:3, 3]
 
 
 def _or(value: float | None, fallback: float) -> float:

@@ -196,7 +196,11 @@ def feasibility(
     ],
     direction: Annotated[
         tuple[float, float, float],
-        typer.Option(help="Body direction X Y Z of that force (x fwd, y left, z up)."),
+        typer.Option(
+            metavar="X Y Z",
+            help="Body direction of that force, three numbers separated by spaces, e.g. "
+            "--direction 1 0 0 (x forward, y left, z up; any length).",
+        ),
     ],
     mass: Annotated[float, typer.Option(help="Vehicle mass, kg.")] = DEFAULT_MASS_KG,
     arm_length: Annotated[

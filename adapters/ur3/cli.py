@@ -43,8 +43,6 @@ if TYPE_CHECKING:
 
 DETECTION_SUFFIX = ".json"
 """An input with this suffix is a saved Detection; anything else is an image to detect."""
-NUMPY_SUFFIX = ".npy"
-"""A depth file with this suffix is a NumPy array; anything else an image (16-bit PNG)."""
 
 InputArgument = Annotated[
     Path,
@@ -251,7 +249,7 @@ def plan_from_files(
     detection = load_or_detect(input_path, segment_length, expected_count)
     try:
         return plan_pick(detection, camera, selector, depth=depth)
-    except GraspPlanningError as error:
+    except (GraspPlanningError, DepthImageError) as error:
         fail(str(error))
 
 
@@ -287,22 +285,14 @@ def load_depth(path: Path | None, camera: CameraModel) -> np.ndarray | None:
             "the camera's surface is a depth image (kind 'depth'): give --depth DEPTH "
             "(a 16-bit PNG or a .npy array aligned with the image)"
         )
-    import numpy as np
-
-    from adapters.grasp.depth import check_depth_image, decode_depth_image
+    from service.geometry3d.depth import check_depth_image, read_depth_file
 
     try:
-        if path.suffix.lower() == NUMPY_SUFFIX:
-            depth = np.load(path, allow_pickle=False)
-        else:
-            depth = decode_depth_image(path.read_bytes())
-        return check_depth_image(camera, depth)
+        return check_depth_image(camera, read_depth_file(path))
     except OSError as error:
         fail(f"depth file {path}: {error.strerror or error}")
     except DepthImageError as error:
         fail(f"depth file {path}: {error}")
-    except (ValueError, EOFError) as error:  # np.load: not an .npy file, or cut short
-        fail(f"depth file {path}: not a NumPy .npy array: {' '.join(str(error).split())}")
 
 
 def load_or_detect(

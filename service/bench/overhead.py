@@ -161,7 +161,7 @@ def _sequential_paths(
     image = decode_image(jpeg)  # what the service sees: the JPEG's pixels, not the scene's
 
     def bare_detect() -> float:
-        return default_detect(image, frame.params, None).timings_ms.total
+        return default_detect(image, frame.params, None, None).timings_ms.total
 
     def bare_decode_and_detect() -> float:
         return run_detection(frame, default_detect, 40_000_000)[1].timings_ms.total

@@ -62,7 +62,7 @@ def sleeping_detect(detect_ms: float):
     """A detect function that waits ``detect_ms`` without using the CPU."""
     from schemas import Detection
 
-    def detect(image, params, mask):
+    def detect(image, params, mask, deadline):
         time.sleep(detect_ms / 1000.0)
         return Detection(width=image.shape[1], height=image.shape[0], segment_length=10.0)
 

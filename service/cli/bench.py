@@ -1,5 +1,6 @@
 """``dlo bench``: the detector per stage on one thread; with ``--service`` what HTTP and
-zenoh add; with ``--startup`` how long whole ``dlo`` processes take (:mod:`service.bench`).
+zenoh add; with ``--startup`` how long whole ``dlo`` processes take; with ``--rings`` how
+detection grows with the number of cables (:mod:`service.bench`).
 
 The detector and service benchmarks run in a process of their own with the numeric
 libraries set to one thread (they size their thread pools when first imported); the
@@ -18,7 +19,7 @@ from typing import Annotated
 
 import typer
 
-from service.bench.detector import DEFAULT_DATASET, THREAD_VARIABLES
+from service.bench.detector import DEFAULT_DATASET, THREAD_VARIABLES, cpu_name
 from service.console import exit_usage, stderr_console
 
 
@@ -71,6 +72,14 @@ def bench(
             "(service/bench/overhead.py).",
         ),
     ] = False,
+    recording: Annotated[
+        bool,
+        typer.Option(
+            "--recording",
+            help="Time only what a ROS 2 recording (--outputs mcap) adds per frame "
+            "(service/bench/recording.py); the full run includes it.",
+        ),
+    ] = False,
     startup: Annotated[
         bool,
         typer.Option(
@@ -79,6 +88,25 @@ def bench(
             "dlo detect, with a warm kernel cache (service/bench/startup.py).",
         ),
     ] = False,
+    bombs: Annotated[
+        bool,
+        typer.Option(
+            "--bombs",
+            help="Time how dlo serve refuses a 110 KB PNG claiming 30000x30000 px, as the "
+            "image and as the mask, and its peak memory before and after "
+            "(service/bench/bombs.py).",
+        ),
+    ] = False,
+    rings: Annotated[
+        str | None,
+        typer.Option(
+            metavar="N,N,...",
+            help="Time scenes of N small rings instead (one chain each, 40x40 px per ring: "
+            "10000 rings make 16 megapixels), e.g. --rings 1000,4000,10000 "
+            "(service/bench/rings.py).",
+            show_default=False,
+        ),
+    ] = None,
     replicas: Annotated[
         int | None,
         typer.Option(
@@ -118,8 +146,17 @@ def bench(
     ] = None,
 ) -> None:
     """Time the detector per stage on one thread: photographs, generated scenes, scaling."""
-    if service and startup:
-        exit_usage(stderr_console(), "--service and --startup time different things: give one")
+    if service + startup + bombs + (rings is not None) + recording > 1:
+        exit_usage(
+            stderr_console(),
+            "--service, --startup, --bombs, --rings and --recording time different things: "
+            "give one",
+        )
+    if bombs:
+        from service.bench.bombs import run_bomb_bench
+
+        raise typer.Exit(run_bomb_bench(5 if quick else repeats or 50, as_json))
+    ring_counts = None if rings is None else _ring_counts(rings)
     if dlo is not None and not startup:
         exit_usage(stderr_console(), "--dlo applies only with --startup")
     if replicas is not None:
@@ -137,6 +174,14 @@ def bench(
         raise typer.Exit(run_startup_bench(command, dataset, runs, as_json))
     repeats = repeats or 3
     if os.environ.get(CHILD_FLAG) == "1":
+        if recording:
+            from service.bench.recording import run_recording_bench
+
+            raise typer.Exit(run_recording_bench(quick, as_json, frames, repeats, cpu_name()))
+        if ring_counts is not None:
+            from service.bench.rings import run_rings_bench
+
+            raise typer.Exit(run_rings_bench(ring_counts, 1 if quick else repeats, as_json))
         if service:
             from service.bench.overhead import run_service_bench
 
@@ -148,4 +193,20 @@ def bench(
     args = [sys.executable, "-m", "service.cli", "bench", "--dataset", str(dataset)]
     args += ["--frames", str(frames), "--repeats", str(repeats)]
     args += ["--quick"] * quick + ["--json"] * as_json + ["--service"] * service
+    args += ["--recording"] * recording
+    args += [] if rings is None else ["--rings", rings]
     raise typer.Exit(subprocess.call(args, env=env))
+
+
+def _ring_counts(text: str) -> list[int]:
+    """``"1000,4000"`` as ``[1000, 4000]``; a usage error unless each is 1 to 40,000."""
+    try:
+        counts = [int(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        counts = []
+    if not counts or not all(1 <= count <= 40_000 for count in counts):
+        exit_usage(
+            stderr_console(),
+            f"--rings: give ring counts from 1 to 40000, e.g. 1000,4000 (got {text!r})",
+        )
+    return counts

@@ -1,4 +1,5 @@
-"""``dlo demo``: generate the bundled synthetic example scene and detect the cables in it."""
+"""``dlo demo``: generate the bundled synthetic example scene and detect the cables in it;
+with ``--examples DIR``, (re)write the README's example photograph and depth image."""
 
 from __future__ import annotations
 
@@ -22,6 +23,15 @@ DEMO_SIZE = (1280, 720)
 DEMO_CABLES = 3
 DEMO_OCCLUDERS = 2
 
+EXAMPLE_SIZE = (640, 360)
+"""The README's example camera (docs/examples/camera*.json) takes 640x360 images."""
+EXAMPLE_SEED = 1
+"""A scene with an orange cable, which the README's HSV box picks out."""
+EXAMPLE_TABLE_MM = 600
+"""The example camera looks straight down from 0.6 m onto the table."""
+EXAMPLE_MM_PER_PX = EXAMPLE_TABLE_MM / 900.0
+"""Millimetres per pixel on the table at that height (focal length 900 px)."""
+
 
 def demo(
     out_dir: Annotated[
@@ -36,9 +46,26 @@ def demo(
             "(the README picture).",
         ),
     ] = None,
+    examples: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="DIR",
+            help="Instead, write the README's example photograph cables.jpg and its depth "
+            "image cables_depth.png (16-bit, mm) here, for the camera of "
+            "docs/examples/camera.json.",
+        ),
+    ] = None,
 ) -> None:
     """Generate the bundled synthetic example scene and detect the cables in it."""
     console = stderr_console()
+    if examples is not None:
+        try:
+            for path in write_examples(examples):
+                typer.echo(str(path))
+        except Exception as exc:
+            print_error(console, failure_message(str(examples), exc))
+            raise typer.Exit(EXIT_FAILED) from None
+        return
     width, height = DEMO_SIZE
     load_kernels(console)
     try:
@@ -60,6 +87,30 @@ def demo(
     _print_summary(console, detection, len(scene.cables), elapsed_ms)
     for path in (example, *OutputPaths.for_input(example, out_dir).all()):
         typer.echo(str(path))
+
+
+def write_examples(directory: Path) -> tuple[Path, Path]:
+    """Write ``cables.jpg`` (three cables, one orange, one occluder) and
+    ``cables_depth.png``: depth along the optical axis in mm (16-bit), the table at 600
+    mm, each cable as high as it is wide, the occluder a 20 mm block. Returns both paths."""
+    import cv2
+
+    scene = make_scene(*EXAMPLE_SIZE, 3, seed=EXAMPLE_SEED, occluders=1, radius_range=(4.0, 7.0))
+    depth = np.full(scene.mask.shape, EXAMPLE_TABLE_MM, np.uint16)
+    for label, cable in enumerate(scene.cables, start=1):
+        height_mm = 2.0 * cable.radius * EXAMPLE_MM_PER_PX
+        depth[scene.labels == label] = round(EXAMPLE_TABLE_MM - height_mm)
+    for occluder in scene.occluders:
+        corners = np.round(occluder.polygon).astype(np.int32)
+        cv2.fillPoly(depth, [corners], EXAMPLE_TABLE_MM - 20)
+    directory.mkdir(parents=True, exist_ok=True)
+    photo, depth_png = directory / "cables.jpg", directory / "cables_depth.png"
+    encoded_ok, jpeg = cv2.imencode(".jpg", scene.image, [cv2.IMWRITE_JPEG_QUALITY, 90])
+    if not encoded_ok:
+        raise RuntimeError("OpenCV could not encode the example photograph as JPEG")
+    photo.write_bytes(jpeg.tobytes())  # a photograph: 40 KB where a PNG takes 400
+    write_png(depth_png, depth)
+    return photo, depth_png
 
 
 def _print_summary(

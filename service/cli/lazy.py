@@ -14,7 +14,9 @@ from importlib import import_module
 from typing import Any
 
 import typer
-from typer.core import TyperCommand, TyperGroup
+from typer.core import TyperCommand
+
+from service.console import DloGroup, typer_app
 
 
 @dataclass(frozen=True)
@@ -40,7 +42,7 @@ class _NotLoaded(TyperCommand):
     """Stands for a subcommand in listings until the command line names it."""
 
 
-class LazyGroup(TyperGroup):
+class LazyGroup(DloGroup):
     """A Typer group whose :attr:`subcommands` are imported when first resolved."""
 
     subcommands: Sequence[Subcommand] = ()
@@ -65,7 +67,7 @@ class LazyGroup(TyperGroup):
         if isinstance(target, typer.Typer):
             command = typer.main.get_group(target)
         else:
-            single = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
+            single = typer_app(no_args_is_help=False)
             single.command(name=name)(target)
             command = typer.main.get_command(single)
         command.name = name

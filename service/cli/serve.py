@@ -12,7 +12,9 @@ from pydantic import ValidationError
 
 from service.console import EXIT_USAGE, FIRST_RUN_NOTICE
 from service.http import create_app
+from service.http.server import uvicorn_options
 from service.perception import kernels_cached
+from service.perception.segmenter import SegmenterModelError
 from service.runtime.settings import Settings
 
 
@@ -36,8 +38,7 @@ def serve(
     zenoh_config: Annotated[
         Path | None,
         typer.Option(
-            exists=True,
-            dir_okay=False,
+            metavar="FILE",
             help="zenoh JSON5 configuration file (env DLO_ZENOH_CONFIG; default: a peer "
             "listening on tcp/127.0.0.1:7447 only, no scouting).",
         ),
@@ -61,11 +62,19 @@ def serve(
             "same keys share the cameras out among themselves.",
         ),
     ] = None,
+    segmenter_model: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="FILE",
+            help="ONNX segmenter for requests with segmentation=model "
+            "(env DLO_SEGMENTER_MODEL; needs pip install 'dlo-service[onnx]').",
+        ),
+    ] = None,
 ) -> None:
     """Serve detection over HTTP (POST /v1/detect; OpenAPI docs at /docs).
 
     Other settings come from DLO_* variables (see the README): DLO_QUEUE_SIZE,
-    DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_ZENOH_MULTICAST,
+    DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_MAX_DETECT_SECONDS, DLO_ZENOH_MULTICAST,
     DLO_ZENOH_ASSIGNMENT, DLO_API_TOKEN or DLO_API_TOKEN_FILE (a bearer token
     on /v1/*), DLO_PROTECT_METRICS, DLO_LOG_LEVEL.
     """
@@ -77,6 +86,7 @@ def serve(
         "zenoh_config": zenoh_config,
         "zenoh_listen": zenoh_listen or None,
         "zenoh_image_keys": image_keys or None,
+        "segmenter_model": segmenter_model,
     }
     try:
         settings = Settings(**{name: value for name, value in options.items() if value is not None})
@@ -89,11 +99,11 @@ def serve(
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(levelname)s:     %(name)s: %(message)s"
     )
+    try:
+        app = create_app(settings)
+    except SegmenterModelError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(EXIT_USAGE) from None
     if not kernels_cached():  # the app's warm-up compiles them; /readyz waits for it
         typer.echo(f"{FIRST_RUN_NOTICE}; /readyz answers 503 until then", err=True)
-    uvicorn.run(
-        create_app(settings),
-        host=settings.host,
-        port=settings.port,
-        log_level=settings.log_level,
-    )
+    uvicorn.run(app, **uvicorn_options(settings.host, settings.port, settings.log_level))

@@ -208,26 +208,14 @@ def eval_command(
 
 def _parse_params(errors: Console, text: str | None) -> DetectParams | None:
     """``--params``: a JSON object of DetectParams fields, or a file holding one."""
-    from pydantic import ValidationError
-
-    from schemas import DetectParams
-    from service.batch import describe_json_validation_error
+    from service.batch import InvalidParametersError, read_params
 
     if text is None:
         return None
-    source = text
-    if not text.lstrip().startswith("{"):
-        path = Path(text)
-        if not path.is_file():
-            exit_usage(errors, f"--params: {text!r} is neither a JSON object nor a file")
-        try:
-            source = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            exit_usage(errors, f"--params: cannot read {text}: {exc}")
     try:
-        return DetectParams.model_validate_json(source)
-    except ValidationError as exc:
-        exit_usage(errors, f"--params: {describe_json_validation_error(exc, 'value')}")
+        return read_params(text)
+    except InvalidParametersError as exc:
+        exit_usage(errors, str(exc))
 
 
 def _params_json(params: DetectParams | None) -> dict[str, Any]:

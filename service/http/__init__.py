@@ -1,8 +1,8 @@
 """The HTTP service: ``create_app(settings) -> FastAPI`` and its :class:`Settings`.
 
 Routes: ``POST /v1/detect`` (Detection JSON), ``POST /v1/detect/overlay`` (PNG),
-``POST /v1/grasp`` (GraspPlan JSON), ``GET /healthz``, ``GET /readyz``, ``GET /metrics``
-(Prometheus), ``/docs`` (OpenAPI).
+``POST /v1/grasp`` (GraspPlan JSON), ``POST /v1/model`` (MJCF), ``GET /healthz``,
+``GET /readyz``, ``GET /metrics`` (Prometheus), ``/docs`` (OpenAPI).
 Detection runs in a bounded thread pool; when it and its queue are full, requests are
 refused at once with 503 and ``Retry-After``. The detection runtime itself (jobs, pool,
 metrics, settings) is :mod:`service.runtime`, shared with the zenoh bus.

@@ -15,8 +15,9 @@ from starlette.exceptions import HTTPException
 from service.http.middleware import RequestContextMiddleware, error_payload, request_id_of
 from service.http.routes import api, router
 from service.http.state import AppState
+from service.perception.segmenter import OnnxSegmenter
 from service.runtime.errors import RequestError
-from service.runtime.jobs import DetectFunction, default_detect, warm_up
+from service.runtime.jobs import DetectFunction, default_detect, detect_with_segmenter, warm_up
 from service.runtime.metrics import Metrics
 from service.runtime.settings import Settings
 
@@ -31,17 +32,27 @@ def create_app(settings: Settings | None = None, detect: DetectFunction | None =
     settings : Settings, optional
         Limits and pool size; by default read from ``DLO_*`` environment variables.
     detect : callable, optional
-        ``detect(image, params, mask) -> Detection`` run for each request; by default
-        :func:`service.perception.detect`. Tests inject slow or failing ones.
+        ``detect(image, params, mask, deadline) -> Detection`` run for each request; by
+        default :func:`service.perception.detect`, with the ONNX segmenter of
+        ``settings.segmenter_model`` for requests with ``segmentation=model``. Tests
+        inject slow or failing ones.
 
     Returns
     -------
     FastAPI
         The app; its lifespan starts the worker pool and the warm-up detection, and
         stores the :class:`AppState` as ``app.state.dlo``.
+
+    Raises
+    ------
+    SegmenterModelError
+        ``settings.segmenter_model`` cannot be loaded (one-line message).
     """
     settings = Settings() if settings is None else settings
-    detect = default_detect if detect is None else detect
+    if detect is None:
+        detect = default_detect
+        if settings.segmenter_model is not None:
+            detect = detect_with_segmenter(OnnxSegmenter(settings.segmenter_model))
     metrics = Metrics()
     api_token = settings.read_api_token()
 
@@ -128,6 +139,7 @@ async def _open_bus(state: AppState) -> None:
             max_bytes=settings.max_body_bytes,
             image_keys=settings.zenoh_image_keys,
             balanced=settings.zenoh_assignment == "balanced",
+            max_detect_seconds=settings.max_detect_seconds,
         )
         state.bus = bus  # before opening: close() then waits for open() to finish
         await asyncio.to_thread(bus.open)

@@ -1,5 +1,6 @@
-"""From an HTTP request to the inputs of one detection (image, optional mask, parameters)
-or of one grasp plan (those, or a saved detection, plus a camera model and a selector).
+"""From an HTTP request to the inputs of one detection (image, optional mask, parameters),
+of one grasp plan (those, or a saved detection, plus a camera model and a selector) or of
+one model of the cables (an image, a camera model and their physics).
 
 Everything here runs on the event loop and is cheap: reading the body (bounded), parsing
 the multipart form, its small JSON fields and the query, and checking the depth image's
@@ -18,9 +19,11 @@ from starlette.datastructures import QueryParams, UploadFile
 from starlette.requests import Request
 
 from schemas import CameraModel, DepthSurface, DetectParams, GraspSelector
-from service.runtime.errors import RequestError, describe_fields
+from schemas.model import CablePhysics
+from service.runtime.errors import RequestError, describe_fields, shortened
 from service.runtime.frames import PNG_SIGNATURE, Frame, image_size
 from service.runtime.grasp import GraspFrame
+from service.runtime.model import ModelFrame
 
 RAW_IMAGE_TYPES = ("image/jpeg", "image/png")
 """Content types accepted for an image sent as the whole request body."""
@@ -31,6 +34,9 @@ FORM_FIELDS = ("image", "mask")
 GRASP_FORM_FIELDS = ("image", "mask", "camera", "selector", "depth")
 """The multipart fields of ``/v1/grasp``: image and mask files, camera and selector JSON,
 and the depth image file for a camera whose surface is a depth image."""
+MODEL_FORM_FIELDS = ("image", "mask", "camera", "physics", "depth")
+"""The multipart fields of ``/v1/model``: as ``/v1/grasp``'s, with the cables' physics
+(JSON) instead of a selector."""
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
@@ -121,27 +127,65 @@ async def read_grasp_request(request: Request, max_body_bytes: int) -> GraspFram
             "surface) or application/json "
             '({"detection": ..., "camera": ..., "selector": ...})',
         )
-    params = parse_params(request.query_params)
-    body = await read_body(request, max_body_bytes)
-    parts = await _parse_form(
+    parts, camera, params = await _camera_form(
         request,
-        body,
         max_body_bytes,
         GRASP_FORM_FIELDS,
         "the file field 'image', optionally 'mask', the JSON fields 'camera' and "
         "optionally 'selector', and the file field 'depth' for a depth surface",
     )
+    selector = optional_json_field(GraspSelector, "selector", parts["selector"])
+    frame = Frame(image=parts["image"], mask=parts["mask"], params=params)
+    return GraspFrame(frame=frame, camera=camera, selector=selector, depth=parts["depth"])
+
+
+async def read_model_request(request: Request, max_body_bytes: int) -> ModelFrame:
+    """Read a ``/v1/model`` request: a multipart form with an image and a camera model.
+
+    File ``image``, optional file ``mask``, JSON field ``camera``, optional JSON field
+    ``physics`` (:class:`~schemas.model.CablePhysics`), file ``depth`` when the camera's
+    surface is a depth image; detection parameters in the query.
+
+    Raises
+    ------
+    RequestError
+        415 for another content type, 413 for a body over ``max_body_bytes``, 422 for a
+        missing, unexpected or invalid field (``invalid_camera``, ``invalid_physics``,
+        ``invalid_depth`` as for ``/v1/grasp``), or bad parameters.
+    """
+    if content_type(request) != MULTIPART_TYPE:
+        shown = content_type(request) or "none"
+        raise RequestError(
+            415,
+            "unsupported_media_type",
+            f"Content-Type {shown} is not accepted: send multipart/form-data (file 'image', "
+            "JSON field 'camera', optionally 'physics', file 'depth' for a depth surface)",
+        )
+    parts, camera, params = await _camera_form(
+        request,
+        max_body_bytes,
+        MODEL_FORM_FIELDS,
+        "the file field 'image', optionally 'mask', the JSON fields 'camera' and "
+        "optionally 'physics', and the file field 'depth' for a depth surface",
+    )
+    physics = optional_json_field(CablePhysics, "physics", parts["physics"])
+    frame = Frame(image=parts["image"], mask=parts["mask"], params=params)
+    return ModelFrame(frame=frame, camera=camera, physics=physics, depth=parts["depth"])
+
+
+async def _camera_form(
+    request: Request, max_body_bytes: int, fields: tuple[str, ...], expected: str
+) -> tuple[dict[str, bytes | None], CameraModel, DetectParams]:
+    """The parts of a multipart form with a camera model (validated) and a depth image (its
+    presence and declared size checked), and the detection parameters of the query."""
+    params = parse_params(request.query_params)
+    body = await read_body(request, max_body_bytes)
+    parts = await _parse_form(request, body, max_body_bytes, fields, expected)
     if parts["camera"] is None:
         raise RequestError(422, "invalid_camera", "multipart body has no 'camera' field")
     camera = parse_json_field(CameraModel, "camera", parts["camera"])
-    selector = (
-        GraspSelector()
-        if parts["selector"] is None
-        else parse_json_field(GraspSelector, "selector", parts["selector"])
-    )
     check_depth_part(camera, parts["depth"])
-    frame = Frame(image=parts["image"], mask=parts["mask"], params=params)
-    return GraspFrame(frame=frame, camera=camera, selector=selector, depth=parts["depth"])
+    return parts, camera, params
 
 
 def check_depth_part(camera: CameraModel, depth: bytes | None) -> None:
@@ -183,6 +227,11 @@ def check_depth_part(camera: CameraModel, depth: bytes | None) -> None:
             f"depth: image is {declared[0]}x{declared[1]} px but the camera model is "
             f"{camera.width}x{camera.height} px",
         )
+
+
+def optional_json_field(model: type[ModelT], name: str, data: bytes | None) -> ModelT:
+    """:func:`parse_json_field`, or the model's defaults when the field was not sent."""
+    return model() if data is None else parse_json_field(model, name, data)
 
 
 def parse_json_field(model: type[ModelT], name: str, data: bytes) -> ModelT:
@@ -289,7 +338,7 @@ def parse_params(query: QueryParams) -> DetectParams:
     for name in dict.fromkeys(query.keys()):
         given = query.getlist(name)
         if name not in DetectParams.model_fields:
-            problems.append(f"{name}: unknown parameter")
+            problems.append(f"{shortened(name)}: unknown parameter")
         elif name in _TUPLE_FIELDS:
             values[name] = [part.strip() for item in given for part in item.split(",")]
         elif len(given) > 1:
@@ -314,5 +363,5 @@ def _describe(error: ValidationError) -> list[str]:
             continue
         name = str(location[0])
         name += "".join(f"[{index}]" for index in location[1:])
-        problems.append(f"{name}: {message} (got {detail.get('input')!r})")
+        problems.append(f"{name}: {message} (got {shortened(repr(detail.get('input')))})")
     return problems

@@ -12,13 +12,21 @@ from pydantic import BaseModel
 
 from schemas import Detection, DetectParams
 from schemas.grasp import GraspPlan
+from schemas.model import CablePhysics
 from service.http.auth import API_TOKEN, METRICS_TOKEN
-from service.http.inputs import JSON_TYPE, RAW_IMAGE_TYPES, read_frame, read_grasp_request
+from service.http.inputs import (
+    JSON_TYPE,
+    RAW_IMAGE_TYPES,
+    read_frame,
+    read_grasp_request,
+    read_model_request,
+)
 from service.http.state import AppState
 from service.runtime.errors import RequestError
-from service.runtime.frames import check_declared_size
+from service.runtime.frames import check_frame, check_upload
 from service.runtime.grasp import GraspFrame, GraspRequest, plan_from_json, run_grasp
-from service.runtime.jobs import run_detection, run_overlay
+from service.runtime.jobs import OVER_BUDGET, run_detection, run_overlay
+from service.runtime.model import run_model
 from service.runtime.pool import PoolBusyError
 
 router = APIRouter()
@@ -99,6 +107,36 @@ _DETECT_OPENAPI = {
 }
 
 
+_DEPTH_PART = {
+    **_BINARY,
+    "description": "Depth image aligned with `image`, a single-channel 16-bit PNG of the "
+    "camera's size in units of the surface's `depth_scale` metres (0 = not measured). "
+    'Required when the camera\'s surface is {"kind": "depth", ...}, refused otherwise.',
+}
+
+
+def _camera_form(name: str, field: dict[str, Any]) -> dict[str, Any]:
+    """The multipart form of ``/v1/grasp`` and ``/v1/model``: image, mask, camera, depth
+    and the route's own JSON field ``name``."""
+    return {
+        "schema": {
+            "type": "object",
+            "required": ["image", "camera"],
+            "properties": {
+                "image": _BINARY,
+                "mask": _BINARY,
+                "camera": {
+                    "type": "string",
+                    "description": "CameraModel as JSON, e.g. docs/examples/camera.json.",
+                },
+                name: field,
+                "depth": _DEPTH_PART,
+            },
+        },
+        "encoding": {"camera": {"contentType": JSON_TYPE}, name: {"contentType": JSON_TYPE}},
+    }
+
+
 _GRASP_OPENAPI = {
     "parameters": _query_parameters(),
     "requestBody": {
@@ -112,36 +150,36 @@ _GRASP_OPENAPI = {
         "optional `selector`; no query parameters then.",
         "content": {
             JSON_TYPE: {"schema": inline_schema(GraspRequest)},
-            "multipart/form-data": {
-                "schema": {
-                    "type": "object",
-                    "required": ["image", "camera"],
-                    "properties": {
-                        "image": _BINARY,
-                        "mask": _BINARY,
-                        "camera": {
-                            "type": "string",
-                            "description": "CameraModel as JSON, e.g. docs/examples/camera.json.",
-                        },
-                        "selector": {
-                            "type": "string",
-                            "description": 'GraspSelector as JSON, e.g. {"chain": "longest", '
-                            '"point": {"kind": "fraction", "value": 0.5}}.',
-                        },
-                        "depth": {
-                            **_BINARY,
-                            "description": "Depth image aligned with `image`, a single-channel "
-                            "16-bit PNG of the camera's size in units of the surface's "
-                            "`depth_scale` metres (0 = not measured). Required when the "
-                            'camera\'s surface is {"kind": "depth", ...}, refused otherwise.',
-                        },
-                    },
+            "multipart/form-data": _camera_form(
+                "selector",
+                {
+                    "type": "string",
+                    "description": 'GraspSelector as JSON, e.g. {"chain": "longest", '
+                    '"point": {"kind": "fraction", "value": 0.5}}.',
                 },
-                "encoding": {
-                    "camera": {"contentType": JSON_TYPE},
-                    "selector": {"contentType": JSON_TYPE},
+            ),
+        },
+    },
+}
+
+
+_MODEL_OPENAPI = {
+    "parameters": _query_parameters(),
+    "requestBody": {
+        "required": True,
+        "description": "A multipart form: the file field `image` (optionally `mask`), the "
+        "field `camera` holding a CameraModel as JSON, optionally `physics` holding the "
+        "cables' physics as JSON, and the file field `depth` when the camera's surface is "
+        "a depth image; the query sets up the detection as for `/v1/detect`.",
+        "content": {
+            "multipart/form-data": _camera_form(
+                "physics",
+                {
+                    **inline_schema(CablePhysics),
+                    "description": "The cables' physics (per metre of cable) as JSON, "
+                    'e.g. {"bending_stiffness": 1e-3}; every field optional.',
                 },
-            },
+            ),
         },
     },
 }
@@ -174,9 +212,18 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
         "A bearer token is set (DLO_API_TOKEN) and the request's is missing or wrong.",
         **_UNAUTHORIZED,
     ),
-    413: _error("Body or image larger than the configured limits."),
-    415: _error("Content type other than image/jpeg, image/png or multipart/form-data."),
-    422: _error("Image or mask unreadable, mask of another size or empty, bad parameters."),
+    413: _error(
+        "Body, image or mask larger than the configured limits (read from the PNG or JPEG "
+        "header, before decoding)."
+    ),
+    415: _error(
+        "Content type other than image/jpeg, image/png or multipart/form-data, or an "
+        "uploaded file in another image format than PNG or JPEG."
+    ),
+    422: _error(
+        "Image or mask unreadable, mask of another size or empty, bad parameters; "
+        "`time_budget_exceeded`: the detection ran past DLO_MAX_DETECT_SECONDS and was stopped."
+    ),
     500: _error("Detection failed inside the service; the body holds the request id."),
     503: _error("Every worker and queue slot is busy; retry after `Retry-After` seconds."),
 }
@@ -195,7 +242,21 @@ _GRASP_ERRORS: dict[int | str, dict[str, Any]] = {
         "unreadable, not 16-bit single-channel or of another size than the camera's "
         "(`invalid_depth`); a point on an inferred segment not allowed (`inferred_segment`); "
         "no grasp: no chain, unknown chain id or segment, image size other than the "
-        "camera's, a ray missing the table, no valid depth around the point (`ungraspable`)."
+        "camera's, a ray missing the table, no valid depth around the point (`ungraspable`); "
+        "the detection ran past DLO_MAX_DETECT_SECONDS (`time_budget_exceeded`)."
+    ),
+}
+
+
+_MODEL_ERRORS: dict[int | str, dict[str, Any]] = {
+    **_ERRORS,
+    415: _error("Content type other than multipart/form-data."),
+    422: _error(
+        "Unreadable image or mask, invalid camera (`invalid_camera`: also an image of "
+        "another size than the camera's), physics (`invalid_physics`: also a damping too "
+        "low for the timestep) or parameters; a depth image missing for a depth surface, "
+        "given for a plane, unreadable, not 16-bit single-channel or of another size than "
+        "the camera's (`invalid_depth`)."
     ),
 }
 
@@ -205,8 +266,10 @@ async def _run(request: Request, job: Any) -> Any:
     state = app_state(request)
     settings = state.settings
     frame = await read_frame(request, settings.max_body_bytes)
-    check_declared_size(frame.image, settings.max_pixels)
-    result = await _in_pool(state, job, frame, state.detect, settings.max_pixels)
+    check_frame(frame, settings.max_pixels)
+    result = await _in_pool(
+        state, job, frame, state.detect, settings.max_pixels, settings.max_detect_seconds
+    )
     state.metrics.observe_detection(result[1])
     return result
 
@@ -224,7 +287,9 @@ async def _in_pool(state: AppState, job: Any, *args: Any) -> Any:
             "are busy; retry in a second",
             headers={"Retry-After": "1"},
         ) from None
-    except RequestError:
+    except RequestError as exc:
+        if exc.code == OVER_BUDGET:
+            state.metrics.over_budget.inc()
         raise
     except Exception:
         state.metrics.detection_failures.inc()
@@ -279,17 +344,55 @@ async def grasp(request: Request) -> Response:
     settings = state.settings
     inputs = await read_grasp_request(request, settings.max_body_bytes)
     if isinstance(inputs, GraspFrame):
-        check_declared_size(inputs.frame.image, settings.max_pixels)
+        check_frame(inputs.frame, settings.max_pixels)
         if inputs.depth is not None:
-            check_declared_size(inputs.depth, settings.max_pixels)
+            check_upload(inputs.depth, "depth", settings.max_pixels)
         plan, detection = await _in_pool(
-            state, run_grasp, inputs, state.detect, settings.max_pixels
+            state,
+            run_grasp,
+            inputs,
+            state.detect,
+            settings.max_pixels,
+            settings.max_detect_seconds,
         )
         state.metrics.observe_detection(detection)
     else:
         # Validating a large detection is CPU work too: the pool, not the event loop.
         plan = await _in_pool(state, plan_from_json, inputs)
     return Response(plan.model_dump_json(exclude_none=True), media_type="application/json")
+
+
+@api.post(
+    "/v1/model",
+    summary="A MuJoCo model (MJCF) of the cables in an image, lifted to the robot base frame",
+    response_model=None,
+    response_class=Response,
+    responses={
+        200: {"content": {"application/xml": {}}, "description": "The MJCF model."},
+        **_MODEL_ERRORS,
+    },
+    openapi_extra=_MODEL_OPENAPI,
+)
+async def model(request: Request) -> Response:
+    """Detect the cables, lift every joint to the base frame with the camera model (and
+    depth image), and answer the MJCF: per chain, one capsule body per segment joined by
+    ball joints, on the surface plane (see the README for the structure and physics)."""
+    state = app_state(request)
+    settings = state.settings
+    inputs = await read_model_request(request, settings.max_body_bytes)
+    check_frame(inputs.frame, settings.max_pixels)
+    if inputs.depth is not None:
+        check_upload(inputs.depth, "depth", settings.max_pixels)
+    text, detection = await _in_pool(
+        state,
+        run_model,
+        inputs,
+        state.detect,
+        settings.max_pixels,
+        settings.max_detect_seconds,
+    )
+    state.metrics.observe_detection(detection)
+    return Response(text, media_type="application/xml")
 
 
 @router.get("/healthz", summary="Liveness: the process answers")

@@ -2,9 +2,10 @@
 
 Public API
 ----------
-detect(image, params=None, mask=None) -> Detection
-    The whole pipeline.
-detect_full(image, params=None, mask=None) -> DetectionResult
+detect(image, params=None, mask=None, *, segmenter=None, deadline=None) -> Detection
+    The whole pipeline; ``deadline`` (a :class:`Deadline`) is an optional time budget,
+    past which it raises :class:`DeadlineExceeded`.
+detect_full(image, params=None, mask=None, *, segmenter=None, deadline=None) -> DetectionResult
     The same, also returning the foreground mask it used (for ``render_labels``).
 render_labels(detection, mask, image=None) -> np.ndarray (uint16)
 render_overlay(image, detection) -> np.ndarray (BGR uint8)
@@ -17,11 +18,14 @@ kernels_cached() -> bool
 """
 
 from service.perception._kernel_cache import kernels_cached
+from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.errors import InvalidInputError
 from service.perception.pipeline import DetectionResult, detect, detect_full, warm_up
 from service.perception.render import render_labels, render_overlay
 
 __all__ = [
+    "Deadline",
+    "DeadlineExceeded",
     "DetectionResult",
     "InvalidInputError",
     "detect",

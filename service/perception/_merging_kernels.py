@@ -1,4 +1,5 @@
-"""Compiled loops of step 6 (:mod:`service.perception.merging`): end widths, gap curves.
+"""Compiled loops of step 6 (:mod:`service.perception.merging`): end widths, candidate
+joins, gap curves.
 
 Plain versions: ``tests/perception/references/merging.py``.
 """
@@ -37,6 +38,150 @@ def median_distance_per_piece(distance, points, starts):
         else:
             medians[k] = (values[middle - 1] + values[middle]) / np.float32(2.0)
     return medians
+
+
+# --------------------------------------------------------------------------- candidate joins
+
+
+@njit(cache=True, nogil=True)
+def _join_cost(ax, ay, adx, ady, bx, by, bdx, bdy, weights, max_gap, radius):
+    """:func:`service.perception.merging.join_cost` of ends a and b, operation for operation
+    (numba's ``np.hypot`` and ``np.arccos`` call the same libm functions as NumPy and
+    ``math.acos``, so the very same double)."""
+    gap_x = bx - ax
+    gap_y = by - ay
+    distance = np.hypot(gap_x, gap_y)
+    arriving_x = -bdx
+    arriving_y = -bdy
+    difference = np.arccos(min(max(adx * arriving_x + ady * arriving_y, -1.0), 1.0))
+    cost = weights[0] * distance / max(max_gap, 1e-9)
+    cost += weights[1] * difference / np.pi
+    if distance > 1e-9:
+        heading_x = gap_x / distance
+        heading_y = gap_y / distance
+        turning = np.arccos(min(max(adx * heading_x + ady * heading_y, -1.0), 1.0))
+        turning += np.arccos(min(max(heading_x * arriving_x + heading_y * arriving_y, -1.0), 1.0))
+        fade = min(1.0, distance / max(3.0 * radius, 1e-9))
+        cost += weights[2] * fade * turning / (2.0 * np.pi)
+    return cost
+
+
+@njit(cache=True, nogil=True)
+def _cells(positions, free, cell):
+    """Grid cell key of each free end (row-major over cells ``cell`` px wide), the free ends
+    sorted by key, their sorted keys, and the number of cells per row."""
+    count = free.size
+    min_x = np.inf
+    min_y = np.inf
+    for k in range(count):
+        min_x = min(min_x, positions[free[k], 0])
+        min_y = min(min_y, positions[free[k], 1])
+    column = np.empty(count, np.int64)
+    row = np.empty(count, np.int64)
+    columns = 1
+    for k in range(count):
+        column[k] = int(np.floor((positions[free[k], 0] - min_x) / cell))
+        row[k] = int(np.floor((positions[free[k], 1] - min_y) / cell))
+        columns = max(columns, column[k] + 3)
+    keys = (row + 1) * columns + column + 1  # a free cell around the grid on every side
+    order = np.argsort(keys, kind="mergesort")
+    return keys, free[order], keys[order], columns
+
+
+@njit(cache=True, nogil=True)
+def _walk_candidates(positions, piece_of_end, free, max_distance, cell, fill, out):
+    """Count (``fill`` False) or write into ``out`` the candidate pairs; returns the count."""
+    if free.size == 0:
+        return 0
+    keys, members, sorted_keys, columns = _cells(positions, free, cell)
+    found = 0
+    for k in range(free.size):
+        i = free[k]
+        for dy in range(-1, 2):
+            for dx in range(-1, 2):
+                key = keys[k] + dy * columns + dx
+                first = np.searchsorted(sorted_keys, key, side="left")
+                last = np.searchsorted(sorted_keys, key, side="right")
+                for m in range(first, last):
+                    j = members[m]
+                    if j <= i or piece_of_end[i] == piece_of_end[j]:
+                        continue
+                    distance = np.hypot(
+                        positions[i, 0] - positions[j, 0], positions[i, 1] - positions[j, 1]
+                    )
+                    if not distance <= max_distance:
+                        continue
+                    if fill:
+                        out[found, 0] = i
+                        out[found, 1] = j
+                    found += 1
+    return found
+
+
+@njit(cache=True, nogil=True)
+def candidate_joins(
+    positions, directions, piece_of_end, free, max_distance, max_gap, weights, radius
+):
+    """Every pair of free ends of different pieces at most ``max_distance`` apart.
+
+    Ends are bucketed in a grid of ``max_distance`` cells, so only the nine cells around
+    an end are searched: the work grows with the number of pairs found, not with the
+    square of the number of ends (``max_distance`` infinite: every pair, one cell).
+
+    Parameters
+    ----------
+    positions, directions : ndarray
+        ``(N, 2)`` end positions and outward unit directions.
+    piece_of_end : ndarray of int64
+        The piece each end belongs to; two ends of one piece are never a candidate.
+    free : ndarray of int64
+        The ends to pair, ascending.
+    max_distance : float
+        Largest distance between the two ends (``np.hypot`` of their difference).
+    max_gap : float
+        ``DetectParams.max_gap``, and ``weights`` the three weights (distance, direction,
+        curvature) and ``radius`` the cable half width, for the cost.
+
+    Returns
+    -------
+    pairs : ndarray of int64
+        ``(M, 2)`` end indices ``i < j``.
+    distances, costs : ndarray
+        ``(M,)``: each pair's distance and :func:`merging.join_cost` of ends ``i``, ``j``.
+    """
+    if max_distance == np.inf:  # every pair: one cell
+        cell = 1e300
+    elif max_distance >= 1.0:
+        cell = max_distance
+    else:  # tiny (or NaN) limits: cells of a pixel
+        cell = 1.0
+    count = _walk_candidates(
+        positions, piece_of_end, free, max_distance, cell, False, np.empty((0, 2), np.int64)
+    )
+    pairs = np.empty((count, 2), np.int64)
+    _walk_candidates(positions, piece_of_end, free, max_distance, cell, True, pairs)
+    distances = np.empty(count)
+    costs = np.empty(count)
+    for k in range(count):
+        i = pairs[k, 0]
+        j = pairs[k, 1]
+        distances[k] = np.hypot(
+            positions[i, 0] - positions[j, 0], positions[i, 1] - positions[j, 1]
+        )
+        costs[k] = _join_cost(
+            positions[i, 0],
+            positions[i, 1],
+            directions[i, 0],
+            directions[i, 1],
+            positions[j, 0],
+            positions[j, 1],
+            directions[j, 0],
+            directions[j, 1],
+            weights,
+            max_gap,
+            radius,
+        )
+    return pairs, distances, costs
 
 
 # --------------------------------------------------------------------------- gap curves

@@ -24,6 +24,7 @@ import numpy as np
 
 from schemas import DetectParams, GapCurve
 from service.perception import _merging_kernels
+from service.perception.deadline import Deadline, check
 from service.perception.geometry import angle_between, end_tangent, polyline_length
 
 END_FIT_SPAN_PX = 40.0
@@ -283,6 +284,8 @@ def _best_matching(
 
 # Junctions with more ends than this are paired greedily (the matching is exponential).
 MAX_JUNCTION_ENDS = 10
+# Candidate joins tried between two looks at the deadline.
+DEADLINE_CHECK_EVERY = 4096
 
 
 def choose_joins(
@@ -292,6 +295,7 @@ def choose_joins(
     radius: float,
     junction_of_end: list[int] | None = None,
     at_border: np.ndarray | None = None,
+    deadline: Deadline | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
@@ -300,6 +304,7 @@ def choose_joins(
     greedily, cheapest first, across gaps, up to ``merge_cost_threshold``; last, two
     free ends that are each other's clearly cheapest partner are joined up to a looser
     limit, unless either is ``at_border``. A join never closes a chain on itself.
+    ``deadline`` (optional) is checked while the joins are made.
 
     Returns
     -------
@@ -336,23 +341,34 @@ def choose_joins(
         for i, j, cost in sorted(proposals, key=lambda item: item[2]):
             try_join(i, j, cost)
 
-    positions = np.array([end.position for end in ends]) if ends else np.zeros((0, 2))
-    distances = np.hypot(*(positions[:, None, :] - positions[None, :, :]).transpose(2, 0, 1))
-    unlimited = params.expected_count is not None
-    candidates = []
-    free = np.flatnonzero(~used)
-    for a_pos, i in enumerate(free):
-        for j in free[a_pos + 1 :]:
-            if ends[i].piece == ends[j].piece:
-                continue
-            if not unlimited and distances[i, j] > params.max_gap:
-                continue
-            candidates.append((join_cost(ends[i], ends[j], params, radius), int(i), int(j)))
-    candidates.sort()
-    for cost, i, j in candidates:
+    # Only pairs within max_gap can be joined (any pair when expected_count asks): the
+    # compiled kernel finds them on a grid and costs them, in time that grows with the
+    # pairs found rather than with the square of the number of ends.
+    positions = np.array([end.position for end in ends], np.float64).reshape(-1, 2)
+    directions = np.array([end.direction for end in ends], np.float64).reshape(-1, 2)
+    pairs, distances, costs = _merging_kernels.candidate_joins(
+        positions,
+        directions,
+        np.array([end.piece for end in ends], np.int64),
+        np.flatnonzero(~used).astype(np.int64),
+        np.inf if params.expected_count is not None else float(params.max_gap),
+        float(params.max_gap),
+        np.array([params.distance_weight, params.direction_weight, params.curvature_weight]),
+        float(radius),
+    )
+    check(deadline, "merging")
+    # Cheapest first, ties by end indices (as sorting (cost, i, j) tuples).
+    order = np.lexsort((pairs[:, 1], pairs[:, 0], costs))
+    pairs, distances, costs = pairs[order], distances[order], costs[order]
+    greedy = len(costs)
+    if params.expected_count is None:  # the loop would stop at the first dearer join
+        greedy = int(np.searchsorted(costs, params.merge_cost_threshold, side="right"))
+    for index, (cost, i, j) in enumerate(
+        zip(costs[:greedy].tolist(), *pairs[:greedy].T.tolist(), strict=True)
+    ):
+        if index % DEADLINE_CHECK_EVERY == 0:
+            check(deadline, "merging")
         if params.expected_count is not None and chains_left <= params.expected_count:
-            break
-        if params.expected_count is None and cost > params.merge_cost_threshold:
             break
         try_join(i, j, cost)
     if params.expected_count is None:
@@ -361,11 +377,8 @@ def choose_joins(
         # explain either of them, and they are joined up to a looser limit.
         # Ends at the edge of the picture are cables leaving it, never gaps.
         excluded = used if at_border is None else used | at_border
-        near = [
-            (cost, i, j)
-            for cost, i, j in candidates
-            if distances[i, j] <= MUTUAL_GAP_RADII * radius
-        ]
+        close = distances <= MUTUAL_GAP_RADII * radius
+        near = list(zip(costs[close].tolist(), *pairs[close].T.tolist(), strict=True))
         for cost, i, j in _mutual_best(near, excluded, params.merge_cost_threshold):
             try_join(i, j, cost)
     return joins
@@ -556,6 +569,7 @@ def merge_chains(
     radius: float,
     zones: np.ndarray | None = None,
     distance: np.ndarray | None = None,
+    deadline: Deadline | None = None,
 ) -> MergeResult:
     """Step 6 of the pipeline: join pieces into whole DLOs and fill the gaps.
 
@@ -571,6 +585,9 @@ def merge_chains(
         together first.
     distance : ndarray, optional
         Distance transform of the mask: end fits then leave out narrow (cut) ends.
+    deadline : Deadline, optional
+        Checked between the phases and while joins are made
+        (:class:`~service.perception.deadline.DeadlineExceeded` past it).
 
     Returns
     -------
@@ -584,6 +601,7 @@ def merge_chains(
     # pixel beyond the border: the full half width is radius + 0.5.
     full_width = FULL_WIDTH_FRACTION * (radius + 0.5)
     ends = chain_ends(pieces, span, skip=radius, distance=distance, full_width=full_width)
+    check(deadline, "merging")
     junction_of_end, dropped = absorb_shared_pieces(pieces, junctions_of_ends(ends, zones), radius)
     at_border = None
     if zones is not None:
@@ -596,7 +614,8 @@ def merge_chains(
             | (positions[:, 0] > width - 1 - margin)
             | (positions[:, 1] > height - 1 - margin)
         )
-    joins = choose_joins(ends, len(pieces), params, radius, junction_of_end, at_border)
+    joins = choose_joins(ends, len(pieces), params, radius, junction_of_end, at_border, deadline)
+    check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
     bridging_ends = ends_through_short_pieces(pieces, ends, joins, span)
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve)

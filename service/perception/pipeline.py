@@ -15,16 +15,32 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from schemas import Chain, Crossing, Detection, DetectParams, GapCurve, StageTimings
+from schemas import (
+    Chain,
+    Crossing,
+    Detection,
+    DetectParams,
+    GapCurve,
+    SegmentationMethod,
+    StageTimings,
+)
 from service.perception import _pipeline_kernels
 from service.perception._kernel_cache import kernels_cached, write_stamp
 from service.perception.contours import extract_contours
 from service.perception.crossings import detect_crossings, find_intersections
+from service.perception.deadline import Deadline, check
 from service.perception.end_extension import extend_ends
 from service.perception.errors import InvalidInputError
 from service.perception.fitting import fit_chains, junction_zones
 from service.perception.geometry import polyline_length, resample
-from service.perception.merging import Join, MergedPath, chain_ends, gap_curve, merge_chains
+from service.perception.merging import (
+    Join,
+    MergedPath,
+    chain_ends,
+    choose_joins,
+    gap_curve,
+    merge_chains,
+)
 from service.perception.pruning import prune_overlaps
 from service.perception.segmentation import (
     as_bgr,
@@ -33,6 +49,7 @@ from service.perception.segmentation import (
     segment_with_cue,
     validate_mask,
 )
+from service.perception.segmenter import Segmenter
 from service.perception.skeleton import (
     distance_transform,
     estimate_radius,
@@ -61,6 +78,10 @@ class DetectionResult:
     mask: np.ndarray
     skeleton: np.ndarray
     joins: list[Join] = field(default_factory=list)
+
+
+# Merged paths finished between two looks at the deadline.
+DEADLINE_CHECK_EVERY = 256
 
 
 class _Stopwatch:
@@ -122,6 +143,9 @@ def detect_full(
     image: np.ndarray | None,
     params: DetectParams | None = None,
     mask: np.ndarray | None = None,
+    *,
+    segmenter: Segmenter | None = None,
+    deadline: Deadline | None = None,
 ) -> DetectionResult:
     """Detect every DLO in an image and return the intermediate products too.
 
@@ -159,8 +183,9 @@ def detect_full(
             validate_mask(mask, shape), params.min_component_area, params.max_hole_area
         )
     else:
-        foreground, cue, image_low = segment_with_cue(image_bgr, params)
+        foreground, cue, image_low = segment_with_cue(image_bgr, params, segmenter)
     watch.lap("segmentation")
+    check(deadline, "segmentation")
     if not foreground.any():
         return _empty(width, height, params, watch, foreground, foreground)
 
@@ -173,33 +198,40 @@ def detect_full(
     if spur_length > 0:
         skeleton = remove_spurs(skeleton, spur_length)
     watch.lap("skeleton")
+    check(deadline, "skeleton")
 
     # 3. Contours (Suzuki-Abe) of the skeleton.
     contours = extract_contours(skeleton)
     watch.lap("contours")
+    check(deadline, "contours")
 
     # 4. Fitting: chains of l_s segments, split at tips and junction zones.
     zones = junction_zones(skeleton, radius)
     pieces = fit_chains(contours, skeleton, zones, params.segment_length)
     watch.lap("fitting")
+    check(deadline, "fitting")
 
     # 5. Pruning of segments that repeat kept ones.
     pieces = prune_overlaps(pieces, shape)
     # Scraps shorter than the cable is wide carry no direction worth merging on.
     pieces = [p for p in pieces if polyline_length(p) >= min(radius, params.min_chain_length)]
     watch.lap("pruning")
+    check(deadline, "pruning")
 
     # 6. Merging across gaps and crossings; each path's free ends extended to the
     # cable's ends and the path resampled; then crossings and their order.
-    merged = merge_chains(pieces, params, radius, zones, distance)
+    merged = merge_chains(pieces, params, radius, zones, distance, deadline)
     finals = []
-    for path in merged.paths:
+    for index, path in enumerate(merged.paths):
+        if index % DEADLINE_CHECK_EVERY == 0:
+            check(deadline, "merging")
         if polyline_length(path.vertices) < params.min_chain_length:
             continue
         finals.append(_finalise_path(path, foreground, distance, params, radius))
     finals.sort(key=lambda item: -polyline_length(item[0]))
     joint_arrays = [joints for joints, _, _ in finals]
     radii = [chain_radius for _, _, chain_radius in finals]
+    check(deadline, "merging")
     found = detect_crossings(joint_arrays, radii, image_bgr)
     inferred_flags = [inferred.copy() for _, inferred, _ in finals]
     for crossing in found:
@@ -210,6 +242,7 @@ def detect_full(
         near = np.hypot(midpoints[:, 0] - crossing.x, midpoints[:, 1] - crossing.y) < reach
         inferred_flags[crossing.under][near] = True
     watch.lap("merging")
+    check(deadline, "merging")
 
     if cue is not None and joint_arrays:
         # Back to step 1 with the chains known: a cable dimmer than the rest gets the
@@ -262,6 +295,9 @@ def detect(
     image: np.ndarray | None,
     params: DetectParams | None = None,
     mask: np.ndarray | None = None,
+    *,
+    segmenter: Segmenter | None = None,
+    deadline: Deadline | None = None,
 ) -> Detection:
     """Detect every deformable linear object in an image as a chain of segments.
 
@@ -278,6 +314,13 @@ def detect(
         Defaults when None.
     mask : ndarray, optional
         ``(H, W)`` foreground mask (nonzero = cable) to use instead of segmentation.
+    segmenter : callable, optional
+        For ``params.segmentation == "model"``: ``segmenter(image_bgr) -> mask``, a
+        learned model (:class:`service.perception.segmenter.OnnxSegmenter`) or any
+        function; see :mod:`service.perception.segmenter` for what it may return.
+    deadline : Deadline, optional
+        A time budget (:class:`service.perception.deadline.Deadline`), checked between
+        the steps and inside the loops that grow with the number of cable pieces.
 
     Returns
     -------
@@ -287,6 +330,8 @@ def detect(
     ------
     InvalidInputError
         The image or mask cannot be used (wrong type or shape, empty mask ...).
+    DeadlineExceeded
+        ``deadline`` passed before the detection was done.
 
     Notes
     -----
@@ -303,7 +348,7 @@ def detect(
     >>> round(detection.chains[0].length / 10)
     18
     """
-    return detect_full(image, params, mask).detection
+    return detect_full(image, params, mask, segmenter=segmenter, deadline=deadline).detection
 
 
 def _numba_cache_dir() -> str:
@@ -334,6 +379,10 @@ def warm_up() -> None:
     # 1. The brightness path (Otsu, hysteresis and clean-up in one pass), the clean-up
     # of other masks, and the growth by a cable's own threshold.
     _, cue, _ = segment_with_cue(image, DetectParams())
+    # The cable-contrast path: a dark line on a light ground, large enough for a level.
+    lines = np.full((96, 96, 3), 210, np.uint8)
+    lines[44:50, 8:88] = (40, 60, 170)
+    segment_with_cue(lines, DetectParams(segmentation=SegmentationMethod.contrast))
     clean_mask(mask, 2, 2)
     line = np.array([[2.0, 20.0], [45.0, 20.0]])
     grow_by_own_thresholds(cue, mask, [line], [3.0], [np.array([False])], [])
@@ -350,7 +399,8 @@ def warm_up() -> None:
         np.array([[0.0, 5.0], [4.0, 5.0], [8.0, 5.0], [12.0, 5.0]]),
         np.array([[6.0, 0.0], [6.0, 4.0], [6.0, 8.0], [6.0, 12.0]]),
     ]
-    chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
+    ends = chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
+    choose_joins(ends, len(strands), DetectParams(), radius)  # the candidates' grid
     east, north = np.array([1.0, 0.0]), np.array([0.0, 1.0])
     for shape in GapCurve:
         for end, arriving in (

@@ -1,10 +1,24 @@
 """Step 1: segmentation, the foreground mask of cable pixels.
 
-The automatic method assumes what cable cells usually show: cables that are brighter
-or more colourful than their background. It thresholds whichever of the two cues
-separates the image better (Otsu's between-class variance ratio), so a bright white
-cable on a dark colourful mat and a red cable on a light grey table both work without
-tuning.
+Four ways to find the mask (``DetectParams.segmentation``), and the caller's own:
+
+``brightness``
+    Cables brighter (or more colourful) than a plain, darker background: Otsu's
+    threshold of brightness with hysteresis, and again per cable once the chains are
+    known (:func:`grow_by_own_thresholds`). Exact and cheap where it applies.
+``contrast``
+    Cable contrast (:mod:`service.perception.cable_segmentation`): lines of one colour
+    that differ from both sides and from the local background, at every width, on
+    bright, dark and textured backgrounds alike.
+``auto``
+    ``brightness`` where the image shows that it applies: brightness is two-class and
+    its bright class is thin, bands no wider than a cable over a quarter of the image
+    at most (:func:`_thin_bright_class`); ``contrast`` everywhere else.
+``hsv``
+    A fixed HSV range.
+``model``
+    A segmenter the caller supplies (:mod:`service.perception.segmenter`): a learned
+    model run with onnxruntime, or any callable from the image to a mask.
 """
 
 from __future__ import annotations
@@ -14,7 +28,9 @@ import numpy as np
 
 from schemas import DetectParams, SegmentationMethod
 from service.perception import _segmentation_kernels
+from service.perception.cable_segmentation import segment_cables
 from service.perception.errors import InvalidInputError
+from service.perception.segmenter import Segmenter, run_segmenter
 
 
 def as_bgr(image: np.ndarray) -> np.ndarray:
@@ -130,7 +146,62 @@ def _cable_like(cue: np.ndarray, threshold: float, separability: float, hist: np
     return separability >= THIN_SEPARABILITY and share <= THIN_FOREGROUND_SHARE
 
 
+# The widest cable the defaults are made for (DetectParams: cables 6 to 40 px wide).
+MAX_CABLE_WIDTH = 40
+BLOCK = 4
+
+
+def _thin_bright_class(hist: np.ndarray, threshold: float, mask: np.ndarray) -> bool:
+    """Is the bright class of a brightness split made of cables, not of a bright surface?
+
+    Cables are thin: the bright class covers at most :data:`THIN_FOREGROUND_SHARE` of
+    the image, and at most that share of the mask lies where a square wider than the
+    widest cable fits inside it. A sheet of paper, a lit table top or the light half of
+    a busy print fails one or the other.
+    """
+    above = float(hist[int(threshold) + 1 :].sum())
+    if above > THIN_FOREGROUND_SHARE * mask.size:
+        return False
+    area = np.count_nonzero(mask)
+    if area == 0:
+        return True
+    # On blocks of BLOCK x BLOCK px (a block counts when the mask covers half of it), at a
+    # sixteenth of the cost: wide regions are wide at any resolution.
+    height, width = mask.shape
+    blocks = cv2.resize(
+        mask.view(np.uint8), (width // BLOCK, height // BLOCK), interpolation=cv2.INTER_AREA
+    )
+    side = MAX_CABLE_WIDTH // BLOCK + 1
+    core = cv2.erode((blocks == 1).view(np.uint8), np.ones((side, side), np.uint8))
+    return BLOCK * BLOCK * np.count_nonzero(core) <= THIN_FOREGROUND_SHARE * area
+
+
 def segment_auto(
+    image_bgr: np.ndarray, min_component_area: int = 0, max_hole_area: int = 0
+) -> np.ndarray:
+    """``brightness`` where the image shows that it applies, else ``contrast``.
+
+    Brightness thresholded by Otsu's method (with hysteresis) is used when it looks
+    like cables against a background (:func:`_cable_like`) and its bright class is
+    thin (:func:`_thin_bright_class`): bright cables on a darker, plain background,
+    where its edges follow the cable better than any other cue. Everywhere else (a
+    light or textured background, dark cables) :func:`segment_cables` finds the cables
+    by their contrast with what lies beside them.
+    """
+    return _segment_auto(image_bgr, min_component_area, max_hole_area)[0]
+
+
+def _segment_auto(
+    image_bgr: np.ndarray, min_component_area: int, max_hole_area: int
+) -> tuple[np.ndarray, np.ndarray | None, float]:
+    """:func:`segment_auto`, and the brightness and weak threshold when brightness made it."""
+    found = _segment_by_brightness(image_bgr, min_component_area, max_hole_area, thin_only=True)
+    if found is not None:
+        return found
+    return segment_cables(image_bgr, min_component_area, max_hole_area), None, 0.0
+
+
+def segment_brightness(
     image_bgr: np.ndarray, min_component_area: int = 0, max_hole_area: int = 0
 ) -> np.ndarray:
     """Foreground mask from brightness, or from colourfulness when brightness fails.
@@ -145,26 +216,46 @@ def segment_auto(
     The mask is cleaned as :func:`clean_mask` would clean it; on the brightness path
     in the same pass as the threshold.
     """
-    return _segment_auto(image_bgr, min_component_area, max_hole_area)[0]
+    return _segment_brightness(image_bgr, min_component_area, max_hole_area)[0]
 
 
-def _segment_auto(
+def _segment_brightness(
     image_bgr: np.ndarray, min_component_area: int, max_hole_area: int
 ) -> tuple[np.ndarray, np.ndarray | None, float]:
-    """:func:`segment_auto`, and the brightness and weak threshold when brightness made it."""
+    """:func:`segment_brightness`, and the brightness and weak threshold when it made it."""
+    found = _segment_by_brightness(image_bgr, min_component_area, max_hole_area, thin_only=False)
+    if found is not None:
+        return found
+    return _segment_by_colourfulness(image_bgr, min_component_area, max_hole_area)
+
+
+def _segment_by_brightness(
+    image_bgr: np.ndarray, min_component_area: int, max_hole_area: int, thin_only: bool
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The brightness path: the mask, the brightness and the weak threshold; None when
+    brightness does not look like cables (or, with ``thin_only``, its class is not thin)."""
     # No blur: it moves the border of thin cables more than it removes noise, and
     # the clean-up afterwards removes the specks noise leaves.
     brightness, counts = _segmentation_kernels.brightness_histogram(image_bgr)
     hist = counts.astype(np.float64)
     threshold, separability = _otsu(hist)
-    if _cable_like(brightness, threshold, separability, hist):
-        low = _hysteresis_low(hist, threshold)
-        # Pixels above ``low``: the levels from the first whole level above it.
-        weak_count = int(hist[max(int(np.floor(low)) + 1, 0) :].sum())
-        mask = _segmentation_kernels.threshold_and_clean(
-            brightness, low, threshold, weak_count, int(min_component_area), int(max_hole_area)
-        ).view(np.bool_)
-        return mask, brightness, low
+    if not _cable_like(brightness, threshold, separability, hist):
+        return None
+    low = _hysteresis_low(hist, threshold)
+    # Pixels above ``low``: the levels from the first whole level above it.
+    weak_count = int(hist[max(int(np.floor(low)) + 1, 0) :].sum())
+    mask = _segmentation_kernels.threshold_and_clean(
+        brightness, low, threshold, weak_count, int(min_component_area), int(max_hole_area)
+    ).view(np.bool_)
+    if thin_only and not _thin_bright_class(hist, threshold, mask):
+        return None
+    return mask, brightness, low
+
+
+def _segment_by_colourfulness(
+    image_bgr: np.ndarray, min_component_area: int, max_hole_area: int
+) -> tuple[np.ndarray, None, float]:
+    """The colourfulness path of ``brightness``: Otsu's threshold of colourfulness."""
     colourfulness = cue_images(image_bgr)[1]
     colour_hist = _histogram(colourfulness)
     colour_threshold, colour_separability = _otsu(colour_hist)
@@ -174,7 +265,7 @@ def _segment_auto(
     # Neither cue looks like cables: an empty table, or cables this method cannot
     # tell from their background. Reporting nothing is safer for a robot than chains
     # traced through texture; such scenes need a mask or an HSV range.
-    return np.zeros(brightness.shape, bool), None, 0.0
+    return np.zeros(colourfulness.shape, bool), None, 0.0
 
 
 def segment_hsv(image_bgr: np.ndarray, low: tuple[int, int, int], high: tuple[int, int, int]):
@@ -210,17 +301,20 @@ def clean_mask(mask: np.ndarray, min_component_area: int, max_hole_area: int) ->
 
 
 def segment_with_cue(
-    image_bgr: np.ndarray, params: DetectParams
+    image_bgr: np.ndarray, params: DetectParams, segmenter: Segmenter | None = None
 ) -> tuple[np.ndarray, np.ndarray | None, float]:
     """:func:`segment`, with the brightness image and the weak threshold it was cut at.
 
-    The brightness is returned (else ``None``) only when the automatic method took it
-    as its cue, so that :func:`grow_by_own_thresholds` can apply the same rule to each
-    cable.
+    The brightness is returned (else ``None``) only when the brightness path made the
+    mask, so that :func:`grow_by_own_thresholds` can apply the same rule to each cable.
     """
-    if params.segmentation is SegmentationMethod.hsv:
-        return segment(image_bgr, params), None, 0.0
-    return _segment_auto(image_bgr, params.min_component_area, params.max_hole_area)
+    area, holes = params.min_component_area, params.max_hole_area
+    method = params.segmentation
+    if method is SegmentationMethod.auto:
+        return _segment_auto(image_bgr, area, holes)
+    if method is SegmentationMethod.brightness:
+        return _segment_brightness(image_bgr, area, holes)
+    return segment(image_bgr, params, segmenter), None, 0.0
 
 
 # Each cable's own threshold is found among the pixels within this many of its radii
@@ -296,6 +390,12 @@ def grow_by_own_thresholds(
     before = np.ascontiguousarray(mask, dtype=bool).view(np.uint8)
     grown = before.copy()
     cue = np.ascontiguousarray(cue, dtype=np.uint8)
+    # Each cable's crossings, gathered once (in their order): a scene of thousands of
+    # cables must not scan every crossing for every cable.
+    crossings_of: dict[int, list[tuple[float, float, int, int]]] = {}
+    for crossing in crossings:
+        for cable in dict.fromkeys(crossing[2:4]):
+            crossings_of.setdefault(cable, []).append(crossing)
     for index, (points, radius) in enumerate(zip(centrelines, radii, strict=True)):
         points = np.ascontiguousarray(points, np.float64)
         if len(points) < 2:
@@ -305,7 +405,7 @@ def grow_by_own_thresholds(
             seen = ~np.asarray(hidden[index], bool)
         radius = max(float(radius), 1.0)
         span = int(np.ceil(OWN_SURROUNDINGS_RADII * radius))
-        mine = [c for c in crossings if index in (c[2], c[3])]
+        mine = crossings_of.get(index, [])
         avoid_xy = np.array([(c[0], c[1]) for c in mine], np.float64).reshape(-1, 2)
         avoid_reach = np.array(
             [span + radii[c[3] if c[2] == index else c[2]] for c in mine], np.float64
@@ -332,7 +432,9 @@ def grow_by_own_thresholds(
     return grown.view(np.bool_)
 
 
-def segment(image_bgr: np.ndarray, params: DetectParams) -> np.ndarray:
+def segment(
+    image_bgr: np.ndarray, params: DetectParams, segmenter: Segmenter | None = None
+) -> np.ndarray:
     """Step 1 of the pipeline: the cleaned foreground mask of an image.
 
     Parameters
@@ -342,6 +444,9 @@ def segment(image_bgr: np.ndarray, params: DetectParams) -> np.ndarray:
     params : DetectParams
         Uses ``segmentation``, ``hsv_low``, ``hsv_high``, ``min_component_area`` and
         ``max_hole_area``.
+    segmenter : callable, optional
+        For ``segmentation="model"``: called with ``image_bgr``, returns the mask
+        (:func:`service.perception.segmenter.run_segmenter` checks it).
 
     Returns
     -------
@@ -357,7 +462,14 @@ def segment(image_bgr: np.ndarray, params: DetectParams) -> np.ndarray:
     >>> int(segment(image, DetectParams()).sum()) > 250
     True
     """
-    if params.segmentation is SegmentationMethod.hsv:
-        raw = segment_hsv(image_bgr, params.hsv_low, params.hsv_high)
-        return clean_mask(raw, params.min_component_area, params.max_hole_area)
-    return segment_auto(image_bgr, params.min_component_area, params.max_hole_area)
+    area, holes = params.min_component_area, params.max_hole_area
+    method = params.segmentation
+    if method is SegmentationMethod.hsv:
+        return clean_mask(segment_hsv(image_bgr, params.hsv_low, params.hsv_high), area, holes)
+    if method is SegmentationMethod.model:
+        return clean_mask(run_segmenter(segmenter, image_bgr), area, holes)
+    if method is SegmentationMethod.contrast:
+        return segment_cables(image_bgr, area, holes)
+    if method is SegmentationMethod.brightness:
+        return segment_brightness(image_bgr, area, holes)
+    return segment_auto(image_bgr, area, holes)

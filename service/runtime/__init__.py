@@ -7,7 +7,7 @@ It imports neither transport, so each can run without the other.
 """
 
 from service.runtime.errors import RequestError
-from service.runtime.frames import Frame, check_declared_size, image_size
+from service.runtime.frames import Frame, check_frame, check_upload, image_size
 from service.runtime.jobs import DetectFunction, default_detect, run_detection, run_overlay
 from service.runtime.metrics import Metrics
 from service.runtime.pool import PoolBusyError, WorkerPool
@@ -21,7 +21,8 @@ __all__ = [
     "RequestError",
     "Settings",
     "WorkerPool",
-    "check_declared_size",
+    "check_frame",
+    "check_upload",
     "default_detect",
     "image_size",
     "run_detection",

@@ -41,8 +41,11 @@ def describe_fields(error: ValidationError) -> list[str]:
         if not where or detail["type"] in ("missing", "json_invalid", "json_type"):
             problems.append(f"{where}: {message}" if where else message)
             continue
-        shown = repr(detail.get("input"))
-        if len(shown) > SHOWN_INPUT_CHARS:
-            shown = shown[: SHOWN_INPUT_CHARS - 3] + "..."
-        problems.append(f"{where}: {message} (got {shown})")
+        problems.append(f"{where}: {message} (got {shortened(repr(detail.get('input')))})")
     return problems
+
+
+def shortened(text: str, limit: int = SHOWN_INPUT_CHARS) -> str:
+    """``text`` cut to ``limit`` characters (ending in ``...``): a client's input is quoted
+    in a message, never echoed back whole."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -16,11 +16,11 @@ import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from adapters.grasp.depth import decode_depth_image
 from adapters.grasp.errors import DepthImageError, GraspPlanningError, InferredSegmentError
 from adapters.grasp.pick import plan_pick
 from schemas import CameraModel, DepthSurface, Detection, GraspSelector
 from schemas.grasp import GraspPlan
+from service.geometry3d.depth import decode_depth_image
 from service.runtime.errors import RequestError, describe_fields
 from service.runtime.frames import Frame
 from service.runtime.jobs import DetectFunction, run_detection
@@ -54,22 +54,27 @@ class GraspFrame:
 
 
 def run_grasp(
-    request: GraspFrame, detect: DetectFunction, max_pixels: int
+    request: GraspFrame, detect: DetectFunction, max_pixels: int, budget_s: float | None = None
 ) -> tuple[GraspPlan, Detection]:
     """Decode the depth image (if any), detect the DLOs in the image, then plan the grasp.
 
     Returns the plan and the detection. The depth image is decoded first so that a bad
     one is refused (422 ``invalid_depth``) before the detection is paid for.
     """
-    depth = None
-    if request.depth is not None:
-        try:
-            depth = decode_depth_image(request.depth)
-        except DepthImageError as exc:
-            raise RequestError(422, "invalid_depth", f"depth: {exc}") from None
-    _, detection = run_detection(request.frame, detect, max_pixels)
+    depth = decode_depth_part(request.depth)
+    _, detection = run_detection(request.frame, detect, max_pixels, budget_s)
     plan = plan_or_refuse(detection, request.camera, request.selector, depth)
     return plan, detection
+
+
+def decode_depth_part(data: bytes | None) -> np.ndarray | None:
+    """The depth image sent as a form part, decoded (422 ``invalid_depth`` if it cannot be)."""
+    if data is None:
+        return None
+    try:
+        return decode_depth_image(data)
+    except DepthImageError as exc:
+        raise RequestError(422, "invalid_depth", f"depth: {exc}") from None
 
 
 def plan_from_json(body: bytes) -> GraspPlan:

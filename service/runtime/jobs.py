@@ -15,19 +15,40 @@ import numpy as np
 
 from schemas import Detection, DetectParams
 from service.imageio import ImageFileError, decode_image, decode_mask
-from service.perception import InvalidInputError, render_overlay
+from service.perception import Deadline, DeadlineExceeded, InvalidInputError, render_overlay
 from service.perception import detect as detect_dlos
 from service.perception import warm_up as warm_up_kernels
+from service.perception.segmenter import Segmenter
 from service.runtime.errors import RequestError
 from service.runtime.frames import Frame, check_pixels
 
-DetectFunction = Callable[[np.ndarray, DetectParams, np.ndarray | None], Detection]
-"""``detect(image, params, mask) -> Detection``, as :func:`service.perception.detect`."""
+DetectFunction = Callable[[np.ndarray, DetectParams, np.ndarray | None, Deadline | None], Detection]
+"""``detect(image, params, mask, deadline) -> Detection``, as :func:`service.perception.detect`;
+``deadline`` is the request's time budget (None: none), to be checked as it goes."""
+
+OVER_BUDGET = "time_budget_exceeded"
+"""The code of the answer to a detection stopped at its time budget."""
 
 
-def default_detect(image: np.ndarray, params: DetectParams, mask: np.ndarray | None) -> Detection:
+def default_detect(
+    image: np.ndarray, params: DetectParams, mask: np.ndarray | None, deadline: Deadline | None
+) -> Detection:
     """:func:`service.perception.detect` with positional arguments."""
-    return detect_dlos(image, params, mask)
+    return detect_dlos(image, params, mask, deadline=deadline)
+
+
+def detect_with_segmenter(segmenter: Segmenter) -> DetectFunction:
+    """:func:`default_detect` with ``segmenter`` for requests with ``segmentation=model``."""
+
+    def detect(
+        image: np.ndarray,
+        params: DetectParams,
+        mask: np.ndarray | None,
+        deadline: Deadline | None,
+    ) -> Detection:
+        return detect_dlos(image, params, mask, segmenter=segmenter, deadline=deadline)
+
+    return detect
 
 
 def decode_frame(frame: Frame, max_pixels: int) -> tuple[np.ndarray, np.ndarray | None]:
@@ -61,20 +82,67 @@ def decode_frame(frame: Frame, max_pixels: int) -> tuple[np.ndarray, np.ndarray 
 
 
 def run_detection(
-    frame: Frame, detect: DetectFunction, max_pixels: int
+    frame: Frame, detect: DetectFunction, max_pixels: int, budget_s: float | None = None
 ) -> tuple[np.ndarray, Detection]:
-    """Decode ``frame`` and detect the DLOs in it; returns the image and the Detection."""
+    """Decode ``frame`` and detect the DLOs in it; returns the image and the Detection.
+
+    ``budget_s`` is the time the decoding and the detection may take together, counted
+    from now (the worker taking the job up); None: no limit.
+
+    Raises
+    ------
+    RequestError
+        As :func:`decode_frame`; 422 ``invalid_input`` for input the detector cannot use;
+        422 :data:`OVER_BUDGET` when the budget ran out (the detection stopped, the
+        thread is free again).
+    """
+    deadline = budget(budget_s)
     image, mask = decode_frame(frame, max_pixels)
+    return image, detect_decoded(image, frame.params, detect, mask, deadline)
+
+
+def budget(seconds: float | None) -> Deadline | None:
+    """The deadline ``seconds`` from now (None: no limit)."""
+    return None if seconds is None else Deadline(seconds)
+
+
+def detect_decoded(
+    image: np.ndarray,
+    params: DetectParams,
+    detect: DetectFunction,
+    mask: np.ndarray | None = None,
+    deadline: Deadline | None = None,
+) -> Detection:
+    """Detect the DLOs in an image already decoded (and checked): as :func:`run_detection`
+    after the decoding (422 for unusable input, or when ``deadline`` passes)."""
     try:
-        detection = detect(image, frame.params, mask)
+        return detect(image, params, mask, deadline)
     except InvalidInputError as exc:
         raise RequestError(422, "invalid_input", str(exc)) from None
-    return image, detection
+    except DeadlineExceeded as exc:
+        raise over_budget(exc) from None
 
 
-def run_overlay(frame: Frame, detect: DetectFunction, max_pixels: int) -> tuple[bytes, Detection]:
+def over_budget(exc: DeadlineExceeded) -> RequestError:
+    """The 422 answer to a detection stopped at its time budget.
+
+    Not 503 (busy: retry in a second) nor another 5xx: the same image would run out of
+    time again, so a retrying client must not be invited to send it back; like 413 for
+    too many pixels, the content asks more than the service gives one request.
+    """
+    return RequestError(
+        422,
+        OVER_BUDGET,
+        f"{exc} (DLO_MAX_DETECT_SECONDS): this image holds more cable pieces than can be "
+        "detected in that time; send a smaller image or a crop, or a mask",
+    )
+
+
+def run_overlay(
+    frame: Frame, detect: DetectFunction, max_pixels: int, budget_s: float | None = None
+) -> tuple[bytes, Detection]:
     """As :func:`run_detection`, then the overlay drawn on the image, encoded as PNG."""
-    image, detection = run_detection(frame, detect, max_pixels)
+    image, detection = run_detection(frame, detect, max_pixels, budget_s)
     encoded_ok, encoded = cv2.imencode(".png", render_overlay(image, detection))
     if not encoded_ok:
         raise RuntimeError("OpenCV could not encode the overlay as PNG")
@@ -89,4 +157,4 @@ def warm_up(detect: DetectFunction) -> Detection:
     image = np.full((96, 160, 3), 30, np.uint8)
     cv2.line(image, (8, 20), (150, 80), (40, 160, 230), 7, cv2.LINE_AA)
     cv2.line(image, (10, 85), (150, 15), (230, 120, 40), 7, cv2.LINE_AA)
-    return detect(image, DetectParams(), None)
+    return detect(image, DetectParams(), None, None)

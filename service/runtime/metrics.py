@@ -55,6 +55,12 @@ class Metrics:
             "Detections that failed inside the service (answered with 500).",
             registry=self.registry,
         )
+        self.over_budget = Counter(
+            "dlo_detection_over_budget",
+            "Detections stopped at their time budget (DLO_MAX_DETECT_SECONDS), answered "
+            "with 422 time_budget_exceeded.",
+            registry=self.registry,
+        )
         self.in_flight = Gauge(
             "dlo_detections_in_flight",
             "Detections running or waiting in the queue.",

@@ -48,6 +48,13 @@ class Settings(BaseSettings):
     max_body_mb: float = Field(
         25.0, gt=0, le=1000, description="Largest request body accepted, in MiB (413)."
     )
+    max_detect_seconds: float = Field(
+        30.0,
+        gt=0,
+        le=3600,
+        description="Time one detection may take (decoding included); past it the request "
+        "gets 422 time_budget_exceeded and the worker is free again.",
+    )
     zenoh: bool = Field(
         True, description="Also serve detection over zenoh (dlo/*/image, dlo/detect)."
     )
@@ -89,6 +96,11 @@ class Settings(BaseSettings):
     protect_metrics: bool = Field(
         False, description="Require the bearer token on /metrics too (when a token is set)."
     )
+    segmenter_model: Path | None = Field(
+        None,
+        description="ONNX segmenter model for requests with segmentation=model "
+        "(needs onnxruntime: the dlo-service[onnx] extra).",
+    )
     log_level: Literal["critical", "error", "warning", "info", "debug"] = Field(
         "info", description="Server log level."
     )
@@ -97,6 +109,17 @@ class Settings(BaseSettings):
     @classmethod
     def _lower_case(cls, value: object) -> object:
         return value.lower() if isinstance(value, str) else value
+
+    @model_validator(mode="after")
+    def _zenoh_config_exists(self) -> Settings:
+        # Checked at start: a missing file would otherwise leave the service never ready.
+        path = self.zenoh_config
+        if self.zenoh and path is not None and not path.is_file():
+            problem = "is a directory, not a file" if path.is_dir() else "no such file"
+            raise ValueError(
+                f"zenoh configuration {path}: {problem} (--zenoh-config, DLO_ZENOH_CONFIG)"
+            )
+        return self
 
     @field_validator("zenoh_listen", mode="before")
     @classmethod

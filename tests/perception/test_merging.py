@@ -8,10 +8,12 @@ import pytest
 
 from schemas import DetectParams
 from service.perception import _merging_kernels
+from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.merging import (
     ChainEnd,
     assemble_paths,
     chain_ends,
+    choose_joins,
     ends_through_short_pieces,
     gap_curve,
     join_cost,
@@ -183,3 +185,66 @@ def test_median_distance_per_piece_equals_numpy(seed):
         cols = np.clip(np.rint(points[:, 0]).astype(int), 0, 79)
         rows = np.clip(np.rint(points[:, 1]).astype(int), 0, 59)
         assert float(np.median(distance[rows, cols])) == float(median)
+
+
+def random_ends(rng, count, extent):
+    """``count`` chain ends of about ``count / 2`` pieces, some on top of each other."""
+    pieces = rng.integers(0, max(1, count // 2), count)
+    ends = []
+    for index in range(count):
+        direction = rng.normal(size=2)
+        direction = direction / np.linalg.norm(direction) if rng.random() > 0.05 else np.zeros(2)
+        position = rng.uniform(0, extent, 2)
+        if ends and rng.random() < 0.1:  # two ends at the same spot
+            position = ends[-1].position.copy()
+        ends.append(ChainEnd(int(pieces[index]), bool(index % 2), position, direction))
+    return ends, int(pieces.max()) + 1
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_candidate_grid_makes_the_joins_every_pair_costed_makes(seed):
+    """The grid of candidate joins within max_gap gives the very joins (ends, order and
+    costs to the last bit) of costing every pair, with and without expected_count,
+    junctions and ends at the border."""
+    rng = np.random.default_rng(seed)
+    ends, piece_count = random_ends(rng, int(rng.integers(2, 160)), float(rng.choice([80, 600])))
+    params = DetectParams(
+        max_gap=float(rng.choice([0.0, 0.5, 40.0, 250.0, 5000.0])),
+        expected_count=None if rng.random() < 0.6 else int(rng.integers(1, 5)),
+        merge_cost_threshold=float(rng.choice([0.3, 0.6, 1.2])),
+    )
+    radius = float(rng.uniform(1, 8))
+    junctions = [int(j) for j in rng.integers(-4, 4, len(ends))] if rng.random() < 0.5 else None
+    at_border = rng.random(len(ends)) < 0.2 if rng.random() < 0.5 else None
+    expected = reference.choose_joins(ends, piece_count, params, radius, junctions, at_border)
+    assert choose_joins(ends, piece_count, params, radius, junctions, at_border) == expected
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_candidate_join_costs_equal_join_cost_to_the_last_bit(seed):
+    rng = np.random.default_rng(seed)
+    ends, _ = random_ends(rng, 300, 400.0)
+    params = DetectParams(distance_weight=0.7, direction_weight=1.3, curvature_weight=0.4)
+    pairs, distances, costs = _merging_kernels.candidate_joins(
+        np.array([end.position for end in ends]),
+        np.array([end.direction for end in ends]),
+        np.array([end.piece for end in ends], np.int64),
+        np.arange(len(ends), dtype=np.int64),
+        float(params.max_gap),
+        float(params.max_gap),
+        np.array([params.distance_weight, params.direction_weight, params.curvature_weight]),
+        3.5,
+    )
+    assert len(pairs) > 1000
+    for (i, j), distance, cost in zip(pairs, distances, costs, strict=True):
+        assert i < j and ends[i].piece != ends[j].piece
+        assert cost == join_cost(ends[i], ends[j], params, 3.5)
+        assert distance == np.hypot(*(ends[i].position - ends[j].position)) <= params.max_gap
+
+
+def test_merging_stops_at_its_deadline():
+    ends, piece_count = random_ends(np.random.default_rng(0), 400, 300.0)
+    ticks = iter(range(1000))
+    deadline = Deadline(1.0, clock=lambda: float(next(ticks)))  # one second per look
+    with pytest.raises(DeadlineExceeded, match="in merging after its budget of 1 s"):
+        choose_joins(ends, piece_count, DetectParams(), 3.0, deadline=deadline)

@@ -289,3 +289,17 @@ def test_steps_2_to_5_equal_the_references_on_mbest_labels():
     assert labels
     for path in labels:
         assert_steps_2_to_5_match(cv2.imread(str(path), cv2.IMREAD_UNCHANGED) > 0)
+
+
+def test_a_detection_stops_at_its_deadline_and_says_in_which_step():
+    from service.perception import Deadline, DeadlineExceeded
+
+    image = make_scene(320, 240, 2, seed=3).image
+    ticks = iter(range(100))  # one second passes at each look at the clock
+    with pytest.raises(DeadlineExceeded, match=r"in segmentation after its budget of 0\.5 s"):
+        detect(image, deadline=Deadline(0.5, clock=lambda: float(next(ticks))))
+    # Within the budget, the deadline changes nothing.
+    timed = detect(image, deadline=Deadline(600.0))
+    assert timed.model_dump(exclude={"timings_ms"}) == detect(image).model_dump(
+        exclude={"timings_ms"}
+    )

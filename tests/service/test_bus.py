@@ -131,7 +131,7 @@ def test_queryable_answers_a_get() -> None:
         reply = query(client, b"GIF89a not what we take")
         assert reply.err is not None
         error = json.loads(reply.err.payload.to_bytes())
-        assert error["error"] == "invalid_image" and "image" in error["detail"]
+        assert error["error"] == "unsupported_media_type" and "GIF" in error["detail"]
 
         reply = query(client, encoded_scene(), json.dumps({"segment_length": -3}))
         assert reply.err is not None
@@ -168,10 +168,10 @@ class GatedDetect:
         self.entered = threading.Event()
         self.release = threading.Event()
 
-    def __call__(self, image: np.ndarray, params: DetectParams, mask: np.ndarray | None):
+    def __call__(self, image: np.ndarray, params: DetectParams, mask: np.ndarray | None, deadline):
         self.entered.set()
         assert self.release.wait(TIMEOUT), "the test never released the detection"
-        return real_detect(image, params, mask)
+        return real_detect(image, params, mask, deadline=deadline)
 
 
 def numbered_frame(publisher: zenoh.Publisher, number: int) -> None:

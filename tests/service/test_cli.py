@@ -293,11 +293,11 @@ def test_unexpected_exception_is_one_line_and_the_batch_goes_on(
 ) -> None:
     real_detect_full = service.batch.detect_full
 
-    def failing_on_first(image, params=None, mask=None):
+    def failing_on_first(image, params=None, mask=None, segmenter=None):
         if image.shape[1] == 320 and failing_on_first.calls == 0:
             failing_on_first.calls += 1
             raise RuntimeError("boom\nsecond line")
-        return real_detect_full(image, params, mask=mask)
+        return real_detect_full(image, params, mask=mask, segmenter=segmenter)
 
     failing_on_first.calls = 0
     monkeypatch.setattr(service.batch, "detect_full", failing_on_first)

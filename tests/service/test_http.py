@@ -21,6 +21,7 @@ from fastapi import FastAPI
 
 from schemas import Detection, DetectParams
 from service.http import Settings, create_app
+from service.http.server import uvicorn_options
 from service.perception import detect as real_detect
 from service.runtime.frames import image_size
 from service.synthetic import make_scene
@@ -40,8 +41,9 @@ def running_server(settings: Settings, detect=None, wait_ready: bool = True) -> 
 
 @contextlib.contextmanager
 def serving(app: FastAPI, wait_ready: bool = True) -> Iterator[str]:
-    """Serve ``app`` with uvicorn on a free loopback port; yields its base URL."""
-    config = uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning")
+    """Serve ``app`` with uvicorn, set up as ``dlo serve`` does, on a free loopback port;
+    yields its base URL."""
+    config = uvicorn.Config(app, **uvicorn_options("127.0.0.1", 0, "warning"))
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
@@ -118,12 +120,12 @@ class Controls:
         self.fail = False
         self.calls = 0
 
-    def detect(self, image, params, mask) -> Detection:
+    def detect(self, image, params, mask, deadline) -> Detection:
         self.calls += 1
         if self.fail:
             raise RuntimeError("injected failure")
         assert self.gate.wait(timeout=10), "test gate never opened"
-        return real_detect(image, params, mask)
+        return real_detect(image, params, mask, deadline=deadline)
 
 
 # --- detection --------------------------------------------------------------------------------
@@ -256,10 +258,10 @@ def test_limits_are_413() -> None:
                 f"{base}/v1/detect", content=body, headers={"Content-Type": media_type}
             )
             assert_error(response, 413, "400x400", "megapixels")
-        # WebP: no header peek, so refused once decoded
+        # WebP: its size is not read from the header, so it is not taken at all
         webp = encode(np.zeros((400, 400, 3), np.uint8), ".webp")
         response = httpx.post(f"{base}/v1/detect", files={"image": ("wide.webp", webp)})
-        assert_error(response, 413, "400x400", "megapixels")
+        assert_error(response, 415, "webp", "png and jpeg")
 
         big = np.random.default_rng(0).integers(0, 255, 100_000, np.uint8).tobytes()
         response = httpx.post(

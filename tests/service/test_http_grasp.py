@@ -257,9 +257,9 @@ def test_bad_forms_are_422_saying_what(server, png) -> None:
 def test_busy_pool_answers_503_at_once(png) -> None:
     gate = threading.Event()
 
-    def held_detect(image, params, mask) -> Detection:
+    def held_detect(image, params, mask, deadline) -> Detection:
         assert gate.wait(timeout=20), "test gate never opened"
-        return real_detect(image, params, mask)
+        return real_detect(image, params, mask, deadline=deadline)
 
     settings = Settings(workers=1, queue_size=0, zenoh=False)
     gate.set()  # let the warm-up through

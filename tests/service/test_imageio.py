@@ -200,3 +200,46 @@ def test_progressive_jpeg_is_accepted(tmp_path: Path) -> None:
     assert encode_ok
     path = write_bytes(tmp_path / "progressive.jpg", data.tobytes())
     assert read_image(path).shape == (64, 96, 3)
+
+
+def test_folders_say_what_they_hold_besides_images(tmp_path: Path) -> None:
+    from service.imageio import images_in_directory
+
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "a.png").write_bytes(b"x")
+    (tmp_path / "gone.jpg").symlink_to(tmp_path / "nowhere.jpg")
+    (tmp_path / "gone.txt").symlink_to(tmp_path / "nowhere.txt")  # not an image's name
+    (tmp_path / ".hidden").mkdir()
+    images, skipped = images_in_directory(tmp_path)
+    assert images == [tmp_path / "a.png"]
+    assert skipped == [
+        f"{tmp_path / 'gone.jpg'}: broken symbolic link (to {tmp_path / 'nowhere.jpg'}), skipped",
+        f"{tmp_path / 'sub'}: a folder, not searched (name it to include it)",
+    ]
+
+
+def test_a_mask_of_another_size_is_refused_from_its_header(tmp_path: Path) -> None:
+    from tests.helpers import blank_png
+
+    path = write_bytes(tmp_path / "mask.png", blank_png(30_000, 30_000))
+    with pytest.raises(ImageFileError, match="mask is 30000x30000 but the image is 96x64"):
+        read_mask(path, (64, 96, 3))
+
+
+@pytest.mark.parametrize(
+    "width, height, problem",
+    [
+        (1, 5_000_000, "image is 1x5000000 px: too large, the PNG decoder takes at most"),
+        (40_000, 40_000, "image is 40000x40000 px: too large to decode (at most 1073.7"),
+        (0, 10, "empty image"),
+    ],
+)
+def test_images_too_large_to_decode_are_refused_from_the_header(
+    tmp_path: Path, width: int, height: int, problem: str
+) -> None:
+    from tests.helpers import blank_png
+
+    path = write_bytes(tmp_path / "big.png", blank_png(width, height))
+    with pytest.raises(ImageFileError) as refused:
+        read_image(path)
+    assert problem in str(refused.value)

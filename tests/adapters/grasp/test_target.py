@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from adapters.grasp.depth import decode_depth_image
 from adapters.grasp.errors import DepthImageError, GraspPlanningError, InferredSegmentError
-from adapters.grasp.target import closing_yaw, normalize_half_turn, pixel_to_plane, plan_grasp
+from adapters.grasp.target import closing_yaw, normalize_half_turn, plan_grasp
 from schemas import (
     CameraModel,
     Chain,
@@ -26,6 +25,9 @@ from schemas import (
     PlaneSurface,
     SegmentPoint,
 )
+from service.geometry3d.camera import pixel_to_plane
+from service.geometry3d.depth import decode_depth_image
+from service.geometry3d.errors import LiftError
 from tests.adapters.builders import DOWN, looking_down
 
 FX, FY, CX, CY, W, H = 800.0, 820.0, 320.0, 240.0, 640, 480
@@ -111,14 +113,18 @@ def test_distorted_pixel_is_undistorted_back_to_the_known_point(base_point):
 
 def test_ray_meeting_the_plane_behind_the_camera_is_refused():
     up = rot_x(math.pi) @ DOWN  # looking straight up
-    with pytest.raises(GraspPlanningError, match="behind the camera"):
+    with pytest.raises(LiftError, match="behind the camera"):
         pixel_to_plane(camera(rotation=up), (CX, CY))
+    # The grasp planning refuses it as a grasp that cannot be planned.
+    line = detection(chain([(CX - 10.0, CY), (CX + 10.0, CY)]))
+    with pytest.raises(GraspPlanningError, match="behind the camera"):
+        plan_grasp(line, camera(rotation=up), GraspSelector())
 
 
 def test_ray_parallel_to_the_plane_is_refused():
     horizontal = rot_x(-math.pi / 2) @ DOWN  # optical axis along base -y
     np.testing.assert_allclose(horizontal[:, 2], [0, -1, 0], atol=1e-12)
-    with pytest.raises(GraspPlanningError, match="parallel"):
+    with pytest.raises(LiftError, match="parallel"):
         pixel_to_plane(camera(rotation=horizontal), (CX, CY))
 
 

@@ -1,7 +1,10 @@
-"""Plain gap curves (step 6): the natural curve's three shapes and the smooth cubic."""
+"""Plain step 6: the gap curves (the natural curve's three shapes and the smooth cubic),
+and the choice of joins costing every pair of chain ends (the code the grid of
+``_merging_kernels.candidate_joins`` replaced)."""
 
 import numpy as np
 
+from service.perception import merging
 from service.perception.geometry import angle_between
 
 
@@ -101,3 +104,67 @@ def smooth_curve(start, leaving, end, arriving, step=1.0):
     t = np.linspace(0.0, 1.0, count)[:, None]
     weights = [(1 - t) ** 3, 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t**2, t**3]
     return sum(w * c for w, c in zip(weights, control, strict=True))
+
+
+def choose_joins(ends, piece_count, params, radius, junction_of_end=None, at_border=None):
+    """:func:`service.perception.merging.choose_joins` over every pair of ends: a distance
+    matrix of all ends and a plain loop over every pair of free ends."""
+    components = merging._Components(piece_count)
+    used = np.zeros(len(ends), bool)
+    chains_left = piece_count
+    joins = []
+
+    def try_join(i, j, cost):
+        nonlocal chains_left
+        if used[i] or used[j]:
+            return False
+        piece_i, piece_j = ends[i].piece, ends[j].piece
+        if components.find(piece_i) == components.find(piece_j):
+            return False
+        components.union(piece_i, piece_j)
+        used[i] = used[j] = True
+        chains_left -= 1
+        joins.append((i, j, cost))
+        return True
+
+    if junction_of_end is not None:
+        groups = {}
+        for index, junction in enumerate(junction_of_end):
+            if junction >= 0:
+                groups.setdefault(junction, []).append(index)
+        proposals = []
+        for members in groups.values():
+            if 2 <= len(members) <= merging.MAX_JUNCTION_ENDS:
+                proposals.extend(merging._best_matching(members, ends, params, radius))
+        for i, j, cost in sorted(proposals, key=lambda item: item[2]):
+            try_join(i, j, cost)
+
+    positions = np.array([end.position for end in ends]) if ends else np.zeros((0, 2))
+    distances = np.hypot(*(positions[:, None, :] - positions[None, :, :]).transpose(2, 0, 1))
+    unlimited = params.expected_count is not None
+    candidates = []
+    free = np.flatnonzero(~used)
+    for a_pos, i in enumerate(free):
+        for j in free[a_pos + 1 :]:
+            if ends[i].piece == ends[j].piece:
+                continue
+            if not unlimited and distances[i, j] > params.max_gap:
+                continue
+            candidates.append((merging.join_cost(ends[i], ends[j], params, radius), int(i), int(j)))
+    candidates.sort()
+    for cost, i, j in candidates:
+        if params.expected_count is not None and chains_left <= params.expected_count:
+            break
+        if params.expected_count is None and cost > params.merge_cost_threshold:
+            break
+        try_join(i, j, cost)
+    if params.expected_count is None:
+        excluded = used if at_border is None else used | at_border
+        near = [
+            (cost, i, j)
+            for cost, i, j in candidates
+            if distances[i, j] <= merging.MUTUAL_GAP_RADII * radius
+        ]
+        for cost, i, j in merging._mutual_best(near, excluded, params.merge_cost_threshold):
+            try_join(i, j, cost)
+    return joins

@@ -1,0 +1,247 @@
+"""Cable-contrast segmentation: behaviour on scenes with exact truth, and its kernels.
+
+The scenes are drawn here, so that the truth is exact: cables as thick polylines of one
+colour with a shaded rim, on backgrounds of several kinds (bright paper, a dark table,
+mid grey with dark and bright cables together, a busy print of small strokes).
+"""
+
+import itertools
+
+import cv2
+import numpy as np
+import pytest
+
+from schemas import DetectParams, SegmentationMethod
+from service.perception import _cable_segmentation_kernels, detect
+from service.perception.cable_segmentation import (
+    BACKGROUND_WINDOW,
+    HALF_LENGTH,
+    JND,
+    N_ORIENTATIONS,
+    OFFSET,
+    WIDE_WINDOW,
+    level_steps,
+    segment_cables,
+)
+from service.perception.segmentation import segment, segment_with_cue
+from service.synthetic import make_scene
+from tests.perception.references import cable_segmentation as reference
+
+CABLES = [
+    [(20, 60), (120, 40), (260, 80), (380, 50)],
+    [(40, 250), (150, 180), (250, 210), (360, 150)],
+    [(300, 20), (280, 120), (320, 200), (300, 280)],
+]
+
+
+def smooth_noise(rng, shape, size):
+    small = rng.standard_normal((max(2, shape[0] // size), max(2, shape[1] // size)))
+    return cv2.resize(small.astype(np.float32), shape[::-1], interpolation=cv2.INTER_CUBIC)
+
+
+def draw_scene(background, colours, width=12, seed=0, shape=(300, 400)):
+    """BGR image and exact mask: ``colours[i]`` cable along ``CABLES[i]`` on ``background``."""
+    rng = np.random.default_rng(seed)
+    image = np.asarray(background, np.float32).copy()
+    truth = np.zeros(shape, bool)
+    for points, colour in zip(CABLES, colours, strict=False):
+        band = np.zeros(shape, np.uint8)
+        cv2.polylines(band, [np.array(points, np.int32)], False, 1, width)
+        core = np.zeros(shape, np.uint8)
+        cv2.polylines(core, [np.array(points, np.int32)], False, 1, max(width - 4, 1))
+        colour = np.asarray(colour, np.float32)
+        image[band > 0] = colour * 0.8  # the shaded rim
+        image[core > 0] = colour
+        truth |= band > 0
+    image += rng.normal(0.0, 2.0, image.shape)
+    return np.clip(image + 0.5, 0, 255).astype(np.uint8), truth
+
+
+def plain(level, shape=(300, 400), seed=0):
+    rng = np.random.default_rng(seed)
+    grey = level + 6.0 * smooth_noise(rng, shape, 100)
+    return np.repeat(grey[:, :, None], 3, axis=2) * np.array([1.0, 1.02, 0.98])
+
+
+def busy(shape=(300, 400), seed=0):
+    """A colourful print: slow colour blobs and many short thin strokes."""
+    rng = np.random.default_rng(seed)
+    image = np.stack([128 + 45 * smooth_noise(rng, shape, 60) for _ in range(3)], axis=2)
+    for _ in range(140):
+        start = rng.uniform(0, 1, 2) * shape[::-1]
+        points = start + np.cumsum(rng.normal(0, 12, (4, 2)), axis=0)
+        colour = rng.uniform(30, 230, 3).tolist()
+        cv2.polylines(image, [points.astype(np.int32)], False, colour, int(rng.integers(1, 3)))
+    return image
+
+
+def dice(mask, truth):
+    return 2.0 * (mask & truth).sum() / (mask.sum() + truth.sum())
+
+
+@pytest.mark.parametrize(
+    ("name", "background", "colours"),
+    [
+        ("dark cables on bright paper", plain(220), [(30, 30, 30), (120, 40, 20), (20, 30, 140)]),
+        ("bright cables on a dark table", plain(45), [(230, 230, 230), (60, 200, 230)]),
+        ("dark and bright cables on mid grey", plain(128), [(25, 25, 25), (240, 240, 240)]),
+        ("coloured cables as bright as the paper", plain(200), [(40, 40, 210), (200, 90, 40)]),
+    ],
+)
+def test_cables_on_plain_backgrounds_are_found_whole(name, background, colours):
+    image, truth = draw_scene(background, colours)
+    truth_of_these = truth
+    mask = segment_cables(image, 120, 60)
+    assert dice(mask, truth_of_these) > 0.93, name
+
+
+def test_cables_on_a_busy_print_are_found_and_the_strokes_left_out():
+    image, truth = draw_scene(busy(), [(30, 30, 150), (40, 200, 230), (200, 80, 40)])
+    mask = segment_cables(image, 120, 60)
+    assert (mask & truth).sum() / truth.sum() > 0.9  # the cables
+    assert (mask & ~truth).sum() / mask.sum() < 0.15  # little of the print
+
+
+@pytest.mark.parametrize("background", ["plain", "textured"])
+def test_a_table_without_cables_gives_an_empty_mask(background):
+    for seed in range(2):
+        image = make_scene(480, 320, 0, seed=seed, background=background).image
+        assert not segment_cables(image, 120, 60).any()
+    flat = np.full((200, 300, 3), 180, np.uint8)
+    assert not segment_cables(flat).any()
+
+
+def test_the_background_between_two_close_cables_stays_background():
+    image, truth = draw_scene(plain(220), [(30, 30, 30)])
+    second = np.zeros(truth.shape, np.uint8)
+    shifted = [(x, y + 22) for x, y in CABLES[0]]
+    cv2.polylines(second, [np.array(shifted, np.int32)], False, 1, 12)
+    image[second > 0] = (30, 30, 30)
+    truth |= second > 0
+    mask = segment_cables(image, 120, 60)
+    assert dice(mask, truth) > 0.9
+    gap = np.zeros(truth.shape, np.uint8)
+    cv2.polylines(gap, [np.array([(x, y + 11) for x, y in CABLES[0]], np.int32)], False, 1, 3)
+    assert (mask & (gap > 0)).sum() < 0.1 * (gap > 0).sum()
+
+
+def test_wide_cables_are_found_at_a_coarser_level():
+    background = plain(210, shape=(600, 800))
+    image = background.copy()
+    truth = np.zeros((600, 800), np.uint8)
+    cv2.polylines(truth, [np.array([(40, 120), (400, 80), (760, 300)], np.int32)], False, 1, 36)
+    image[truth > 0] = (40, 40, 170)
+    image = np.clip(image, 0, 255).astype(np.uint8)
+    assert dice(segment_cables(image, 120, 60), truth > 0) > 0.93
+
+
+def test_auto_takes_brightness_on_a_dark_plain_table_and_contrast_elsewhere():
+    scene = make_scene(640, 360, 2, seed=3, background="plain")
+    mask, cue, _ = segment_with_cue(scene.image, DetectParams())
+    assert cue is not None  # the brightness path, and its per-cable thresholds later
+    np.testing.assert_array_equal(
+        mask, segment(scene.image, DetectParams(segmentation=SegmentationMethod.brightness))
+    )
+    paper, truth = draw_scene(plain(220), [(30, 30, 30), (40, 40, 200)])
+    mask, cue, _ = segment_with_cue(paper, DetectParams())
+    assert cue is None
+    np.testing.assert_array_equal(mask, segment_cables(paper, 120, 60))
+    assert dice(mask, truth) > 0.93
+
+
+def test_auto_finds_dark_cables_on_paper_end_to_end():
+    image, _ = draw_scene(plain(220), [(30, 30, 30), (120, 40, 20), (20, 30, 140)])
+    detection = detect(image)
+    assert len(detection.chains) == 3
+
+
+def test_the_pyramid_reaches_40_px_cables_and_stops_at_small_levels():
+    steps = level_steps(2160, 3840)
+    assert steps[0] == 2.0
+    assert steps[-1] * 2.5 >= 40.0
+    assert all(b / a == pytest.approx(np.sqrt(2.0)) for a, b in itertools.pairwise(steps))
+    assert len(level_steps(120, 160)) < len(level_steps(480, 640))
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+def level_inputs(seed, shape=(48, 64)):
+    image, _ = draw_scene(busy(shape=(300, 400), seed=seed), [(30, 30, 150), (40, 200, 230)])
+    small = cv2.resize(image, shape[::-1], interpolation=cv2.INTER_AREA)
+    lab8 = cv2.cvtColor(small, cv2.COLOR_BGR2Lab)
+    background8, wide8 = (
+        cv2.merge([cv2.medianBlur(np.ascontiguousarray(lab8[:, :, c]), size) for c in range(3)])
+        for size in (BACKGROUND_WINDOW, WIDE_WINDOW)
+    )
+    return lab8, background8, wide8
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_level_contrast_equals_the_reference(seed):
+    lab8, background8, wide8 = level_inputs(seed)
+    args = (lab8, background8, wide8, N_ORIENTATIONS, HALF_LENGTH, float(OFFSET), JND * JND)
+    ratio, orientation = _cable_segmentation_kernels.level_contrast(*args)
+    expected_ratio, expected_orientation = reference.level_contrast(*args)
+    np.testing.assert_allclose(ratio, expected_ratio, rtol=1e-4, atol=1e-4)
+    # The angle, where one clearly wins (near-ties may go either way in float32).
+    ratios = np.sort(reference.orientation_ratios(*args), axis=0)
+    clear = ratios[-1] > ratios[-2] * (1 + 1e-4) + 1e-6
+    np.testing.assert_array_equal(orientation[clear], expected_orientation[clear])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_seed_colours_equal_the_reference(seed):
+    lab8, background8, wide8 = level_inputs(seed)
+    _, orientation = _cable_segmentation_kernels.level_contrast(
+        lab8, background8, wide8, N_ORIENTATIONS, HALF_LENGTH, float(OFFSET), JND * JND
+    )
+    rng = np.random.default_rng(seed)
+    rows = rng.integers(0, lab8.shape[0], 40).astype(np.int64)
+    cols = rng.integers(0, lab8.shape[1], 40).astype(np.int64)
+    rows[:4] = [0, 0, lab8.shape[0] - 1, lab8.shape[0] - 1]  # the corners: cut segments
+    cols[:4] = [0, lab8.shape[1] - 1, 0, lab8.shape[1] - 1]
+    args = (N_ORIENTATIONS, HALF_LENGTH, float(OFFSET))
+    found = _cable_segmentation_kernels.seed_colours(
+        lab8, background8, rows, cols, orientation, *args
+    )
+    expected = reference.seed_colours(lab8, background8, rows, cols, orientation, *args)
+    np.testing.assert_allclose(found, expected, rtol=1e-4, atol=1e-3)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_merge_level_and_nearest_colour_class_equal_the_reference(seed):
+    rng = np.random.default_rng(seed)
+    best = rng.random((30, 40)).astype(np.float32)
+    best_level = rng.integers(0, 3, (30, 40)).astype(np.int64)
+    ratio = rng.random((21, 28)).astype(np.float32) * 1.5
+    found_best, found_level = best.copy(), best_level.copy()
+    _cable_segmentation_kernels.merge_level(found_best, found_level, ratio, 3)
+    reference.merge_level(best, best_level, ratio, 3)
+    np.testing.assert_array_equal(found_best, best)
+    np.testing.assert_array_equal(found_level, best_level)
+
+    lab8 = rng.integers(0, 256, (59, 81, 3)).astype(np.uint8)
+    nearest = rng.integers(-1, 12, (30, 40)).astype(np.int64)
+    distance = (rng.random((30, 40)) * 6).astype(np.float32)
+    reach = (rng.random(12) * 10).astype(np.float32)
+    colours = (rng.random((12, 4, 3)) * 100 - 30).astype(np.float32)
+    found = _cable_segmentation_kernels.nearest_colour_class(
+        lab8, nearest, distance, 81 / 40, reach, colours
+    )
+    expected = reference.nearest_colour_class(lab8, nearest, distance, 81 / 40, reach, colours)
+    assert (found != expected).mean() < 1e-3  # float32 against float64 at exact ties
+
+
+def test_auto_leaves_brightness_for_a_sheet_of_paper_on_a_dark_table():
+    # A sheet covering a sixth of the picture: brightness splits it off cleanly, but the
+    # bright class is one wide region, not cables.
+    table = plain(40, shape=(300, 400))
+    table[60:200, 80:260] = 225
+    image, truth = draw_scene(table, [(40, 40, 200)])  # red: seen on the table and the sheet
+    mask, cue, _ = segment_with_cue(image, DetectParams())
+    assert cue is None
+    assert not mask[110:190, 120:250].any()  # the sheet is no cable
+    # (The sliver of paper between the cable and the sheet's edge, and the sheet's corner
+    # next to it, are thin bright shapes too: some of them are taken.)
+    assert dice(mask, truth) > 0.8
