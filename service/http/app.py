@@ -140,6 +140,7 @@ async def _open_bus(state: AppState) -> None:
             image_keys=settings.zenoh_image_keys,
             balanced=settings.zenoh_assignment == "balanced",
             max_detect_seconds=settings.max_detect_seconds,
+            tracking=_camera_trackers(settings),
         )
         state.bus = bus  # before opening: close() then waits for open() to finish
         await asyncio.to_thread(bus.open)
@@ -152,6 +153,16 @@ async def _open_bus(state: AppState) -> None:
     logger.info(
         "zenoh session open; serving %s and dlo/detect", ", ".join(settings.zenoh_image_keys)
     )
+
+
+def _camera_trackers(settings: Settings):
+    """The bus's per-camera trackers, when some cameras are to be tracked."""
+    if not settings.track:
+        return None
+    from schemas import TrackParams
+    from service.bus.tracks import CameraTrackers
+
+    return CameraTrackers(settings.track, TrackParams(memory_s=settings.track_memory_s))
 
 
 async def _request_error(request: Request, exc: Exception) -> JSONResponse:

@@ -263,3 +263,168 @@ def _place_next(x, fixed, moved, length):
     else:  # coincident: continue straight along the chain
         x[moved, 0] = x[fixed, 0] + length
         x[moved, 1] = x[fixed, 1]
+
+
+@njit(cache=True, nogil=True)
+def fit_statistics(distance, arc, cosine, sample_arc, starts, counts, gates, min_cosine):
+    """How each piece lies along each track, from its samples' projections.
+
+    Piece ``p`` owns samples ``starts[p] : starts[p] + counts[p]`` (rows of the ``(S, T)``
+    projection arrays of :func:`nearest_on_polylines`, ``arc`` in px); ``sample_arc`` is
+    each sample's arc along its piece. A sample is near a track when its distance is
+    finite and the directions agree (``|cosine| >= min_cosine``). Per piece and track:
+
+    ok
+        At least 3 samples, and half of the piece's, are near, and their offsets agree
+        (median spread at most half the piece's length).
+    sign
+        +1 when the piece runs along the track's direction, -1 against it.
+    offset
+        Median over the near samples of ``arc - sign * sample_arc``.
+    cost
+        Mean distance of the near samples + (1 - near share) * gate + spread / 4.
+    share
+        The near share.
+    """
+    n_pieces = starts.shape[0]
+    n_tracks = gates.shape[0]
+    ok = np.zeros((n_pieces, n_tracks), np.bool_)
+    sign = np.ones((n_pieces, n_tracks), np.int64)
+    offset = np.zeros((n_pieces, n_tracks))
+    cost = np.full((n_pieces, n_tracks), np.inf)
+    share = np.zeros((n_pieces, n_tracks))
+    for p in range(n_pieces):
+        first = starts[p]
+        count = counts[p]
+        length = sample_arc[first + count - 1]
+        values = np.empty(count)
+        for t in range(n_tracks):
+            near = 0
+            cos_sum = 0.0
+            distance_sum = 0.0
+            for i in range(first, first + count):
+                if np.isfinite(distance[i, t]) and abs(cosine[i, t]) >= min_cosine:
+                    near += 1
+                    cos_sum += cosine[i, t]
+                    distance_sum += distance[i, t]
+            if near < 3 or near < 0.5 * count:
+                continue
+            direction = 1 if cos_sum >= 0.0 else -1
+            k = 0
+            for i in range(first, first + count):
+                if np.isfinite(distance[i, t]) and abs(cosine[i, t]) >= min_cosine:
+                    values[k] = arc[i, t] - direction * sample_arc[i]
+                    k += 1
+            middle = np.median(values[:near])
+            for i in range(near):
+                values[i] = abs(values[i] - middle)
+            spread = np.median(values[:near])
+            if spread > 0.5 * max(length, 1.0):
+                continue
+            ok[p, t] = True
+            sign[p, t] = direction
+            offset[p, t] = middle
+            share[p, t] = near / count
+            cost[p, t] = distance_sum / near + (1.0 - near / count) * gates[t] + 0.25 * spread
+    return ok, sign, offset, cost, share
+
+
+@njit(cache=True, nogil=True)
+def _locate(arcs, at):
+    """The segment of a polyline (vertices at ``arcs``) holding arc ``at``, and the
+    fraction along it (clamped to the polyline)."""
+    n = arcs.shape[0]
+    if at <= arcs[0]:
+        return 0, 0.0
+    if at >= arcs[n - 1]:
+        return n - 2, 1.0
+    lo = 0
+    hi = n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if arcs[mid] <= at:
+            lo = mid
+        else:
+            hi = mid
+    span = arcs[lo + 1] - arcs[lo]
+    return lo, (at - arcs[lo]) / span if span > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def refine_offset(joints, points, arcs, sign, offset, step, iterations):
+    """Least-squares offset laying a piece's arc along a track's joints (Gauss-Newton).
+
+    Joint ``k`` sits at piece arc ``sign * (k * step - offset)``; each iteration moves the
+    offset by the mean, over the joints that fall on the piece, of their residual along
+    the piece (so that the residuals along it balance).
+    """
+    n = joints.shape[0]
+    length = arcs[arcs.shape[0] - 1]
+    for _ in range(iterations):
+        total = 0.0
+        count = 0
+        for k in range(n):
+            u = sign * (k * step - offset)
+            if u < 0.0 or u > length:
+                continue
+            s, f = _locate(arcs, u)
+            dx = points[s + 1, 0] - points[s, 0]
+            dy = points[s + 1, 1] - points[s, 1]
+            norm = np.sqrt(dx * dx + dy * dy)
+            if norm <= 0.0:
+                continue
+            px = points[s, 0] + f * dx
+            py = points[s, 1] + f * dy
+            total += ((joints[k, 0] - px) * dx + (joints[k, 1] - py) * dy) / norm
+            count += 1
+        if count < 2:
+            break
+        offset -= sign * total / count
+    return offset
+
+
+@njit(cache=True, nogil=True)
+def chord_walk(points, arcs, start, sign, step, limit):
+    """Up to ``limit`` points along a polyline from arc ``start``, forwards (``sign`` 1)
+    or backwards, each exactly ``step`` in a straight line from the one before (a
+    track's spacing), the first at ``start`` itself."""
+    n = points.shape[0]
+    out = np.empty((max(limit, 1), 2))
+    s, f = _locate(arcs, start)
+    cx = points[s, 0] + f * (points[s + 1, 0] - points[s, 0])
+    cy = points[s, 1] + f * (points[s + 1, 1] - points[s, 1])
+    out[0, 0] = cx
+    out[0, 1] = cy
+    count = 1
+    # The vertex to walk towards next.
+    vertex = s + 1 if sign > 0 else (s if f > 0.0 else s - 1)
+    ax = cx
+    ay = cy
+    step_sq = step * step
+    while count < limit and 0 <= vertex < n:
+        bx = points[vertex, 0]
+        by = points[vertex, 1]
+        if (bx - cx) ** 2 + (by - cy) ** 2 < step_sq:
+            ax = bx
+            ay = by
+            vertex += 1 if sign > 0 else -1
+            continue
+        # Where the circle of radius step round the last point leaves segment a-b.
+        dx = bx - ax
+        dy = by - ay
+        fx = ax - cx
+        fy = ay - cy
+        qa = dx * dx + dy * dy
+        qb = 2.0 * (fx * dx + fy * dy)
+        qc = fx * fx + fy * fy - step_sq
+        disc = max(qb * qb - 4.0 * qa * qc, 0.0)
+        t = (-qb + np.sqrt(disc)) / (2.0 * qa) if qa > 0.0 else 1.0
+        t = min(max(t, 0.0), 1.0)
+        cx = ax + t * dx
+        cy = ay + t * dy
+        ax = cx
+        ay = cy
+        out[count, 0] = cx
+        out[count, 1] = cy
+        count += 1
+    return out[:count]

@@ -19,9 +19,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from schemas import Detection
 from service.perception import _geometry_kernels
-from service.perception.track_matching import Piece
+from service.perception.track_matching import Chains, Piece
 
 MIN_CANDIDATE_SEGMENTS = 3
 """A stretch shorter than this many segments does not start a track."""
@@ -67,21 +66,20 @@ class Candidate:
 
 
 def unclaimed_stretches(
-    detection: Detection,
+    chains: Chains,
     pieces: list[Piece],
     used: np.ndarray,
-    image_lab: np.ndarray | None,
+    image: np.ndarray | None,
 ) -> list[Candidate]:
     """Candidates from the pieces no track holds: consecutive free pieces of a chain
     (with what lies between them) make one candidate."""
-    step = detection.segment_length
+    step = chains.step
     by_chain: dict[int, list[int]] = {}
     for index, piece in enumerate(pieces):
         by_chain.setdefault(piece.chain, []).append(index)
     found = []
     for chain_index, members in by_chain.items():
-        chain = detection.chains[chain_index]
-        joints = np.asarray(chain.points, dtype=np.float64)
+        joints = chains.joints[chain_index]
         run: list[int] = []
         for index in [*members, None]:
             if index is not None and not used[index]:
@@ -97,8 +95,8 @@ def unclaimed_stretches(
                         Candidate(
                             joints=stretch,
                             tips=(first.tips[0], last.tips[1]),
-                            radius=chain.radius,
-                            colour=colour_along(image_lab, stretch),
+                            radius=chains.radii[chain_index],
+                            colour=colour_along(image, stretch),
                         )
                     )
             run = []
@@ -233,13 +231,13 @@ def similarity(
     return score
 
 
-def colour_along(image_lab: np.ndarray | None, points: np.ndarray) -> np.ndarray | None:
-    """Median Lab colour of the pixels under ``points`` (None without an image)."""
-    if image_lab is None or len(points) == 0:
+def colour_along(image: np.ndarray | None, points: np.ndarray) -> np.ndarray | None:
+    """Median Lab colour (OpenCV's 8-bit scaling) of the pixels under ``points`` that lie
+    in the picture; None without an image or without such points. Only those pixels are
+    converted."""
+    if image is None or len(points) == 0:
         return None
-    height, width = image_lab.shape[:2]
-    cols = np.clip(np.rint(points[:, 0]).astype(int), 0, width - 1)
-    rows = np.clip(np.rint(points[:, 1]).astype(int), 0, height - 1)
+    height, width = image.shape[:2]
     inside = (
         (points[:, 0] >= 0)
         & (points[:, 0] <= width - 1)
@@ -248,16 +246,14 @@ def colour_along(image_lab: np.ndarray | None, points: np.ndarray) -> np.ndarray
     )
     if not np.any(inside):
         return None
-    return np.median(image_lab[rows[inside], cols[inside]].astype(np.float64), axis=0)
-
-
-def lab_image(image: np.ndarray | None) -> np.ndarray | None:
-    """The image in Lab (``uint8``, OpenCV's scaling) for :func:`colour_along`."""
-    if image is None:
-        return None
-    if image.ndim == 2:
-        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-    return cv2.cvtColor(np.ascontiguousarray(image[:, :, :3]), cv2.COLOR_BGR2LAB)
+    cols = np.rint(points[inside, 0]).astype(np.intp)
+    rows = np.rint(points[inside, 1]).astype(np.intp)
+    pixels = image[rows, cols]
+    if pixels.ndim == 1:  # a grey image
+        pixels = np.repeat(pixels[:, None], 3, axis=1)
+    pixels = np.ascontiguousarray(pixels[:, :3], dtype=np.uint8).reshape(-1, 1, 3)
+    lab = cv2.cvtColor(pixels, cv2.COLOR_BGR2LAB).reshape(-1, 3)
+    return np.median(lab.astype(np.float64), axis=0)
 
 
 def orientation(

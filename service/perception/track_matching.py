@@ -21,8 +21,48 @@ import numpy as np
 from schemas import Detection
 from service.perception import _tracking_kernels
 
+MIN_COSINE = 0.5
+"""A piece's point counts as on a track only where their directions are within 60
+degrees of each other (either way round)."""
 EDGE_MARGIN = 3.0
 """A chain end within its radius plus this many px of the picture's edge is not a tip."""
+
+
+@dataclass(frozen=True, eq=False)
+class Chains:
+    """A detection's chains as arrays, read once per frame.
+
+    Attributes
+    ----------
+    joints, arcs : list of ndarray
+        Per chain, its ``(n, 2)`` joints and their arcs from its first joint (px).
+    radii : list of float
+    inferred : list of (n - 1,) bool ndarray
+    width, height : int
+    step : float
+        The segment length.
+    """
+
+    joints: list[np.ndarray]
+    arcs: list[np.ndarray]
+    radii: list[float]
+    inferred: list[np.ndarray]
+    width: int
+    height: int
+    step: float
+
+    @classmethod
+    def of(cls, detection: Detection) -> Chains:
+        joints = [np.asarray(chain.points, dtype=np.float64) for chain in detection.chains]
+        return cls(
+            joints=joints,
+            arcs=[arcs_of(points) for points in joints],
+            radii=[chain.radius for chain in detection.chains],
+            inferred=[np.asarray(chain.inferred, dtype=bool) for chain in detection.chains],
+            width=detection.width,
+            height=detection.height,
+            step=detection.segment_length,
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,6 +81,8 @@ class Piece:
         Whether the first and the last joint are a cable's free end (the chain's end,
         clear of the picture's edge and of other chains).
     radius : float
+    arcs : ndarray, shape (n,)
+        Arc of each joint from the piece's first (px).
     """
 
     chain: int
@@ -48,10 +90,16 @@ class Piece:
     joints: np.ndarray
     tips: tuple[bool, bool]
     radius: float
+    arcs: np.ndarray
 
     @property
     def length(self) -> float:
-        return float(np.linalg.norm(np.diff(self.joints, axis=0), axis=1).sum())
+        return float(self.arcs[-1])
+
+    @property
+    def last(self) -> int:
+        """Index in the chain of the piece's last joint."""
+        return self.first + len(self.joints) - 1
 
 
 @dataclass(frozen=True)
@@ -65,34 +113,43 @@ class Fit:
     inliers: float  # share of the piece's points near the track
 
 
-def detection_pieces(detection: Detection) -> list[Piece]:
+def detection_pieces(chains: Chains) -> list[Piece]:
     """Cut the detection's chains into :class:`Piece` s (see the module's documentation)."""
-    chains = [np.asarray(chain.points, dtype=np.float64) for chain in detection.chains]
-    if not chains:
+    if not chains.joints:
         return []
-    step = detection.segment_length
-    radii = np.array([chain.radius for chain in detection.chains], dtype=np.float64)
+    step = chains.step
+    radii = np.array(chains.radii, dtype=np.float64)
     reach = 1.5 * radii + 1.0
     self_gap = np.ceil(2.0 * math.pi * reach / step).astype(np.int64) + 2
-    counts = np.array([len(c) for c in chains], dtype=np.int64)
+    counts = np.array([len(c) for c in chains.joints], dtype=np.int64)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
     crowded = _tracking_kernels.crowded_segments(
-        np.ascontiguousarray(np.concatenate(chains)), starts, counts, reach, self_gap
+        np.ascontiguousarray(np.concatenate(chains.joints)), starts, counts, reach, self_gap
     )
     pieces = []
     segment = 0
-    width, height = detection.width, detection.height
-    for index, (chain, joints) in enumerate(zip(detection.chains, chains, strict=True)):
+    width, height = chains.width, chains.height
+    for index, joints in enumerate(chains.joints):
+        radius = chains.radii[index]
+        arcs = chains.arcs[index]
         n_segments = len(joints) - 1
-        usable = ~np.asarray(chain.inferred, dtype=bool) & ~crowded[segment : segment + n_segments]
+        usable = ~chains.inferred[index] & ~crowded[segment : segment + n_segments]
         segment += n_segments
         for begin, end in _runs(usable):
-            piece_joints = joints[begin : end + 1]
             tips = (
-                begin == 0 and clear_of_edge(joints[0], chain.radius, width, height),
-                end == n_segments and clear_of_edge(joints[-1], chain.radius, width, height),
+                begin == 0 and clear_of_edge(joints[0], radius, width, height),
+                end == n_segments and clear_of_edge(joints[-1], radius, width, height),
             )
-            pieces.append(Piece(index, begin, piece_joints, tips, chain.radius))
+            pieces.append(
+                Piece(
+                    index,
+                    begin,
+                    joints[begin : end + 1],
+                    tips,
+                    radius,
+                    arcs[begin : end + 1] - arcs[begin],
+                )
+            )
     return pieces
 
 
@@ -130,44 +187,28 @@ def fit_pieces(
         np.ascontiguousarray(gates, dtype=np.float64),
     )
     arc = arc * step  # joint units to px along the track
+    counts_per_piece = np.array([len(p) for p, _, _ in samples], dtype=np.int64)
+    starts_per_piece = np.concatenate([[0], np.cumsum(counts_per_piece)[:-1]]).astype(np.int64)
+    ok, sign, offset, cost, share = _tracking_kernels.fit_statistics(
+        distance,
+        arc,
+        cosine,
+        np.ascontiguousarray(np.concatenate([a for _, _, a in samples])),
+        starts_per_piece,
+        counts_per_piece,
+        np.ascontiguousarray(gates, dtype=np.float64),
+        MIN_COSINE,
+    )
     fits: list[Fit | None] = []
-    first = 0
-    for piece_points, _, piece_arc in samples:
-        rows = slice(first, first + len(piece_points))
-        first += len(piece_points)
-        best = None
-        for track in range(len(tracks)):
-            fit = _fit_one(
-                distance[rows, track],
-                arc[rows, track],
-                cosine[rows, track],
-                piece_arc,
-                float(gates[track]),
-            )
-            if fit is None:
-                continue
-            sign, offset, cost, inliers = fit
-            if best is None or cost < best.cost:
-                best = Fit(track, sign, offset, cost, inliers)
-        fits.append(best)
+    for p in range(len(pieces)):
+        if not ok[p].any():
+            fits.append(None)
+            continue
+        t = int(np.argmin(np.where(ok[p], cost[p], np.inf)))
+        fits.append(
+            Fit(t, int(sign[p, t]), float(offset[p, t]), float(cost[p, t]), float(share[p, t]))
+        )
     return fits
-
-
-def _fit_one(distance, arc, cosine, piece_arc, gate):
-    """(sign, offset, cost, inlier share) of one piece on one track, or None."""
-    near = np.isfinite(distance) & (np.abs(cosine) >= 0.5)
-    n_near = int(np.count_nonzero(near))
-    if n_near < 3 or n_near < 0.5 * len(distance):
-        return None
-    sign = 1 if float(cosine[near].sum()) >= 0 else -1
-    offsets = arc[near] - sign * piece_arc[near]
-    offset = float(np.median(offsets))
-    spread = float(np.median(np.abs(offsets - offset)))
-    if spread > 0.5 * max(float(piece_arc[-1]), 1.0):
-        return None  # the piece does not lie along the track in order
-    inliers = n_near / len(distance)
-    cost = float(np.mean(distance[near])) + (1.0 - inliers) * gate + 0.25 * spread
-    return sign, offset, cost, inliers
 
 
 def _samples(joints: np.ndarray):
@@ -197,6 +238,12 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     begins = np.flatnonzero(edges == 1)
     ends = np.flatnonzero(edges == -1)
     return [(int(b), int(e)) for b, e in zip(begins, ends, strict=True)]
+
+
+def arcs_of(points: np.ndarray) -> np.ndarray:
+    """Arc of each vertex of a polyline from its first (px)."""
+    steps = np.diff(points, axis=0)
+    return np.concatenate([[0.0], np.cumsum(np.sqrt((steps * steps).sum(axis=1)))])
 
 
 def clear_of_edge(point, radius: float, width: int, height: int) -> bool:

@@ -22,9 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from schemas import Detection
-from service.perception import _geometry_kernels, _tracking_kernels
-from service.perception.track_matching import Fit, Piece, clear_of_edge
+from service.perception import _tracking_kernels
+from service.perception.track_matching import Chains, Fit, Piece, clear_of_edge
 
 TIP_WINDOW = 5.0
 """A piece's free end within this many segments of a track's end is that end."""
@@ -83,7 +82,7 @@ def observe(
     joints: np.ndarray,
     tips: tuple[bool, bool],
     fitted: list[tuple[Piece, Fit]],
-    detection: Detection,
+    chains: Chains,
     claimed: np.ndarray,
     chain_of_piece: list[tuple[int, int, int]],
 ) -> Observation:
@@ -103,14 +102,14 @@ def observe(
         Whether its first / last end is a tip.
     fitted : list of (Piece, Fit)
         The pieces that fit this track.
-    detection : Detection
-        Their detection (the chains ends grow along).
+    chains : Chains
+        Their detection's chains (which ends grow along).
     claimed : (S,) bool ndarray
         Per piece of the detection, whether a track already fits it (growth stops there).
     chain_of_piece : list of (chain, first joint, last joint)
         Per piece of the detection, where it lies in its chain.
     """
-    step = detection.segment_length
+    step = chains.step
     n = len(joints)
     total = (n - 1) * step
     sums = np.zeros((n, 2))
@@ -118,11 +117,13 @@ def observe(
     new_tips = list(tips)
     placed = []
     for piece, fit in fitted:
-        arcs = _arcs(piece.joints)
-        offset = _refined_offset(joints, piece.joints, arcs, fit.sign, fit.offset, step)
+        arcs = piece.arcs
+        offset = _tracking_kernels.refine_offset(
+            joints, piece.joints, arcs, fit.sign, fit.offset, step, REFINE_STEPS
+        )
         placed.append((piece, fit.sign, offset, arcs))
-    placed = _one_offset_per_chain(placed, detection, step)
-    slide = _slide(placed, total, step, _going_out(joints, placed, detection))
+    placed = _one_offset_per_chain(placed, chains)
+    slide = _slide(placed, total, step, _going_out(joints, placed, chains))
     for end in (0, 1):
         if slide.tips[end]:
             new_tips[end] = True
@@ -136,7 +137,9 @@ def observe(
         u = sign * (track_arc - offset)
         inside = np.flatnonzero((u >= 0.0) & (u <= arcs[-1]))
         if len(inside):
-            walked = _chord_walk(piece.joints, arcs, float(u[inside[0]]), sign, step)
+            walked = _tracking_kernels.chord_walk(
+                piece.joints, arcs, float(u[inside[0]]), sign, step, len(inside)
+            )
             count = min(len(walked), len(inside))
             rows = inside[0] + np.arange(count)
             sums[rows] += walked[:count]
@@ -158,7 +161,7 @@ def observe(
         if source is not None:
             piece, sign, offset = source
             points, reached_tip = _grow(
-                piece, sign, offset, end, total, step, detection, claimed, chain_of_piece
+                piece, sign, offset, end, total, chains, claimed, chain_of_piece
             )
             if tips[end] and len(points) < TIP_GROWTH:
                 points = np.empty((0, 2))  # a tip seen a little further out: not more cable
@@ -229,7 +232,7 @@ def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Sl
     return _Slide(TIP_GAIN * change[end], tips)
 
 
-def _grow(piece, sign, offset, end, total, step, detection, claimed, chain_of_piece):
+def _grow(piece, sign, offset, end, total, chains, claimed, chain_of_piece):
     """Joints beyond a track's end along the piece's chain, and whether they end at a tip.
 
     The chain is followed from the piece on, beyond the end: through the segments
@@ -237,9 +240,9 @@ def _grow(piece, sign, offset, end, total, step, detection, claimed, chain_of_pi
     lies on cable no other track holds (the piece itself, or a free piece of the chain);
     a piece held by a track stops it.
     """
-    chain = detection.chains[piece.chain]
-    chain_joints = np.asarray(chain.points, dtype=np.float64)
-    chain_arcs = _arcs(chain_joints)
+    step = chains.step
+    chain_joints = chains.joints[piece.chain]
+    chain_arcs = chains.arcs[piece.chain]
     base = chain_arcs[piece.first]  # chain arc of the piece's first joint
     # Track arc s lies at chain arc base + sign * (s - offset); beyond the end means s
     # below 0 (end 0) or above total (end 1).
@@ -269,17 +272,16 @@ def _grow(piece, sign, offset, end, total, step, detection, claimed, chain_of_pi
     if keep == 0:
         return np.empty((0, 2)), False
     chain_end = len(chain_joints) - 1 if direction > 0 else 0
+    flags = chains.inferred[piece.chain]
+    end_inferred = bool(flags[-1] if direction > 0 else flags[0]) if len(flags) else False
     at_tip = (
         reached_end
-        and clear_of_edge(chain_joints[chain_end], chain.radius, detection.width, detection.height)
-        and not _chain_end_inferred(chain, direction)
+        and clear_of_edge(
+            chain_joints[chain_end], chains.radii[piece.chain], chains.width, chains.height
+        )
+        and not end_inferred
     )
     return np.array(new[:keep]), at_tip
-
-
-def _chain_end_inferred(chain, direction):
-    flags = chain.inferred
-    return bool(flags[-1] if direction > 0 else flags[0]) if flags else False
 
 
 def register(
@@ -365,7 +367,7 @@ def _uncovered_runs(covered: np.ndarray) -> list[tuple[int, int]]:
     return [(int(b), int(e)) for b, e in zip(begins, ends, strict=True)]
 
 
-def _one_offset_per_chain(placed, detection, step):
+def _one_offset_per_chain(placed, chains):
     """Pieces of one detected chain that lie on the track the same way share one offset.
 
     The chain's own arc between two of its pieces (across the crossing or gap that split
@@ -381,13 +383,13 @@ def _one_offset_per_chain(placed, detection, step):
     for (chain_index, sign), members in groups.items():
         if len(members) < 2:
             continue
-        chain_arcs = _arcs(np.asarray(detection.chains[chain_index].points, dtype=np.float64))
+        chain_arcs = chains.arcs[chain_index]
         along_chain = np.array(
             [placed[i][2] - sign * chain_arcs[placed[i][0].first] for i in members]
         )
         weights = np.array([placed[i][3][-1] for i in members])
         centre = along_chain[np.argmax(weights)]
-        agree = np.abs(along_chain - centre) <= CHAIN_AGREEMENT * step
+        agree = np.abs(along_chain - centre) <= CHAIN_AGREEMENT * chains.step
         common = float(np.average(along_chain[agree], weights=weights[agree]))
         for i, keep in zip(members, agree, strict=True):
             if keep:
@@ -396,39 +398,10 @@ def _one_offset_per_chain(placed, detection, step):
     return result
 
 
-def _refined_offset(joints, points, arcs, sign, offset, step, iterations=REFINE_STEPS):
-    """The offset that lays the piece's arc along the track's joints best (least squares).
-
-    The projection's offsets (:func:`~service.perception.track_matching.fit_pieces`)
-    lean with the bend when the cable moved sideways to its prediction (a curve and one
-    beside it differ in length); Gauss-Newton steps on the joints' distances to their
-    places along the piece take that out: each moves the offset by the mean of the
-    joints' residuals along the piece.
-    """
-    track_arc = np.arange(len(joints)) * step
-    for _ in range(iterations):
-        u = sign * (track_arc - offset)
-        inside = (u >= 0.0) & (u <= arcs[-1])
-        if np.count_nonzero(inside) < 2:
-            break
-        at = _along(points, arcs, u[inside])
-        tangent = _tangents(points, arcs, u[inside])
-        along = ((joints[inside] - at) * tangent).sum(axis=1)
-        offset -= sign * float(np.mean(along))
-    return offset
-
-
-def _tangents(points, arcs, at):
-    """Unit directions of the polyline's segments at arcs ``at``."""
-    index = np.clip(np.searchsorted(arcs, at, side="right") - 1, 0, len(points) - 2)
-    steps = points[index + 1] - points[index]
-    return steps / np.maximum(np.linalg.norm(steps, axis=1), 1e-12)[:, None]
-
-
-def _going_out(joints, placed, detection) -> tuple[bool, bool]:
+def _going_out(joints, placed, chains) -> tuple[bool, bool]:
     """Per end of the track: whether the cable may go on out of the picture that way
     (the end is outside it, or the seen cable furthest that way ends at its edge)."""
-    width, height = detection.width, detection.height
+    width, height = chains.width, chains.height
     result = []
     for end in (0, 1):
         if not _in_picture(joints[-end], width, height):
@@ -449,26 +422,6 @@ def _going_out(joints, placed, detection) -> tuple[bool, bool]:
 
 def _in_picture(point, width: int, height: int) -> bool:
     return 0.0 <= point[0] <= width - 1 and 0.0 <= point[1] <= height - 1
-
-
-def _chord_walk(points, arcs, start, sign, step):
-    """Points along a polyline from arc ``start``, forwards (``sign`` 1) or backwards,
-    each exactly ``step`` (straight line) from the one before, as a track's joints are.
-
-    Spacing targets this way, rather than ``step`` apart along the polyline, keeps a
-    curve's chords from coming out a little short and the track from creeping along.
-    """
-    first = _along(points, arcs, np.array([start]))
-    rest = points[arcs > start] if sign > 0 else points[arcs < start][::-1]
-    line = np.ascontiguousarray(np.vstack([first, rest]))
-    if len(line) < 2:
-        return first
-    walked, _ = _geometry_kernels.resample_kernel(line, float(step))
-    return walked
-
-
-def _arcs(points: np.ndarray) -> np.ndarray:
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
 
 
 def _along(points: np.ndarray, arcs: np.ndarray, at: np.ndarray) -> np.ndarray:

@@ -39,23 +39,23 @@ import numpy as np
 
 from schemas import Crossing, Detection, DetectParams, Track, TrackingStatus, TrackParams, Tracks
 from service.perception import _tracking_kernels
-from service.perception.crossings import detect_crossings
+from service.perception.crossings import detect_crossings, find_intersections
 from service.perception.errors import InvalidInputError
 from service.perception.pipeline import detect_full
 from service.perception.segmentation import as_bgr
+from service.perception.segmenter import Segmenter
 from service.perception.track_identity import (
     Candidate,
     Continuation,
     colour_along,
     confirm,
     continuation,
-    lab_image,
     orientation,
     revived_joints,
     similarity,
     unclaimed_stretches,
 )
-from service.perception.track_matching import Piece, detection_pieces, fit_pieces
+from service.perception.track_matching import Chains, Piece, detection_pieces, fit_pieces
 from service.perception.track_update import Observation, exact_chain, observe, register
 
 VELOCITY_SMOOTHING = 0.5
@@ -233,10 +233,10 @@ def advance(
     now = frame / params.fps if timestamp_s is None else float(timestamp_s)
     dt = 1.0 / params.fps if state.time_s is None else now - state.time_s
     dt = min(max(dt, 1e-3), MAX_STEP_S)
-    image_lab = lab_image(image)
 
     predicted = [_predicted(track, dt) for track in state.tracks]
-    pieces = detection_pieces(detection)
+    chains = Chains.of(detection)
+    pieces = detection_pieces(chains)
     gates = np.array([_gate(track, step, dt) for track in state.tracks])
     fits = fit_pieces(pieces, predicted, gates, step)
     claimed = np.array([fit is not None for fit in fits], dtype=bool)
@@ -248,14 +248,12 @@ def advance(
         if not fitted:
             tracks.append(_unseen(track, predicted[index]))
             continue
-        observation = observe(
-            predicted[index], track.tips, fitted, detection, claimed, chain_of_piece
-        )
-        tracks.append(_moved(track, predicted[index], observation, step, dt, now, frame, image_lab))
+        observation = observe(predicted[index], track.tips, fitted, chains, claimed, chain_of_piece)
+        tracks.append(_moved(track, predicted[index], observation, step, dt, now, frame, image))
 
     # Pieces near a track (held by it, or passed over as it grew) start nothing new.
     used = claimed | _near_tracks(pieces, tracks)
-    found = unclaimed_stretches(detection, pieces, used, image_lab)
+    found = unclaimed_stretches(chains, pieces, used, image)
     gate = max([_gate_base(c.radius, step) for c in found], default=0.0)
     candidates = confirm(found, list(state.candidates), gate)
     seeding = state.frame == 0 and not state.tracks
@@ -294,6 +292,7 @@ def advance(
     output = _tracks(
         kept,
         detection,
+        chains,
         image,
         TrackingStatus(
             session=state.session,
@@ -329,6 +328,8 @@ class Tracker:
     params : DetectParams, optional
         For the detection that :meth:`update` runs.
     track_params : TrackParams, optional
+    segmenter : callable, optional
+        For ``params.segmentation == "model"`` (:mod:`service.perception.segmenter`).
 
     Examples
     --------
@@ -343,10 +344,15 @@ class Tracker:
     """
 
     def __init__(
-        self, params: DetectParams | None = None, track_params: TrackParams | None = None
+        self,
+        params: DetectParams | None = None,
+        track_params: TrackParams | None = None,
+        *,
+        segmenter: Segmenter | None = None,
     ) -> None:
         self.params = DetectParams() if params is None else params
         self.track_params = TrackParams() if track_params is None else track_params
+        self.segmenter = segmenter
         self.state = new_state()
         self._lost = 0
 
@@ -362,12 +368,12 @@ class Tracker:
         ------
         InvalidInputError
             The frame cannot be used (see :func:`service.perception.detect`); the tracks
-            are kept and the frame counts as lost.
+            are kept and the frame counts as lost (so does one the detection fails on).
         """
         try:
-            detection = detect_full(image, self.params, mask).detection
-        except InvalidInputError:
-            self._lost += 1
+            detection = detect_full(image, self.params, mask, segmenter=self.segmenter).detection
+        except BaseException:
+            self._lost += 1  # the frame is lost to the tracks, whatever went wrong
             raise
         return self.follow(detection, image, timestamp_s)
 
@@ -434,7 +440,7 @@ def _moved(
     dt: float,
     now: float,
     frame: int,
-    image_lab: np.ndarray | None,
+    image: np.ndarray | None,
 ) -> TrackRecord:
     """The track registered onto what the frame shows of it (growth included)."""
     head, tail = observation.head_growth[::-1], observation.tail_growth
@@ -461,7 +467,7 @@ def _moved(
         measured = _motion(previous, joints, use) / dt
         measured += (observation.slide / dt) * _tangents(joints)
         velocity = VELOCITY_SMOOTHING * measured + (1.0 - VELOCITY_SMOOTHING) * velocity
-    colour = colour_along(image_lab, joints[covered])
+    colour = colour_along(image, joints[covered])
     if track.colour is not None and colour is not None:
         colour = (1.0 - COLOUR_SMOOTHING) * track.colour + COLOUR_SMOOTHING * colour
     elif colour is None:
@@ -696,13 +702,14 @@ def _in_picture(track: TrackRecord, size: tuple[int, int], step: float) -> bool:
 def _tracks(
     kept: list[TrackRecord],
     detection: Detection,
+    chains: Chains,
     image: np.ndarray | None,
     status: TrackingStatus,
 ) -> Tracks:
     """The published tracks: inferred flags (unseen, hidden, underneath) and crossings."""
     width, height = detection.width, detection.height
     step = detection.segment_length
-    seen_starts, seen_ends = _seen_segments(detection)
+    seen_starts, seen_ends = _seen_segments(chains)
     flags = []
     for track in kept:
         midpoints = 0.5 * (track.joints[:-1] + track.joints[1:])
@@ -722,32 +729,15 @@ def _tracks(
                 seen_ends,
             )
         flags.append(~(seen & inside))
-    crossings = []
-    if kept:
-        found = detect_crossings(
-            [track.joints for track in kept],
-            [track.radius for track in kept],
-            None if image is None else as_bgr(image),
-        )
-        for crossing in found:
-            if not (0 <= crossing.x <= width - 1 and 0 <= crossing.y <= height - 1):
-                continue
-            under = kept[crossing.under].joints
-            reach = kept[crossing.over].radius + 0.5 * step
-            midpoints = 0.5 * (under[:-1] + under[1:])
-            near = np.hypot(midpoints[:, 0] - crossing.x, midpoints[:, 1] - crossing.y) < reach
-            flags[crossing.under][near] = True
-            crossings.append(
-                Crossing(
-                    x=crossing.x,
-                    y=crossing.y,
-                    over=kept[crossing.over].id,
-                    under=kept[crossing.under].id,
-                    over_segment=crossing.over_segment,
-                    under_segment=crossing.under_segment,
-                    confidence=crossing.confidence,
-                )
-            )
+    crossings = _track_crossings(kept, detection, image)
+    for crossing in crossings:
+        under = next(i for i, t in enumerate(kept) if t.id == crossing.under)
+        over = next(i for i, t in enumerate(kept) if t.id == crossing.over)
+        joints = kept[under].joints
+        reach = kept[over].radius + 0.5 * step
+        midpoints = 0.5 * (joints[:-1] + joints[1:])
+        near = np.hypot(midpoints[:, 0] - crossing.x, midpoints[:, 1] - crossing.y) < reach
+        flags[under][near] = True
     chains = [
         Track(
             id=track.id,
@@ -772,14 +762,107 @@ def _tracks(
     )
 
 
-def _seen_segments(detection: Detection) -> tuple[np.ndarray, np.ndarray]:
+def _track_crossings(
+    kept: list[TrackRecord], detection: Detection, image: np.ndarray | None
+) -> list[Crossing]:
+    """Where the tracks cross in the picture, and which is on top.
+
+    The detection has already judged the order of the strands at its crossings
+    (:mod:`service.perception.crossings`): a track crossing takes the order of the
+    detection's crossing within reach of it, the strand on top being the track that
+    runs along the detection's top strand there. Only a crossing the detection does not
+    have (hidden, or missed) is judged from the image here.
+    """
+    if not kept:
+        return []
+    width, height = detection.width, detection.height
+    found = find_intersections([track.joints for track in kept])
+    result = []
+    pending = []
+    for a, seg_a, b, seg_b, point in found:
+        x, y = float(point[0]), float(point[1])
+        if not (0 <= x <= width - 1 and 0 <= y <= height - 1):
+            continue
+        reach = max(kept[a].radius, kept[b].radius) + detection.segment_length
+        order = _order_from_detection(kept, (a, seg_a), (b, seg_b), x, y, reach, detection)
+        if order is None:
+            pending.append((a, seg_a, b, seg_b, point))
+            continue
+        (over, over_seg), (under, under_seg), confidence = order
+        result.append(
+            Crossing(
+                x=x,
+                y=y,
+                over=kept[over].id,
+                under=kept[under].id,
+                over_segment=over_seg,
+                under_segment=under_seg,
+                confidence=confidence,
+            )
+        )
+    if pending:
+        judged = detect_crossings(
+            [track.joints for track in kept],
+            [track.radius for track in kept],
+            None if image is None else as_bgr(image),
+        )
+        for a, seg_a, b, seg_b, _ in pending:
+            for crossing in judged:
+                if {
+                    (crossing.over, crossing.over_segment),
+                    (crossing.under, crossing.under_segment),
+                } == {
+                    (a, seg_a),
+                    (b, seg_b),
+                }:
+                    result.append(
+                        Crossing(
+                            x=crossing.x,
+                            y=crossing.y,
+                            over=kept[crossing.over].id,
+                            under=kept[crossing.under].id,
+                            over_segment=crossing.over_segment,
+                            under_segment=crossing.under_segment,
+                            confidence=crossing.confidence,
+                        )
+                    )
+    return result
+
+
+def _order_from_detection(kept, first, second, x, y, reach, detection):
+    """``((over, segment), (under, segment), confidence)`` from the detection's crossing
+    within ``reach`` of ``(x, y)``, or None when it has none there."""
+    nearest, best = None, reach
+    for crossing in detection.crossings:
+        distance = math.hypot(crossing.x - x, crossing.y - y)
+        if distance <= best:
+            nearest, best = crossing, distance
+    if nearest is None:
+        return None
+    top = np.asarray(detection.chain(nearest.over).points, dtype=np.float64)
+    k = min(nearest.over_segment, len(top) - 2)
+    direction = top[k + 1] - top[k]
+    direction /= max(float(np.linalg.norm(direction)), 1e-12)
+
+    def alignment(strand):
+        index, segment = strand
+        joints = kept[index].joints
+        along = joints[segment + 1] - joints[segment]
+        return abs(float(along @ direction)) / max(float(np.linalg.norm(along)), 1e-12)
+
+    if alignment(first) >= alignment(second):
+        return first, second, nearest.confidence
+    return second, first, nearest.confidence
+
+
+def _seen_segments(chains: Chains) -> tuple[np.ndarray, np.ndarray]:
     """Start and end points of the detection's segments that were seen (not inferred)."""
-    starts, ends = [], []
-    for chain in detection.chains:
-        points = np.asarray(chain.points, dtype=np.float64)
-        seen = ~np.asarray(chain.inferred, dtype=bool)
-        starts.append(points[:-1][seen])
-        ends.append(points[1:][seen])
-    if not starts:
+    if not chains.joints:
         return np.empty((0, 2)), np.empty((0, 2))
+    starts = [
+        points[:-1][~flags] for points, flags in zip(chains.joints, chains.inferred, strict=True)
+    ]
+    ends = [
+        points[1:][~flags] for points, flags in zip(chains.joints, chains.inferred, strict=True)
+    ]
     return np.ascontiguousarray(np.concatenate(starts)), np.ascontiguousarray(np.concatenate(ends))

@@ -618,3 +618,25 @@ def _rect_in_picture(rect, width, height):
     corners = rect.corners()
     low, high = corners.min(axis=0), corners.max(axis=0)
     return high[0] >= 0 and high[1] >= 0 and low[0] <= width - 1 and low[1] <= height - 1
+
+
+def write_video(video: SyntheticVideo, path, *, frames: int | None = None, fourcc: str = "mp4v"):
+    """Write the video's frames to a video file (OpenCV, ``mp4v`` by default).
+
+    ``frames``: only the first this many. Returns the path. Raises ``OSError`` when
+    OpenCV cannot create the file.
+    """
+    import cv2
+
+    count = video.n_frames if frames is None else min(frames, video.n_frames)
+    writer = cv2.VideoWriter(
+        str(path), cv2.VideoWriter_fourcc(*fourcc), video.fps, (video.width, video.height)
+    )
+    if not writer.isOpened():
+        raise OSError(f"cannot write {path}: OpenCV cannot create the video")
+    try:
+        for frame in video.frames(0, count):
+            writer.write(frame.image)
+    finally:
+        writer.release()
+    return path
