@@ -340,7 +340,8 @@ def make_video(
         ``occluders``
             One to three background-coloured boxes slide over the cables.
         ``crossings``
-            Two or three cables drift across each other: crossings form and dissolve.
+            Two or three cables drift across each other (1-2.2 px per frame): crossings
+            form and dissolve.
         ``enter_leave``
             A cable leaves the picture and comes back 0.5-2.5 s later; with two or more
             cables, another one comes in from outside.
@@ -477,9 +478,10 @@ def _cable_motion(rng, kind, number, colour, width, height, n_frames, shrink=1.0
             for _ in range(int(rng.integers(1, 3)))
         )
     elif kind == "crossings" and number > 0:
-        # Drift across the first cable and out the other side: crossings form and part.
-        travel = rng.uniform(0.6, 1.4) * min(width, height) * rng.choice([-1.0, 1.0], 2)
-        path = _replace(path, start=centre - travel / 2.0, drift=travel / n_frames)
+        # Drift across the first cable (1-2.2 px per frame): crossings form and part.
+        heading = rng.uniform(0.0, 2.0 * math.pi)
+        velocity = rng.uniform(1.0, 2.2) * np.array([math.cos(heading), math.sin(heading)])
+        path = _replace(path, start=centre - velocity * n_frames / 2.0, drift=velocity)
     elif kind == "enter_leave":
         path = _excursion(rng, path, number, n_frames, width, height, length)
     return _CableMotion(
