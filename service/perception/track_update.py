@@ -18,7 +18,7 @@ that covers it goes on beyond it: new joints are added there, along that chain.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -33,10 +33,10 @@ or one of them is hidden."""
 TIP_GROWTH = 3
 """Segments of cable seen beyond a tip before the track grows there (the tip was an end
 hidden under something)."""
-TIP_GAIN = 0.7
+TIP_GAIN = 0.4
 """Share of the slide its free ends show that a track takes per frame (a free end is
 found to a pixel or two: this smooths that)."""
-TIP_INWARD = 0.1
+TIP_INWARD = 0.3
 """... and so does one short of it by up to this many (further in, it is taken for an
 end hidden under something)."""
 NEIGHBOURS = 6
@@ -46,7 +46,14 @@ UNSEEN_MOBILITY = 25.0
 MIN_BEND_RADII = 2.5
 """The tightest bend assumed where nothing is seen, in cable radii."""
 SWEEPS = 24
+SHAPE_MEMORY = 0.98
+"""Share of its turn a hidden end's segment keeps from one frame to the next."""
 REFINE_STEPS = 2
+BENT_TURN = 0.6
+"""Total turn (radians) of the seen stretches from which their registration alone is
+trusted for the slide along the cable ..."""
+BENT_SLIDE = 0.3
+"""... and how far (segments) the free ends may then still slide the track per frame."""
 CHAIN_AGREEMENT = 1.5
 
 
@@ -123,7 +130,17 @@ def observe(
         )
         placed.append((piece, fit.sign, offset, arcs))
     placed = _one_offset_per_chain(placed, chains)
-    slide = _slide(placed, total, step, _going_out(joints, placed, chains))
+    # A cable that bends where it is seen shows a slide along itself to the registration
+    # of its body: one end alone may then only correct that a little, and an end that
+    # went in is taken for one being covered even where the cable could go out of the
+    # picture. Both ends of a whole cable are trusted over its body.
+    limit = _slide_limit(joints, placed, step)
+    going_out = _going_out(joints, placed, chains)
+    if limit <= BENT_SLIDE * step:
+        going_out = (False, False)
+    slide = _slide(placed, total, step, going_out)
+    if not slide.whole:  # a whole cable's two ends outweigh its body (a bend may travel)
+        slide = replace(slide, shift=float(np.clip(slide.shift, -limit, limit)))
     for end in (0, 1):
         if slide.tips[end]:
             new_tips[end] = True
@@ -161,7 +178,7 @@ def observe(
         if source is not None:
             piece, sign, offset = source
             points, reached_tip = _grow(
-                piece, sign, offset, end, total, chains, claimed, chain_of_piece
+                piece, sign, offset, end, total, chains, claimed, chain_of_piece, tips[end]
             )
             if tips[end] and len(points) < TIP_GROWTH:
                 points = np.empty((0, 2))  # a tip seen a little further out: not more cable
@@ -185,6 +202,7 @@ class _Slide:
 
     shift: float = 0.0
     tips: tuple[bool, bool] = (False, False)
+    whole: bool = False  # both ends seen, agreeing on the cable's length
 
 
 def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Slide:
@@ -219,7 +237,7 @@ def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Sl
     tips = (bool(seen[0]), bool(seen[1]))
     if outward[0] is not None and outward[1] is not None:
         if outward[0] + outward[1] >= -tolerance:  # not much shorter: both are real ends
-            return _Slide(TIP_GAIN * 0.5 * (change[0] + change[1]), tips)
+            return _Slide(TIP_GAIN * 0.5 * (change[0] + change[1]), tips, whole=True)
         end = 0 if outward[0] > outward[1] else 1  # the other one is hidden
     elif outward[0] is not None:
         end = 0
@@ -232,13 +250,17 @@ def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Sl
     return _Slide(TIP_GAIN * change[end], tips)
 
 
-def _grow(piece, sign, offset, end, total, chains, claimed, chain_of_piece):
+def _grow(piece, sign, offset, end, total, chains, claimed, chain_of_piece, at_tip):
     """Joints beyond a track's end along the piece's chain, and whether they end at a tip.
 
     The chain is followed from the piece on, beyond the end: through the segments
     between pieces (a crossing, a filled gap) but only as far as the last joint that
     lies on cable no other track holds (the piece itself, or a free piece of the chain);
-    a piece held by a track stops it.
+    a piece held by a track stops it. Beyond an end seen as the cable's tip (``at_tip``)
+    only the piece itself counts: the cable seen going on there (it was hidden) is the
+    piece's; joining a piece beyond a gap there is left to
+    :func:`~service.perception.track_identity.continuation`, which checks that it looks
+    like the track.
     """
     step = chains.step
     chain_joints = chains.joints[piece.chain]
@@ -263,8 +285,8 @@ def _grow(piece, sign, offset, end, total, chains, claimed, chain_of_piece):
             break
         a = min(max(a, 0.0), float(chain_arcs[-1]))
         held = [free for low, high, free in spans if low - slack <= a <= high + slack]
-        if held and not all(held):
-            break  # another track's cable
+        if held and (at_tip or not all(held)):
+            break  # another track's cable (or, beyond a tip, another piece)
         new.append(_along(chain_joints, chain_arcs, np.array([a]))[0])
         if held or own[0] - slack <= a <= own[1] + slack:
             keep = len(new)
@@ -291,40 +313,88 @@ def register(
     radius: float,
 ) -> np.ndarray:
     """The track's new joints: covered ones at their targets, the rest carried along,
-    all exactly ``step`` apart (see the module's documentation)."""
+    all exactly ``step`` apart (see the module's documentation).
+
+    Between its first and last covered joint, each run of uncovered joints follows the
+    rigid motion of the covered joints on either side, blended along the run, and the
+    joints are then made ``step`` apart, the uncovered ones moving most, with a bending
+    limit where nothing was seen. Beyond the first and the last covered joint (an end
+    hidden, or outside the picture) the joints keep the track's shape: each segment
+    turns from the one before by the angle it turned by as predicted (a little less
+    every frame: with nothing seen, a straighter cable is the safer guess), from the
+    outermost covered segment on.
+    """
     covered = observation.covered
     targets = observation.targets
     joints = predicted.copy()
     joints[covered] = targets[covered]
-    n = len(joints)
     seen = np.flatnonzero(covered)
+    if len(seen) == 0:
+        return exact_chain(joints, step)
+    first, last = int(seen[0]), int(seen[-1])
     for begin, end in _uncovered_runs(covered):
+        if begin < first or end > last:
+            continue  # an end: below
         left = seen[seen < begin][-NEIGHBOURS:]
         right = seen[seen > end][:NEIGHBOURS]
         moved_left = _rigid(predicted[left], targets[left], predicted[begin : end + 1])
         moved_right = _rigid(predicted[right], targets[right], predicted[begin : end + 1])
-        if moved_left is None:
-            joints[begin : end + 1] = moved_right
-        elif moved_right is None:
-            joints[begin : end + 1] = moved_left
-        else:
-            weight = (np.arange(begin, end + 1) - begin + 1.0) / (end - begin + 2.0)
-            joints[begin : end + 1] = (1.0 - weight)[:, None] * moved_left + weight[
-                :, None
-            ] * moved_right
-    inverse_mass = np.where(covered, 1.0, UNSEEN_MOBILITY)
+        weight = (np.arange(begin, end + 1) - begin + 1.0) / (end - begin + 2.0)
+        joints[begin : end + 1] = (1.0 - weight)[:, None] * moved_left + weight[
+            :, None
+        ] * moved_right
     turn = min(1.2, 2.0 * math.asin(min(1.0, step / (2.0 * MIN_BEND_RADII * max(radius, 1.0)))))
-    min_span = np.where(covered, 0.0, 2.0 * step * math.cos(turn / 2.0))
-    min_span[0] = min_span[-1] = 0.0
-    middle = seen[len(seen) // 2] if len(seen) else n // 2
-    return _tracking_kernels.constrain_chain(
-        np.ascontiguousarray(joints),
-        np.ascontiguousarray(inverse_mass),
-        float(step),
-        np.ascontiguousarray(min_span),
-        SWEEPS,
-        int(middle),
-    )
+    core = slice(first, last + 1)
+    if last > first:
+        inverse_mass = np.where(covered[core], 1.0, UNSEEN_MOBILITY)
+        min_span = np.where(covered[core], 0.0, 2.0 * step * math.cos(turn / 2.0))
+        min_span[0] = min_span[-1] = 0.0
+        middle = seen[len(seen) // 2] - first
+        joints[core] = _tracking_kernels.constrain_chain(
+            np.ascontiguousarray(joints[core]),
+            np.ascontiguousarray(inverse_mass),
+            float(step),
+            np.ascontiguousarray(min_span),
+            SWEEPS,
+            int(middle),
+        )
+    if first > 0 or last < len(joints) - 1:
+        _keep_shape_at_ends(joints, predicted, first, last, step, turn)
+    return joints
+
+
+def _keep_shape_at_ends(joints, predicted, first, last, step, turn_limit) -> None:
+    """Lay the joints before ``first`` and after ``last`` (in place) with the turns of
+    ``predicted``'s segments, damped by :data:`SHAPE_MEMORY` and at most
+    ``turn_limit`` per joint (see :func:`register`)."""
+    steps = np.diff(predicted, axis=0)
+    angles = np.arctan2(steps[:, 1], steps[:, 0])
+    turns = np.zeros(len(predicted))
+    turns[1:-1] = (np.diff(angles) + math.pi) % (2.0 * math.pi) - math.pi
+    turns = np.clip(turns * SHAPE_MEMORY, -turn_limit, turn_limit)
+
+    def direction_of(k):  # of the segment from joint k to k + 1, as now laid
+        if first <= k < last:
+            dx, dy = joints[k + 1] - joints[k]
+            return math.atan2(dy, dx)
+        return float(angles[k])
+
+    if last < len(joints) - 1:
+        if last > first:
+            heading = direction_of(last - 1)
+        else:
+            heading = float(angles[max(last - 1, 0)])
+        for k in range(last, len(joints) - 1):
+            heading += turns[k] if k > 0 else 0.0
+            joints[k + 1] = joints[k] + step * np.array([math.cos(heading), math.sin(heading)])
+    if first > 0:
+        if last > first:
+            heading = direction_of(first)
+        else:
+            heading = float(angles[min(first, len(angles) - 1)])
+        for k in range(first, 0, -1):
+            heading -= turns[k] if k < len(joints) - 1 else 0.0
+            joints[k - 1] = joints[k] - step * np.array([math.cos(heading), math.sin(heading)])
 
 
 def exact_chain(joints: np.ndarray, step: float) -> np.ndarray:
@@ -396,6 +466,26 @@ def _one_offset_per_chain(placed, chains):
                 piece, _, _, arcs = placed[i]
                 result[i] = (piece, sign, common + sign * chain_arcs[piece.first], arcs)
     return result
+
+
+def _slide_limit(joints, placed, step) -> float:
+    """How far (px) the free ends may slide the track this frame: unbounded where the
+    seen stretches are nearly straight, :data:`BENT_SLIDE` segments where they turn by
+    :data:`BENT_TURN` radians or more in all (in between, in proportion)."""
+    n = len(joints)
+    seen = np.zeros(n, dtype=bool)
+    track_arc = np.arange(n) * step
+    for _, sign, offset, arcs in placed:
+        lo, hi = sorted((offset, sign * float(arcs[-1]) + offset))
+        seen |= (track_arc >= lo) & (track_arc <= hi)
+    steps = np.diff(joints, axis=0)
+    angles = np.arctan2(steps[:, 1], steps[:, 0])
+    turns = np.abs((np.diff(angles) + math.pi) % (2.0 * math.pi) - math.pi)
+    inner = seen[1:-1] & seen[:-2] & seen[2:]
+    bent = float(turns[inner].sum()) / BENT_TURN
+    if bent >= 1.0:
+        return BENT_SLIDE * step
+    return BENT_SLIDE * step / max(bent, 1e-6)
 
 
 def _going_out(joints, placed, chains) -> tuple[bool, bool]:

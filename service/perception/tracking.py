@@ -465,7 +465,8 @@ def _moved(
         use[-len(tail) :] = False
     if np.count_nonzero(use) >= 3:
         measured = _motion(previous, joints, use) / dt
-        measured += (observation.slide / dt) * _tangents(joints)
+        # A slide moves each joint back along the track (lower joint numbers) by its size.
+        measured -= (observation.slide / dt) * _tangents(joints)
         velocity = VELOCITY_SMOOTHING * measured + (1.0 - VELOCITY_SMOOTHING) * velocity
     colour = colour_along(image, joints[covered])
     if track.colour is not None and colour is not None:
