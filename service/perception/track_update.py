@@ -380,10 +380,7 @@ def _keep_shape_at_ends(joints, predicted, first, last, step, turn_limit) -> Non
         return float(angles[k])
 
     if last < len(joints) - 1:
-        if last > first:
-            heading = direction_of(last - 1)
-        else:
-            heading = float(angles[max(last - 1, 0)])
+        heading = direction_of(last - 1) if last > first else float(angles[max(last - 1, 0)])
         for k in range(last, len(joints) - 1):
             heading += turns[k] if k > 0 else 0.0
             joints[k + 1] = joints[k] + step * np.array([math.cos(heading), math.sin(heading)])
