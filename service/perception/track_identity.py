@@ -16,11 +16,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from service.perception import _geometry_kernels
-from service.perception.track_matching import Chains, Piece
+from service.perception.track_matching import Chains, Piece, lab_under
 
 MIN_CANDIDATE_SEGMENTS = 3
 """A stretch shorter than this many segments does not start a track."""
@@ -32,6 +31,8 @@ RADIUS_TOLERANCE = 1.6
 """Largest ratio between their radii."""
 LENGTH_TOLERANCE = 0.15
 """Largest relative difference between whole cables' lengths (plus two segments)."""
+SHAPE_MARGIN = 1.5
+"""The shape decides which end is which when one way fits this much worse than the other."""
 MAX_JOIN_GAP = 10.0
 """A candidate continues a track only from within this many segments of its end ..."""
 MAX_JOIN_TURN = math.radians(40.0)
@@ -70,37 +71,48 @@ def unclaimed_stretches(
     pieces: list[Piece],
     used: np.ndarray,
     image: np.ndarray | None,
+    colours: list[np.ndarray | None],
 ) -> list[Candidate]:
     """Candidates from the pieces no track holds: consecutive free pieces of a chain
-    (with what lies between them) make one candidate."""
+    (with what lies between them) make one candidate, unless their colours differ
+    (``colours``: per piece)."""
     step = chains.step
     by_chain: dict[int, list[int]] = {}
     for index, piece in enumerate(pieces):
         by_chain.setdefault(piece.chain, []).append(index)
     found = []
     for chain_index, members in by_chain.items():
-        joints = chains.joints[chain_index]
         run: list[int] = []
         for index in [*members, None]:
             if index is not None and not used[index]:
+                # Pieces of other colours are other cables the detection joined to this
+                # one at a crossing: the run stops there.
+                if run and colour_distance(colours[run[-1]], colours[index]) > COLOUR_TOLERANCE:
+                    found.extend(_candidate(chains, chain_index, pieces, run, image, step))
+                    run = []
                 run.append(index)
                 continue
-            if run:
-                first, last = pieces[run[0]], pieces[run[-1]]
-                begin = first.first
-                end = last.first + len(last.joints) - 1
-                stretch = joints[begin : end + 1]
-                if (len(stretch) - 1) * step >= MIN_CANDIDATE_SEGMENTS * step - 1e-9:
-                    found.append(
-                        Candidate(
-                            joints=stretch,
-                            tips=(first.tips[0], last.tips[1]),
-                            radius=chains.radii[chain_index],
-                            colour=colour_along(image, stretch),
-                        )
-                    )
+            found.extend(_candidate(chains, chain_index, pieces, run, image, step))
             run = []
     return found
+
+
+def _candidate(chains, chain_index, pieces, run, image, step) -> list[Candidate]:
+    """The candidate a run of a chain's pieces makes (none when it is too short)."""
+    if not run:
+        return []
+    first, last = pieces[run[0]], pieces[run[-1]]
+    stretch = chains.joints[chain_index][first.first : last.last + 1]
+    if (len(stretch) - 1) * step < MIN_CANDIDATE_SEGMENTS * step - 1e-9:
+        return []
+    return [
+        Candidate(
+            joints=stretch,
+            tips=(first.tips[0], last.tips[1]),
+            radius=chains.radii[chain_index],
+            colour=colour_along(image, stretch),
+        )
+    ]
 
 
 def confirm(new: list[Candidate], previous: list[Candidate], gate: float) -> list[Candidate]:
@@ -211,8 +223,7 @@ def similarity(
     if colour is not None and candidate.colour is not None:
         # Lightness changes with the light and the shading across a cable; the hue and
         # the saturation (a, b) far less.
-        difference = (colour - candidate.colour) * LAB_WEIGHTS
-        distance = float(np.linalg.norm(difference))
+        distance = colour_distance(colour, candidate.colour)
         if distance > COLOUR_TOLERANCE:
             return None
         score += distance / COLOUR_TOLERANCE
@@ -231,42 +242,63 @@ def similarity(
     return score
 
 
+def colour_distance(first: np.ndarray | None, second: np.ndarray | None) -> float:
+    """Distance between two Lab colours, lightness weighted by half (:data:`LAB_WEIGHTS`);
+    0 when either is unknown."""
+    if first is None or second is None:
+        return 0.0
+    return float(np.linalg.norm((first - second) * LAB_WEIGHTS))
+
+
+def colours_along(image: np.ndarray | None, polylines: list[np.ndarray]) -> list[np.ndarray | None]:
+    """:func:`colour_along` for several polylines, converting their pixels at once."""
+    if image is None or not polylines:
+        return [None] * len(polylines)
+    lab, inside = lab_under(image, np.concatenate(polylines))
+    colours: list[np.ndarray | None] = []
+    first = 0
+    for points in polylines:
+        keep = inside[first : first + len(points)]
+        seen = lab[first : first + len(points)][keep]
+        colours.append(np.median(seen, axis=0) if len(seen) else None)
+        first += len(points)
+    return colours
+
+
 def colour_along(image: np.ndarray | None, points: np.ndarray) -> np.ndarray | None:
     """Median Lab colour (OpenCV's 8-bit scaling) of the pixels under ``points`` that lie
-    in the picture; None without an image or without such points. Only those pixels are
-    converted."""
+    in the picture; None without an image or without such points."""
     if image is None or len(points) == 0:
         return None
-    height, width = image.shape[:2]
-    inside = (
-        (points[:, 0] >= 0)
-        & (points[:, 0] <= width - 1)
-        & (points[:, 1] >= 0)
-        & (points[:, 1] <= height - 1)
-    )
-    if not np.any(inside):
-        return None
-    cols = np.rint(points[inside, 0]).astype(np.intp)
-    rows = np.rint(points[inside, 1]).astype(np.intp)
-    pixels = image[rows, cols]
-    if pixels.ndim == 1:  # a grey image
-        pixels = np.repeat(pixels[:, None], 3, axis=1)
-    pixels = np.ascontiguousarray(pixels[:, :3], dtype=np.uint8).reshape(-1, 1, 3)
-    lab = cv2.cvtColor(pixels, cv2.COLOR_BGR2LAB).reshape(-1, 3)
-    return np.median(lab.astype(np.float64), axis=0)
+    return colours_along(image, [points])[0]
 
 
 def orientation(
     candidate: Candidate,
+    track_joints: np.ndarray,
+    track_tips: tuple[bool, bool],
     ends_last_seen: tuple[np.ndarray, np.ndarray],
     ends_seen_s: tuple[float, float],
 ) -> bool:
     """Whether the candidate's first joint is the track's first end (else its last).
 
-    With one free end in view, that end is the track's end seen last (a cable comes back
-    through an edge with the end that left last; ties go by distance); otherwise the
-    pairing of the ends that puts them nearest where they were last seen.
+    A free end is the same free end: when the candidate shows exactly one and the track
+    knows exactly one, they pair. Otherwise by shape: the candidate laid rigidly
+    (turned and moved) onto the track's joints from either end, the way that fits
+    clearly better (a cable keeps its shape while it is out of view, more or less).
+    When the shape cannot tell (a nearly straight cable): with one free end in view,
+    that end is the track's end seen last (a cable comes back through an edge with the
+    end that left last; ties go by distance); otherwise the pairing of the ends that
+    puts them nearest where they were last seen.
     """
+    if candidate.tips[0] != candidate.tips[1] and track_tips[0] != track_tips[1]:
+        return candidate.tips[0] == track_tips[0]
+    fits = []
+    for first_is_head in (True, False):
+        fits.append(_shape_misfit(candidate, track_joints, first_is_head))
+    better, worse = sorted(fits)
+    if worse > SHAPE_MARGIN * better + 1.0:
+        return fits[0] <= fits[1]
     first, last = candidate.joints[0], candidate.joints[-1]
     head, tail = ends_last_seen
     if candidate.tips[0] != candidate.tips[1]:
@@ -279,6 +311,28 @@ def orientation(
     straight = np.linalg.norm(first - head) + np.linalg.norm(last - tail)
     crossed = np.linalg.norm(first - tail) + np.linalg.norm(last - head)
     return straight <= crossed
+
+
+def _shape_misfit(candidate: Candidate, track_joints: np.ndarray, first_is_head: bool) -> float:
+    """RMS distance (px) between the candidate's joints and the track's, laid rigidly on
+    each other from one end: the candidate's free end when it has exactly one (it may
+    show only part of the cable), else its first joint, paired with the track's end the
+    hypothesis (``first_is_head``) gives it."""
+    from_last = candidate.tips[1] and not candidate.tips[0]
+    seen = candidate.joints[::-1] if from_last else candidate.joints
+    # The track's end paired with the candidate's chosen end under the hypothesis.
+    track = track_joints if first_is_head != from_last else track_joints[::-1]
+    count = min(len(seen), len(track))
+    if count < 3:
+        return 0.0
+    a, b = track[:count], seen[:count]
+    a0, b0 = a - a.mean(axis=0), b - b.mean(axis=0)
+    angle = math.atan2(
+        float((a0[:, 0] * b0[:, 1] - a0[:, 1] * b0[:, 0]).sum()), float((a0 * b0).sum())
+    )
+    c, s = math.cos(angle), math.sin(angle)
+    laid = a0 @ np.array([[c, -s], [s, c]]).T
+    return float(np.sqrt(((laid - b0) ** 2).sum(axis=1).mean()))
 
 
 def revived_joints(

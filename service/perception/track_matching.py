@@ -14,8 +14,10 @@ at all. Each piece goes to the track it fits best, or to none (a new cable, perh
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from schemas import Detection
@@ -24,6 +26,11 @@ from service.perception import _tracking_kernels
 MIN_COSINE = 0.5
 """A piece's point counts as on a track only where their directions are within 60
 degrees of each other (either way round)."""
+COLOUR_SPAN = 3
+"""Joints either side compared for a change of colour along a chain ..."""
+COLOUR_JUMP = 30.0
+"""... and how much they must differ (Lab, 8-bit scaling, lightness weighted by half)."""
+COLOUR_WEIGHTS = np.array([0.5, 1.0, 1.0])
 EDGE_MARGIN = 3.0
 """A chain end within its radius plus this many px of the picture's edge is not a tip."""
 
@@ -41,6 +48,9 @@ class Chains:
     width, height : int
     step : float
         The segment length.
+    colour_breaks : list of (n - 1,) bool ndarray
+        Per chain, the segments where its colour changes (the detection joined two
+        cables of different colours there); all False without an image.
     """
 
     joints: list[np.ndarray]
@@ -50,18 +60,21 @@ class Chains:
     width: int
     height: int
     step: float
+    colour_breaks: list[np.ndarray]
 
     @classmethod
-    def of(cls, detection: Detection) -> Chains:
+    def of(cls, detection: Detection, image: np.ndarray | None = None) -> Chains:
         joints = [np.asarray(chain.points, dtype=np.float64) for chain in detection.chains]
+        inferred = [np.asarray(chain.inferred, dtype=bool) for chain in detection.chains]
         return cls(
             joints=joints,
             arcs=[arcs_of(points) for points in joints],
             radii=[chain.radius for chain in detection.chains],
-            inferred=[np.asarray(chain.inferred, dtype=bool) for chain in detection.chains],
+            inferred=inferred,
             width=detection.width,
             height=detection.height,
             step=detection.segment_length,
+            colour_breaks=_colour_breaks(image, joints, inferred),
         )
 
 
@@ -134,6 +147,7 @@ def detection_pieces(chains: Chains) -> list[Piece]:
         arcs = chains.arcs[index]
         n_segments = len(joints) - 1
         usable = ~chains.inferred[index] & ~crowded[segment : segment + n_segments]
+        usable &= ~chains.colour_breaks[index]
         segment += n_segments
         for begin, end in _runs(usable):
             tips = (
@@ -158,6 +172,7 @@ def fit_pieces(
     tracks: list[np.ndarray],
     gates: np.ndarray,
     step: float,
+    compatible: np.ndarray | None = None,
 ) -> list[Fit | None]:
     """The track each piece lies along, and how; None for a piece that fits none.
 
@@ -170,6 +185,8 @@ def fit_pieces(
         Per track, how far (px) a point of a piece may lie from it and still count.
     step : float
         The segment length.
+    compatible : (P, T) bool ndarray, optional
+        Which pieces may fit which tracks at all (their colours agree).
     """
     if not pieces or not tracks:
         return [None] * len(pieces)
@@ -199,6 +216,8 @@ def fit_pieces(
         np.ascontiguousarray(gates, dtype=np.float64),
         MIN_COSINE,
     )
+    if compatible is not None:
+        ok &= compatible
     fits: list[Fit | None] = []
     for p in range(len(pieces)):
         if not ok[p].any():
@@ -238,6 +257,65 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     begins = np.flatnonzero(edges == 1)
     ends = np.flatnonzero(edges == -1)
     return [(int(b), int(e)) for b, e in zip(begins, ends, strict=True)]
+
+
+def _colour_breaks(
+    image: np.ndarray | None, chains: list[np.ndarray], inferred: list[np.ndarray]
+) -> list[np.ndarray]:
+    """Per chain, the segments across which its colour changes: the median Lab colour of
+    the :data:`COLOUR_SPAN` joints before differs from that of the ones after by more
+    than :data:`COLOUR_JUMP` (lightness weighted by half). Joints on an inferred
+    stretch (under an occluder, across a gap) show something else's colour and are left
+    out of the medians; a side with none of its joints seen makes no break."""
+    breaks = [np.zeros(max(len(points) - 1, 0), dtype=bool) for points in chains]
+    if image is None or not chains or image.ndim < 3:
+        return breaks  # no image, or a grey one: no colour to go by
+    lab, _ = lab_under(image, np.concatenate(chains))
+    lab *= COLOUR_WEIGHTS
+    span = COLOUR_SPAN
+    first = 0
+    for points, hidden_segments, flags in zip(chains, inferred, breaks, strict=True):
+        colours = lab[first : first + len(points)].copy()
+        first += len(points)
+        if len(points) < 2 * span + 1:
+            continue
+        hidden = np.zeros(len(points), dtype=bool)
+        hidden[:-1] |= hidden_segments
+        hidden[1:] |= hidden_segments
+        colours[hidden] = np.nan
+        # Window k covers joints k .. k + span; break k compares joints k - span .. k
+        # with joints k + 1 .. k + span.
+        before = np.lib.stride_tricks.sliding_window_view(colours, span + 1, axis=0)
+        after = np.lib.stride_tricks.sliding_window_view(colours[1:], span, axis=0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # an all-hidden window
+            before_median = np.nanmedian(before, axis=2)
+            after_median = np.nanmedian(after, axis=2)
+        ks = np.arange(span, len(points) - span)
+        jump = np.linalg.norm(before_median[ks - span] - after_median[ks], axis=1)
+        flags[ks] = np.nan_to_num(jump, nan=0.0) > COLOUR_JUMP
+    return breaks
+
+
+def lab_under(image: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lab colour (OpenCV's 8-bit scaling, float) of the pixel under each of ``points``
+    (clamped to the picture; a grey image counts as grey colour), and which points lie
+    in the picture."""
+    height, width = image.shape[:2]
+    inside = (
+        (points[:, 0] >= 0)
+        & (points[:, 0] <= width - 1)
+        & (points[:, 1] >= 0)
+        & (points[:, 1] <= height - 1)
+    )
+    cols = np.clip(np.rint(points[:, 0]).astype(np.intp), 0, width - 1)
+    rows = np.clip(np.rint(points[:, 1]).astype(np.intp), 0, height - 1)
+    pixels = image[rows, cols]
+    if pixels.ndim == 1:  # a grey image
+        pixels = np.repeat(pixels[:, None], 3, axis=1)
+    pixels = np.ascontiguousarray(pixels[:, :3], dtype=np.uint8).reshape(-1, 1, 3)
+    lab = cv2.cvtColor(pixels, cv2.COLOR_BGR2LAB).reshape(-1, 3).astype(np.float64)
+    return lab, inside
 
 
 def arcs_of(points: np.ndarray) -> np.ndarray:

@@ -112,7 +112,8 @@ def observe(
     chains : Chains
         Their detection's chains (which ends grow along).
     claimed : (S,) bool ndarray
-        Per piece of the detection, whether a track already fits it (growth stops there).
+        Per piece of the detection, whether it is out of this track's reach: a track
+        already fits it, or its colour is not this track's (growth stops there).
     chain_of_piece : list of (chain, first joint, last joint)
         Per piece of the detection, where it lies in its chain.
     """

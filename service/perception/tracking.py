@@ -45,9 +45,12 @@ from service.perception.pipeline import detect_full
 from service.perception.segmentation import as_bgr
 from service.perception.segmenter import Segmenter
 from service.perception.track_identity import (
+    COLOUR_TOLERANCE,
     Candidate,
     Continuation,
     colour_along,
+    colour_distance,
+    colours_along,
     confirm,
     continuation,
     orientation,
@@ -56,6 +59,7 @@ from service.perception.track_identity import (
     unclaimed_stretches,
 )
 from service.perception.track_matching import Chains, Piece, detection_pieces, fit_pieces
+from service.perception.track_merging import Bridge, Join, bridges, joins
 from service.perception.track_update import Observation, exact_chain, observe, register
 
 VELOCITY_SMOOTHING = 0.5
@@ -70,6 +74,8 @@ RIDGE = 0.02
 """How strongly the rigid motion fitted to a cable's cross-cable displacements is kept
 small (relative to the data): enough to leave a straight cable's slide at zero."""
 MAX_STEP_S = 10.0
+STEADY_FRAMES = 3
+"""Frames a track must have been seen in a row before its velocity narrows its search."""
 """Longest time step used for prediction (a stream that stalled)."""
 
 
@@ -101,6 +107,9 @@ class TrackRecord:
         Where each end joint was then.
     unseen : int
         Consecutive frames without being seen.
+    steady : int
+        Frames it was seen in a row since it began or came back: until a few, its
+        velocity is not known and it looks for its cable further afield.
     seen : (N,) bool ndarray or None
         Which joints a piece of the detection placed, the last frame it was seen (None:
         all of them).
@@ -119,6 +128,7 @@ class TrackRecord:
     ends_seen_s: tuple[float, float]
     ends_last: np.ndarray
     unseen: int = 0
+    steady: int = 0  # frames seen in a row since it began or came back (its velocity known)
     seen: np.ndarray | None = None  # (N,) bool: joints seen in the last frame it was seen
 
     @property
@@ -235,10 +245,17 @@ def advance(
     dt = min(max(dt, 1e-3), MAX_STEP_S)
 
     predicted = [_predicted(track, dt) for track in state.tracks]
-    chains = Chains.of(detection)
+    chains = Chains.of(detection, image)
     pieces = detection_pieces(chains)
     gates = np.array([_gate(track, step, dt) for track in state.tracks])
-    fits = fit_pieces(pieces, predicted, gates, step)
+    # A piece of a colour unlike a track's is another cable's (where the detection
+    # joined two cables at a crossing, say).
+    colours = colours_along(image, [piece.joints for piece in pieces])
+    compatible = np.array(
+        [[colour_distance(c, t.colour) <= COLOUR_TOLERANCE for t in state.tracks] for c in colours],
+        dtype=bool,
+    ).reshape(len(pieces), len(state.tracks))
+    fits = fit_pieces(pieces, predicted, gates, step, compatible)
     claimed = np.array([fit is not None for fit in fits], dtype=bool)
     chain_of_piece = [(p.chain, p.first, p.first + len(p.joints) - 1) for p in pieces]
 
@@ -248,12 +265,16 @@ def advance(
         if not fitted:
             tracks.append(_unseen(track, predicted[index]))
             continue
-        observation = observe(predicted[index], track.tips, fitted, chains, claimed, chain_of_piece)
+        # Growth may take free pieces of the track's own colour only.
+        taken = claimed | ~compatible[:, index]
+        observation = observe(predicted[index], track.tips, fitted, chains, taken, chain_of_piece)
         tracks.append(_moved(track, predicted[index], observation, step, dt, now, frame, image))
+    tracks = _joined(tracks, joins(tracks, pieces, fits, chains), now)
+    tracks = _bridged(tracks, bridges(tracks, step, set()), now)
 
     # Pieces near a track (held by it, or passed over as it grew) start nothing new.
     used = claimed | _near_tracks(pieces, tracks)
-    found = unclaimed_stretches(chains, pieces, used, image)
+    found = unclaimed_stretches(chains, pieces, used, image, colours)
     gate = max([_gate_base(c.radius, step) for c in found], default=0.0)
     candidates = confirm(found, list(state.candidates), gate)
     seeding = state.frame == 0 and not state.tracks
@@ -415,6 +436,8 @@ def _gate_base(radius: float, step: float) -> float:
 def _gate(track: TrackRecord, step: float, dt: float) -> float:
     """How far (px) a detected point may lie from the predicted track and still count."""
     base = _gate_base(track.radius, step)
+    if track.steady < STEADY_FRAMES:  # just begun or back: its speed is not known yet
+        return 4.0 * base
     speed = float(np.max(np.linalg.norm(track.velocity, axis=1))) if len(track.velocity) else 0.0
     return min(base + 0.5 * speed * dt + 2.0 * track.unseen, 4.0 * base)
 
@@ -429,6 +452,7 @@ def _unseen(track: TrackRecord, predicted: np.ndarray) -> TrackRecord:
         joints=predicted,
         velocity=track.velocity * UNSEEN_DAMPING,
         unseen=track.unseen + 1,
+        steady=0,
     )
 
 
@@ -495,6 +519,7 @@ def _moved(
         ends_seen_s=ends_seen,
         ends_last=ends_last,
         unseen=0,
+        steady=track.steady + 1,
         seen=covered,
     )
 
@@ -574,6 +599,50 @@ def _whole_segments(joints: np.ndarray, step: float) -> np.ndarray:
     return exact_chain(joints, step)
 
 
+def _joined(tracks: list[TrackRecord], found: list[Join], now: float) -> list[TrackRecord]:
+    """The tracks with each join made: the older track continued, the younger retired."""
+    if not found:
+        return tracks
+    result = list(tracks)
+    for join in found:
+        older = result[join.older]
+        added = join.joints
+        motion = older.velocity[0] if join.end == 0 else older.velocity[-1]
+        velocity = np.repeat(motion[None, :], len(added), axis=0)
+        if join.end == 0:
+            joints = np.vstack([added[::-1], older.joints])
+            velocities = np.vstack([velocity, older.velocity])
+            tips, first_joint = (join.tip, older.tips[1]), older.first_joint - len(added)
+        else:
+            joints = np.vstack([older.joints, added])
+            velocities = np.vstack([older.velocity, velocity])
+            tips, first_joint = (older.tips[0], join.tip), older.first_joint
+        result[join.older] = replace(
+            older,
+            joints=joints,
+            velocity=velocities,
+            tips=tips,
+            first_joint=first_joint,
+            ends_seen_s=(now, now),
+            ends_last=np.array([joints[0], joints[-1]]),
+            seen=None,
+        )
+    retired = {join.younger for join in found}
+    return [track for index, track in enumerate(result) if index not in retired]
+
+
+def _bridged(tracks: list[TrackRecord], found: list[Bridge], now: float) -> list[TrackRecord]:
+    """The tracks with each bridge made: the older track continued, the younger retired."""
+    if not found:
+        return tracks
+    result = list(tracks)
+    for bridge in found:
+        joined = Continuation(bridge.older, bridge.end, bridge.anchor, bridge.joints, bridge.tip)
+        result[bridge.older] = _extended(result[bridge.older], joined, now)
+    retired = {bridge.younger for bridge in found}
+    return [track for index, track in enumerate(result) if index not in retired]
+
+
 def _seen_mask(track: TrackRecord) -> np.ndarray:
     return np.ones(len(track.joints), bool) if track.seen is None else track.seen
 
@@ -651,7 +720,11 @@ def _recognise(
     else:
         remembered = [(t, s) for t, s in remembered if t is not track]
     first_is_head = orientation(
-        candidate, (track.ends_last[0], track.ends_last[1]), track.ends_seen_s
+        candidate,
+        track.joints,
+        track.tips,
+        (track.ends_last[0], track.ends_last[1]),
+        track.ends_seen_s,
     )
     joints = revived_joints(
         track.joints, _with_whole_segments(candidate, step), first_is_head, step
