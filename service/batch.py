@@ -29,6 +29,7 @@ from service.imageio import (
     write_png,
     write_text,
 )
+from service.interrupts import interrupts_held
 from service.perception import InvalidInputError, detect_full, render_labels, render_overlay
 from service.perception.segmenter import Segmenter
 from service.simulation import ModelError, to_mjcf
@@ -319,15 +320,17 @@ def process_file(
         detection = lift(detection, camera, depth)
     if out_dir is not None:
         paths = OutputPaths.for_input(path, out_dir)
-        if "labels" in outputs:
-            write_png(paths.labels_png, render_labels(detection, result.mask, image))
-        if "overlay" in outputs:
-            write_png(paths.overlay_png, render_overlay(image, detection))
-        if "mjcf" in outputs and camera is not None:
-            model = to_mjcf(detection, **with_surface(physics, camera).model_dump())
-            write_text(paths.mjcf_xml, model)
-        if "json" in outputs:
-            write_text(paths.detection_json, detection_to_json(detection) + "\n")
+        # Ctrl-C waits until this image's outputs are whole (see service.interrupts).
+        with interrupts_held():
+            if "labels" in outputs:
+                write_png(paths.labels_png, render_labels(detection, result.mask, image))
+            if "overlay" in outputs:
+                write_png(paths.overlay_png, render_overlay(image, detection))
+            if "mjcf" in outputs and camera is not None:
+                model = to_mjcf(detection, **with_surface(physics, camera).model_dump())
+                write_text(paths.mjcf_xml, model)
+            if "json" in outputs:
+                write_text(paths.detection_json, detection_to_json(detection) + "\n")
     return detection
 
 

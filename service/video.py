@@ -50,6 +50,7 @@ from pydantic import BaseModel, Field, SerializeAsAny
 
 from schemas import Detection, DetectParams
 from service.imageio import OutputWriteError, _opencv_quiet
+from service.interrupts import interrupts_held
 from service.perception import InvalidInputError, detect, render_overlay
 from service.perception.segmenter import Segmenter
 
@@ -621,16 +622,19 @@ def _run(
             if detection is None:
                 summary.failed += 1
             else:
+                # Ctrl-C waits until this frame's outputs are whole (a KeyboardInterrupt
+                # inside pydantic's serialiser would surface as an internal error).
                 try:
-                    if overlay is not None:
-                        overlay.write(render_overlay(frame.image, detection))
-                    if lines is not None:
-                        record = FrameRecord(
-                            frame=index, timestamp_s=round(timestamp, 6), detection=detection
-                        )
-                        lines.write(record.model_dump_json() + "\n")
-                    if recording is not None:
-                        recording.write(timestamp, detection, frame.image)
+                    with interrupts_held():
+                        if overlay is not None:
+                            overlay.write(render_overlay(frame.image, detection))
+                        if lines is not None:
+                            record = FrameRecord(
+                                frame=index, timestamp_s=round(timestamp, 6), detection=detection
+                            )
+                            lines.write(record.model_dump_json() + "\n")
+                        if recording is not None:
+                            recording.write(timestamp, detection, frame.image)
                 except OutputWriteError as exc:
                     summary.output_error = str(exc)
                     return

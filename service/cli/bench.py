@@ -1,6 +1,7 @@
 """``dlo bench``: the detector per stage on one thread; with ``--service`` what HTTP and
 zenoh add; with ``--startup`` how long whole ``dlo`` processes take; with ``--rings`` how
-detection grows with the number of cables (:mod:`service.bench`).
+detection grows with the number of cables; with ``--viewer`` how the viewer's live mode
+keeps up with a camera (:mod:`service.bench`).
 
 The detector and service benchmarks run in a process of their own with the numeric
 libraries set to one thread (they size their thread pools when first imported); the
@@ -150,6 +151,28 @@ def bench(
             help="With --replicas: how the replicas share the cameras (DLO_ZENOH_ASSIGNMENT).",
         ),
     ] = Assignment.balanced,
+    viewer: Annotated[
+        bool,
+        typer.Option(
+            "--viewer",
+            help="Run the viewer's live mode in Debian's chromium on a 15 fps 640x480 camera "
+            "instead: frame rate shown, dropped frames, the page's JS heap at start and end "
+            "(service/bench/viewer.py; needs the dev extra's Playwright).",
+        ),
+    ] = False,
+    seconds: Annotated[
+        float,
+        typer.Option(min=1, metavar="S", help="With --viewer: how long the live mode runs."),
+    ] = 60.0,
+    cpu_slowdown: Annotated[
+        float,
+        typer.Option(
+            min=1,
+            metavar="X",
+            help="With --viewer: slow the page's CPU X times (Chrome's throttling), as a "
+            "weak client's.",
+        ),
+    ] = 1.0,
     dlo: Annotated[
         str | None,
         typer.Option(
@@ -174,6 +197,14 @@ def bench(
     ring_counts = None if rings is None else _ring_counts(rings)
     if dlo is not None and not startup:
         exit_usage(stderr_console(), "--dlo applies only with --startup")
+    if viewer:
+        if service or startup:
+            exit_usage(
+                stderr_console(), "--viewer times the page alone: without --service/--startup"
+            )
+        from service.bench.viewer import run_viewer_bench
+
+        raise typer.Exit(run_viewer_bench(10.0 if quick else seconds, as_json, cpu_slowdown))
     if replicas is not None:
         if not service:
             exit_usage(stderr_console(), "--replicas applies only with --service")

@@ -23,16 +23,14 @@ from __future__ import annotations
 
 import contextlib
 import os
-import signal
-import threading
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
 
 from schemas import Detection
+from service.interrupts import interrupts_held
 from service.ros.messages import (
     COMPRESSED_IMAGE,
     MARKER_ARRAY,
@@ -135,7 +133,7 @@ class McapRecorder:
         stamp_ns = max(int(stamp_ns), 0)
         image_message = compressed_image_cdr(encoded[0], encoded[1], stamp_ns)
         markers = markers_cdr(detection, stamp_ns)
-        with _interrupts_held(), self._errors():
+        with interrupts_held(), self._errors():
             sequence = self.frames
             self._writer.add_message(
                 self._image_channel, stamp_ns, image_message, stamp_ns, sequence
@@ -165,7 +163,7 @@ class McapRecorder:
         call more than once."""
         if self._file.closed:
             return
-        with _interrupts_held(), self._errors():
+        with interrupts_held(), self._errors():
             try:
                 self._writer.finish()
             finally:
@@ -232,26 +230,3 @@ def _library() -> str:
         return f"dlo-service {version('dlo-service')}"
     except PackageNotFoundError:
         return "dlo-service"
-
-
-@contextlib.contextmanager
-def _interrupts_held() -> Iterator[None]:
-    """Hold SIGINT back until the block is done, then deliver it as before.
-
-    Only the main thread receives signals (elsewhere this does nothing).
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    caught: list[Any] = []
-    previous = signal.signal(signal.SIGINT, lambda number, frame: caught.append(frame))
-    try:
-        yield
-    finally:
-        if previous is not None:  # None: a handler not installed from Python, left alone
-            signal.signal(signal.SIGINT, previous)
-        if caught:
-            if callable(previous):
-                previous(signal.SIGINT, caught[0])
-            elif previous == signal.SIG_DFL:
-                signal.raise_signal(signal.SIGINT)

@@ -23,7 +23,6 @@ from service.ros.recording import (
     IMAGE_TOPIC,
     MIN_STEP_NS,
     McapRecorder,
-    _interrupts_held,
 )
 from service.synthetic import make_scene
 from service.synthetic.scene3d import make_scene_3d
@@ -184,15 +183,6 @@ def test_a_recording_that_cannot_be_created_is_a_one_line_error(tmp_path: Path) 
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert lines[0].startswith(f"error: cannot write {out_dir / 'clip.mcap'}:")
     assert "Traceback" not in result.stderr
-
-
-def test_sigint_is_held_until_the_frame_is_whole_then_delivered() -> None:
-    reached_the_end = False
-    with pytest.raises(KeyboardInterrupt), _interrupts_held():
-        signal.raise_signal(signal.SIGINT)
-        reached_the_end = True
-    assert reached_the_end
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 def test_recorder_closes_once_and_refuses_a_frame_without_an_image(tmp_path: Path) -> None:
