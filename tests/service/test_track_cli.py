@@ -120,3 +120,24 @@ def test_dlo_track_warns_of_a_reset_on_one_line(tmp_path, monkeypatch):
     warnings = lines_starting(result, "warning:")
     assert len(warnings) == 1 and "frame 2" in warnings[0] and "started afresh" in warnings[0]
     assert len(list(read_track_records(tmp_path / "camera0.jsonl"))) == 4
+
+
+def test_dlo_track_records_the_tracks_in_mcap(clip, tmp_path):
+    """--outputs mcap: the stock reader gives one MarkerArray and one image per frame, a
+    LINE_STRIP per track with the track's id and joints, as in the JSON Lines."""
+    from tests.service.ros.decoding import read_recording
+    from tests.service.ros.test_recording import assert_frame_matches, frames_of
+
+    result = run_dlo("track", clip, "--out-dir", tmp_path, "--outputs", "json,mcap")
+    assert_no_traceback(result)
+    assert result.exit_code == 0, result.stderr
+    assert sorted(entry.name for entry in tmp_path.iterdir()) == ["cables.jsonl", "cables.mcap"]
+    records = list(read_track_records(tmp_path / "cables.jsonl"))
+    frames = frames_of(read_recording(tmp_path / "cables.mcap"))
+    assert len(frames) == len(records) == 40
+    for (image, markers), record in zip(frames, records, strict=True):
+        assert abs(markers.log_time - record.timestamp_s * 1e9) <= 1000  # JSON: to the µs
+        assert_frame_matches(image, markers, record.detection)
+    # The marker ids are the track ids, the same in every frame.
+    first = {c.id for c in records[0].detection.chains}
+    assert first and all({c.id for c in r.detection.chains} == first for r in records)
