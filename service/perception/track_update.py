@@ -132,13 +132,14 @@ def observe(
         placed.append((piece, fit.sign, offset, arcs))
     placed = _one_offset_per_chain(placed, chains)
     # A cable that bends where it is seen shows a slide along itself to the registration
-    # of its body: one end alone may then only correct that a little, and an end that
-    # went in is taken for one being covered even where the cable could go out of the
-    # picture. Both ends of a whole cable are trusted over its body.
+    # of its body: one end alone may then only correct that a little per frame. It still
+    # corrects it when the end went in while the cable may go out of the picture at its
+    # other end: a bend travelling along the cable drags the registration of its body
+    # along (the cable itself does not move so), and a free end seen is the one sure
+    # mark of where the cable lies along itself. Both ends of a whole cable are trusted
+    # over its body.
     limit = _slide_limit(joints, placed, step)
     going_out = _going_out(joints, placed, chains)
-    if limit <= BENT_SLIDE * step:
-        going_out = (False, False)
     slide = _slide(placed, total, step, going_out)
     if not slide.whole:  # a whole cable's two ends outweigh its body (a bend may travel)
         slide = replace(slide, shift=float(np.clip(slide.shift, -limit, limit)))
