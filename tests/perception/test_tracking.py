@@ -347,3 +347,21 @@ def test_after_warm_up_tracking_compiles_nothing():
     )
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout.strip().splitlines()[-1]) == {}
+
+
+def test_window_medians_are_nanmedians_of_the_seen_rows():
+    """The colour-change windows' medians: np.nanmedian's, NaN where a window has none."""
+    import warnings
+
+    from service.perception.track_matching import _window_medians
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        values = rng.normal(size=(int(rng.integers(4, 30)), 3))
+        values[rng.random(len(values)) < 0.4] = np.nan  # hidden joints
+        width = int(rng.integers(1, 5))
+        windows = np.lib.stride_tricks.sliding_window_view(values, width, axis=0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows
+            expected = np.nanmedian(windows, axis=2)
+        np.testing.assert_allclose(_window_medians(values, width), expected)
