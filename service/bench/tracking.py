@@ -49,7 +49,7 @@ def run_tracking_bench(
 
     cv2.setNumThreads(1)
     numba.set_num_threads(1)
-    load_kernels(stderr_console())
+    load_kernels(stderr_console(), ("detection", "tracking"))
     n_frames = 10 if quick else frames
     seeds = FRAME_SEEDS[:2] if quick else FRAME_SEEDS
     rows = [_frame_case(seed, n_frames) for seed in seeds]

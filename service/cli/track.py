@@ -173,7 +173,7 @@ def track(
             exit_usage(console, "--camera cannot be combined with VIDEO arguments")
         make_out_dir(console, out_dir)
         source = parse_camera(camera)
-        load_kernels(console)
+        load_kernels(console, ("detection", "tracking"))
         summary = run_stream(
             console,
             lambda: open_camera(source),
@@ -203,7 +203,7 @@ def track(
             failed += 1
     make_out_dir(console, out_dir)
     if videos:
-        load_kernels(console)
+        load_kernels(console, ("detection", "tracking"))
     clashes = find_output_clashes(videos)
     interrupted = False
     for path in videos:

@@ -71,7 +71,7 @@ def run_tracking(
         exit_usage(errors, "--tracking must be at least 1")
     if n_frames < 1:
         exit_usage(errors, "--frames must be at least 1")
-    load_kernels(errors)
+    load_kernels(errors, ("detection", "tracking"))
     scores = []
     failed = 0
     with (

@@ -115,9 +115,14 @@ def _zenoh_config(settings: Settings) -> Any:
 
 
 async def _warm_up(state: AppState) -> None:
-    """Run one detection on a tiny image in the pool; then the service is ready."""
+    """Run one detection on a tiny image in the pool (and load the tracker's kernels when
+    cameras are tracked); then the service is ready."""
     try:
         await state.pool.run(warm_up, state.detect)
+        if state.settings.zenoh and state.settings.track:
+            from service.perception.tracking_warm_up import warm_up_tracking
+
+            await state.pool.run(warm_up_tracking)
     except asyncio.CancelledError:
         raise
     except Exception as exc:

@@ -56,7 +56,6 @@ from service.perception.skeleton import (
     remove_spurs,
     skeletonize,
 )
-from service.perception.tracking_warm_up import warm_up_tracking
 
 
 @dataclass(frozen=True)
@@ -416,7 +415,5 @@ def warm_up() -> None:
     # OpenCV builds its Lab tables on the first conversion (about 60 ms), which the
     # crossings step and the labels would otherwise report as their own time.
     cv2.cvtColor(image[:1, :1], cv2.COLOR_BGR2LAB)
-    # The tracker's kernels (service.perception.tracking builds on this module).
-    warm_up_tracking()
     if not kernels_cached():
         write_stamp(_numba_cache_dir())
