@@ -324,6 +324,7 @@ FRESH_PROCESS = """
 import json
 from numba.core.dispatcher import Dispatcher
 from service.perception import Tracker, warm_up, _tracking_kernels
+from service.perception.tracking_warm_up import warm_up_tracking
 from service.synthetic import make_video
 
 def signatures():
@@ -331,6 +332,7 @@ def signatures():
             if isinstance(value, Dispatcher)}
 
 warm_up()
+warm_up_tracking()
 before = signatures()
 tracker = Tracker()
 for frame in make_video(4, "crossings", n_frames=12).frames():
