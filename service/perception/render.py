@@ -223,7 +223,15 @@ def render_overlay(image: np.ndarray, detection: Detection) -> np.ndarray:
                 cv2.line(canvas, fixed(a), fixed(b), colour, 2 * scale, cv2.LINE_AA, shift)
         for point in chain.points:
             cv2.circle(canvas, fixed(point), 2 * scale * factor, colour, -1, cv2.LINE_AA, shift)
-        start = chain.points[0]
+        # The id beside the first joint in the picture (a track's may lie outside it).
+        start = next(
+            (
+                p
+                for p in chain.points
+                if 0 <= p[0] < canvas.shape[1] and 0 <= p[1] < canvas.shape[0]
+            ),
+            chain.points[0],
+        )
         cv2.putText(
             canvas,
             str(chain.id),
