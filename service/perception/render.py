@@ -105,7 +105,7 @@ def render_labels(
         split_crossings_by_colour(labels, detection, mask, image)
     hidden = np.zeros((height, width), np.uint16)
     for chain in detection.chains:
-        thickness = max(1, round(2 * chain.radius + 1))
+        thickness = max(1, round(2 * chain.radius))
         for k, inferred in enumerate(chain.inferred):
             if not inferred:
                 continue
