@@ -21,6 +21,7 @@ from schemas.grasp import (
     SegmentPoint,
 )
 from schemas.params import DetectParams, GapCurve, SegmentationMethod
+from schemas.tracking import Track, TrackingStatus, TrackParams, Tracks
 
 __all__ = [
     "CameraModel",
@@ -44,4 +45,8 @@ __all__ = [
     "SegmentPoint",
     "SegmentationMethod",
     "StageTimings",
+    "Track",
+    "TrackParams",
+    "TrackingStatus",
+    "Tracks",
 ]

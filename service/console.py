@@ -130,7 +130,10 @@ def typer_app(**settings: Any) -> typer.Typer:
 FIRST_RUN_NOTICE = "compiling the detection kernels, once per machine, about 20 s"
 
 
-KERNEL_SETS = {"detection": "service.perception:warm_up"}
+KERNEL_SETS = {
+    "detection": "service.perception:warm_up",
+    "tracking": "service.perception.tracking_warm_up:warm_up_tracking",
+}
 """Each set of compiled kernels a front end may load, by name: its warm-up function
 (``"module:function"``, imported only when the set is loaded). A warm-up loads (on a
 machine's first run: compiles) its kernels and writes its group's stamp

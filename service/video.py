@@ -41,12 +41,12 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 from urllib.parse import urlsplit
 
 import cv2
 import numpy as np
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, SerializeAsAny
 
 from schemas import Detection, DetectParams
 from service.imageio import OutputWriteError, _opencv_quiet
@@ -158,11 +158,26 @@ class FrameSource:
 
 
 class FrameRecord(BaseModel):
-    """One line of the JSON Lines output: a frame's detection with its position."""
+    """One line of the JSON Lines output: a frame's detection with its position.
+
+    ``detection`` is written with every field of its own class: a
+    :class:`schemas.Tracks` (``dlo track``) keeps its tracks' fields and its ``tracking``.
+    """
 
     frame: int = Field(ge=0, description="Frame index in the stream, from 0.")
     timestamp_s: float = Field(description="Presentation time of the frame in seconds.")
-    detection: Detection
+    detection: SerializeAsAny[Detection]
+
+
+class StreamAnalyser(Protocol):
+    """What :func:`process_stream` runs on each frame instead of plain detection (the
+    tracker of :mod:`service.tracking`, which keeps state from frame to frame)."""
+
+    def __call__(self, frame: Frame) -> Detection:
+        """The frame's result; raises :class:`InvalidInputError` for a frame it cannot use."""
+
+    def lost(self, frame: Frame) -> None:
+        """A frame that could not be read (the next result may say so)."""
 
 
 @dataclass(frozen=True)
@@ -438,6 +453,7 @@ def process_stream(
     max_frames: int | None = None,
     on_frame: Callable[[FrameOutcome], None] | None = None,
     segmenter: Segmenter | None = None,
+    analyser: StreamAnalyser | None = None,
 ) -> StreamSummary:
     """Detect the cables in every frame of a source and write the outputs as it goes.
 
@@ -462,6 +478,9 @@ def process_stream(
     segmenter : callable, optional
         The segmenter for ``params.segmentation == "model"`` (see
         :mod:`service.perception.segmenter`).
+    analyser : StreamAnalyser, optional
+        Runs on each frame instead of :func:`service.perception.detect` (and is told of
+        the frames that could not be read): the tracker, for ``dlo track``.
 
     Returns
     -------
@@ -515,7 +534,7 @@ def process_stream(
         if mcap:
             recording = _Recording(outputs.mcap, source.epoch_s)
         writers = (lines, overlay, recording)
-        _run(source, params, summary, writers, max_frames, on_frame, segmenter)
+        _run(source, params, summary, writers, max_frames, on_frame, segmenter, analyser)
     except KeyboardInterrupt:
         summary.interrupted = True
     finally:
@@ -563,6 +582,7 @@ def _run(
     max_frames: int | None,
     on_frame: Callable[[FrameOutcome], None] | None,
     segmenter: Segmenter | None = None,
+    analyser: StreamAnalyser | None = None,
 ) -> None:
     """The frame loop of :func:`process_stream`; fills ``summary`` in place."""
     lines, overlay, recording = writers
@@ -587,9 +607,14 @@ def _run(
         if frame.image is None:
             summary.unreadable += 1
             problem = f"frame {index}: unreadable frame, skipped"
+            if analyser is not None:
+                analyser.lost(frame)
         else:
             try:
-                detection = detect(frame.image, params, segmenter=segmenter)
+                if analyser is not None:
+                    detection = analyser(frame)
+                else:
+                    detection = detect(frame.image, params, segmenter=segmenter)
             except InvalidInputError as exc:
                 problem = f"frame {index}: {_one_line(exc)}"
             except Exception as exc:  # one bad frame does not end the stream

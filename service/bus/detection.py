@@ -21,6 +21,8 @@ and
 * shares the cameras with the other replicas of its pool (:mod:`service.bus.ownership`):
   it announces itself with a liveliness token under ``dlo/@replicas/`` and detects only the
   frames of the cameras it owns; the others' frames are dropped before decoding;
+* tracks the cameras it is asked to (``tracking``, :mod:`service.bus.tracks`): their frames'
+  :class:`schemas.Tracks` go to ``dlo/<camera>/tracks`` too, with the same attachment;
 * answers queries on ``dlo/detect``, declared *complete*, so that a ``get`` with zenoh's
   default target (``BEST_MATCHING``) reaches one replica: the query's payload is the image,
   its attachment as a frame's; the reply is the Detection JSON, or an error reply holding
@@ -36,6 +38,7 @@ from __future__ import annotations
 import json
 import logging
 import threading
+import time
 from collections import Counter, OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -66,6 +69,7 @@ from service.bus.ros import (
     ros_attachment,
     with_stamp,
 )
+from service.bus.tracks import CameraTrackers, tracks_key
 from service.ros.messages import warm_up as warm_up_ros_messages
 from service.runtime.errors import RequestError
 from service.runtime.frames import Frame, check_upload
@@ -151,6 +155,8 @@ class _Job:
     """The zenoh timestamp of the frame's sample, when it has one."""
     kind: str = ENCODED
     """What the payload is: an encoded image, or a ROS 2 message (:mod:`service.bus.ros`)."""
+    received_s: float = field(default_factory=time.monotonic)
+    """When the sample arrived (the time tracking goes by without a capture time)."""
 
 
 class DetectionBus:
@@ -186,6 +192,9 @@ class DetectionBus:
     max_detect_seconds : float, optional
         Time budget of one detection (decoding included); past it the frame or query
         gets the error ``time_budget_exceeded`` and the thread goes on. None: no limit.
+    tracking : CameraTrackers, optional
+        Track the cameras it names: each of their frames' Tracks goes to
+        ``dlo/<camera>/tracks`` too (:mod:`service.bus.tracks`).
     """
 
     def __init__(
@@ -202,6 +211,7 @@ class DetectionBus:
         camera_idle_s: float = CAMERA_IDLE_S,
         learn_s: float | None = None,
         max_detect_seconds: float | None = None,
+        tracking: CameraTrackers | None = None,
     ) -> None:
         self._config = config if config is not None else zenoh.Config()
         self._detect = detect if detect is not None else default_detect
@@ -218,9 +228,12 @@ class DetectionBus:
         self.replicas_key = replicas_key(self.image_keys)
         """The pool's liveliness prefix; this replica's token is ``<it>/<replica id>``."""
         self.max_detect_seconds = max_detect_seconds
+        self.tracking = tracking
+        """Per-camera trackers (:mod:`service.bus.tracks`); None: nothing is tracked."""
         self.counts: Counter[str] = Counter()
         """Outcomes so far: ``published``, ``replaced``, ``rejected``, ``failed``,
-        ``not_owned`` for frames, ``query_answered`` ... for queries (also in ``metrics``)."""
+        ``not_owned``, ``tracked`` for frames, ``query_answered`` ... for queries (also in
+        ``metrics``)."""
         self._pending: OrderedDict[tuple[str, Any], _Job] = OrderedDict()
         self._queries_waiting = 0
         self._next_query = 0
@@ -396,6 +409,8 @@ class DetectionBus:
         if not self.ownership.owns(camera):  # another replica's: not even copied
             with self._condition:
                 self._count("not_owned")
+            if self.tracking is not None:
+                self.tracking.forget(camera)  # a new session should it come back
             return
         job = _Job(
             sample.payload.to_bytes(),
@@ -411,6 +426,8 @@ class DetectionBus:
             if key in self._pending:
                 self._count("replaced")
                 logger.debug("camera %s: frame replaced by a newer one before detection", camera)
+                if self.tracking is not None:
+                    self.tracking.lose(camera)
             self._pending[key] = job  # keeps its place in the line, with the newest image
             self._condition.notify()
 
@@ -452,6 +469,7 @@ class DetectionBus:
     def _process(self, job: _Job) -> None:
         where = f"camera {job.camera}" if job.query is None else "query dlo/detect"
         identity = FrameIdentity()
+        image = None
         try:
             ros = job.kind != ENCODED
             identity, params = read_attachment(
@@ -471,11 +489,12 @@ class DetectionBus:
                 frame = read_ros_frame(job.kind, job.image, self.max_pixels)
                 identity = with_stamp(identity, frame.stamp_s)
                 if frame.image is not None:
+                    image = frame.image
                     detection = detect_decoded(frame.image, params, self._detect, None, deadline)
                 encoded = frame.encoded
             if encoded is not None:
                 check_upload(encoded, "image", self.max_pixels)
-                _, detection = run_detection(
+                image, detection = run_detection(
                     Frame(encoded, params), self._detect, self.max_pixels, self.max_detect_seconds
                 )
         except RequestError as exc:
@@ -505,6 +524,22 @@ class DetectionBus:
             self.session.put(chains_key(job.camera), body, encoding=JSON, attachment=attachment)
             markers = markers_payload(detection, job.camera, identity, job.timestamp)
             self.session.put(markers_key(job.camera), markers, encoding=CDR, attachment=attachment)
+            if self.tracking is not None and self.tracking.tracks(job.camera):
+                self._publish_tracks(job, detection, image, identity, attachment)
+
+    def _publish_tracks(self, job, detection, image, identity, attachment) -> None:
+        """Track a camera frame's detection and publish the Tracks on ``.../tracks``."""
+        assert self.tracking is not None and job.camera is not None
+        try:
+            tracks = self.tracking.follow(job.camera, detection, image, identity, job.received_s)
+        except Exception:  # the chains went out; tracking this frame failed: log it
+            logger.exception("camera %s: tracking failed", job.camera)
+            self.tracking.lose(job.camera)
+            return
+        self.counts["tracked"] += 1  # beside published, not a sample outcome of its own
+        self.session.put(
+            tracks_key(job.camera), tracks.model_dump_json(), encoding=JSON, attachment=attachment
+        )
 
     def _result_attachment(self, job: _Job, identity: FrameIdentity) -> str:
         """The :class:`ResultAttachment` of every result of ``job``'s frame, as JSON."""
@@ -525,6 +560,8 @@ class DetectionBus:
         assert job.camera is not None
         attachment = self._result_attachment(job, identity)
         self._count(outcome)
+        if self.tracking is not None:
+            self.tracking.lose(job.camera)
         record = {"camera": job.camera, "error": code, "detail": message}
         self.session.put(
             errors_key(job.camera), json.dumps(record), encoding=JSON, attachment=attachment

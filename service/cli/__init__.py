@@ -24,6 +24,11 @@ SUBCOMMANDS = (
         "Detect the cables in each image, or in every frame of a video or camera stream.",
     ),
     Subcommand(
+        "track",
+        "service.cli.track:track",
+        "Follow the cables through videos or a camera stream: one id per cable.",
+    ),
+    Subcommand(
         "demo",
         "service.cli.demo:demo",
         "Generate the bundled synthetic example scene and detect the cables in it.",

@@ -34,6 +34,7 @@ class Assignment(StrEnum):
 CHILD_FLAG = "DLO_BENCH_CHILD"
 """Set in the one-thread process that ``dlo bench`` starts for the timing itself."""
 STARTUP_RUNS, STARTUP_QUICK_RUNS = 10, 2
+TRACKING_FRAMES = 120
 
 
 def bench(
@@ -53,9 +54,14 @@ def bench(
         ),
     ] = DEFAULT_DATASET,
     frames: Annotated[
-        int,
-        typer.Option(min=1, metavar="N", help="Generated scenes (seeds) per case."),
-    ] = 10,
+        int | None,
+        typer.Option(
+            min=1,
+            metavar="N",
+            help="Generated scenes (seeds) per case; with --tracking, frames per video.",
+            show_default="10; 120 with --tracking",
+        ),
+    ] = None,
     repeats: Annotated[
         int | None,
         typer.Option(
@@ -71,6 +77,15 @@ def bench(
             "--service",
             help="Time the service instead: HTTP and zenoh latency against bare detection "
             "(service/bench/overhead.py).",
+        ),
+    ] = False,
+    tracking: Annotated[
+        bool,
+        typer.Option(
+            "--tracking",
+            help="Time what tracking adds to detection instead: per 640x480 frame of "
+            "generated videos, and whole dlo track processes against dlo detect "
+            "(service/bench/tracking.py).",
         ),
     ] = False,
     recording: Annotated[
@@ -170,11 +185,11 @@ def bench(
     ] = None,
 ) -> None:
     """Time the detector per stage on one thread: photographs, generated scenes, scaling."""
-    if service + startup + bombs + (rings is not None) + recording > 1:
+    if service + startup + bombs + (rings is not None) + recording + tracking > 1:
         exit_usage(
             stderr_console(),
-            "--service, --startup, --bombs, --rings and --recording time different things: "
-            "give one",
+            "--service, --startup, --bombs, --rings, --recording and --tracking time "
+            "different things: give one",
         )
     if bombs:
         from service.bench.bombs import run_bomb_bench
@@ -205,7 +220,15 @@ def bench(
         command = dlo_command() if dlo is None else shlex.split(dlo)
         raise typer.Exit(run_startup_bench(command, dataset, runs, as_json))
     repeats = repeats or 3
+    frames = frames or (TRACKING_FRAMES if tracking else 10)
     if os.environ.get(CHILD_FLAG) == "1":
+        if tracking:
+            from service.bench.tracking import dlo_command as tracking_dlo
+            from service.bench.tracking import run_tracking_bench
+
+            raise typer.Exit(
+                run_tracking_bench(quick, as_json, frames, repeats, cpu_name(), tracking_dlo())
+            )
         if recording:
             from service.bench.recording import run_recording_bench
 
@@ -225,7 +248,7 @@ def bench(
     args = [sys.executable, "-m", "service.cli", "bench", "--dataset", str(dataset)]
     args += ["--frames", str(frames), "--repeats", str(repeats)]
     args += ["--quick"] * quick + ["--json"] * as_json + ["--service"] * service
-    args += ["--recording"] * recording
+    args += ["--recording"] * recording + ["--tracking"] * tracking
     args += [] if rings is None else ["--rings", rings]
     raise typer.Exit(subprocess.call(args, env=env))
 

@@ -21,12 +21,11 @@ from pydantic import ValidationError
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from schemas import CameraModel, DepthSurface, Detection, DetectParams, SegmentationMethod
+from schemas import CameraModel, DepthSurface, Detection, DetectParams
 from schemas.model import CablePhysics
 from service.batch import (
     IMAGE_OUTPUTS,
     InvalidParametersError,
-    build_params,
     describe_json_validation_error,
     detection_to_json,
     expand_inputs,
@@ -34,7 +33,18 @@ from service.batch import (
     find_output_clashes,
     parse_outputs,
     process_file,
-    read_params,
+)
+from service.cli.options import (
+    ExpectedCount,
+    HsvHigh,
+    HsvLow,
+    MaxFrames,
+    OverlayVideo,
+    ParamsText,
+    Segmentation,
+    SegmenterModel,
+    SegmentLength,
+    detection_setup,
 )
 from service.console import (
     EXIT_FAILED,
@@ -46,10 +56,11 @@ from service.console import (
     stderr_console,
 )
 from service.imageio import OutputWriteError
-from service.perception.segmenter import OnnxSegmenter, Segmenter, SegmenterModelError
+from service.perception.segmenter import Segmenter
 from service.video import (
     FrameOutcome,
     FrameSource,
+    StreamAnalyser,
     StreamSummary,
     VideoSourceError,
     is_video_path,
@@ -66,16 +77,6 @@ FRAME_MESSAGES_PER_STREAM = 5
 """Skipped frames reported one by one per video; the rest only counted in the summary."""
 CAMERA_MODEL_SUFFIXES = (".json", ".yaml", ".yml")
 """A ``--camera`` naming a file with one of these suffixes is a camera model, not a source."""
-
-
-def _default_of(field: str) -> str:
-    """The default of a :class:`DetectParams` field, as shown in ``--help``."""
-    default = DetectParams.model_fields[field].default
-    if isinstance(default, SegmentationMethod):
-        return default.value
-    if isinstance(default, tuple):
-        return " ".join(map(str, default))
-    return str(default)
 
 
 def detect(
@@ -119,60 +120,13 @@ def detect(
         Path | None,
         typer.Option(help="Foreground mask (non-zero = cable) for a single input image."),
     ] = None,
-    segment_length: Annotated[
-        float | None,
-        typer.Option(
-            metavar="PX",
-            help="Length of each chain segment.",
-            show_default=_default_of("segment_length"),
-        ),
-    ] = None,
-    expected_count: Annotated[
-        int | None, typer.Option(metavar="N", help="Number of cables in view, when known.")
-    ] = None,
-    segmentation: Annotated[
-        SegmentationMethod | None,
-        typer.Option(
-            help="Segmentation when no mask is given.",
-            show_default=_default_of("segmentation"),
-        ),
-    ] = None,
-    hsv_low: Annotated[
-        tuple[int, int, int] | None,
-        typer.Option(
-            metavar="H S V",
-            help="Lower HSV bound for --segmentation hsv.",
-            show_default=_default_of("hsv_low"),
-        ),
-    ] = None,
-    hsv_high: Annotated[
-        tuple[int, int, int] | None,
-        typer.Option(
-            metavar="H S V",
-            help="Upper HSV bound for --segmentation hsv.",
-            show_default=_default_of("hsv_high"),
-        ),
-    ] = None,
-    segmenter_model: Annotated[
-        Path | None,
-        typer.Option(
-            metavar="FILE",
-            help="A learned segmenter in ONNX format (input 1x3xHxW RGB, output a cable "
-            "probability or logit map; see the README) that makes the mask; implies "
-            "--segmentation model. Needs onnxruntime: pip install 'dlo-service[onnx]'.",
-        ),
-    ] = None,
-    params_text: Annotated[
-        str | None,
-        typer.Option(
-            "--params",
-            metavar="JSON|FILE",
-            help="Any detection parameters, as a JSON object such as "
-            '\'{"gap_curve": "natural", "max_gap": 150}\' or a file holding one (as dlo eval '
-            "--params); the options above override the fields they set.",
-            show_default=False,
-        ),
-    ] = None,
+    segment_length: SegmentLength = None,
+    expected_count: ExpectedCount = None,
+    segmentation: Segmentation = None,
+    hsv_low: HsvLow = None,
+    hsv_high: HsvHigh = None,
+    segmenter_model: SegmenterModel = None,
+    params_text: ParamsText = None,
     out_dir: Annotated[
         Path | None,
         typer.Option(
@@ -195,14 +149,8 @@ def detect(
             show_default=False,
         ),
     ] = None,
-    overlay_video: Annotated[
-        bool,
-        typer.Option("--overlay-video", help="Also write <stem>.overlay.mp4 per video or camera."),
-    ] = False,
-    max_frames: Annotated[
-        int | None,
-        typer.Option(metavar="N", help="Stop each video or camera after N frames."),
-    ] = None,
+    overlay_video: OverlayVideo = False,
+    max_frames: MaxFrames = None,
 ) -> None:
     """Detect the cables in each image, or in every frame of a video or camera stream.
 
@@ -212,32 +160,20 @@ def detect(
     {...}}. Ctrl-C stops cleanly, keeping every line written so far, and exits with 130.
     """
     console = stderr_console()
-    if segmenter_model is not None:
-        if segmentation not in (None, SegmentationMethod.model):
-            exit_usage(
-                console, f"--segmenter-model cannot be used with --segmentation {segmentation}"
-            )
-        segmentation = SegmentationMethod.model
-    elif segmentation is SegmentationMethod.model:
-        exit_usage(console, "--segmentation model needs --segmenter-model FILE.onnx")
+    params, segmenter = detection_setup(
+        console,
+        params_text,
+        segment_length,
+        expected_count,
+        segmentation,
+        hsv_low,
+        hsv_high,
+        segmenter_model,
+    )
     try:
-        params = build_params(
-            None if params_text is None else read_params(params_text),
-            segment_length=segment_length,
-            expected_count=expected_count,
-            segmentation=segmentation,
-            hsv_low=hsv_low,
-            hsv_high=hsv_high,
-        )
         selected = IMAGE_OUTPUTS if outputs is None else parse_outputs(outputs)
     except InvalidParametersError as exc:
         exit_usage(console, str(exc))
-    segmenter = None
-    if segmenter_model is not None:
-        try:
-            segmenter = OnnxSegmenter(segmenter_model)
-        except SegmenterModelError as exc:
-            exit_usage(console, str(exc))
     if max_frames is not None and max_frames < 1:
         exit_usage(console, "--max-frames: must be at least 1")
     camera_model = None
@@ -260,16 +196,16 @@ def detect(
             exit_usage(console, "--mask applies to a single input image")
         if out_dir is None:
             exit_usage(console, "--camera needs --out-dir")
-        stream_outputs = _stream_outputs(console, outputs, selected, overlay_video)
-        _make_out_dir(console, out_dir)
+        chosen_outputs = video_outputs(console, outputs, selected, overlay_video)
+        make_out_dir(console, out_dir)
         source = parse_camera(camera)
         load_kernels(console)
-        summary = _run_stream(
+        summary = run_stream(
             console,
             lambda: open_camera(source),
             params,
             out_dir,
-            stream_outputs,
+            chosen_outputs,
             max_frames,
             segmenter,
         )
@@ -294,8 +230,8 @@ def detect(
         exit_usage(console, "several inputs need --out-dir")
     if out_dir is None and outputs is not None:
         exit_usage(console, "--outputs needs --out-dir")
-    stream_outputs = (
-        _stream_outputs(console, outputs, selected, overlay_video)
+    chosen_outputs = (
+        video_outputs(console, outputs, selected, overlay_video)
         if videos
         else (False, False, False)
     )
@@ -326,7 +262,7 @@ def detect(
                 typer.echo(detection_to_json(detection))
         raise typer.Exit(EXIT_FAILED if failed else 0)
 
-    _make_out_dir(console, out_dir)
+    make_out_dir(console, out_dir)
     interrupted = False
     if images:
         _, images_failed, interrupted = _detect_images(
@@ -345,12 +281,12 @@ def detect(
             )
             failed += 1
             continue
-        summary = _run_stream(
+        summary = run_stream(
             console,
             lambda path=path: open_video(path),
             params,
             out_dir,
-            stream_outputs,
+            chosen_outputs,
             max_frames,
             segmenter,
         )
@@ -364,7 +300,7 @@ def detect(
     raise typer.Exit(EXIT_FAILED if failed else 0)
 
 
-def _stream_outputs(
+def video_outputs(
     console: Console, given: str | None, selected: Iterable[str], overlay_video: bool
 ) -> tuple[bool, bool, bool]:
     """Which outputs videos get: (JSON Lines, overlay video, MCAP recording); labels are a
@@ -387,7 +323,7 @@ def recording_stem(paths: list[Path]) -> str:
     return "images"
 
 
-def _make_out_dir(console: Console, out_dir: Path) -> None:
+def make_out_dir(console: Console, out_dir: Path) -> None:
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -507,7 +443,7 @@ def _close_recording(console: Console, recording: McapRecorder) -> bool:
     return True
 
 
-def _run_stream(
+def run_stream(
     console: Console,
     open_source: Callable[[], FrameSource],
     params: DetectParams,
@@ -515,11 +451,14 @@ def _run_stream(
     outputs: tuple[bool, bool, bool],
     max_frames: int | None,
     segmenter: Segmenter | None = None,
+    analyser: Callable[[FrameSource], StreamAnalyser] | None = None,
 ) -> StreamSummary | None:
     """Open a video or camera and process it with a progress bar; report on stderr.
 
-    Returns None when the source cannot be opened or the output cannot be created
-    (the error is printed), else the summary, also when Ctrl-C stopped it.
+    ``analyser``, given the opened source, makes what runs on each of its frames instead
+    of plain detection (``dlo track``'s tracker). Returns None when the source cannot be
+    opened or the output cannot be created (the error is printed), else the summary,
+    also when Ctrl-C stopped it.
     """
     try:
         source = open_source()
@@ -570,6 +509,7 @@ def _run_stream(
                 max_frames=max_frames,
                 on_frame=on_frame,
                 segmenter=segmenter,
+                analyser=None if analyser is None else analyser(source),
             )
         except OutputWriteError as exc:
             print_error(console, str(exc))

@@ -70,13 +70,29 @@ def serve(
             "(env DLO_SEGMENTER_MODEL; needs pip install 'dlo-service[onnx]').",
         ),
     ] = None,
+    track: Annotated[
+        bool,
+        typer.Option(
+            "--track",
+            help="Also track every camera over zenoh: each frame's Tracks (one id per cable "
+            "from frame to frame) on dlo/<camera>/tracks (env DLO_TRACK=*).",
+        ),
+    ] = False,
+    track_camera: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="NAME",
+            help="Track this camera (a name, or a key expression of names such as "
+            "line1-$*); repeatable (env DLO_TRACK, comma separated).",
+        ),
+    ] = None,
 ) -> None:
     """Serve detection over HTTP (POST /v1/detect; OpenAPI docs at /docs).
 
     Other settings come from DLO_* variables (see the README): DLO_QUEUE_SIZE,
     DLO_MAX_MEGAPIXELS, DLO_MAX_BODY_MB, DLO_MAX_DETECT_SECONDS, DLO_ZENOH_MULTICAST,
-    DLO_ZENOH_ASSIGNMENT, DLO_API_TOKEN or DLO_API_TOKEN_FILE (a bearer token
-    on /v1/*), DLO_PROTECT_METRICS, DLO_LOG_LEVEL.
+    DLO_ZENOH_ASSIGNMENT, DLO_TRACK_MEMORY_S, DLO_API_TOKEN or DLO_API_TOKEN_FILE (a
+    bearer token on /v1/*), DLO_PROTECT_METRICS, DLO_LOG_LEVEL.
     """
     options = {
         "host": host,
@@ -87,6 +103,7 @@ def serve(
         "zenoh_listen": zenoh_listen or None,
         "zenoh_image_keys": image_keys or None,
         "segmenter_model": segmenter_model,
+        "track": ["*"] if track else (track_camera or None),
     }
     try:
         settings = Settings(**{name: value for name, value in options.items() if value is not None})

@@ -142,6 +142,29 @@ def eval_command(
             metavar="H", help="Synthetic image height.", show_default=str(SYNTHETIC_SIZE[1])
         ),
     ] = None,
+    tracking: Annotated[
+        int | None,
+        typer.Option(
+            metavar="N",
+            help="Score the tracker (dlo track) on N generated videos instead: identity, "
+            "same end, id switches and joint error against each cable's material points, "
+            "beside the bare detection's; video i uses seed S + i.",
+            show_default=False,
+        ),
+    ] = None,
+    kinds: Annotated[
+        str | None,
+        typer.Option(
+            metavar="K[,K...]|all",
+            help="With --tracking: the kinds of video, taken in turn (default all: the kind "
+            "goes by the seed): drift, rotation, bends, occluders, crossings, enter_leave.",
+            show_default=False,
+        ),
+    ] = None,
+    frames: Annotated[
+        int,
+        typer.Option(metavar="F", help="With --tracking: frames per video (30 per second)."),
+    ] = 300,
     json_output: Annotated[
         bool,
         typer.Option("--json", help="Print the results as JSON instead of a table."),
@@ -166,6 +189,10 @@ def eval_command(
     if worst < 0:
         exit_usage(errors, "--worst must be 0 or more")
     params = _parse_params(errors, params_text)
+    if tracking is not None:
+        _tracking_mode(errors, tracking, locals())
+    elif kinds is not None:
+        exit_usage(errors, "--kinds applies only with --tracking N")
     synthetic_options = {
         "--family": family,
         "--seed": seed,
@@ -204,6 +231,40 @@ def eval_command(
             json_output,
             params,
         )
+
+
+def _tracking_mode(errors: Console, count: int, given: dict[str, Any]) -> None:
+    """``--tracking N``: the tracker on generated videos (service/evaluation/tracking_cli.py)."""
+    from service.evaluation import tracking_cli
+
+    others = {
+        "DATASET_DIR": given["dataset_dirs"],
+        "--synthetic": given["synthetic"],
+        "--family": given["family"],
+        "--occluders": given["occluders"],
+        "--cables": given["cables"],
+        "--width": given["width"],
+        "--height": given["height"],
+        "--out-dir": given["out_dir"],
+    }
+    clash = [name for name, value in others.items() if value]
+    if clash:
+        exit_usage(errors, f"{', '.join(clash)} cannot be combined with --tracking")
+    tracking_cli.run_tracking(
+        errors,
+        count,
+        SYNTHETIC_SEED if given["seed"] is None else given["seed"],
+        tracking_cli.parse_kinds(errors, given["kinds"]),
+        given["frames"],
+        given["mask_from_labels"],
+        given["csv_file"],
+        given["json_output"],
+        given["params"],
+        _csv_writer,
+        _progress,
+        _print_json,
+        _stdout_console,
+    )
 
 
 def _parse_params(errors: Console, text: str | None) -> DetectParams | None:

@@ -115,9 +115,14 @@ def _zenoh_config(settings: Settings) -> Any:
 
 
 async def _warm_up(state: AppState) -> None:
-    """Run one detection on a tiny image in the pool; then the service is ready."""
+    """Run one detection on a tiny image in the pool (and load the tracker's kernels when
+    cameras are tracked); then the service is ready."""
     try:
         await state.pool.run(warm_up, state.detect)
+        if state.settings.zenoh and state.settings.track:
+            from service.perception.tracking_warm_up import warm_up_tracking
+
+            await state.pool.run(warm_up_tracking)
     except asyncio.CancelledError:
         raise
     except Exception as exc:
@@ -146,6 +151,7 @@ async def _open_bus(state: AppState) -> None:
             image_keys=settings.zenoh_image_keys,
             balanced=settings.zenoh_assignment == "balanced",
             max_detect_seconds=settings.max_detect_seconds,
+            tracking=_camera_trackers(settings),
         )
         state.bus = bus  # before opening: close() then waits for open() to finish
         await asyncio.to_thread(bus.open)
@@ -158,6 +164,16 @@ async def _open_bus(state: AppState) -> None:
     logger.info(
         "zenoh session open; serving %s and dlo/detect", ", ".join(settings.zenoh_image_keys)
     )
+
+
+def _camera_trackers(settings: Settings):
+    """The bus's per-camera trackers, when some cameras are to be tracked."""
+    if not settings.track:
+        return None
+    from schemas import TrackParams
+    from service.bus.tracks import CameraTrackers
+
+    return CameraTrackers(settings.track, TrackParams(memory_s=settings.track_memory_s))
 
 
 async def _request_error(request: Request, exc: Exception) -> JSONResponse:

@@ -16,6 +16,10 @@ kernels_cached(group="detection") -> bool
     Whether the kernels are already compiled into numba's cache on this machine (a
     cheap check, before ``warm_up``, for front ends that say when a run compiles); other
     groups are sets of kernels with warm-ups of their own (``service.console.KERNEL_SETS``).
+Tracker(params=None, track_params=None)
+    Follows cables through a video: ``tracker.update(image)`` detects and returns the
+    frame's :class:`schemas.Tracks`; :func:`advance` is the same step as a pure function
+    of a :class:`TrackerState` (see :mod:`service.perception.tracking`).
 """
 
 from service.perception._kernel_cache import kernels_cached
@@ -23,15 +27,20 @@ from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.errors import InvalidInputError
 from service.perception.pipeline import DetectionResult, detect, detect_full, warm_up
 from service.perception.render import render_labels, render_overlay
+from service.perception.tracking import Tracker, TrackerState, advance, new_state
 
 __all__ = [
     "Deadline",
     "DeadlineExceeded",
     "DetectionResult",
     "InvalidInputError",
+    "Tracker",
+    "TrackerState",
+    "advance",
     "detect",
     "detect_full",
     "kernels_cached",
+    "new_state",
     "render_labels",
     "render_overlay",
     "warm_up",

@@ -99,8 +99,10 @@ class _Stopwatch:
 def _finalise_path(path: MergedPath, mask, distance, params: DetectParams, radius: float):
     """A merged path with its ends extended, as joints exactly ``l_s`` apart.
 
-    Returns the joints, the per-segment "inferred" flags and the chain's radius (the
-    median distance to the border at its joints on the cable, less half a pixel).
+    Returns the joints, the per-segment "inferred" flags, the chain's scale for the
+    later steps' thresholds (the median distance transform at its joints on the cable,
+    less half a pixel: what the crossings' window, the hidden segments' reach and each
+    cable's own threshold were built on) and its radius (:func:`chain_radius`).
     """
     span = max(2.0 * params.segment_length, 3.0 * radius)
     vertices, filled = extend_ends(path.vertices, path.filled, mask, radius, span)
@@ -121,12 +123,62 @@ def _finalise_path(path: MergedPath, mask, distance, params: DetectParams, radiu
     cols = np.clip(np.rint(joints[:, 0]).astype(int), 0, width - 1)
     rows = np.clip(np.rint(joints[:, 1]).astype(int), 0, height - 1)
     on_cable = distance[rows, cols] > 0
-    chain_radius = (
+    scale = (
         max(float(np.median(distance[rows, cols][on_cable])) - 0.5, 0.5)
         if on_cable.any()
         else radius
     )
-    return joints, inferred, chain_radius
+    return joints, inferred, scale, chain_radius(joints, mask, radius)
+
+
+# Each side of a width across a chain is off by at most half a pixel's diagonal: the ray
+# leaves the cable on a pixel's border, the cable's edge runs somewhere in that pixel.
+ACROSS_QUANTISATION_PX = float(np.sqrt(2.0))
+# How far out a side's edge is looked for, in typical radii (a ray along a crossing
+# strand stops there), plus a few pixels for thin cables.
+ACROSS_REACH_RADII = 6.0
+# The share of a width either side must span for the chain to count as on its middle.
+CENTRED_SHARE = 1.0 / 3.0
+ACROSS_REACH_PX = 6.0
+
+
+def chain_radius(joints: np.ndarray, mask: np.ndarray, radius: float) -> float:
+    """A chain's radius in pixels: half the mask's width across it, where it is seen.
+
+    The width is measured across the chain at each joint and at each segment's middle,
+    from border to border of the mask's pixels (:func:`_pipeline_kernels.edge_distance`),
+    so a cable drawn ``w`` pixels wide measures ``w`` at any angle and curvature on
+    average (a distance transform at the centreline runs about half a pixel short off
+    the axes). Widths the chain does not run through the middle third of are left out;
+    the rest near their median (within two sides' quantisation) are averaged.
+
+    Parameters
+    ----------
+    joints : ndarray
+        ``(N, 2)`` joints ``(x, y)`` of the chain.
+    mask : ndarray of bool
+        The foreground mask.
+    radius : float
+        The cables' typical radius (``estimate_radius``): sets how far out an edge is
+        looked for, and is the answer where no width can be measured (a chain seen
+        nowhere, or only where it leaves the image).
+    """
+    limit = ACROSS_REACH_RADII * radius + ACROSS_REACH_PX
+    sides = _pipeline_kernels.sides_across(
+        np.ascontiguousarray(joints, np.float64), np.ascontiguousarray(mask, bool), limit
+    )
+    widths = sides.sum(axis=1)
+    # A chain runs along its cable's middle: where it lies off the middle third of what
+    # the mask spans across it, the span is something else (the other side of a cable
+    # it touches, a strand it crosses, a blob it runs along the edge of).
+    centred = sides.min(axis=1) >= CENTRED_SHARE * widths
+    widths = widths[np.isfinite(widths) & centred]
+    if widths.size == 0:
+        return radius
+    median = float(np.median(widths))
+    near = widths[np.abs(widths - median) <= ACROSS_QUANTISATION_PX]
+    # An even count split far apart has none near its median: the median it is.
+    return max(0.5 * (float(np.mean(near)) if near.size else median), 0.5)
 
 
 def _empty(width, height, params, watch, mask, skeleton) -> DetectionResult:
@@ -232,11 +284,12 @@ def detect_full(
             continue
         finals.append(_finalise_path(path, foreground, distance, params, radius))
     finals.sort(key=lambda item: -polyline_length(item[0]))
-    joint_arrays = [joints for joints, _, _ in finals]
-    radii = [chain_radius for _, _, chain_radius in finals]
+    joint_arrays = [joints for joints, *_ in finals]
+    # The thresholds of the steps below are in the scale they were built on.
+    radii = [scale for _, _, scale, _ in finals]
     check(deadline, "merging")
     found = detect_crossings(joint_arrays, radii, image_bgr)
-    inferred_flags = [inferred.copy() for _, inferred, _ in finals]
+    inferred_flags = [inferred.copy() for _, inferred, *_ in finals]
     for crossing in found:
         # The strand underneath is hidden where the top strand covers it.
         under = joint_arrays[crossing.under]
@@ -265,10 +318,10 @@ def detect_full(
         Chain(
             id=index,
             points=joints.tolist(),
-            radius=chain_radius,
+            radius=measured,
             inferred=inferred_flags[index].tolist(),
         )
-        for index, (joints, _, chain_radius) in enumerate(finals)
+        for index, (joints, _, _, measured) in enumerate(finals)
     ]
     crossings = [
         Crossing(

@@ -105,7 +105,7 @@ def render_labels(
         split_crossings_by_colour(labels, detection, mask, image)
     hidden = np.zeros((height, width), np.uint16)
     for chain in detection.chains:
-        thickness = max(1, round(2 * chain.radius + 1))
+        thickness = max(1, round(2 * chain.radius))
         for k, inferred in enumerate(chain.inferred):
             if not inferred:
                 continue
@@ -223,7 +223,15 @@ def render_overlay(image: np.ndarray, detection: Detection) -> np.ndarray:
                 cv2.line(canvas, fixed(a), fixed(b), colour, 2 * scale, cv2.LINE_AA, shift)
         for point in chain.points:
             cv2.circle(canvas, fixed(point), 2 * scale * factor, colour, -1, cv2.LINE_AA, shift)
-        start = chain.points[0]
+        # The id beside the first joint in the picture (a track's may lie outside it).
+        start = next(
+            (
+                p
+                for p in chain.points
+                if 0 <= p[0] < canvas.shape[1] and 0 <= p[1] < canvas.shape[0]
+            ),
+            chain.points[0],
+        )
         cv2.putText(
             canvas,
             str(chain.id),

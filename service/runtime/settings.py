@@ -85,6 +85,15 @@ class Settings(BaseSettings):
         None,
         description="Multicast scouting on/off; default: as the configuration file, else off.",
     )
+    track: Annotated[list[str], NoDecode] = Field(
+        [],
+        description="Cameras whose frames are also tracked (their Tracks on "
+        "dlo/<camera>/tracks), comma separated: names or key expressions of names "
+        "(line1-$*), or * for every camera; empty: none.",
+    )
+    track_memory_s: float = Field(
+        5.0, ge=0, le=3600, description="How long a tracked cable out of view is remembered."
+    )
     api_token: SecretStr | None = Field(
         None,
         description="Bearer token required on /v1/* (and on /metrics with protect_metrics); "
@@ -125,6 +134,21 @@ class Settings(BaseSettings):
     @classmethod
     def _endpoints(cls, value: object) -> object:
         return _comma_separated(value) or None  # an empty variable: as if unset
+
+    @field_validator("track", mode="before")
+    @classmethod
+    def _camera_list(cls, value: object) -> object:
+        return _comma_separated(value) or []
+
+    @field_validator("track")
+    @classmethod
+    def _camera_patterns(cls, names: list[str]) -> list[str]:
+        for name in names:
+            if "/" in name or not name.strip():
+                raise ValueError(
+                    f"{name!r} is not a camera name or pattern (one chunk, e.g. cam1, line1-$*, *)"
+                )
+        return list(dict.fromkeys(names))
 
     @field_validator("zenoh_image_keys", mode="before")
     @classmethod

@@ -8,7 +8,8 @@ image, every cable's whole centreline (hidden stretches included) and every cros
 the cable on top. :func:`make_family_scene` draws scenes of named families
 (:data:`FAMILIES`: tight loops, cables doubled back, shallow crossings, cables side by
 side, many cables, occluders on bends and at the edge, bright and busy backgrounds, cables
-of one colour), with the same ground truth.
+of one colour), with the same ground truth. :func:`make_video` makes videos of moving
+cables with the true position of every material point in every frame, for tracking.
 
 Coordinates are pixels as ``[x, y]`` with pixel centres at integer positions (the OpenCV
 convention): ``image[row, col]`` is centred on ``x = col, y = row``. The same arguments
@@ -25,6 +26,14 @@ from service.synthetic.scene_types import (
     SyntheticCrossing,
     SyntheticScene,
 )
+from service.synthetic.videos import (
+    VIDEO_KINDS,
+    CableTruth,
+    SyntheticVideo,
+    VideoFrame,
+    make_video,
+    write_video,
+)
 
 __all__ = [
     "FAMILIES",
@@ -33,12 +42,18 @@ __all__ = [
     "MIN_CABLE_RADIUS",
     "MIN_CROSSING_ANGLE",
     "MIN_IMAGE_SIDE",
+    "VIDEO_KINDS",
+    "CableTruth",
     "Family",
     "Occluder",
     "SceneFeature",
     "SyntheticCable",
     "SyntheticCrossing",
     "SyntheticScene",
+    "SyntheticVideo",
+    "VideoFrame",
     "make_family_scene",
     "make_scene",
+    "make_video",
+    "write_video",
 ]

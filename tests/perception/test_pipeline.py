@@ -17,6 +17,7 @@ from service.perception import (
 )
 from service.perception.contours import extract_contours
 from service.perception.fitting import fit_chains, junction_zones
+from service.perception.pipeline import chain_radius
 from service.perception.pruning import prune_overlaps
 from service.perception.skeleton import (
     distance_transform,
@@ -60,6 +61,69 @@ def test_one_straight_cable_with_an_occlusion_is_one_chain_bridged_and_flagged()
     assert inferred_x and min(inferred_x) > 165 and max(inferred_x) < 235
     assert not any(chain.inferred[:10])
     assert chain.radius == pytest.approx(5.5, abs=1.0)
+
+
+def straight_cable_mask(shape, angle_deg, half_width, length):
+    """The pixels whose centres lie within ``half_width`` of a segment through the middle."""
+    height, width = shape
+    rows, cols = np.mgrid[0:height, 0:width].astype(float)
+    centre = np.array([width // 2, height // 2], float)
+    along = np.array([np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))])
+    t = np.clip(
+        (cols - centre[0]) * along[0] + (rows - centre[1]) * along[1], -length / 2, length / 2
+    )
+    return np.hypot(cols - centre[0] - t * along[0], rows - centre[1] - t * along[1]) <= half_width
+
+
+def ring_cable_mask(shape, ring_radius, half_width, centre_offset=(0.0, 0.0)):
+    """The pixels whose centres lie within ``half_width`` of a circle."""
+    height, width = shape
+    rows, cols = np.mgrid[0:height, 0:width].astype(float)
+    centre_x, centre_y = width // 2 + centre_offset[0], height // 2 + centre_offset[1]
+    return np.abs(np.hypot(cols - centre_x, rows - centre_y) - ring_radius) <= half_width
+
+
+# Half widths whose axis-aligned masks are exactly twice as wide (odd pixel counts).
+HALF_WIDTHS = (2.5, 4.5, 7.5)
+
+
+@pytest.mark.parametrize("half_width", HALF_WIDTHS)
+def test_a_straight_cables_radius_is_half_its_width_at_any_angle(half_width):
+    for angle in (0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0, 112.5, 135.0, 160.0):
+        mask = straight_cable_mask((300, 300), angle, half_width, 240.0)
+        chains = detect(None, mask=mask).chains
+        assert len(chains) == 1, angle
+        assert chains[0].radius == pytest.approx(half_width, abs=0.25), angle
+
+
+@pytest.mark.parametrize("half_width", HALF_WIDTHS)
+def test_a_curved_cables_radius_is_half_its_width(half_width):
+    # A distance transform read at the centreline gave 3.89 for the 4.5 of a ring.
+    for ring_radius, offset in ((25.0, (0.0, 0.0)), (45.0, (0.3, 0.6)), (90.0, (0.5, 0.2))):
+        if ring_radius < 4 * half_width:
+            continue
+        mask = ring_cable_mask((240, 240), ring_radius, half_width, offset)
+        chains = detect(None, mask=mask).chains
+        assert chains, ring_radius
+        assert chains[0].radius == pytest.approx(half_width, abs=0.25), ring_radius
+
+
+def test_a_chains_radius_is_the_median_width_when_no_width_lies_near_it():
+    mask = np.zeros((40, 80), bool)
+    mask[19:22, :30] = True  # 3 px wide
+    mask[13:28, 50:] = True  # 15 px wide; the chain's middle (x = 40) is off the mask
+    joints = np.array([[10.0, 20.0], [70.0, 20.0]])
+    assert chain_radius(joints, mask, 2.0) == pytest.approx(4.5)
+    assert chain_radius(joints[:1], mask, 2.0) == 2.0  # one joint has no direction
+
+
+def test_a_span_the_chain_lies_off_the_middle_of_is_not_its_width():
+    mask = np.zeros((40, 120), bool)
+    mask[10:19, 5:115] = True  # a cable 9 px wide along row 14
+    joints = np.column_stack((np.arange(20.0, 101.0, 10.0), np.full(9, 14.0)))
+    assert chain_radius(joints, mask, 3.0) == pytest.approx(4.5)
+    mask[19:28, 5:115] = True  # another one touching it: 18 px of mask, 4.5 above the chain
+    assert chain_radius(joints, mask, 3.0) == 3.0  # nothing measured: the typical radius
 
 
 def test_a_crossing_is_passed_straight_through_and_the_top_strand_is_found():
@@ -261,6 +325,26 @@ def test_inferred_segments_kernel_equals_the_reference(seed):
         np.testing.assert_array_equal(
             _pipeline_kernels.inferred_segments(source_edge, edge_lengths, hidden_edge),
             reference.inferred_segments(source_edge, edge_lengths, hidden_edge),
+        )
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sides_across_kernel_equals_the_reference(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(20):
+        mask = rng.random((int(rng.integers(5, 60)), int(rng.integers(5, 60)))) < rng.random()
+        mask |= straight_cable_mask(mask.shape, rng.uniform(0, 180), rng.uniform(0.5, 6), 50.0)
+        height, width = mask.shape
+        joints = np.cumsum(rng.normal(0.0, 4.0, (int(rng.integers(1, 12)), 2)), axis=0)
+        joints += (width / 2, height / 2)
+        if rng.random() < 0.2:
+            joints[1:2] = joints[:1]  # a segment of no length has no normal
+        limit = float(rng.uniform(1.0, 40.0))
+        np.testing.assert_allclose(
+            _pipeline_kernels.sides_across(joints, mask, limit),
+            reference.sides_across(joints, mask, limit),
+            rtol=0,
+            atol=1e-9,
         )
 
 

@@ -18,6 +18,7 @@ from numba.core.dispatcher import Dispatcher
 
 import service.perception
 from service.perception import _kernel_cache, kernels_cached, warm_up
+from service.perception.tracking_warm_up import warm_up_tracking
 
 PACKAGE = Path(service.perception.__file__).parent
 KERNEL_FILES = sorted(PACKAGE.glob("_*_kernels.py"))
@@ -80,6 +81,7 @@ def test_warm_up_compiles_every_kernel_the_steps_call():
     called = kernels_the_steps_call()
     assert len(called) >= 20
     warm_up()
+    warm_up_tracking()  # the tracker's set (service.console.KERNEL_SETS)
     for module_name, name in sorted(called):
         kernel = getattr(kernel_module(PACKAGE / f"{module_name}.py"), name)
         assert isinstance(kernel, Dispatcher), f"{module_name}.{name} is not a kernel"

@@ -153,3 +153,21 @@ def test_dlo_bench_bombs_reports_refusals_and_the_servers_memory():
     assert all(row["requests"] == 5 and row["p50_ms"] > 0 for row in results["rows"])
     memory = results["server_peak_rss_mb"]
     assert memory["after"] - memory["before"] < 64  # decoding one bomb: 2.7 GB
+
+
+@pytest.mark.slow
+def test_dlo_bench_tracking_times_frames_and_whole_processes():
+    """The report's shape: per-frame rows (tracking beside detection) and whole dlo
+    detect / dlo track processes, with their wall and CPU times."""
+    completed = bench("--tracking", "--quick", "--json")
+    assert completed.returncode == 0, completed.stderr
+    results = json.loads(completed.stdout)
+    *videos, total = results["frames"]
+    assert total["case"] == "all frames" and total["frames"] == 9 * len(videos)
+    for row in results["frames"]:
+        assert row["frames"] % 9 == 0  # the first of a video's 10 frames starts the tracks
+        assert row["track_cpu_p50_ms"] > 0 and 0 < row["detect_p50_ms"] <= row["both_p50_ms"]
+    assert [row["command"] for row in results["processes"]] == ["dlo detect", "dlo track"]
+    for row in results["processes"]:
+        assert row["cpu_s_median"] > 0 and row["fps_whole_process_cpu"] > 0
+        assert row["fps_reported"] is not None

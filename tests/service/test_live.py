@@ -82,6 +82,16 @@ def ack(socket: ClientConnection) -> None:
     socket.send(json.dumps({"type": "ack"}))
 
 
+def acknowledged_until(socket: ClientConnection, kind: str, frame_id) -> tuple[dict, bytes, bytes]:
+    """The frame message with a ``kind`` result for ``frame_id``, every frame before it
+    acknowledged (skipped)."""
+    while True:
+        header, result, jpeg = next_frame(socket)
+        ack(socket)
+        if header["kind"] == kind and header["frame_id"] == frame_id:
+            return header, result, jpeg
+
+
 def watched_publisher(client: zenoh.Session, camera: str) -> zenoh.Publisher:
     """A publisher on ``dlo/<camera>/image``, once a subscriber (the hub's) matches it."""
     publisher = client.declare_publisher(f"dlo/{camera}/image")
@@ -235,11 +245,7 @@ def test_frames_stream_with_the_chains_the_service_detected() -> None:
             paired = {}
             for index, image in images.items():
                 publisher.put(image, attachment=json.dumps({"frame_id": index}))
-                while True:
-                    header, result, jpeg = next_frame(socket)
-                    ack(socket)
-                    if header["kind"] == "chains" and header["frame_id"] == index:
-                        break
+                header, result, jpeg = acknowledged_until(socket, "chains", index)
                 assert header["pairing"] == "frame_id"
                 assert header["camera"] == "cam1" and jpeg == image
                 paired[index] = Detection.model_validate_json(result)
@@ -335,3 +341,30 @@ def test_bad_cameras_other_sites_and_zenoh_off_are_refused() -> None:
         with open_socket(base, "cam1") as socket:
             error, code = refusal(socket)
             assert (error["status"], code) == (503, 4503)
+
+
+def test_a_tracked_camera_shows_the_trackers_ids_live() -> None:
+    """``dlo serve --track``: the viewer's socket carries the service's own tracks (the
+    real tracker's ids, kept from frame to frame), not only chains published by hand."""
+    from schemas import Tracks
+
+    from .test_bus_tracks import encoded_frames
+
+    frames = encoded_frames(5)  # two drifting cables
+    with (
+        service_with_zenoh(track=["cam1"]) as (base, endpoint),
+        client_of(endpoint) as camera,
+        open_socket(base, "cam1") as socket,
+    ):
+        next_text(socket, "hello")
+        publisher = watched_publisher(camera, "cam1")
+        wait_for_subscriber(camera, "dlo/cam1/tracks")  # the hub's
+        shown = []
+        for index, image in enumerate(frames):
+            publisher.put(image, attachment=json.dumps({"frame_id": index}))
+            _, result, _ = acknowledged_until(socket, "tracks", index)
+            shown.append(Tracks.model_validate_json(result))
+    ids = [sorted(chain.id for chain in tracks.chains) for tracks in shown]
+    assert ids[0] == [0, 1] and all(frame_ids == ids[0] for frame_ids in ids)
+    assert [tracks.tracking.frame for tracks in shown] == list(range(len(frames)))
+    assert len({tracks.tracking.session for tracks in shown}) == 1

@@ -71,9 +71,7 @@ def within_a_millimetre(kind: str, seed: int, mode: str) -> tuple[float, int]:
 
 
 @pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize(
-    ("kind", "mode"), [case for case in cases() if case != ("tilted", "plane")]
-)
+@pytest.mark.parametrize(("kind", "mode"), list(cases()))
 def test_detected_chains_lie_within_a_millimetre_of_the_truth(kind, mode, seed):
     share, joints = within_a_millimetre(kind, seed, mode)
     assert joints >= 100
@@ -83,9 +81,10 @@ def test_detected_chains_lie_within_a_millimetre_of_the_truth(kind, mode, seed):
 @pytest.mark.parametrize("seed", SEEDS)
 def test_on_a_tilted_table_the_detectors_radius_sets_the_error(seed):
     """Seen obliquely, a plane surface places the centreline ``radius`` above the table
-    along an oblique ray, so the detector's pixel radius (10-15 % short on shaded cables)
-    costs more there than anything in the lifting: with each chain's radius set to its
-    cable's, the same detected chains lie within a millimetre."""
+    along an oblique ray, so the detector's pixel radius (about 5 % short on these shaded
+    cables: their darker rims fall outside the mask) costs more there than anything in
+    the lifting: with each chain's radius set to its cable's, the same detected chains
+    lie closer still."""
     scene_3d = scene("tilted", seed)
     found = detected("tilted", seed)
     as_found = lift(found, scene_3d.camera)
@@ -99,7 +98,7 @@ def test_on_a_tilted_table_the_detectors_radius_sets_the_error(seed):
     share_found = np.mean(scene_3d.distance_to_centrelines(lifted_points(as_found)) <= 1e-3)
     share_fixed = np.mean(scene_3d.distance_to_centrelines(lifted_points(fixed)) <= 1e-3)
     assert share_fixed >= 0.95, f"{share_fixed:.1%}"
-    assert share_found < share_fixed
+    assert share_found <= share_fixed
 
 
 def nearest_cable(scene_3d, chain: Chain):

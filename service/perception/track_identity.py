@@ -1,0 +1,381 @@
+"""Tracking, step 3: new cables, and cables that come back.
+
+Stretches of the detection that no track holds become *candidates*; a candidate seen in
+consecutive frames (``confirm_frames``) becomes a track, so that a chain the detector
+finds in one frame only does not start one. Before it gets a new id it is compared with
+the tracks out of view (and those predicted but not seen for a moment): a cable that
+comes back is recognised by its colour (the median Lab colour along it), its width and
+its length (a whole cable, both ends seen, must match a whole cable's length; part of
+one may not be longer), and takes its old id, joints and end back. Which end is which
+follows from the ends' last sightings: a cable that left through an edge comes back
+through it with the end that left last.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from service.perception import _geometry_kernels
+from service.perception.track_matching import Chains, Piece, lab_under
+
+MIN_CANDIDATE_SEGMENTS = 3
+"""A stretch shorter than this many segments does not start a track."""
+COLOUR_TOLERANCE = 22.0
+"""Largest distance between the colours of a cable and a remembered track: Lab (OpenCV's
+8-bit scaling) with lightness weighted by half (:data:`LAB_WEIGHTS`)."""
+LAB_WEIGHTS = np.array([0.5, 1.0, 1.0])
+RADIUS_TOLERANCE = 1.6
+"""Largest ratio between their radii."""
+LENGTH_TOLERANCE = 0.15
+"""Largest relative difference between whole cables' lengths (plus two segments)."""
+SHAPE_MARGIN = 1.5
+"""The shape decides which end is which when one way fits this much worse than the other."""
+MAX_JOIN_GAP = 10.0
+"""A candidate continues a track only from within this many segments of its end ..."""
+MAX_JOIN_TURN = math.radians(40.0)
+"""... turning no more than this from the track's end direction."""
+
+
+@dataclass(frozen=True, eq=False)
+class Candidate:
+    """A stretch of detection no track holds: perhaps a new cable.
+
+    Attributes
+    ----------
+    joints : (n, 2) ndarray
+        ``segment_length`` apart.
+    tips : (bool, bool)
+    radius : float
+    colour : (3,) ndarray or None
+        Median Lab colour along it (None without an image).
+    hits : int
+        Consecutive frames it has been seen in.
+    """
+
+    joints: np.ndarray
+    tips: tuple[bool, bool]
+    radius: float
+    colour: np.ndarray | None
+    hits: int = 1
+
+    @property
+    def length(self) -> float:
+        return float(np.linalg.norm(np.diff(self.joints, axis=0), axis=1).sum())
+
+
+def unclaimed_stretches(
+    chains: Chains,
+    pieces: list[Piece],
+    used: np.ndarray,
+    image: np.ndarray | None,
+    colours: list[np.ndarray | None],
+) -> list[Candidate]:
+    """Candidates from the pieces no track holds: consecutive free pieces of a chain
+    (with what lies between them) make one candidate, unless their colours differ
+    (``colours``: per piece)."""
+    step = chains.step
+    by_chain: dict[int, list[int]] = {}
+    for index, piece in enumerate(pieces):
+        by_chain.setdefault(piece.chain, []).append(index)
+    found = []
+    for chain_index, members in by_chain.items():
+        run: list[int] = []
+        for index in [*members, None]:
+            if index is not None and not used[index]:
+                # Pieces of other colours are other cables the detection joined to this
+                # one at a crossing: the run stops there.
+                if run and colour_distance(colours[run[-1]], colours[index]) > COLOUR_TOLERANCE:
+                    found.extend(_candidate(chains, chain_index, pieces, run, image, step))
+                    run = []
+                run.append(index)
+                continue
+            found.extend(_candidate(chains, chain_index, pieces, run, image, step))
+            run = []
+    return found
+
+
+def _candidate(chains, chain_index, pieces, run, image, step) -> list[Candidate]:
+    """The candidate a run of a chain's pieces makes (none when it is too short)."""
+    if not run:
+        return []
+    first, last = pieces[run[0]], pieces[run[-1]]
+    stretch = chains.joints[chain_index][first.first : last.last + 1]
+    if (len(stretch) - 1) * step < MIN_CANDIDATE_SEGMENTS * step - 1e-9:
+        return []
+    return [
+        Candidate(
+            joints=stretch,
+            tips=(first.tips[0], last.tips[1]),
+            radius=chains.radii[chain_index],
+            colour=colour_along(image, stretch),
+        )
+    ]
+
+
+def confirm(new: list[Candidate], previous: list[Candidate], gate: float) -> list[Candidate]:
+    """``new`` with their hit counts: one more than the previous candidate they overlap."""
+    confirmed = []
+    for candidate in new:
+        hits = 1
+        for old in previous:
+            if _overlap(candidate.joints, old.joints, gate + old.radius) >= 0.5:
+                hits = max(hits, old.hits + 1)
+        confirmed.append(
+            Candidate(candidate.joints, candidate.tips, candidate.radius, candidate.colour, hits)
+        )
+    return confirmed
+
+
+@dataclass(frozen=True, eq=False)
+class Continuation:
+    """A candidate that continues a track's end across a short gap (a hidden stretch).
+
+    Attributes
+    ----------
+    track : int
+        Index of the track.
+    end : int
+        0: its first end; 1: its last.
+    anchor : int
+        The track's outermost joint seen at that end, from which it is continued.
+    joints : (n, 2) ndarray
+        The joints beyond the anchor, nearest first, each ``step`` from the one before.
+    tip : bool
+        Whether the far end of the candidate is a free end.
+    """
+
+    track: int
+    end: int
+    anchor: int
+    joints: np.ndarray
+    tip: bool
+
+
+def continuation(
+    candidate: Candidate,
+    tracks: list[tuple[np.ndarray, np.ndarray, float, np.ndarray | None]],
+    step: float,
+) -> Continuation | None:
+    """The track end the candidate continues, if one does: an end seen where something
+    lay on the cable, and the rest of the cable has come out from under it.
+
+    Measured from the track's outermost joint seen at that end (the joints beyond it
+    are guesses), the candidate must begin within :data:`MAX_JOIN_GAP` segments, go on
+    the way the track ends (the gap and both ends within :data:`MAX_JOIN_TURN` of each
+    other) and look like the track (colour, width). ``tracks`` are ``(joints, seen,
+    radius, colour)``.
+    """
+    best, best_gap = None, math.inf
+    limit = math.cos(MAX_JOIN_TURN)
+    for index, (joints, seen, radius, colour) in enumerate(tracks):
+        seen_at = np.flatnonzero(seen)
+        if len(seen_at) < 2:
+            continue
+        if similarity(candidate, colour, radius, math.inf, (False, False), step) is None:
+            continue
+        for end in (0, 1):
+            anchor = int(seen_at[0] if end == 0 else seen_at[-1])
+            body = joints[anchor:] if end == 0 else joints[: anchor + 1]
+            outward = _end_direction(body, end)
+            track_end = joints[anchor]
+            for candidate_end in (0, 1):
+                start = candidate.joints[0] if candidate_end == 0 else candidate.joints[-1]
+                gap_vector = start - track_end
+                gap = float(np.linalg.norm(gap_vector))
+                if gap > MAX_JOIN_GAP * step or gap >= best_gap:
+                    continue
+                inward = -_end_direction(candidate.joints, candidate_end)
+                if float(outward @ inward) < limit:
+                    continue
+                if gap > step and float(outward @ (gap_vector / gap)) < limit:
+                    continue
+                rest = candidate.joints if candidate_end == 0 else candidate.joints[::-1]
+                line = np.ascontiguousarray(np.vstack([track_end, rest]))
+                walked, _ = _geometry_kernels.resample_kernel(line, step)
+                if len(walked) < 2:
+                    continue
+                tip = candidate.tips[1 - candidate_end]
+                best = Continuation(index, end, anchor, walked[1:], tip)
+                best_gap = gap
+    return best
+
+
+def _end_direction(joints: np.ndarray, end: int) -> np.ndarray:
+    """Unit direction pointing out of a polyline at one end (over up to three segments)."""
+    span = min(3, len(joints) - 1)
+    vector = joints[0] - joints[span] if end == 0 else joints[-1] - joints[-1 - span]
+    return vector / max(float(np.linalg.norm(vector)), 1e-12)
+
+
+def similarity(
+    candidate: Candidate,
+    colour: np.ndarray | None,
+    radius: float,
+    length: float,
+    tips: tuple[bool, bool],
+    step: float,
+) -> float | None:
+    """How unlike a remembered track the candidate is (lower is closer); None: not it."""
+    score = 0.0
+    if colour is not None and candidate.colour is not None:
+        # Lightness changes with the light and the shading across a cable; the hue and
+        # the saturation (a, b) far less.
+        distance = colour_distance(colour, candidate.colour)
+        if distance > COLOUR_TOLERANCE:
+            return None
+        score += distance / COLOUR_TOLERANCE
+    ratio = max(radius, candidate.radius) / max(min(radius, candidate.radius), 1e-6)
+    if ratio > RADIUS_TOLERANCE:
+        return None
+    score += math.log(ratio)
+    slack = LENGTH_TOLERANCE * length + 2.0 * step
+    whole_track = all(tips)
+    if whole_track and candidate.length > length + slack:
+        return None
+    if whole_track and all(candidate.tips):
+        if abs(candidate.length - length) > slack:
+            return None
+        score += abs(candidate.length - length) / slack
+    return score
+
+
+def colour_distance(first: np.ndarray | None, second: np.ndarray | None) -> float:
+    """Distance between two Lab colours, lightness weighted by half (:data:`LAB_WEIGHTS`);
+    0 when either is unknown."""
+    if first is None or second is None:
+        return 0.0
+    return float(np.linalg.norm((first - second) * LAB_WEIGHTS))
+
+
+def colours_along(image: np.ndarray | None, polylines: list[np.ndarray]) -> list[np.ndarray | None]:
+    """:func:`colour_along` for several polylines, converting their pixels at once."""
+    if image is None or not polylines:
+        return [None] * len(polylines)
+    lab, inside = lab_under(image, np.concatenate(polylines))
+    colours: list[np.ndarray | None] = []
+    first = 0
+    for points in polylines:
+        keep = inside[first : first + len(points)]
+        seen = lab[first : first + len(points)][keep]
+        colours.append(np.median(seen, axis=0) if len(seen) else None)
+        first += len(points)
+    return colours
+
+
+def colour_along(image: np.ndarray | None, points: np.ndarray) -> np.ndarray | None:
+    """Median Lab colour (OpenCV's 8-bit scaling) of the pixels under ``points`` that lie
+    in the picture; None without an image or without such points."""
+    if image is None or len(points) == 0:
+        return None
+    return colours_along(image, [points])[0]
+
+
+def orientation(
+    candidate: Candidate,
+    track_joints: np.ndarray,
+    track_tips: tuple[bool, bool],
+    ends_last_seen: tuple[np.ndarray, np.ndarray],
+    ends_seen_s: tuple[float, float],
+) -> bool:
+    """Whether the candidate's first joint is the track's first end (else its last).
+
+    A free end is the same free end: when the candidate shows exactly one and the track
+    knows exactly one, they pair. Otherwise by shape: the candidate laid rigidly
+    (turned and moved) onto the track's joints from either end, the way that fits
+    clearly better (a cable keeps its shape while it is out of view, more or less).
+    When the shape cannot tell (a nearly straight cable): with one free end in view,
+    that end is the track's end seen last (a cable comes back through an edge with the
+    end that left last; ties go by distance); otherwise the pairing of the ends that
+    puts them nearest where they were last seen.
+    """
+    if candidate.tips[0] != candidate.tips[1] and track_tips[0] != track_tips[1]:
+        return candidate.tips[0] == track_tips[0]
+    fits = []
+    for first_is_head in (True, False):
+        fits.append(_shape_misfit(candidate, track_joints, first_is_head))
+    better, worse = sorted(fits)
+    if worse > SHAPE_MARGIN * better + 1.0:
+        return fits[0] <= fits[1]
+    first, last = candidate.joints[0], candidate.joints[-1]
+    head, tail = ends_last_seen
+    if candidate.tips[0] != candidate.tips[1]:
+        tip = first if candidate.tips[0] else last
+        if abs(ends_seen_s[0] - ends_seen_s[1]) > 1e-6:
+            head_is_tip = ends_seen_s[0] > ends_seen_s[1]
+        else:
+            head_is_tip = np.linalg.norm(tip - head) <= np.linalg.norm(tip - tail)
+        return head_is_tip == candidate.tips[0]
+    straight = np.linalg.norm(first - head) + np.linalg.norm(last - tail)
+    crossed = np.linalg.norm(first - tail) + np.linalg.norm(last - head)
+    return straight <= crossed
+
+
+def _shape_misfit(candidate: Candidate, track_joints: np.ndarray, first_is_head: bool) -> float:
+    """RMS distance (px) between the candidate's joints and the track's, laid rigidly on
+    each other from one end: the candidate's free end when it has exactly one (it may
+    show only part of the cable), else its first joint, paired with the track's end the
+    hypothesis (``first_is_head``) gives it."""
+    from_last = candidate.tips[1] and not candidate.tips[0]
+    seen = candidate.joints[::-1] if from_last else candidate.joints
+    # The track's end paired with the candidate's chosen end under the hypothesis.
+    track = track_joints if first_is_head != from_last else track_joints[::-1]
+    count = min(len(seen), len(track))
+    if count < 3:
+        return 0.0
+    a, b = track[:count], seen[:count]
+    a0, b0 = a - a.mean(axis=0), b - b.mean(axis=0)
+    angle = math.atan2(
+        float((a0[:, 0] * b0[:, 1] - a0[:, 1] * b0[:, 0]).sum()), float((a0 * b0).sum())
+    )
+    c, s = math.cos(angle), math.sin(angle)
+    laid = a0 @ np.array([[c, -s], [s, c]]).T
+    return float(np.sqrt(((laid - b0) ** 2).sum(axis=1).mean()))
+
+
+def revived_joints(
+    old: np.ndarray, candidate: Candidate, first_is_head: bool, step: float
+) -> np.ndarray:
+    """A remembered track's joints laid along a candidate that shows its cable again.
+
+    The joints from the matching end follow the candidate; the rest keep the track's old
+    shape, moved rigidly to join on (they are outside the picture or hidden).
+    """
+    seen = candidate.joints if first_is_head else candidate.joints[::-1]
+    arcs = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seen, axis=0), axis=1))])
+    n = len(old)
+    wanted = np.arange(n) * step
+    inside = wanted <= arcs[-1] + 1e-9
+    joints = old.copy()
+    placed = np.column_stack(
+        [np.interp(wanted[inside], arcs, seen[:, 0]), np.interp(wanted[inside], arcs, seen[:, 1])]
+    )
+    count = int(np.count_nonzero(inside))
+    if count == n:
+        return placed
+    reference = slice(max(count - 6, 0), count)
+    source, target = old[reference], placed[reference]
+    source_mean, target_mean = source.mean(axis=0), target.mean(axis=0)
+    a, b = source - source_mean, target - target_mean
+    angle = math.atan2(float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum()), float((a * b).sum()))
+    c, s = math.cos(angle), math.sin(angle)
+    rest = (old[count:] - source_mean) @ np.array([[c, -s], [s, c]]).T + target_mean
+    joints[:count] = placed
+    joints[count:] = rest
+    return joints
+
+
+def _overlap(points: np.ndarray, polyline: np.ndarray, gate: float) -> float:
+    """Share of ``points`` within ``gate`` of the polyline's vertices or segments."""
+    if len(polyline) < 2:
+        return 0.0
+    a, b = polyline[:-1], polyline[1:]
+    ab = b - a
+    length_sq = np.maximum((ab**2).sum(axis=1), 1e-12)
+    offset = points[:, None, :] - a[None, :, :]
+    t = np.clip((offset * ab[None]).sum(axis=2) / length_sq[None], 0.0, 1.0)
+    foot = a[None] + t[:, :, None] * ab[None]
+    distance = np.linalg.norm(points[:, None, :] - foot, axis=2).min(axis=1)
+    return float(np.mean(distance <= gate))

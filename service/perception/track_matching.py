@@ -1,0 +1,340 @@
+"""Tracking, step 1: which stretch of which track each stretch of a detection shows.
+
+A detection's chains are cut into *pieces* where the detection is sure of itself: away
+from gaps it filled (inferred segments) and from places where the chain comes near
+another chain or near itself (crossings, touching cables), where its merging step may
+have joined the wrong strands. Each piece is then laid along the tracks, as predicted
+for this frame: its points are projected on each track's polyline and, because a cable
+does not stretch, the arc along the piece and the arc along the track differ by one
+constant (and perhaps a sign), ``s = sign * u + offset``. The offset found this way is
+the registration of the piece onto the track; its spread tells whether the piece fits
+at all. Each piece goes to the track it fits best, or to none (a new cable, perhaps).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from schemas import Detection
+from service.perception import _tracking_kernels
+
+MIN_COSINE = 0.5
+"""A piece's point counts as on a track only where their directions are within 60
+degrees of each other (either way round)."""
+COLOUR_SPAN = 3
+"""Joints either side compared for a change of colour along a chain ..."""
+COLOUR_JUMP = 30.0
+"""... and how much they must differ (Lab, 8-bit scaling, lightness weighted by half)."""
+COLOUR_WEIGHTS = np.array([0.5, 1.0, 1.0])
+EDGE_MARGIN = 3.0
+"""A chain end within its radius plus this many px of the picture's edge is not a tip."""
+
+
+@dataclass(frozen=True, eq=False)
+class Chains:
+    """A detection's chains as arrays, read once per frame.
+
+    Attributes
+    ----------
+    joints, arcs : list of ndarray
+        Per chain, its ``(n, 2)`` joints and their arcs from its first joint (px).
+    radii : list of float
+    inferred : list of (n - 1,) bool ndarray
+    width, height : int
+    step : float
+        The segment length.
+    colour_breaks : list of (n - 1,) bool ndarray
+        Per chain, the segments where its colour changes (the detection joined two
+        cables of different colours there); all False without an image.
+    """
+
+    joints: list[np.ndarray]
+    arcs: list[np.ndarray]
+    radii: list[float]
+    inferred: list[np.ndarray]
+    width: int
+    height: int
+    step: float
+    colour_breaks: list[np.ndarray]
+
+    @classmethod
+    def of(cls, detection: Detection, image: np.ndarray | None = None) -> Chains:
+        joints = [np.asarray(chain.points, dtype=np.float64) for chain in detection.chains]
+        inferred = [np.asarray(chain.inferred, dtype=bool) for chain in detection.chains]
+        return cls(
+            joints=joints,
+            arcs=[arcs_of(points) for points in joints],
+            radii=[chain.radius for chain in detection.chains],
+            inferred=inferred,
+            width=detection.width,
+            height=detection.height,
+            step=detection.segment_length,
+            colour_breaks=_colour_breaks(image, joints, inferred),
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class Piece:
+    """A stretch of a detected chain that is surely one cable.
+
+    Attributes
+    ----------
+    chain : int
+        Index of the chain in the detection.
+    first : int
+        Index in that chain of the piece's first joint.
+    joints : ndarray, shape (n, 2)
+        Joints ``segment_length`` apart: the arc of joint ``i`` is ``i * segment_length``.
+    tips : (bool, bool)
+        Whether the first and the last joint are a cable's free end (the chain's end,
+        clear of the picture's edge and of other chains).
+    radius : float
+    arcs : ndarray, shape (n,)
+        Arc of each joint from the piece's first (px).
+    """
+
+    chain: int
+    first: int
+    joints: np.ndarray
+    tips: tuple[bool, bool]
+    radius: float
+    arcs: np.ndarray
+
+    @property
+    def length(self) -> float:
+        return float(self.arcs[-1])
+
+    @property
+    def last(self) -> int:
+        """Index in the chain of the piece's last joint."""
+        return self.first + len(self.joints) - 1
+
+
+@dataclass(frozen=True)
+class Fit:
+    """How a piece lies along a track: track arc = ``sign * piece arc + offset``."""
+
+    track: int
+    sign: int
+    offset: float
+    cost: float
+    inliers: float  # share of the piece's points near the track
+
+
+def detection_pieces(chains: Chains) -> list[Piece]:
+    """Cut the detection's chains into :class:`Piece` s (see the module's documentation)."""
+    if not chains.joints:
+        return []
+    step = chains.step
+    radii = np.array(chains.radii, dtype=np.float64)
+    reach = 1.5 * radii + 1.0
+    self_gap = np.ceil(2.0 * math.pi * reach / step).astype(np.int64) + 2
+    counts = np.array([len(c) for c in chains.joints], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    crowded = _tracking_kernels.crowded_segments(
+        np.ascontiguousarray(np.concatenate(chains.joints)), starts, counts, reach, self_gap
+    )
+    pieces = []
+    segment = 0
+    width, height = chains.width, chains.height
+    for index, joints in enumerate(chains.joints):
+        radius = chains.radii[index]
+        arcs = chains.arcs[index]
+        n_segments = len(joints) - 1
+        usable = ~chains.inferred[index] & ~crowded[segment : segment + n_segments]
+        usable &= ~chains.colour_breaks[index]
+        segment += n_segments
+        for begin, end in _runs(usable):
+            tips = (
+                begin == 0 and clear_of_edge(joints[0], radius, width, height),
+                end == n_segments and clear_of_edge(joints[-1], radius, width, height),
+            )
+            pieces.append(
+                Piece(
+                    index,
+                    begin,
+                    joints[begin : end + 1],
+                    tips,
+                    radius,
+                    arcs[begin : end + 1] - arcs[begin],
+                )
+            )
+    return pieces
+
+
+def fit_pieces(
+    pieces: list[Piece],
+    tracks: list[np.ndarray],
+    gates: np.ndarray,
+    step: float,
+    compatible: np.ndarray | None = None,
+) -> list[Fit | None]:
+    """The track each piece lies along, and how; None for a piece that fits none.
+
+    Parameters
+    ----------
+    pieces : list of Piece
+    tracks : list of (N, 2) ndarray
+        The tracks' joints as predicted for this frame (``step`` apart).
+    gates : (T,) ndarray
+        Per track, how far (px) a point of a piece may lie from it and still count.
+    step : float
+        The segment length.
+    compatible : (P, T) bool ndarray, optional
+        Which pieces may fit which tracks at all (their colours agree).
+    """
+    if not pieces or not tracks:
+        return [None] * len(pieces)
+    samples = [_samples(piece.joints) for piece in pieces]
+    points = np.ascontiguousarray(np.concatenate([p for p, _, _ in samples]))
+    directions = np.ascontiguousarray(np.concatenate([d for _, d, _ in samples]))
+    counts = np.array([len(t) for t in tracks], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    distance, arc, cosine = _tracking_kernels.nearest_on_polylines(
+        points,
+        directions,
+        np.ascontiguousarray(np.concatenate(tracks)),
+        starts,
+        counts,
+        np.ascontiguousarray(gates, dtype=np.float64),
+    )
+    arc = arc * step  # joint units to px along the track
+    counts_per_piece = np.array([len(p) for p, _, _ in samples], dtype=np.int64)
+    starts_per_piece = np.concatenate([[0], np.cumsum(counts_per_piece)[:-1]]).astype(np.int64)
+    ok, sign, offset, cost, share = _tracking_kernels.fit_statistics(
+        distance,
+        arc,
+        cosine,
+        np.ascontiguousarray(np.concatenate([a for _, _, a in samples])),
+        starts_per_piece,
+        counts_per_piece,
+        np.ascontiguousarray(gates, dtype=np.float64),
+        MIN_COSINE,
+    )
+    if compatible is not None:
+        ok &= compatible
+    fits: list[Fit | None] = []
+    for p in range(len(pieces)):
+        if not ok[p].any():
+            fits.append(None)
+            continue
+        t = int(np.argmin(np.where(ok[p], cost[p], np.inf)))
+        fits.append(
+            Fit(t, int(sign[p, t]), float(offset[p, t]), float(cost[p, t]), float(share[p, t]))
+        )
+    return fits
+
+
+def _samples(joints: np.ndarray):
+    """Joints and segment midpoints, their unit directions, and their arcs (joint units)."""
+    n = len(joints)
+    points = np.empty((2 * n - 1, 2))
+    points[0::2] = joints
+    points[1::2] = 0.5 * (joints[:-1] + joints[1:])
+    steps = np.diff(joints, axis=0)
+    lengths = np.linalg.norm(steps, axis=1)
+    unit = steps / np.maximum(lengths, 1e-12)[:, None]
+    directions = np.empty_like(points)
+    directions[1::2] = unit
+    directions[0] = unit[0]
+    directions[-1] = unit[-1]
+    if n > 2:
+        inner = unit[:-1] + unit[1:]
+        directions[2:-1:2] = inner / np.maximum(np.linalg.norm(inner, axis=1), 1e-12)[:, None]
+    arc = np.concatenate([[0.0], np.cumsum(np.repeat(lengths / 2.0, 2))])
+    return points, directions, arc
+
+
+def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """(first joint, last joint) of each run of True segments."""
+    padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
+    edges = np.diff(padded)
+    begins = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1)
+    return [(int(b), int(e)) for b, e in zip(begins, ends, strict=True)]
+
+
+def _colour_breaks(
+    image: np.ndarray | None, chains: list[np.ndarray], inferred: list[np.ndarray]
+) -> list[np.ndarray]:
+    """Per chain, the segments across which its colour changes: the median Lab colour of
+    the :data:`COLOUR_SPAN` joints before differs from that of the ones after by more
+    than :data:`COLOUR_JUMP` (lightness weighted by half). Joints on an inferred
+    stretch (under an occluder, across a gap) show something else's colour and are left
+    out of the medians; a side with none of its joints seen makes no break."""
+    breaks = [np.zeros(max(len(points) - 1, 0), dtype=bool) for points in chains]
+    if image is None or not chains or image.ndim < 3:
+        return breaks  # no image, or a grey one: no colour to go by
+    lab, _ = lab_under(image, np.concatenate(chains))
+    lab *= COLOUR_WEIGHTS
+    span = COLOUR_SPAN
+    first = 0
+    for points, hidden_segments, flags in zip(chains, inferred, breaks, strict=True):
+        colours = lab[first : first + len(points)].copy()
+        first += len(points)
+        if len(points) < 2 * span + 1:
+            continue
+        hidden = np.zeros(len(points), dtype=bool)
+        hidden[:-1] |= hidden_segments
+        hidden[1:] |= hidden_segments
+        colours[hidden] = np.nan
+        # Window k covers joints k .. k + span; break k compares joints k - span .. k
+        # with joints k + 1 .. k + span.
+        before_median = _window_medians(colours, span + 1)
+        after_median = _window_medians(colours[1:], span)
+        ks = np.arange(span, len(points) - span)
+        jump = np.linalg.norm(before_median[ks - span] - after_median[ks], axis=1)
+        flags[ks] = np.nan_to_num(jump, nan=0.0) > COLOUR_JUMP
+    return breaks
+
+
+def _window_medians(values: np.ndarray, width: int) -> np.ndarray:
+    """Per window of ``width`` consecutive rows, the median of each column over the rows
+    that are not NaN (NaN where none is): ``np.nanmedian`` over small windows, without
+    its per-call cost."""
+    windows = np.lib.stride_tricks.sliding_window_view(values, width, axis=0)
+    ordered = np.sort(windows, axis=2)  # NaNs last
+    count = (~np.isnan(windows)).sum(axis=2, keepdims=True)
+    low = np.take_along_axis(ordered, np.maximum((count - 1) // 2, 0), axis=2)
+    high = np.take_along_axis(ordered, count // 2, axis=2)
+    median = 0.5 * (low + high)[..., 0]
+    median[count[..., 0] == 0] = np.nan
+    return median
+
+
+def lab_under(image: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lab colour (OpenCV's 8-bit scaling, float) of the pixel under each of ``points``
+    (clamped to the picture; a grey image counts as grey colour), and which points lie
+    in the picture."""
+    height, width = image.shape[:2]
+    inside = (
+        (points[:, 0] >= 0)
+        & (points[:, 0] <= width - 1)
+        & (points[:, 1] >= 0)
+        & (points[:, 1] <= height - 1)
+    )
+    cols = np.clip(np.rint(points[:, 0]).astype(np.intp), 0, width - 1)
+    rows = np.clip(np.rint(points[:, 1]).astype(np.intp), 0, height - 1)
+    pixels = image[rows, cols]
+    if pixels.ndim == 1:  # a grey image
+        pixels = np.repeat(pixels[:, None], 3, axis=1)
+    pixels = np.ascontiguousarray(pixels[:, :3], dtype=np.uint8).reshape(-1, 1, 3)
+    lab = cv2.cvtColor(pixels, cv2.COLOR_BGR2LAB).reshape(-1, 3).astype(np.float64)
+    return lab, inside
+
+
+def arcs_of(points: np.ndarray) -> np.ndarray:
+    """Arc of each vertex of a polyline from its first (px)."""
+    steps = np.diff(points, axis=0)
+    return np.concatenate([[0.0], np.cumsum(np.sqrt((steps * steps).sum(axis=1)))])
+
+
+def clear_of_edge(point, radius: float, width: int, height: int) -> bool:
+    """Whether a chain end lies clear of the picture's edge (so it can be a cable's tip)."""
+    margin = radius + EDGE_MARGIN
+    x, y = float(point[0]), float(point[1])
+    return margin <= x <= width - 1 - margin and margin <= y <= height - 1 - margin

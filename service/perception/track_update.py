@@ -1,0 +1,520 @@
+"""Tracking, step 2: a track moved onto what this frame shows of its cable.
+
+Every piece fitted to a track (:mod:`service.perception.track_matching`) gives target
+positions to the joints it covers: joint ``k`` sits at track arc ``k * l_s``, which is
+piece arc ``sign * (k * l_s - offset)``. Where the piece ends at the cable's free end and
+the track's end is a tip, the offset is taken from the tip instead (a tip pins the
+sliding along the cable that the shape alone cannot). Joints no piece covers (hidden,
+at a crossing, outside the picture) move with their seen neighbours: each run of them
+follows the rigid motion of the seen joints on either side, blended along the run (the
+motion coherence of CPD-style trackers, along the cable rather than across the image).
+Then the joints are made exactly ``l_s`` apart, the unseen ones moving most, with a
+bending limit where nothing was seen (:func:`_tracking_kernels.constrain_chain`).
+
+An ``open`` end (at the picture's edge or hidden when last seen) grows when the chain
+that covers it goes on beyond it: new joints are added there, along that chain.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from service.perception import _tracking_kernels
+from service.perception.track_matching import Chains, Fit, Piece, clear_of_edge
+
+TIP_WINDOW = 5.0
+"""A piece's free end within this many segments of a track's end is that end."""
+TIP_TOLERANCE = 1.5
+"""Both ends in view make the cable this many segments shorter than the track at most,
+or one of them is hidden."""
+TIP_GROWTH = 3
+"""Segments of cable seen beyond a tip before the track grows there (the tip was an end
+hidden under something)."""
+TIP_GAIN = 0.4
+"""Share of the slide its free ends show that a track takes per frame (a free end is
+found to a pixel or two: this smooths that)."""
+TIP_INWARD = 0.3
+"""... and so does one short of it by up to this many (further in, it is taken for an
+end hidden under something)."""
+NEIGHBOURS = 6
+"""Seen joints on each side whose motion an unseen run follows."""
+UNSEEN_MOBILITY = 25.0
+"""How much more an unseen joint moves than a seen one to keep the segment lengths."""
+MIN_BEND_RADII = 2.5
+"""The tightest bend assumed where nothing is seen, in cable radii."""
+SWEEPS = 24
+SHAPE_MEMORY = 0.98
+"""Share of its turn a hidden end's segment keeps from one frame to the next."""
+REFINE_STEPS = 2
+BENT_TURN = 0.6
+"""Total turn (radians) of the seen stretches from which their registration alone is
+trusted for the slide along the cable ..."""
+BENT_SLIDE = 0.3
+"""... and how far (segments) the free ends may then still slide the track per frame."""
+CHAIN_AGREEMENT = 1.5
+
+
+@dataclass(frozen=True, eq=False)
+class Observation:
+    """What this frame shows of one track.
+
+    Attributes
+    ----------
+    targets : (N, 2) ndarray
+        Where the pieces put each joint (meaningful where ``covered``).
+    covered : (N,) bool ndarray
+    tips : (bool, bool)
+        Whether each end is a tip after this frame: an open end that a free end reaches
+        becomes one; an end the cable was seen to go on beyond is one only if the
+        growth ended at a free end.
+    head_growth, tail_growth : (n, 2) ndarray
+        Joints to add before the first / after the last one (nearest first).
+    slide : float
+        How far (px) the free ends showed the cable slid along itself, beyond what the
+        registration of its body found.
+    """
+
+    targets: np.ndarray
+    covered: np.ndarray
+    tips: tuple[bool, bool]
+    head_growth: np.ndarray
+    tail_growth: np.ndarray
+    slide: float = 0.0
+
+
+def observe(
+    joints: np.ndarray,
+    tips: tuple[bool, bool],
+    fitted: list[tuple[Piece, Fit]],
+    chains: Chains,
+    claimed: np.ndarray,
+    chain_of_piece: list[tuple[int, int, int]],
+) -> Observation:
+    """The targets the fitted pieces give a track's joints, and how its ends grow.
+
+    A piece's free end within :data:`TIP_TOLERANCE` segments of the track's end pins
+    that end (the offset is taken from it). A free end further in is taken for an end
+    hidden by something (the track is not pulled in); a piece going on beyond an end,
+    by more than that tolerance, makes the track grow there (an end that was hidden, or
+    outside the picture, came into view).
+
+    Parameters
+    ----------
+    joints : (N, 2) ndarray
+        The track's joints as predicted for this frame.
+    tips : (bool, bool)
+        Whether its first / last end is a tip.
+    fitted : list of (Piece, Fit)
+        The pieces that fit this track.
+    chains : Chains
+        Their detection's chains (which ends grow along).
+    claimed : (S,) bool ndarray
+        Per piece of the detection, whether it is out of this track's reach: a track
+        already fits it, or its colour is not this track's (growth stops there).
+    chain_of_piece : list of (chain, first joint, last joint)
+        Per piece of the detection, where it lies in its chain.
+    """
+    step = chains.step
+    n = len(joints)
+    total = (n - 1) * step
+    sums = np.zeros((n, 2))
+    weights = np.zeros(n)
+    new_tips = list(tips)
+    placed = []
+    for piece, fit in fitted:
+        arcs = piece.arcs
+        offset = _tracking_kernels.refine_offset(
+            joints, piece.joints, arcs, fit.sign, fit.offset, step, REFINE_STEPS
+        )
+        placed.append((piece, fit.sign, offset, arcs))
+    placed = _one_offset_per_chain(placed, chains)
+    # A cable that bends where it is seen shows a slide along itself to the registration
+    # of its body: one end alone may then only correct that a little per frame. It still
+    # corrects it when the end went in while the cable may go out of the picture at its
+    # other end: a bend travelling along the cable drags the registration of its body
+    # along (the cable itself does not move so), and a free end seen is the one sure
+    # mark of where the cable lies along itself. Both ends of a whole cable are trusted
+    # over its body.
+    limit = _slide_limit(joints, placed, step)
+    going_out = _going_out(joints, placed, chains)
+    slide = _slide(placed, total, step, going_out)
+    if not slide.whole:  # a whole cable's two ends outweigh its body (a bend may travel)
+        slide = replace(slide, shift=float(np.clip(slide.shift, -limit, limit)))
+    for end in (0, 1):
+        if slide.tips[end]:
+            new_tips[end] = True
+    # The piece reaching furthest towards each end: the cable may go on beyond that end
+    # along the piece's chain.
+    reach = [np.inf, -np.inf]
+    reach_source: list[tuple[Piece, int, float] | None] = [None, None]
+    track_arc = np.arange(n) * step
+    for piece, sign, offset, arcs in placed:
+        offset += slide.shift
+        u = sign * (track_arc - offset)
+        inside = np.flatnonzero((u >= 0.0) & (u <= arcs[-1]))
+        if len(inside):
+            walked = _tracking_kernels.chord_walk(
+                piece.joints, arcs, float(u[inside[0]]), sign, step, len(inside)
+            )
+            count = min(len(walked), len(inside))
+            rows = inside[0] + np.arange(count)
+            sums[rows] += walked[:count]
+            weights[rows] += 1.0
+        lo, hi = offset, sign * float(arcs[-1]) + offset
+        if min(lo, hi) < reach[0]:
+            reach[0] = min(lo, hi)
+            reach_source[0] = (piece, sign, offset)
+        if max(lo, hi) > reach[1]:
+            reach[1] = max(lo, hi)
+            reach_source[1] = (piece, sign, offset)
+    covered = weights > 0
+    targets = joints.copy()
+    targets[covered] = sums[covered] / weights[covered, None]
+    growth = []
+    for end in (0, 1):
+        source = reach_source[end]
+        points = np.empty((0, 2))
+        if source is not None:
+            piece, sign, offset = source
+            points, reached_tip = _grow(
+                piece, sign, offset, end, total, chains, claimed, chain_of_piece, tips[end]
+            )
+            if tips[end] and len(points) < TIP_GROWTH:
+                points = np.empty((0, 2))  # a tip seen a little further out: not more cable
+            if len(points):
+                new_tips[end] = reached_tip
+        growth.append(points)
+    return Observation(
+        targets=targets,
+        covered=covered,
+        tips=(new_tips[0], new_tips[1]),
+        head_growth=growth[0],
+        tail_growth=growth[1],
+        slide=slide.shift,
+    )
+
+
+@dataclass(frozen=True)
+class _Slide:
+    """How far the track slid along itself beyond what the body showed (px of arc, added
+    to every piece's offset), and which ends were seen as free ends."""
+
+    shift: float = 0.0
+    tips: tuple[bool, bool] = (False, False)
+    whole: bool = False  # both ends seen, agreeing on the cable's length
+
+
+def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Slide:
+    """The slide along the cable that the free ends in view show.
+
+    A stretch of cable looks the same slid along itself, so the body's registration
+    (each piece's offset) sees motion along the cable only where the cable bends; a free
+    end sees it directly. Each free end near one of the track's ends gives how far
+    beyond that end (``outward``, px) the cable now ends. Both ends in view, and the
+    cable not clearly shorter than the track: it slid by half their difference (which
+    leaves a small error in the track's length evenly at both ends). Otherwise an end
+    that went in
+    is taken for one hidden under something (an occluder hides, it never adds) unless the
+    track's other end is outside the picture (where the cable can go on), and the one
+    that went out (or stayed) tells the slide.
+    """
+    tolerance = TIP_TOLERANCE * step
+    window = TIP_WINDOW * step
+    seen: list[list[tuple[float, float]]] = [[], []]  # per end: (outward, offset change)
+    for piece, sign, offset, arcs in placed:
+        for end, u_end in ((0, 0.0), (1, float(arcs[-1]))):
+            if not piece.tips[end]:
+                continue
+            s_tip = sign * u_end + offset
+            if abs(s_tip) <= window and s_tip < 0.5 * total:
+                seen[0].append((-s_tip, -s_tip))
+            elif abs(s_tip - total) <= window and s_tip > 0.5 * total:
+                seen[1].append((s_tip - total, total - s_tip))
+    outward = [max(found)[0] if found else None for found in seen]
+    change = [max(found)[1] if found else None for found in seen]
+    inward = TIP_INWARD * step
+    tips = (bool(seen[0]), bool(seen[1]))
+    if outward[0] is not None and outward[1] is not None:
+        if outward[0] + outward[1] >= -tolerance:  # not much shorter: both are real ends
+            return _Slide(TIP_GAIN * 0.5 * (change[0] + change[1]), tips, whole=True)
+        end = 0 if outward[0] > outward[1] else 1  # the other one is hidden
+    elif outward[0] is not None:
+        end = 0
+    elif outward[1] is not None:
+        end = 1
+    else:
+        return _Slide(0.0, tips)
+    if outward[end] < -inward and not outside[1 - end]:
+        return _Slide(0.0, tips)  # went in: hidden, more likely than slid
+    return _Slide(TIP_GAIN * change[end], tips)
+
+
+def _grow(piece, sign, offset, end, total, chains, claimed, chain_of_piece, at_tip):
+    """Joints beyond a track's end along the piece's chain, and whether they end at a tip.
+
+    The chain is followed from the piece on, beyond the end: through the segments
+    between pieces (a crossing, a filled gap) but only as far as the last joint that
+    lies on cable no other track holds (the piece itself, or a free piece of the chain);
+    a piece held by a track stops it. Beyond an end seen as the cable's tip (``at_tip``)
+    only the piece itself counts: the cable seen going on there (it was hidden) is the
+    piece's; joining a piece beyond a gap there is left to
+    :func:`~service.perception.track_identity.continuation`, which checks that it looks
+    like the track.
+    """
+    step = chains.step
+    chain_joints = chains.joints[piece.chain]
+    chain_arcs = chains.arcs[piece.chain]
+    base = chain_arcs[piece.first]  # chain arc of the piece's first joint
+    # Track arc s lies at chain arc base + sign * (s - offset); beyond the end means s
+    # below 0 (end 0) or above total (end 1).
+    direction = -sign if end == 0 else sign  # +1: towards the chain's last joint
+    spans = []  # (low arc, high arc, free) of the chain's other pieces
+    for index, (c, first, last) in enumerate(chain_of_piece):
+        if c == piece.chain and first != piece.first:
+            spans.append((chain_arcs[first], chain_arcs[last], not claimed[index]))
+    own = (base, chain_arcs[piece.first + len(piece.joints) - 1])
+    slack = 0.25 * step
+    new = []
+    keep = 0  # joints up to here lie on free cable
+    reached_end = False
+    for k in range(1, len(chain_joints) + 1):
+        s = -k * step if end == 0 else total + k * step
+        a = base + sign * (s - offset)
+        if a < -slack or a > chain_arcs[-1] + slack:
+            break
+        a = min(max(a, 0.0), float(chain_arcs[-1]))
+        held = [free for low, high, free in spans if low - slack <= a <= high + slack]
+        if held and (at_tip or not all(held)):
+            break  # another track's cable (or, beyond a tip, another piece)
+        new.append(_along(chain_joints, chain_arcs, np.array([a]))[0])
+        if held or own[0] - slack <= a <= own[1] + slack:
+            keep = len(new)
+            reached_end = (a >= chain_arcs[-1] - slack) if direction > 0 else (a <= slack)
+    if keep == 0:
+        return np.empty((0, 2)), False
+    chain_end = len(chain_joints) - 1 if direction > 0 else 0
+    flags = chains.inferred[piece.chain]
+    end_inferred = bool(flags[-1] if direction > 0 else flags[0]) if len(flags) else False
+    at_tip = (
+        reached_end
+        and clear_of_edge(
+            chain_joints[chain_end], chains.radii[piece.chain], chains.width, chains.height
+        )
+        and not end_inferred
+    )
+    return np.array(new[:keep]), at_tip
+
+
+def register(
+    predicted: np.ndarray,
+    observation: Observation,
+    step: float,
+    radius: float,
+) -> np.ndarray:
+    """The track's new joints: covered ones at their targets, the rest carried along,
+    all exactly ``step`` apart (see the module's documentation).
+
+    Between its first and last covered joint, each run of uncovered joints follows the
+    rigid motion of the covered joints on either side, blended along the run, and the
+    joints are then made ``step`` apart, the uncovered ones moving most, with a bending
+    limit where nothing was seen. Beyond the first and the last covered joint (an end
+    hidden, or outside the picture) the joints keep the track's shape: each segment
+    turns from the one before by the angle it turned by as predicted (a little less
+    every frame: with nothing seen, a straighter cable is the safer guess), from the
+    outermost covered segment on.
+    """
+    covered = observation.covered
+    targets = observation.targets
+    joints = predicted.copy()
+    joints[covered] = targets[covered]
+    seen = np.flatnonzero(covered)
+    if len(seen) == 0:
+        return exact_chain(joints, step)
+    first, last = int(seen[0]), int(seen[-1])
+    for begin, end in _uncovered_runs(covered):
+        if begin < first or end > last:
+            continue  # an end: below
+        left = seen[seen < begin][-NEIGHBOURS:]
+        right = seen[seen > end][:NEIGHBOURS]
+        moved_left = _rigid(predicted[left], targets[left], predicted[begin : end + 1])
+        moved_right = _rigid(predicted[right], targets[right], predicted[begin : end + 1])
+        weight = (np.arange(begin, end + 1) - begin + 1.0) / (end - begin + 2.0)
+        joints[begin : end + 1] = (1.0 - weight)[:, None] * moved_left + weight[
+            :, None
+        ] * moved_right
+    turn = min(1.2, 2.0 * math.asin(min(1.0, step / (2.0 * MIN_BEND_RADII * max(radius, 1.0)))))
+    core = slice(first, last + 1)
+    if last > first:
+        inverse_mass = np.where(covered[core], 1.0, UNSEEN_MOBILITY)
+        min_span = np.where(covered[core], 0.0, 2.0 * step * math.cos(turn / 2.0))
+        min_span[0] = min_span[-1] = 0.0
+        middle = seen[len(seen) // 2] - first
+        joints[core] = _tracking_kernels.constrain_chain(
+            np.ascontiguousarray(joints[core]),
+            np.ascontiguousarray(inverse_mass),
+            float(step),
+            np.ascontiguousarray(min_span),
+            SWEEPS,
+            int(middle),
+        )
+    if first > 0 or last < len(joints) - 1:
+        _keep_shape_at_ends(joints, predicted, first, last, step, turn)
+    return joints
+
+
+def _keep_shape_at_ends(joints, predicted, first, last, step, turn_limit) -> None:
+    """Lay the joints before ``first`` and after ``last`` (in place) with the turns of
+    ``predicted``'s segments, damped by :data:`SHAPE_MEMORY` and at most
+    ``turn_limit`` per joint (see :func:`register`)."""
+    steps = np.diff(predicted, axis=0)
+    angles = np.arctan2(steps[:, 1], steps[:, 0])
+    turns = np.zeros(len(predicted))
+    turns[1:-1] = (np.diff(angles) + math.pi) % (2.0 * math.pi) - math.pi
+    turns = np.clip(turns * SHAPE_MEMORY, -turn_limit, turn_limit)
+
+    def direction_of(k):  # of the segment from joint k to k + 1, as now laid
+        if first <= k < last:
+            dx, dy = joints[k + 1] - joints[k]
+            return math.atan2(dy, dx)
+        return float(angles[k])
+
+    if last < len(joints) - 1:
+        heading = direction_of(last - 1) if last > first else float(angles[max(last - 1, 0)])
+        for k in range(last, len(joints) - 1):
+            heading += turns[k] if k > 0 else 0.0
+            joints[k + 1] = joints[k] + step * np.array([math.cos(heading), math.sin(heading)])
+    if first > 0:
+        if last > first:
+            heading = direction_of(first)
+        else:
+            heading = float(angles[min(first, len(angles) - 1)])
+        for k in range(first, 0, -1):
+            heading -= turns[k] if k < len(joints) - 1 else 0.0
+            joints[k - 1] = joints[k] - step * np.array([math.cos(heading), math.sin(heading)])
+
+
+def exact_chain(joints: np.ndarray, step: float) -> np.ndarray:
+    """``joints`` made exactly ``step`` apart, every joint moving alike."""
+    n = len(joints)
+    return _tracking_kernels.constrain_chain(
+        np.ascontiguousarray(joints, dtype=np.float64),
+        np.ones(n),
+        float(step),
+        np.zeros(n),
+        SWEEPS,
+        n // 2,
+    )
+
+
+def _rigid(source: np.ndarray, target: np.ndarray, points: np.ndarray) -> np.ndarray | None:
+    """``points`` moved by the rotation and translation taking ``source`` onto ``target``
+    (least squares); a translation alone from one pair; None from none."""
+    if len(source) == 0:
+        return None
+    source_mean = source.mean(axis=0)
+    target_mean = target.mean(axis=0)
+    if len(source) == 1:
+        return points + (target_mean - source_mean)
+    a = source - source_mean
+    b = target - target_mean
+    dot = float((a * b).sum())
+    cross = float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum())
+    angle = math.atan2(cross, dot)
+    c, s = math.cos(angle), math.sin(angle)
+    rotation = np.array([[c, -s], [s, c]])
+    return (points - source_mean) @ rotation.T + target_mean
+
+
+def _uncovered_runs(covered: np.ndarray) -> list[tuple[int, int]]:
+    padded = np.concatenate([[True], covered, [True]])
+    edges = np.diff(padded.astype(np.int8))
+    begins = np.flatnonzero(edges == -1)
+    ends = np.flatnonzero(edges == 1) - 1
+    return [(int(b), int(e)) for b, e in zip(begins, ends, strict=True)]
+
+
+def _one_offset_per_chain(placed, chains):
+    """Pieces of one detected chain that lie on the track the same way share one offset.
+
+    The chain's own arc between two of its pieces (across the crossing or gap that split
+    them) is the cable's; registering each piece alone would let the track's arc between
+    them stretch or shrink, and the joints there buckle. Pieces whose offsets, measured
+    along their chain, agree within :data:`CHAIN_AGREEMENT` segments get their
+    length-weighted mean.
+    """
+    groups: dict[tuple[int, int], list[int]] = {}
+    for index, (piece, sign, _, _) in enumerate(placed):
+        groups.setdefault((piece.chain, sign), []).append(index)
+    result = list(placed)
+    for (chain_index, sign), members in groups.items():
+        if len(members) < 2:
+            continue
+        chain_arcs = chains.arcs[chain_index]
+        along_chain = np.array(
+            [placed[i][2] - sign * chain_arcs[placed[i][0].first] for i in members]
+        )
+        weights = np.array([placed[i][3][-1] for i in members])
+        centre = along_chain[np.argmax(weights)]
+        agree = np.abs(along_chain - centre) <= CHAIN_AGREEMENT * chains.step
+        common = float(np.average(along_chain[agree], weights=weights[agree]))
+        for i, keep in zip(members, agree, strict=True):
+            if keep:
+                piece, _, _, arcs = placed[i]
+                result[i] = (piece, sign, common + sign * chain_arcs[piece.first], arcs)
+    return result
+
+
+def _slide_limit(joints, placed, step) -> float:
+    """How far (px) the free ends may slide the track this frame: unbounded where the
+    seen stretches are nearly straight, :data:`BENT_SLIDE` segments where they turn by
+    :data:`BENT_TURN` radians or more in all (in between, in proportion)."""
+    n = len(joints)
+    seen = np.zeros(n, dtype=bool)
+    track_arc = np.arange(n) * step
+    for _, sign, offset, arcs in placed:
+        lo, hi = sorted((offset, sign * float(arcs[-1]) + offset))
+        seen |= (track_arc >= lo) & (track_arc <= hi)
+    steps = np.diff(joints, axis=0)
+    angles = np.arctan2(steps[:, 1], steps[:, 0])
+    turns = np.abs((np.diff(angles) + math.pi) % (2.0 * math.pi) - math.pi)
+    inner = seen[1:-1] & seen[:-2] & seen[2:]
+    bent = float(turns[inner].sum()) / BENT_TURN
+    if bent >= 1.0:
+        return BENT_SLIDE * step
+    return BENT_SLIDE * step / max(bent, 1e-6)
+
+
+def _going_out(joints, placed, chains) -> tuple[bool, bool]:
+    """Per end of the track: whether the cable may go on out of the picture that way
+    (the end is outside it, or the seen cable furthest that way ends at its edge)."""
+    width, height = chains.width, chains.height
+    result = []
+    for end in (0, 1):
+        if not _in_picture(joints[-end], width, height):
+            result.append(True)
+            continue
+        extreme, at_edge = None, False
+        for piece, sign, offset, arcs in placed:
+            for piece_end, u_end in ((0, 0.0), (1, float(arcs[-1]))):
+                s_end = sign * u_end + offset
+                further = extreme is None or (s_end < extreme if end == 0 else s_end > extreme)
+                if further:
+                    extreme = s_end
+                    point = piece.joints[-piece_end]
+                    at_edge = not clear_of_edge(point, piece.radius, width, height)
+        result.append(at_edge)
+    return result[0], result[1]
+
+
+def _in_picture(point, width: int, height: int) -> bool:
+    return 0.0 <= point[0] <= width - 1 and 0.0 <= point[1] <= height - 1
+
+
+def _along(points: np.ndarray, arcs: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Points at arcs ``at`` along a polyline whose vertices are at ``arcs``."""
+    x = np.interp(at, arcs, points[:, 0])
+    y = np.interp(at, arcs, points[:, 1])
+    return np.column_stack([x, y])
