@@ -65,11 +65,12 @@ def resample_kernel(points, step):
 def end_fit(backwards, skip, span):
     """Quadratic least-squares fit of a polyline's last stretch (see geometry.end_tangent).
 
-    ``backwards`` starts at the end. Returns ``(fitted, x0, y0, dx, dy, last)``:
-    whether at least four points lie between ``skip`` and ``skip + span`` of arc
+    ``backwards`` starts at the end. Returns ``(fitted, x0, y0, dx, dy, last, ddx,
+    ddy)``: whether at least four points lie between ``skip`` and ``skip + span`` of arc
     length; the end position (the fit's value at arc length 0 when a stretch was
-    skipped, else the first point); the fit's first-order coefficient; and the index
-    of the last point within ``span`` (for the chord fallback).
+    skipped, else the first point); the fit's first-order coefficient; the index of the
+    last point within ``span`` (for the chord fallback); and the fit's second derivative
+    (per px squared).
     """
     n = backwards.shape[0]
     total = 0.0
@@ -107,14 +108,14 @@ def end_fit(backwards, skip, span):
             used += 1
     last = max(last, 1)
     if used < 4:
-        return False, backwards[0, 0], backwards[0, 1], 0.0, 0.0, last
+        return False, backwards[0, 0], backwards[0, 1], 0.0, 0.0, last, 0.0, 0.0
     normal = np.empty((3, 3))
     for r in range(3):
         for c in range(3):
             normal[r, c] = sums[r + c]
     determinant, coefficients = solve_small(normal, rhs)
     if abs(determinant) < 1e-12:
-        return False, backwards[0, 0], backwards[0, 1], 0.0, 0.0, last
+        return False, backwards[0, 0], backwards[0, 1], 0.0, 0.0, last, 0.0, 0.0
     x0, y0 = backwards[0, 0], backwards[0, 1]
     if skip > 0:
         x0, y0 = coefficients[0, 0], coefficients[0, 1]
@@ -125,4 +126,6 @@ def end_fit(backwards, skip, span):
         coefficients[1, 0] / reach,
         coefficients[1, 1] / reach,
         last,
+        2.0 * coefficients[2, 0] / (reach * reach),
+        2.0 * coefficients[2, 1] / (reach * reach),
     )

@@ -43,27 +43,66 @@ def median_distance_per_piece(distance, points, starts):
 # --------------------------------------------------------------------------- candidate joins
 
 
+# A cable bends no tighter than this many radii: the most of an end's curvature that
+# is carried on across a gap.
+MIN_BEND_RADII = 3.0
+
+
 @njit(cache=True, nogil=True)
-def _join_cost(ax, ay, adx, ady, bx, by, bdx, bdy, weights, max_gap, radius):
-    """:func:`service.perception.merging.join_cost` of ends a and b, operation for operation
-    (numba's ``np.hypot`` and ``np.arccos`` call the same libm functions as NumPy and
-    ``math.acos``, so the very same double)."""
+def _signed_angle(ux, uy, wx, wy):
+    """Signed angle (-pi..pi) from unit vector u to unit vector w."""
+    return np.arctan2(ux * wy - uy * wx, ux * wx + uy * wy)
+
+
+@njit(cache=True, nogil=True)
+def _wrap(angle):
+    while angle > np.pi:
+        angle -= 2.0 * np.pi
+    while angle < -np.pi:
+        angle += 2.0 * np.pi
+    return angle
+
+
+@njit(cache=True, nogil=True)
+def _bending(turn, first, second, distance, length, kappa_a, kappa_b, weights, radius):
+    """The direction and turning parts of the join cost, less what curvatures explain."""
+    expected = 0.5 * (kappa_a + kappa_b) * length
+    cost = weights[1] * abs(_wrap(turn - expected)) / np.pi
+    if distance > 1e-9:
+        expected_first = length * (2.0 * kappa_a + kappa_b) / 6.0
+        expected_second = expected - expected_first
+        turning = abs(_wrap(first - expected_first)) + abs(_wrap(second - expected_second))
+        fade = min(1.0, distance / max(3.0 * radius, 1e-9))
+        cost += weights[2] * fade * turning / (2.0 * np.pi)
+    return cost
+
+
+@njit(cache=True, nogil=True)
+def join_cost(ax, ay, adx, ady, ak, bx, by, bdx, bdy, bk, weights, max_gap, radius):
+    """merging.join_cost: the paper's three parts, its direction and turning parts less
+    the turn the ends' curvature explains when that is cheaper."""
     gap_x = bx - ax
     gap_y = by - ay
     distance = np.hypot(gap_x, gap_y)
     arriving_x = -bdx
     arriving_y = -bdy
-    difference = np.arccos(min(max(adx * arriving_x + ady * arriving_y, -1.0), 1.0))
-    cost = weights[0] * distance / max(max_gap, 1e-9)
-    cost += weights[1] * difference / np.pi
+    turn = _signed_angle(adx, ady, arriving_x, arriving_y)
+    limit = 1.0 / max(MIN_BEND_RADII * radius, 1e-9)
+    kappa_a = min(max(ak, -limit), limit)
+    # b's curvature is for travel out of b; the cable arrives travelling into b.
+    kappa_b = min(max(-bk, -limit), limit)
+    half = 0.5 * abs(turn)
+    length = distance * half / np.sin(half) if half > 1e-6 else distance
+    first = 0.0
+    second = 0.0
     if distance > 1e-9:
         heading_x = gap_x / distance
         heading_y = gap_y / distance
-        turning = np.arccos(min(max(adx * heading_x + ady * heading_y, -1.0), 1.0))
-        turning += np.arccos(min(max(heading_x * arriving_x + heading_y * arriving_y, -1.0), 1.0))
-        fade = min(1.0, distance / max(3.0 * radius, 1e-9))
-        cost += weights[2] * fade * turning / (2.0 * np.pi)
-    return cost
+        first = _signed_angle(adx, ady, heading_x, heading_y)
+        second = _signed_angle(heading_x, heading_y, arriving_x, arriving_y)
+    bent = _bending(turn, first, second, distance, length, kappa_a, kappa_b, weights, radius)
+    straight = _bending(turn, first, second, distance, length, 0.0, 0.0, weights, radius)
+    return weights[0] * distance / max(max_gap, 1e-9) + min(bent, straight)
 
 
 @njit(cache=True, nogil=True)
@@ -120,7 +159,7 @@ def _walk_candidates(positions, piece_of_end, free, max_distance, cell, fill, ou
 
 @njit(cache=True, nogil=True)
 def candidate_joins(
-    positions, directions, piece_of_end, free, max_distance, max_gap, weights, radius
+    positions, directions, curvatures, piece_of_end, free, max_distance, max_gap, weights, radius
 ):
     """Every pair of free ends of different pieces at most ``max_distance`` apart.
 
@@ -168,15 +207,17 @@ def candidate_joins(
         distances[k] = np.hypot(
             positions[i, 0] - positions[j, 0], positions[i, 1] - positions[j, 1]
         )
-        costs[k] = _join_cost(
+        costs[k] = join_cost(
             positions[i, 0],
             positions[i, 1],
             directions[i, 0],
             directions[i, 1],
+            curvatures[i],
             positions[j, 0],
             positions[j, 1],
             directions[j, 0],
             directions[j, 1],
+            curvatures[j],
             weights,
             max_gap,
             radius,
@@ -326,3 +367,36 @@ def smooth_curve_kernel(start, leaving, end, arriving, step):
     else:
         handle = (2.0 / 3.0) * distance * np.tan(theta / 4.0) / np.sin(theta / 2.0)
     return _bezier_samples(start, leaving, end, arriving, handle, distance, step)
+
+
+# --------------------------------------------------------------------------- ends at the border
+
+
+@njit(cache=True, nogil=True)
+def runs_to_border(mask, positions, directions, reach, margin):
+    """Ends whose cable runs on along their direction to the picture's border.
+
+    From each end, 1 px steps along its direction while they stay on the mask, up to
+    ``reach`` px: the end runs to the border when a step leaves the picture, or when
+    the first step off the mask is within ``margin`` px of leaving it (thinning stops
+    about a radius short of the border). Steps are rounded as Python's ``round``.
+    """
+    height, width = mask.shape
+    result = np.zeros(positions.shape[0], np.bool_)
+    for index in range(positions.shape[0]):
+        x, y = positions[index, 0], positions[index, 1]
+        dx, dy = directions[index, 0], directions[index, 1]
+        step = 0.0
+        while step <= reach:
+            col = int(np.rint(x + step * dx))
+            row = int(np.rint(y + step * dy))
+            if not (0 <= col < width and 0 <= row < height):
+                result[index] = True
+                break
+            if not mask[row, col]:
+                col = int(np.rint(x + (step + margin) * dx))
+                row = int(np.rint(y + (step + margin) * dy))
+                result[index] = not (0 <= col < width and 0 <= row < height)
+                break
+            step += 1.0
+    return result

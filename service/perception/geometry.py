@@ -51,14 +51,33 @@ def end_tangent(
     position, direction : ndarray
         The fitted end point and the unit tangent pointing out of the polyline.
     """
+    position, direction, _ = end_fit(points, at_start, span, skip)
+    return position, direction
+
+
+def end_fit(
+    points: np.ndarray, at_start: bool, span: float, skip: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`end_tangent` and the signed curvature (1/px) of the fit at the end.
+
+    The curvature is that of the polyline travelled outwards, through the end: positive
+    when the outward direction turns the way of a positive angle (from +x towards +y),
+    0 when the stretch was too short to fit.
+    """
     ordered = points[::-1] if at_start else points
     backwards = np.ascontiguousarray(ordered[::-1], dtype=np.float64)
-    fitted, x0, y0, dx, dy, last = _geometry_kernels.end_fit(backwards, float(skip), float(span))
+    fitted, x0, y0, dx, dy, last, ddx, ddy = _geometry_kernels.end_fit(
+        backwards, float(skip), float(span)
+    )
     # The linear term points into the polyline; outwards is its opposite.
     tangent = np.array([-dx, -dy])
-    if fitted and np.hypot(*tangent) > 1e-9:
-        return np.array([x0, y0]), unit(tangent)
-    return backwards[0].copy(), unit(backwards[0] - backwards[last])
+    speed = float(np.hypot(dx, dy))
+    if fitted and speed > 1e-9:
+        # Travelled inwards the curvature is (x'y'' - y'x'') / |v|^3; outwards (the
+        # tangent reversed) its sign flips.
+        curvature = -(dx * ddy - dy * ddx) / speed**3
+        return np.array([x0, y0]), unit(tangent), float(curvature)
+    return backwards[0].copy(), unit(backwards[0] - backwards[last]), 0.0
 
 
 def end_direction(points: np.ndarray, at_start: bool, span: float) -> np.ndarray:

@@ -9,6 +9,12 @@ cheapest remaining join is implausible or the expected number of DLOs is reached
 two free ends across a short gap that are each other's clearly cheapest partner are
 joined up to a looser limit (:func:`choose_joins`).
 
+Beyond the paper, the cost uses what the image shows (issue 13): an end's own bending
+is expected to go on across a gap, so a hidden stretch of a loop costs no more than a
+straight one; two ends of clearly different colour (:mod:`.appearance`) cost more; an
+end whose cable runs on to the picture's border, and any gap whose curve would run
+outside the picture, is a cable leaving the picture, never a gap to bridge.
+
 Each gap is filled with the curve ``DetectParams.gap_curve`` names (:func:`gap_curve`):
 by default "smooth", a cubic along both end directions that spreads the turn over the
 whole gap as an elastic cable bends; or the paper's "natural" curve, straight along the
@@ -17,16 +23,22 @@ end directions and then one arc of constant curvature.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
 
 from schemas import DetectParams, GapCurve
 from service.perception import _merging_kernels
+from service.perception.appearance import EndColours, colour_penalty, end_colours
 from service.perception.deadline import Deadline, check
-from service.perception.geometry import angle_between, end_tangent, polyline_length
+from service.perception.geometry import end_fit, polyline_length
 
+# An end whose cable runs on along its direction, within this many radii plus
+# BORDER_REACH_PX, to the picture's border (or within BORDER_MARGIN_PX of it) is a cable
+# leaving the picture: it is never joined across a gap.
+BORDER_REACH_RADII = 6.0
+BORDER_REACH_PX = 2.0
 END_FIT_SPAN_PX = 40.0
 END_FIT_SPAN_RADII = 6.0
 # Thinning stops about a radius from the edge of the picture; an end this much
@@ -46,6 +58,7 @@ class ChainEnd:
     at_start: bool
     position: np.ndarray
     direction: np.ndarray
+    curvature: float = 0.0
 
 
 @dataclass
@@ -110,8 +123,8 @@ def chain_ends(
             end_skip = skip
             if distance is not None:
                 end_skip = max(skip, _narrow_end_length(points, at_start, distance, piece_full))
-            position, direction = end_tangent(points, at_start, span, end_skip)
-            ends.append(ChainEnd(index, at_start, position, direction))
+            position, direction, curvature = end_fit(points, at_start, span, end_skip)
+            ends.append(ChainEnd(index, at_start, position, direction, curvature))
     return ends
 
 
@@ -137,10 +150,18 @@ def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> 
     """Cost of joining two chain ends: distance, direction difference and curvature.
 
     ``distance_weight * d / max_gap + direction_weight * angle / pi + curvature_weight *
-    fade * turning / (2 pi)``, with ``d`` the gap's length, ``angle`` (0 to pi) between
-    the direction leaving ``a`` and the direction arriving at ``b``, ``turning`` (0 to
-    2 pi) the turn from the leaving direction onto the gap's heading plus the turn from
-    there onto the arriving direction, and ``fade = min(1, d / (3 radius))``.
+    fade * turning / (2 pi)``, with ``d`` the gap's length, ``angle`` (0 to pi) the turn
+    from the direction leaving ``a`` to the direction arriving at ``b`` that the ends'
+    own bending does not explain, ``turning`` (0 to 2 pi) the turn from the leaving
+    direction onto the gap's heading plus the turn from there onto the arriving
+    direction, less what the ends' bending explains, and ``fade = min(1, d / (3
+    radius))``.
+
+    A cable bends smoothly: across a gap of length ``L`` an end whose stretch curves
+    by ``kappa`` (at most a tight loop's, ``1 / (MIN_BEND_RADII * radius)``) may go on
+    turning, by about ``kappa L`` in all, so a hidden stretch of a loop or a bend costs
+    no more than a straight one. It may as well straighten out of sight: the direction
+    and turning parts are the cheaper of the two readings, never dearer than the paper's.
 
     Parameters
     ----------
@@ -157,19 +178,23 @@ def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> 
         0 for ends that touch and continue each other straight; the usual limit of
         plausibility is ``params.merge_cost_threshold``.
     """
-    gap = b.position - a.position
-    distance = float(np.hypot(gap[0], gap[1]))
-    leaving = a.direction
-    arriving = -b.direction
-    direction_difference = angle_between(leaving, arriving)
-    cost = params.distance_weight * distance / max(params.max_gap, 1e-9)
-    cost += params.direction_weight * direction_difference / np.pi
-    if distance > 1e-9:
-        heading = gap / distance
-        turning = angle_between(leaving, heading) + angle_between(heading, arriving)
-        fade = min(1.0, distance / max(3.0 * radius, 1e-9))
-        cost += params.curvature_weight * fade * turning / (2.0 * np.pi)
-    return cost
+    return float(
+        _merging_kernels.join_cost(
+            float(a.position[0]),
+            float(a.position[1]),
+            float(a.direction[0]),
+            float(a.direction[1]),
+            float(a.curvature),
+            float(b.position[0]),
+            float(b.position[1]),
+            float(b.direction[0]),
+            float(b.direction[1]),
+            float(b.curvature),
+            np.array([params.distance_weight, params.direction_weight, params.curvature_weight]),
+            float(params.max_gap),
+            float(radius),
+        )
+    )
 
 
 def gap_curve(
@@ -244,21 +269,41 @@ class _Components:
 
 
 def _best_matching(
-    members: list[int], ends: list[ChainEnd], params: DetectParams, radius: float
+    members: list[int],
+    ends: list[ChainEnd],
+    params: DetectParams,
+    radius: float,
+    colours: EndColours | None = None,
 ) -> list[tuple[int, int, float]]:
     """Cheapest way to pair up the ends that meet at one junction.
 
     Every pairing of the ends is considered (junctions are small: a crossing has four
     ends, a loop touching a cable four, a triple crossing six), with a penalty for each
     end left unpaired, since a strand rarely ends inside a junction. Two ends of the
-    same piece are never paired.
+    same piece are never paired. The ends' curvature is not carried across: inside a
+    junction thinning bends each strand toward where the strands meet, so the bending
+    there is not the cable's, and the gaps are short.
     """
-    unpaired_penalty = params.merge_cost_threshold
+    straight = {member: replace(ends[member], curvature=0.0) for member in members}
     costs = {}
     for a_pos, a in enumerate(members):
         for b in members[a_pos + 1 :]:
             if ends[a].piece != ends[b].piece:
-                costs[a, b] = join_cost(ends[a], ends[b], params, radius)
+                costs[a, b] = join_cost(straight[a], straight[b], params, radius)
+                if colours is not None:
+                    costs[a, b] += params.colour_weight * float(
+                        colour_penalty(colours, np.array(a), np.array(b))
+                    )
+    return cheapest_pairing(members, costs, params.merge_cost_threshold)
+
+
+def cheapest_pairing(
+    members: list[int], costs: dict[tuple[int, int], float], unpaired_penalty: float
+) -> list[tuple[int, int, float]]:
+    """The pairs of ``members`` of least total cost, each end left unpaired costing
+    ``unpaired_penalty``; ``costs[a, b]`` (``a`` before ``b`` in ``members``) holds every
+    pair allowed. Exact, by trying every pairing (exponential: for a dozen ends or so).
+    """
     memo: dict[tuple[int, ...], tuple[float, tuple]] = {}
 
     def solve(remaining: tuple[int, ...]) -> tuple[float, tuple]:
@@ -296,6 +341,9 @@ def choose_joins(
     junction_of_end: list[int] | None = None,
     at_border: np.ndarray | None = None,
     deadline: Deadline | None = None,
+    colours: EndColours | None = None,
+    leaving: np.ndarray | None = None,
+    picture: tuple[int, int] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
@@ -305,6 +353,13 @@ def choose_joins(
     free ends that are each other's clearly cheapest partner are joined up to a looser
     limit, unless either is ``at_border``. A join never closes a chain on itself.
     ``deadline`` (optional) is checked while the joins are made.
+
+    The evidence of the image, when given: ``colours`` (:func:`.appearance.end_colours`)
+    adds ``params.colour_weight`` times :func:`.appearance.colour_penalty` to every
+    join; ends marked ``leaving`` (cables leaving the picture) are never joined across a
+    gap; and with ``picture`` ((height, width)) no gap is bridged by a curve that runs
+    outside the picture. The last two do not apply when ``expected_count`` asks for
+    joins past the threshold.
 
     Returns
     -------
@@ -337,7 +392,7 @@ def choose_joins(
         proposals = []
         for members in groups.values():
             if 2 <= len(members) <= MAX_JUNCTION_ENDS:
-                proposals.extend(_best_matching(members, ends, params, radius))
+                proposals.extend(_best_matching(members, ends, params, radius, colours))
         for i, j, cost in sorted(proposals, key=lambda item: item[2]):
             try_join(i, j, cost)
 
@@ -349,6 +404,7 @@ def choose_joins(
     pairs, distances, costs = _merging_kernels.candidate_joins(
         positions,
         directions,
+        np.array([end.curvature for end in ends], np.float64),
         np.array([end.piece for end in ends], np.int64),
         np.flatnonzero(~used).astype(np.int64),
         np.inf if params.expected_count is not None else float(params.max_gap),
@@ -356,6 +412,14 @@ def choose_joins(
         np.array([params.distance_weight, params.direction_weight, params.curvature_weight]),
         float(radius),
     )
+    if colours is not None and len(costs):
+        costs = costs + params.colour_weight * colour_penalty(colours, pairs[:, 0], pairs[:, 1])
+    if leaving is not None and params.expected_count is None and len(costs):
+        keep = ~(leaving[pairs[:, 0]] | leaving[pairs[:, 1]])
+        pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
+    if picture is not None and params.expected_count is None and len(costs):
+        keep = _bridges_inside(ends, pairs, costs, picture, params)
+        pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
     check(deadline, "merging")
     # Cheapest first, ties by end indices (as sorting (cost, i, j) tuples).
     order = np.lexsort((pairs[:, 1], pairs[:, 0], costs))
@@ -382,6 +446,26 @@ def choose_joins(
         for cost, i, j in _mutual_best(near, excluded, params.merge_cost_threshold):
             try_join(i, j, cost)
     return joins
+
+
+def _bridges_inside(ends, pairs, costs, picture, params) -> np.ndarray:
+    """Which candidate joins' gap curves stay inside the picture (``picture`` is its
+    (height, width)): a cable whose hidden stretch would run outside it left the
+    picture there, and what it did out of sight cannot be told. Only joins that could
+    be made (at most the mutual limit) have their curve drawn."""
+    height, width = picture
+    keep = np.ones(len(costs), bool)
+    limit = MUTUAL_COST_FACTOR * params.merge_cost_threshold
+    for index in np.flatnonzero(costs <= limit).tolist():
+        a, b = ends[pairs[index, 0]], ends[pairs[index, 1]]
+        curve = gap_curve(a.position, a.direction, b.position, -b.direction, shape=params.gap_curve)
+        keep[index] = bool(
+            (curve[:, 0] >= -0.5).all()
+            and (curve[:, 1] >= -0.5).all()
+            and (curve[:, 0] <= width - 0.5).all()
+            and (curve[:, 1] <= height - 0.5).all()
+        )
+    return keep
 
 
 # The looser limit of a join between two ends that are each other's only candidate,
@@ -570,6 +654,8 @@ def merge_chains(
     zones: np.ndarray | None = None,
     distance: np.ndarray | None = None,
     deadline: Deadline | None = None,
+    image: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
 ) -> MergeResult:
     """Step 6 of the pipeline: join pieces into whole DLOs and fill the gaps.
 
@@ -588,6 +674,12 @@ def merge_chains(
     deadline : Deadline, optional
         Checked between the phases and while joins are made
         (:class:`~service.perception.deadline.DeadlineExceeded` past it).
+    image : ndarray (H, W, 3) uint8, optional
+        The BGR image: joins between ends of clearly different colour cost
+        ``params.colour_weight`` more per step of difference (:mod:`.appearance`).
+    mask : ndarray of bool, optional
+        The foreground: an end whose cable runs on to the picture's border leaves the
+        picture and is never joined across a gap.
 
     Returns
     -------
@@ -604,8 +696,8 @@ def merge_chains(
     check(deadline, "merging")
     junction_of_end, dropped = absorb_shared_pieces(pieces, junctions_of_ends(ends, zones), radius)
     at_border = None
-    if zones is not None:
-        height, width = zones.shape
+    if zones is not None or mask is not None:
+        height, width = (zones if zones is not None else mask).shape
         positions = np.array([end.position for end in ends]).reshape(-1, 2)
         margin = radius + BORDER_MARGIN_PX
         at_border = (
@@ -614,7 +706,36 @@ def merge_chains(
             | (positions[:, 0] > width - 1 - margin)
             | (positions[:, 1] > height - 1 - margin)
         )
-    joins = choose_joins(ends, len(pieces), params, radius, junction_of_end, at_border, deadline)
+    leaving = None
+    if mask is not None and ends:
+        leaving = _merging_kernels.runs_to_border(
+            np.ascontiguousarray(mask, np.bool_),
+            np.array([end.position for end in ends], np.float64),
+            np.array([end.direction for end in ends], np.float64),
+            BORDER_REACH_RADII * radius + BORDER_REACH_PX,
+            BORDER_MARGIN_PX,
+        )
+    if at_border is not None:
+        # An end at the picture's edge is a cable leaving it, too.
+        leaving = at_border if leaving is None else leaving | at_border
+    colours = None
+    if image is not None and params.colour_weight > 0:
+        colours = end_colours(image, pieces, ends, radius)
+    picture = None
+    if zones is not None or mask is not None:
+        picture = (zones if zones is not None else mask).shape[:2]
+    joins = choose_joins(
+        ends,
+        len(pieces),
+        params,
+        radius,
+        junction_of_end,
+        at_border,
+        deadline,
+        colours,
+        leaving,
+        picture,
+    )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
     bridging_ends = ends_through_short_pieces(pieces, ends, joins, span)

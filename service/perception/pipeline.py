@@ -39,6 +39,7 @@ from service.perception.merging import (
     chain_ends,
     choose_joins,
     gap_curve,
+    join_cost,
     merge_chains,
 )
 from service.perception.pruning import prune_overlaps
@@ -272,7 +273,9 @@ def detect_full(
 
     # 6. Merging across gaps and crossings; each path's free ends extended to the
     # cable's ends and the path resampled; then crossings and their order.
-    merged = merge_chains(pieces, params, radius, zones, distance, deadline)
+    merged = merge_chains(
+        pieces, params, radius, zones, distance, deadline, image=image_bgr, mask=foreground
+    )
     finals = []
     for index, path in enumerate(merged.paths):
         if index % DEADLINE_CHECK_EVERY == 0:
@@ -454,6 +457,9 @@ def warm_up() -> None:
     ]
     ends = chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
     choose_joins(ends, len(strands), DetectParams(), radius)  # the candidates' grid
+    # The image's evidence: ends running to the border, the ends' colours.
+    merge_chains(strands, DetectParams(), radius, zones, distance, image=image, mask=mask)
+    join_cost(ends[0], ends[2], DetectParams(), radius)  # one pair's (junctions)
     east, north = np.array([1.0, 0.0]), np.array([0.0, 1.0])
     for shape in GapCurve:
         for end, arriving in (

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from service.perception import _geometry_kernels
-from service.perception.geometry import end_direction, resample
+from service.perception.geometry import end_direction, end_fit, resample
 from tests.perception.references import geometry as reference
 
 
@@ -36,3 +36,19 @@ def test_resample_kernel_equals_the_reference(seed):
         np.testing.assert_array_equal(edges, expected_edges)
         full_joints, _ = resample(points, step)
         np.testing.assert_array_equal(full_joints[: len(joints)], joints)
+
+
+@pytest.mark.parametrize("radius", [15.0, 40.0, 120.0])
+def test_end_fit_measures_the_curvature_of_a_circle_travelled_outwards(radius):
+    """Anticlockwise in image axes (x right, y down: from +x towards +y) the outward
+    travel through the last point turns positive; through the first point, negative.
+    (A quadratic fit over the stretch reads a circle's curvature a few per cent low.)"""
+    t = np.linspace(0.0, 1.5, 200)
+    arc = np.stack([200 + radius * np.cos(t), 200 + radius * np.sin(t)], axis=1)
+    _, direction, at_last = end_fit(arc, False, 0.5 * radius)
+    _, _, at_first = end_fit(arc, True, 0.5 * radius)
+    assert at_last == pytest.approx(1.0 / radius, rel=0.12)
+    assert at_first == pytest.approx(-1.0 / radius, rel=0.12)
+    np.testing.assert_allclose(direction, [-np.sin(1.5), np.cos(1.5)], atol=0.02)
+    straight = np.stack([np.linspace(0, 50, 30), np.full(30, 7.0)], axis=1)
+    assert end_fit(straight, False, 20.0)[2] == pytest.approx(0.0, abs=1e-9)

@@ -1,6 +1,7 @@
 """Step 6, merging: join costs, joins, gap curves and bridges, and their kernels."""
 
 from collections import Counter
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -8,6 +9,7 @@ import pytest
 
 from schemas import DetectParams
 from service.perception import _merging_kernels
+from service.perception.appearance import EndColours
 from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.merging import (
     ChainEnd,
@@ -197,7 +199,8 @@ def random_ends(rng, count, extent):
         position = rng.uniform(0, extent, 2)
         if ends and rng.random() < 0.1:  # two ends at the same spot
             position = ends[-1].position.copy()
-        ends.append(ChainEnd(int(pieces[index]), bool(index % 2), position, direction))
+        curvature = float(rng.normal(0.0, 0.05)) if rng.random() < 0.7 else 0.0
+        ends.append(ChainEnd(int(pieces[index]), bool(index % 2), position, direction, curvature))
     return ends, int(pieces.max()) + 1
 
 
@@ -216,8 +219,21 @@ def test_candidate_grid_makes_the_joins_every_pair_costed_makes(seed):
     radius = float(rng.uniform(1, 8))
     junctions = [int(j) for j in rng.integers(-4, 4, len(ends))] if rng.random() < 0.5 else None
     at_border = rng.random(len(ends)) < 0.2 if rng.random() < 0.5 else None
-    expected = reference.choose_joins(ends, piece_count, params, radius, junctions, at_border)
-    assert choose_joins(ends, piece_count, params, radius, junctions, at_border) == expected
+    leaving = rng.random(len(ends)) < 0.2 if rng.random() < 0.5 else None
+    colours = None
+    if rng.random() < 0.5:
+        colours = EndColours(rng.uniform(0, 60, (len(ends), 3)), rng.uniform(0, 8, len(ends)))
+    picture = (
+        (int(rng.integers(40, 700)), int(rng.integers(40, 700))) if rng.random() < 0.5 else None
+    )
+    evidence = (colours, leaving, picture)
+    expected = reference.choose_joins(
+        ends, piece_count, params, radius, junctions, at_border, *evidence
+    )
+    assert (
+        choose_joins(ends, piece_count, params, radius, junctions, at_border, None, *evidence)
+        == expected
+    )
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -228,6 +244,7 @@ def test_candidate_join_costs_equal_join_cost_to_the_last_bit(seed):
     pairs, distances, costs = _merging_kernels.candidate_joins(
         np.array([end.position for end in ends]),
         np.array([end.direction for end in ends]),
+        np.array([end.curvature for end in ends]),
         np.array([end.piece for end in ends], np.int64),
         np.arange(len(ends), dtype=np.int64),
         float(params.max_gap),
@@ -248,3 +265,121 @@ def test_merging_stops_at_its_deadline():
     deadline = Deadline(1.0, clock=lambda: float(next(ticks)))  # one second per look
     with pytest.raises(DeadlineExceeded, match="in merging after its budget of 1 s"):
         choose_joins(ends, piece_count, DetectParams(), 3.0, deadline=deadline)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_join_cost_kernel_equals_the_plain_reference(seed):
+    rng = np.random.default_rng(seed)
+    ends, _ = random_ends(rng, 200, 150.0)
+    params = DetectParams(distance_weight=0.7, direction_weight=1.3, curvature_weight=0.4)
+    for a, b in zip(ends[::2], ends[1::2], strict=True):
+        radius = float(rng.uniform(1, 8))
+        expected = reference.join_cost(a, b, params, radius)
+        assert join_cost(a, b, params, radius) == pytest.approx(expected, rel=1e-12, abs=1e-12)
+        # The ends' bending only ever explains a turn: never dearer than the paper's cost.
+        flat = join_cost(replace(a, curvature=0.0), replace(b, curvature=0.0), params, radius)
+        assert join_cost(a, b, params, radius) <= flat
+
+
+def test_join_cost_of_a_hidden_bend_follows_the_ends_curvature():
+    """Two ends of one circle of 30 px (a tight loop of a cable of radius 6) with a
+    quarter of it hidden: their curvature says the cable goes on bending, so the join
+    costs far less than the same ends seen as straight, and no more than a straight gap
+    of the same length between straight ends."""
+    params, radius, bend = DetectParams(), 6.0, 30.0
+
+    def on_circle(angle, outwards_sign, curvature):
+        position = bend * np.array([np.cos(angle), np.sin(angle)])
+        tangent = outwards_sign * np.array([-np.sin(angle), np.cos(angle)])
+        return position, tangent, curvature
+
+    # Leaving a at angle 0 anticlockwise (turning left, +1/bend), arriving at b at pi/2;
+    # b's outward direction is clockwise, along which the circle turns right.
+    pa, da, ka = on_circle(0.0, 1.0, 1.0 / bend)
+    pb, db, kb = on_circle(np.pi / 2, -1.0, -1.0 / bend)
+    curved = join_cost(
+        ChainEnd(0, False, pa, da, ka), ChainEnd(1, True, pb, db, kb), params, radius
+    )
+    seen_straight = join_cost(ChainEnd(0, False, pa, da), ChainEnd(1, True, pb, db), params, radius)
+    gap = float(np.hypot(*(pb - pa)))
+    straight = join_cost(
+        ChainEnd(0, False, np.zeros(2), np.array([1.0, 0.0])),
+        ChainEnd(1, True, np.array([gap, 0.0]), np.array([-1.0, 0.0])),
+        params,
+        radius,
+    )
+    assert curved < 0.5 * seen_straight
+    assert curved <= straight + 1e-9
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_runs_to_border_equals_the_plain_reference(seed):
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((60, 90), bool)
+    for _ in range(6):
+        x, y = rng.integers(0, 90), rng.integers(0, 60)
+        cv2.line(mask.view(np.uint8), (int(x), int(y)), (int(x + 40), int(y)), 1, 5)
+    positions = rng.uniform(-2, 92, (300, 2))
+    angles = rng.uniform(0, 2 * np.pi, 300)
+    directions = np.column_stack([np.cos(angles), np.sin(angles)])
+    found = _merging_kernels.runs_to_border(mask, positions, directions, 20.0, 2.0)
+    expected = reference.runs_to_border(mask, positions, directions, 20.0, 2.0)
+    np.testing.assert_array_equal(found, expected)
+
+
+def test_a_cable_running_out_of_the_picture_is_not_joined_across_a_gap():
+    """Two parallel cables cross the picture 20 px apart, leaving it at both edges:
+    without the mask one pair of their ends would be joined in a U-turn."""
+    mask = np.zeros((100, 200), bool)
+    mask[37:44] = True
+    mask[57:64] = True
+    pieces = [
+        np.column_stack([np.linspace(3, 196, 20), np.full(20, 40.0)]),
+        np.column_stack([np.linspace(3, 196, 20), np.full(20, 60.0)]),
+    ]
+    params = DetectParams(merge_cost_threshold=5.0)
+    assert len(merge_chains(pieces, params, 3.5).paths) == 1
+    assert len(merge_chains(pieces, params, 3.5, mask=mask).paths) == 2
+
+
+def test_ends_of_clearly_different_colour_are_not_joined():
+    """One straight cable with a 30 px gap, drawn in one colour or in two."""
+    pieces = [
+        np.column_stack([np.linspace(10, 80, 15), np.full(15, 50.0)]),
+        np.column_stack([np.linspace(110, 190, 15), np.full(15, 50.0)]),
+    ]
+    one, two = (np.full((100, 200, 3), 235, np.uint8) for _ in range(2))
+    for image, right in ((one, (40, 40, 200)), (two, (200, 60, 30))):
+        cv2.line(image, (10, 50), (80, 50), (40, 40, 200), 7)
+        cv2.line(image, (110, 50), (190, 50), right, 7)
+    params = DetectParams()
+    assert len(merge_chains(pieces, params, 3.5, image=one).paths) == 1
+    assert len(merge_chains(pieces, params, 3.5, image=two).paths) == 2
+    assert (
+        len(
+            merge_chains(
+                pieces, params.model_copy(update={"colour_weight": 0}), 3.5, image=two
+            ).paths
+        )
+        == 1
+    )
+
+
+def test_ends_are_not_joined_round_a_bend_outside_the_picture():
+    """Two cables bend down out of the picture's bottom edge next to each other: their
+    ends' curvature makes a U-turn below the picture look plausible, but what a cable
+    does outside the picture cannot be told."""
+
+    # One circle of radius 50 round (100, 60): its bottom (y 100-110) is cut off by the
+    # picture's edge at y = 100.
+    def arc(first, last):
+        t = np.linspace(first, last, 40)
+        return np.column_stack([100 + 50 * np.cos(t), 60 + 50 * np.sin(t)])
+
+    left, right = arc(np.pi, 0.8 * np.pi), arc(0.0, 0.2 * np.pi)
+    pieces = [left, right]
+    # (A U-turn joining the two top ends, over the circle's top, costs 0.58.)
+    params = DetectParams(merge_cost_threshold=0.5)
+    free = merge_chains(pieces, params, 4.0)
+    inside = merge_chains(pieces, params, 4.0, zones=np.zeros((100, 240), bool))
+    assert len(free.paths) == 1 and len(inside.paths) == 2

@@ -4,7 +4,8 @@ and the choice of joins costing every pair of chain ends (the code the grid of
 
 import numpy as np
 
-from service.perception import merging
+from service.perception import _merging_kernels, merging
+from service.perception.appearance import colour_penalty
 from service.perception.geometry import angle_between
 
 
@@ -106,7 +107,81 @@ def smooth_curve(start, leaving, end, arriving, step=1.0):
     return sum(w * c for w, c in zip(weights, control, strict=True))
 
 
-def choose_joins(ends, piece_count, params, radius, junction_of_end=None, at_border=None):
+def _signed_angle(u, w):
+    return float(np.arctan2(u[0] * w[1] - u[1] * w[0], u[0] * w[0] + u[1] * w[1]))
+
+
+def _wrapped(angle):
+    return float((angle + np.pi) % (2.0 * np.pi) - np.pi)
+
+
+def _bending(turn, first, second, distance, length, kappa_a, kappa_b, params, radius):
+    expected = (kappa_a + kappa_b) / 2.0 * length
+    cost = params.direction_weight * abs(_wrapped(turn - expected)) / np.pi
+    if distance > 1e-9:
+        expected_first = length * (2.0 * kappa_a + kappa_b) / 6.0
+        turning = abs(_wrapped(first - expected_first))
+        turning += abs(_wrapped(second - (expected - expected_first)))
+        fade = min(1.0, distance / max(3.0 * radius, 1e-9))
+        cost += params.curvature_weight * fade * turning / (2.0 * np.pi)
+    return cost
+
+
+def join_cost(a, b, params, radius):
+    """:func:`service.perception.merging.join_cost` in plain Python: the paper's three
+    parts, the direction and turning ones less the turning that the ends' curvature
+    (capped at a bend of MIN_BEND_RADII radii) carries on across the gap when that is
+    cheaper than the paper's."""
+    gap = b.position - a.position
+    distance = float(np.hypot(*gap))
+    leaving, arriving = a.direction, -b.direction
+    turn = _signed_angle(leaving, arriving)
+    limit = 1.0 / max(_merging_kernels.MIN_BEND_RADII * radius, 1e-9)
+    kappa_a = float(np.clip(a.curvature, -limit, limit))
+    kappa_b = float(np.clip(-b.curvature, -limit, limit))
+    # The arc length of a circle through both ends with that turn.
+    half = abs(turn) / 2.0
+    length = distance * half / np.sin(half) if half > 1e-6 else distance
+    first = second = 0.0
+    if distance > 1e-9:
+        heading = gap / distance
+        first, second = _signed_angle(leaving, heading), _signed_angle(heading, arriving)
+    shape = (turn, first, second, distance, length)
+    bent = _bending(*shape, kappa_a, kappa_b, params, radius)
+    straight = _bending(*shape, 0.0, 0.0, params, radius)
+    return params.distance_weight * distance / max(params.max_gap, 1e-9) + min(bent, straight)
+
+
+def runs_to_border(mask, positions, directions, reach, margin):
+    """``_merging_kernels.runs_to_border`` as a plain loop."""
+    height, width = mask.shape
+    result = np.zeros(len(positions), bool)
+    for index, ((x, y), (dx, dy)) in enumerate(zip(positions, directions, strict=True)):
+        step = 0.0
+        while step <= reach:
+            col, row = round(x + step * dx), round(y + step * dy)
+            if not (0 <= col < width and 0 <= row < height):
+                result[index] = True
+                break
+            if not mask[row, col]:
+                col, row = round(x + (step + margin) * dx), round(y + (step + margin) * dy)
+                result[index] = not (0 <= col < width and 0 <= row < height)
+                break
+            step += 1.0
+    return result
+
+
+def choose_joins(
+    ends,
+    piece_count,
+    params,
+    radius,
+    junction_of_end=None,
+    at_border=None,
+    colours=None,
+    leaving=None,
+    picture=None,
+):
     """:func:`service.perception.merging.choose_joins` over every pair of ends: a distance
     matrix of all ends and a plain loop over every pair of free ends."""
     components = merging._Components(piece_count)
@@ -135,7 +210,7 @@ def choose_joins(ends, piece_count, params, radius, junction_of_end=None, at_bor
         proposals = []
         for members in groups.values():
             if 2 <= len(members) <= merging.MAX_JUNCTION_ENDS:
-                proposals.extend(merging._best_matching(members, ends, params, radius))
+                proposals.extend(merging._best_matching(members, ends, params, radius, colours))
         for i, j, cost in sorted(proposals, key=lambda item: item[2]):
             try_join(i, j, cost)
 
@@ -150,7 +225,24 @@ def choose_joins(ends, piece_count, params, radius, junction_of_end=None, at_bor
                 continue
             if not unlimited and distances[i, j] > params.max_gap:
                 continue
-            candidates.append((merging.join_cost(ends[i], ends[j], params, radius), int(i), int(j)))
+            if not unlimited and leaving is not None and (leaving[i] or leaving[j]):
+                continue
+            cost = merging.join_cost(ends[i], ends[j], params, radius)
+            if colours is not None:
+                cost += params.colour_weight * float(
+                    colour_penalty(colours, np.array(i), np.array(j))
+                )
+            limit = merging.MUTUAL_COST_FACTOR * params.merge_cost_threshold
+            if not unlimited and picture is not None and cost <= limit:
+                a, b = ends[i], ends[j]
+                curve = merging.gap_curve(
+                    a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
+                )
+                height, width = picture
+                inside = (curve >= -0.5).all() and (curve[:, 0] <= width - 0.5).all()
+                if not (inside and (curve[:, 1] <= height - 0.5).all()):
+                    continue
+            candidates.append((cost, int(i), int(j)))
     candidates.sort()
     for cost, i, j in candidates:
         if params.expected_count is not None and chains_left <= params.expected_count:

@@ -1,0 +1,122 @@
+"""Compiled loops of :mod:`service.perception.appearance`: colour samples along the end
+stretch of every chain end, and their medians.
+
+Plain versions: ``tests/perception/references/appearance.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def _stretch_bounds(total, skip, length):
+    """Arc lengths (from the end) of the first and last sample of an end stretch."""
+    stop = min(skip + length, total)
+    start = min(skip, max(total - length, 0.0))
+    if stop - start < 1.0:
+        start, stop = 0.0, total
+    return start, stop
+
+
+@njit(cache=True, nogil=True)
+def end_samples(image, joints, starts, end_piece, end_at_start, skip, length):
+    """BGR (0-1) means of the 3x3 pixels round points 1 px apart along each end stretch.
+
+    End ``e`` belongs to piece ``end_piece[e]`` (joints ``joints[starts[k]:starts[k + 1]]``)
+    and sits at its first joint when ``end_at_start[e]``, else at its last. Its stretch
+    runs from ``skip`` to ``skip + length`` of arc from the end (or over the last
+    ``length`` of a shorter piece, or the whole piece when that is under 1 px). Points are
+    rounded half to even and the 3x3 neighbourhood is clipped to the image.
+
+    Returns ``(samples, bounds)``: end ``e``'s samples are ``samples[bounds[e]:bounds[e + 1]]``.
+    """
+    height, width = image.shape[0], image.shape[1]
+    count = end_piece.size
+    bounds = np.zeros(count + 1, np.int64)
+    # First pass: how many samples each end gets.
+    totals = np.empty(count)
+    for e in range(count):
+        k = end_piece[e]
+        total = 0.0
+        for i in range(starts[k] + 1, starts[k + 1]):
+            total += np.hypot(joints[i, 0] - joints[i - 1, 0], joints[i, 1] - joints[i - 1, 1])
+        totals[e] = total
+        first, last = _stretch_bounds(total, skip, length)
+        bounds[e + 1] = bounds[e] + int(np.floor(last - first + 1e-9)) + 1
+    samples = np.empty((bounds[count], 3), np.float32)
+    for e in range(count):
+        k = end_piece[e]
+        n = starts[k + 1] - starts[k]
+        first, last = _stretch_bounds(totals[e], skip, length)
+        # Walk the piece from the end, with arc lengths as np.interp sees them.
+        segment = 0
+        arc_here = 0.0
+        arc_next = 0.0
+        for s_index in range(bounds[e + 1] - bounds[e]):
+            s = first + s_index
+            x = 0.0
+            y = 0.0
+            while True:
+                a = starts[k] + segment if end_at_start[e] else starts[k + 1] - 1 - segment
+                if segment + 1 >= n:
+                    x, y = joints[a, 0], joints[a, 1]
+                    break
+                b = a + 1 if end_at_start[e] else a - 1
+                arc_next = arc_here + np.hypot(
+                    joints[b, 0] - joints[a, 0], joints[b, 1] - joints[a, 1]
+                )
+                if s <= arc_next or segment + 2 >= n:
+                    if s >= arc_next:
+                        x, y = joints[b, 0], joints[b, 1]
+                    elif arc_next > arc_here:
+                        t = (s - arc_here) / (arc_next - arc_here)
+                        x = joints[a, 0] + t * (joints[b, 0] - joints[a, 0])
+                        y = joints[a, 1] + t * (joints[b, 1] - joints[a, 1])
+                    else:
+                        x, y = joints[b, 0], joints[b, 1]
+                    break
+                segment += 1
+                arc_here = arc_next
+            col = min(max(int(np.rint(x)), 0), width - 1)
+            row = min(max(int(np.rint(y)), 0), height - 1)
+            blue = 0.0
+            green = 0.0
+            red = 0.0
+            for dr in range(-1, 2):
+                r = min(max(row + dr, 0), height - 1)
+                for dc in range(-1, 2):
+                    c = min(max(col + dc, 0), width - 1)
+                    blue += image[r, c, 0]
+                    green += image[r, c, 1]
+                    red += image[r, c, 2]
+            out = bounds[e] + s_index
+            samples[out, 0] = blue / (9.0 * 255.0)
+            samples[out, 1] = green / (9.0 * 255.0)
+            samples[out, 2] = red / (9.0 * 255.0)
+    return samples, bounds
+
+
+@njit(cache=True, nogil=True)
+def colour_medians(lab, bounds):
+    """Per end: the median of each channel of its samples, and the median distance of
+    its samples from that colour (as ``np.median``)."""
+    count = bounds.size - 1
+    colour = np.zeros((count, 3))
+    spread = np.zeros(count)
+    for e in range(count):
+        chunk = lab[bounds[e] : bounds[e + 1]]
+        if chunk.shape[0] == 0:
+            continue
+        for channel in range(3):
+            colour[e, channel] = np.median(chunk[:, channel].astype(np.float64))
+        distances = np.empty(chunk.shape[0])
+        for i in range(chunk.shape[0]):
+            distances[i] = np.sqrt(
+                (chunk[i, 0] - colour[e, 0]) ** 2
+                + (chunk[i, 1] - colour[e, 1]) ** 2
+                + (chunk[i, 2] - colour[e, 2]) ** 2
+            )
+        spread[e] = np.median(distances)
+    return colour, spread

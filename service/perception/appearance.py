@@ -1,0 +1,88 @@
+"""What the image says about chain ends, for merging: each end's colour.
+
+Two pieces of one cable look alike where they meet a gap or a crossing; two cables
+of clearly different colour are not one cable, however well their ends line up. Each
+end gets the colour of the cable just inside it (the median, in CIE Lab, of the 3x3
+means at points 1 px apart along a stretch of the piece starting one radius in, so a
+cut's rim and an occluder's shadow are left out) and how much its samples scatter
+round that (shading, texture, a stripe). :func:`colour_penalty` turns the difference
+of two ends' colours, beyond what their own scatter explains, into a join cost.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from service.perception import _appearance_kernels
+
+# The end stretch starts this many radii in from the end and is this many radii long.
+STRETCH_SKIP_RADII = 1.0
+STRETCH_RADII = 7.0
+# Colours closer than this (Lab units, lightness counted at half weight, after the two
+# ends' own scatter) are alike: a few times what shading along one cable gives. Each
+# further COLOUR_TOLERANCE adds one colour_weight to the join cost, up to
+# MAX_COLOUR_STEPS of them.
+COLOUR_TOLERANCE = 10.0
+MAX_COLOUR_STEPS = 2.0
+# Lightness changes with the light along one cable far more than hue does.
+LIGHTNESS_SHARE = 0.5
+
+
+@dataclass(frozen=True)
+class EndColours:
+    """Per chain end: the cable's Lab colour next to it and its samples' scatter."""
+
+    colour: np.ndarray  # (E, 3) L (0-100), a, b
+    spread: np.ndarray  # (E,) median Lab distance of the samples from ``colour``
+
+
+def end_colours(image_bgr: np.ndarray, pieces: list[np.ndarray], ends, radius: float) -> EndColours:
+    """The colour of the cable at every chain end (see the module's docstring).
+
+    Parameters
+    ----------
+    image_bgr : ndarray (H, W, 3) uint8
+    pieces : list of ndarray (N, 2)
+        Chain pieces, (x, y) joints.
+    ends : sequence of ChainEnd
+        Each with ``piece`` and ``at_start``.
+    radius : float
+        Cable half width (px).
+    """
+    count = len(ends)
+    if count == 0:
+        return EndColours(np.zeros((0, 3)), np.zeros(0))
+    starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
+    joints = np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64)
+    samples, bounds = _appearance_kernels.end_samples(
+        np.ascontiguousarray(image_bgr, dtype=np.uint8),
+        joints,
+        starts,
+        np.array([end.piece for end in ends], np.int64),
+        np.array([end.at_start for end in ends], np.bool_),
+        STRETCH_SKIP_RADII * radius,
+        STRETCH_RADII * radius,
+    )
+    lab = cv2.cvtColor(samples.reshape(-1, 1, 3), cv2.COLOR_BGR2LAB).reshape(-1, 3)
+    colour, spread = _appearance_kernels.colour_medians(np.ascontiguousarray(lab), bounds)
+    return EndColours(colour, spread)
+
+
+def colour_penalty(colours: EndColours, first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """Join cost, in units of the colour weight, of pairing ends ``first[k]`` and ``second[k]``.
+
+    0 while the colours differ by no more than :data:`COLOUR_TOLERANCE` plus both ends'
+    scatter, then one unit per further :data:`COLOUR_TOLERANCE`, at most
+    :data:`MAX_COLOUR_STEPS`.
+    """
+    difference = colours.colour[first] - colours.colour[second]
+    distance = np.sqrt(
+        (LIGHTNESS_SHARE * difference[..., 0]) ** 2
+        + difference[..., 1] ** 2
+        + difference[..., 2] ** 2
+    )
+    allowed = COLOUR_TOLERANCE + colours.spread[first] + colours.spread[second]
+    return np.clip((distance - allowed) / COLOUR_TOLERANCE, 0.0, MAX_COLOUR_STEPS)

@@ -1,0 +1,43 @@
+"""Plain colour samples along chain ends (what ``_appearance_kernels`` compiles)."""
+
+import cv2
+import numpy as np
+
+
+def end_stretch(points, at_start, skip, length):
+    """Points 1 px apart along a piece from ``skip`` to ``skip + length`` of arc from an end."""
+    ordered = points if at_start else points[::-1]
+    steps = np.hypot(*np.diff(ordered, axis=0).T)
+    arc = np.concatenate([[0.0], np.cumsum(steps)])
+    stop = min(skip + length, arc[-1])
+    start = min(skip, max(arc[-1] - length, 0.0))
+    if stop - start < 1.0:
+        start, stop = 0.0, arc[-1]
+    s = np.arange(start, stop + 1e-9, 1.0)
+    return np.column_stack([np.interp(s, arc, ordered[:, 0]), np.interp(s, arc, ordered[:, 1])])
+
+
+def bgr_means(image_bgr, points):
+    """BGR (0-1) mean of the 3x3 pixels round each point, clipped to the image."""
+    height, width = image_bgr.shape[:2]
+    cols = np.clip(np.rint(points[:, 0]).astype(np.int64), 0, width - 1)
+    rows = np.clip(np.rint(points[:, 1]).astype(np.int64), 0, height - 1)
+    total = np.zeros((len(points), 3))
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            r = np.clip(rows + dr, 0, height - 1)
+            c = np.clip(cols + dc, 0, width - 1)
+            total += image_bgr[r, c].astype(np.float64)
+    return total / (9.0 * 255.0)
+
+
+def end_colours(image_bgr, pieces, ends, skip, length):
+    """Per end: the median Lab colour along its stretch and the samples' median distance."""
+    colour, spread = np.zeros((len(ends), 3)), np.zeros(len(ends))
+    for index, end in enumerate(ends):
+        bgr = bgr_means(image_bgr, end_stretch(pieces[end.piece], end.at_start, skip, length))
+        lab = cv2.cvtColor(bgr.astype(np.float32).reshape(-1, 1, 3), cv2.COLOR_BGR2LAB)
+        lab = lab.reshape(-1, 3).astype(np.float64)
+        colour[index] = np.median(lab, axis=0)
+        spread[index] = np.median(np.sqrt(((lab - colour[index]) ** 2).sum(axis=1)))
+    return colour, spread
