@@ -19,6 +19,7 @@ from service.perception.cable_segmentation import (
     JND,
     N_ORIENTATIONS,
     OFFSET,
+    REACH,
     WIDE_WINDOW,
     level_steps,
     segment_cables,
@@ -172,7 +173,7 @@ def level_inputs(seed, shape=(48, 64)):
     lab8 = cv2.cvtColor(small, cv2.COLOR_BGR2Lab)
     background8, wide8 = (
         cv2.merge([cv2.medianBlur(np.ascontiguousarray(lab8[:, :, c]), size) for c in range(3)])
-        for size in (BACKGROUND_WINDOW, WIDE_WINDOW)
+        for size in (BACKGROUND_WINDOW | 1, WIDE_WINDOW | 1)
     )
     return lab8, background8, wide8
 
@@ -210,7 +211,7 @@ def test_seed_colours_equal_the_reference(seed):
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_merge_level_and_nearest_colour_class_equal_the_reference(seed):
+def test_merge_level_equals_the_reference(seed):
     rng = np.random.default_rng(seed)
     best = rng.random((30, 40)).astype(np.float32)
     best_level = rng.integers(0, 3, (30, 40)).astype(np.int64)
@@ -221,15 +222,47 @@ def test_merge_level_and_nearest_colour_class_equal_the_reference(seed):
     np.testing.assert_array_equal(found_best, best)
     np.testing.assert_array_equal(found_level, best_level)
 
-    lab8 = rng.integers(0, 256, (59, 81, 3)).astype(np.uint8)
-    nearest = rng.integers(-1, 12, (30, 40)).astype(np.int64)
-    distance = (rng.random((30, 40)) * 6).astype(np.float32)
-    reach = (rng.random(12) * 10).astype(np.float32)
-    colours = (rng.random((12, 4, 3)) * 100 - 30).astype(np.float32)
-    found = _cable_segmentation_kernels.nearest_colour_class(
-        lab8, nearest, distance, 81 / 40, reach, colours
+
+@pytest.mark.parametrize("seed", range(3))
+def test_colour_class_within_reach_equals_the_reference(seed):
+    # Short lines of random colours on a noisy grey, seeds on them along their direction
+    # (so that the walks ahead of line ends go on and stop), and seeds of random colours.
+    rng = np.random.default_rng(seed)
+    image = np.clip(rng.normal(128, 12, (59, 81, 3)), 0, 255).astype(np.uint8)
+    n_lines, n = 5, 12
+    centres_y = rng.uniform(-3, 62, n)
+    centres_x = rng.uniform(-3, 84, n)
+    orientation = rng.integers(0, N_ORIENTATIONS, n)
+    angles = np.pi * orientation / N_ORIENTATIONS
+    for i in range(n_lines):
+        start = (centres_x[i], centres_y[i])
+        length = rng.uniform(5, 25)
+        end = (start[0] + length * np.cos(angles[i]), start[1] + length * np.sin(angles[i]))
+        colour = tuple(int(c) for c in rng.integers(0, 256, 3))
+        cv2.line(
+            image,
+            tuple(round(v) for v in start),
+            tuple(round(v) for v in end),
+            colour,
+            int(rng.integers(2, 5)),
+        )
+    lab8 = cv2.cvtColor(image, cv2.COLOR_BGR2Lab)
+    lab = reference.lab_float(lab8)
+    steps = rng.choice([1.0, 2.0, 2.0 * np.sqrt(2.0)], n)
+    colours = (rng.random((n, 4, 3)) * 100 - 30).astype(np.float32)
+    inside_y = np.clip(np.round(centres_y).astype(int), 0, 58)
+    inside_x = np.clip(np.round(centres_x).astype(int), 0, 80)
+    colours[:n_lines, 0] = lab[inside_y[:n_lines], inside_x[:n_lines]]
+    colours[:n_lines, 1:] = lab[0, 0]  # the grey round them
+    ahead = np.where(rng.random(n) < 0.7, HALF_LENGTH * steps * 4, 0.0)
+    behind = np.where(rng.random(n) < 0.7, HALF_LENGTH * steps * 4, 0.0)
+    args = (centres_y, centres_x, angles, steps, ahead, behind, REACH, 1.0, OFFSET, colours)
+    found = _cable_segmentation_kernels.colour_class_within_reach(lab8, *args)
+    expected = reference.colour_class_within_reach(lab8, *args)
+    without_walks = reference.colour_class_within_reach(
+        lab8, *args[:4], ahead * 0, behind * 0, *args[6:]
     )
-    expected = reference.nearest_colour_class(lab8, nearest, distance, 81 / 40, reach, colours)
+    assert expected.sum() > without_walks.sum()  # the walks add pixels
     assert (found != expected).mean() < 1e-3  # float32 against float64 at exact ties
 
 
