@@ -29,6 +29,7 @@ from service.imageio import (
     write_png,
     write_text,
 )
+from service.interrupts import interrupts_held
 from service.perception import InvalidInputError, detect_full, render_labels, render_overlay
 from service.perception.segmenter import Segmenter
 from service.simulation import ModelError, to_mjcf
@@ -36,9 +37,10 @@ from service.simulation.mjcf import with_surface
 
 IMAGE_OUTPUTS = ("json", "labels", "overlay")
 """The outputs written per image by default."""
-OUTPUT_KINDS = (*IMAGE_OUTPUTS, "mjcf")
+OUTPUT_KINDS = (*IMAGE_OUTPUTS, "mjcf", "mcap")
 """Every output, as named on the command line (``--outputs``); ``mjcf`` (the MuJoCo model)
-needs a camera model, and is then written by default too."""
+needs a camera model, and is then written by default too; ``mcap`` (a ROS 2 recording of all
+the images, or of each video or camera) is written only when asked for."""
 
 
 class InvalidParametersError(ValueError):
@@ -281,7 +283,7 @@ def process_file(
     outputs : collection of str
         Which of :data:`OUTPUT_KINDS` to write in ``out_dir`` (:data:`IMAGE_OUTPUTS` by
         default); the images that are not asked for are not rendered. ``mjcf`` needs
-        ``camera``.
+        ``camera``; ``mcap`` is the caller's (one recording holds many images).
     camera : CameraModel, optional
         Lift the chains to the robot base frame (``points_3d``, ``radius_m``).
     depth_path : str or Path, optional
@@ -318,15 +320,17 @@ def process_file(
         detection = lift(detection, camera, depth)
     if out_dir is not None:
         paths = OutputPaths.for_input(path, out_dir)
-        if "labels" in outputs:
-            write_png(paths.labels_png, render_labels(detection, result.mask, image))
-        if "overlay" in outputs:
-            write_png(paths.overlay_png, render_overlay(image, detection))
-        if "mjcf" in outputs and camera is not None:
-            model = to_mjcf(detection, **with_surface(physics, camera).model_dump())
-            write_text(paths.mjcf_xml, model)
-        if "json" in outputs:
-            write_text(paths.detection_json, detection_to_json(detection) + "\n")
+        # Ctrl-C waits until this image's outputs are whole (see service.interrupts).
+        with interrupts_held():
+            if "labels" in outputs:
+                write_png(paths.labels_png, render_labels(detection, result.mask, image))
+            if "overlay" in outputs:
+                write_png(paths.overlay_png, render_overlay(image, detection))
+            if "mjcf" in outputs and camera is not None:
+                model = to_mjcf(detection, **with_surface(physics, camera).model_dump())
+                write_text(paths.mjcf_xml, model)
+            if "json" in outputs:
+                write_text(paths.detection_json, detection_to_json(detection) + "\n")
     return detection
 
 

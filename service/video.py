@@ -15,6 +15,11 @@ writes
 ``<stem>.overlay.mp4`` (optional)
     The detections drawn over the frames (``mp4v``), one video frame per processed
     frame, at the source frame rate (30 when unknown).
+``<stem>.mcap`` (optional)
+    A ROS 2 recording (:mod:`service.ros.recording`): per processed frame, the frame as a
+    ``sensor_msgs/msg/CompressedImage`` on ``/dlo/image`` and the detection as a
+    ``visualization_msgs/msg/MarkerArray`` on ``/dlo/chains``, stamped with the frame's
+    time (a camera's: Unix time; a video file's: from its start).
 
 Bad input never raises out of :func:`process_stream`: an unreadable frame or a
 frame the detection fails on is skipped and counted, a source that stops
@@ -27,6 +32,7 @@ These are plain functions behind the ``dlo`` command line; they print nothing.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
@@ -44,6 +50,7 @@ from pydantic import BaseModel, Field
 
 from schemas import Detection, DetectParams
 from service.imageio import OutputWriteError, _opencv_quiet
+from service.interrupts import interrupts_held
 from service.perception import InvalidInputError, detect, render_overlay
 from service.perception.segmenter import Segmenter
 
@@ -130,6 +137,9 @@ class FrameSource:
         Number of frames, when known (video files).
     release : callable or None
         Called once by :meth:`close` (releases the capture device).
+    epoch_s : float or None
+        For a live source, the Unix time of timestamp 0, so that frames can be stamped
+        with the wall-clock time they were read (recordings); None for files.
     """
 
     name: str
@@ -138,6 +148,7 @@ class FrameSource:
     fps: float | None = None
     frame_count: int | None = None
     release: Callable[[], None] | None = None
+    epoch_s: float | None = None
 
     def close(self) -> None:
         """Release the underlying capture; safe to call more than once."""
@@ -162,14 +173,18 @@ class StreamOutputs:
     """``<stem>.jsonl``: one :class:`FrameRecord` per line."""
     overlay_video: Path
     """``<stem>.overlay.mp4``: the detections drawn over the frames."""
+    mcap: Path
+    """``<stem>.mcap``: the ROS 2 recording of the frames and their detections."""
 
     @classmethod
     def for_stem(cls, stem: str, out_dir: str | os.PathLike[str]) -> StreamOutputs:
-        """Output paths in ``out_dir`` named ``<stem>.jsonl`` and ``<stem>.overlay.mp4``."""
+        """Output paths in ``out_dir`` named ``<stem>.jsonl``, ``<stem>.overlay.mp4`` and
+        ``<stem>.mcap``."""
         directory = Path(out_dir)
         return cls(
             jsonl=directory / f"{stem}.jsonl",
             overlay_video=directory / f"{stem}.overlay.mp4",
+            mcap=directory / f"{stem}.mcap",
         )
 
 
@@ -204,7 +219,7 @@ class StreamSummary:
     ----------
     source : str
         The source's label.
-    jsonl_path, overlay_path : Path or None
+    jsonl_path, overlay_path, mcap_path : Path or None
         The outputs written (None when not asked for).
     processed : int
         Frames whose detection was written.
@@ -228,6 +243,7 @@ class StreamSummary:
     source: str
     jsonl_path: Path | None = None
     overlay_path: Path | None = None
+    mcap_path: Path | None = None
     processed: int = 0
     unreadable: int = 0
     failed: int = 0
@@ -379,14 +395,20 @@ def open_camera(
     if capture is None:
         raise VideoSourceError(label, "cannot open camera or stream")
     fps = _positive(capture.get(cv2.CAP_PROP_FPS), upper=1000.0)
+    started, epoch = time.monotonic(), time.time()
     return FrameSource(
         name=name or stream_name(source),
         label=label,
         frames=_camera_frames(
-            capture, label, fps or DEFAULT_FPS, CAMERA_TIMEOUT_S if timeout_s is None else timeout_s
+            capture,
+            label,
+            fps or DEFAULT_FPS,
+            CAMERA_TIMEOUT_S if timeout_s is None else timeout_s,
+            started,
         ),
         fps=fps,
         release=capture.release,
+        epoch_s=epoch,
     )
 
 
@@ -412,6 +434,7 @@ def process_stream(
     *,
     jsonl: bool = True,
     overlay_video: bool = False,
+    mcap: bool = False,
     max_frames: int | None = None,
     on_frame: Callable[[FrameOutcome], None] | None = None,
     segmenter: Segmenter | None = None,
@@ -430,6 +453,8 @@ def process_stream(
         Write ``<stem>.jsonl``, one :class:`FrameRecord` per processed frame.
     overlay_video : bool
         Write ``<stem>.overlay.mp4``.
+    mcap : bool
+        Write ``<stem>.mcap``, the ROS 2 recording.
     max_frames : int, optional
         Stop after taking this many frames from the source.
     on_frame : callable, optional
@@ -446,14 +471,15 @@ def process_stream(
     Raises
     ------
     OutputWriteError
-        Only when ``<stem>.jsonl`` cannot be created; a write error later stops
+        Only when ``<stem>.jsonl`` or ``<stem>.mcap`` cannot be created; a write error later stops
         processing and is reported in :attr:`StreamSummary.output_error`.
 
     Notes
     -----
     Never raises ``KeyboardInterrupt``: Ctrl-C stops reading, the outputs are
     closed (the JSON Lines file holding only complete lines, the overlay video
-    finalised) and the summary has ``interrupted=True``.
+    finalised, the recording holding whole frames, with its summary) and the summary has
+    ``interrupted=True``.
 
     Examples
     --------
@@ -476,20 +502,25 @@ def process_stream(
         source=source.label,
         jsonl_path=outputs.jsonl if jsonl else None,
         overlay_path=outputs.overlay_video if overlay_video else None,
+        mcap_path=outputs.mcap if mcap else None,
     )
     started = time.perf_counter()
     lines: _JsonLinesWriter | None = None
     overlay: _OverlayVideoWriter | None = None
+    recording: _Recording | None = None
     try:
         lines = _JsonLinesWriter(outputs.jsonl) if jsonl else None
         if overlay_video:
             overlay = _OverlayVideoWriter(outputs.overlay_video, source.fps or DEFAULT_FPS)
-        _run(source, params, summary, lines, overlay, max_frames, on_frame, segmenter)
+        if mcap:
+            recording = _Recording(outputs.mcap, source.epoch_s)
+        writers = (lines, overlay, recording)
+        _run(source, params, summary, writers, max_frames, on_frame, segmenter)
     except KeyboardInterrupt:
         summary.interrupted = True
     finally:
         problems = []
-        for output in (lines, overlay):
+        for output in (lines, overlay, recording):
             if output is not None:
                 try:
                     output.close()
@@ -528,13 +559,13 @@ def _run(
     source: FrameSource,
     params: DetectParams | None,
     summary: StreamSummary,
-    lines: _JsonLinesWriter | None,
-    overlay: _OverlayVideoWriter | None,
+    writers: tuple[_JsonLinesWriter | None, _OverlayVideoWriter | None, _Recording | None],
     max_frames: int | None,
     on_frame: Callable[[FrameOutcome], None] | None,
     segmenter: Segmenter | None = None,
 ) -> None:
     """The frame loop of :func:`process_stream`; fills ``summary`` in place."""
+    lines, overlay, recording = writers
     frames = iter(source.frames)
     while max_frames is None or summary.frames < max_frames:
         try:
@@ -566,14 +597,19 @@ def _run(
             if detection is None:
                 summary.failed += 1
             else:
+                # Ctrl-C waits until this frame's outputs are whole (a KeyboardInterrupt
+                # inside pydantic's serialiser would surface as an internal error).
                 try:
-                    if overlay is not None:
-                        overlay.write(render_overlay(frame.image, detection))
-                    if lines is not None:
-                        record = FrameRecord(
-                            frame=index, timestamp_s=round(timestamp, 6), detection=detection
-                        )
-                        lines.write(record.model_dump_json() + "\n")
+                    with interrupts_held():
+                        if overlay is not None:
+                            overlay.write(render_overlay(frame.image, detection))
+                        if lines is not None:
+                            record = FrameRecord(
+                                frame=index, timestamp_s=round(timestamp, 6), detection=detection
+                            )
+                            lines.write(record.model_dump_json() + "\n")
+                        if recording is not None:
+                            recording.write(timestamp, detection, frame.image)
                 except OutputWriteError as exc:
                     summary.output_error = str(exc)
                     return
@@ -597,7 +633,7 @@ class _JsonLinesWriter:
         self.path = path
         self._committed = 0
         try:
-            self._file = open(path, "wb")  # noqa: SIM115  (closed in close())
+            self._file = open(path, "w+b")  # noqa: SIM115  (closed in close())
         except OSError as exc:
             raise OutputWriteError(f"cannot write {path}: {exc.strerror or exc}") from exc
 
@@ -614,10 +650,49 @@ class _JsonLinesWriter:
         if self._file.closed:
             return
         try:
+            self._file.flush()
+            size = self._file.seek(0, os.SEEK_END)
+            if size > self._committed:
+                # Ctrl-C may land after a line's bytes went out but before write() noted
+                # them: keep every line that ends in its newline, drop only a broken tail.
+                self._file.seek(self._committed)
+                tail = self._file.read(size - self._committed)
+                self._committed += tail.rfind(b"\n") + 1
             self._file.truncate(self._committed)
             self._file.close()
         except OSError as exc:
             raise OutputWriteError(f"cannot write {self.path}: {exc.strerror or exc}") from exc
+
+
+class _Recording:
+    """``<stem>.mcap``: a :class:`service.ros.recording.McapRecorder`, frames stamped with
+    the source's epoch (when live) plus their timestamp."""
+
+    def __init__(self, path: Path, epoch_s: float | None) -> None:
+        from service.ros.messages import seconds_to_ns
+        from service.ros.recording import McapRecorder, RecordingError
+
+        self._failed = RecordingError
+        with self._errors():
+            self._recorder = McapRecorder(path)
+        self._epoch_ns = 0 if epoch_s is None else seconds_to_ns(epoch_s)
+        self._to_ns = seconds_to_ns
+
+    def write(self, timestamp_s: float, detection: Detection, image: np.ndarray) -> None:
+        stamp_ns = self._epoch_ns + self._to_ns(timestamp_s)
+        with self._errors():
+            self._recorder.write(stamp_ns, detection, image=image)
+
+    def close(self) -> None:
+        with self._errors():
+            self._recorder.close()
+
+    @contextlib.contextmanager
+    def _errors(self) -> Iterator[None]:
+        try:
+            yield
+        except self._failed as exc:
+            raise OutputWriteError(str(exc)) from exc
 
 
 class _OverlayVideoWriter:
@@ -709,10 +784,10 @@ def _file_frames(
 
 
 def _camera_frames(
-    capture: cv2.VideoCapture, label: str, fps: float, timeout_s: float
+    capture: cv2.VideoCapture, label: str, fps: float, timeout_s: float, started: float
 ) -> Iterator[Frame]:
-    """Frames of a camera or stream; see :func:`open_camera`."""
-    started = time.monotonic()
+    """Frames of a camera or stream, timed from ``started`` (``time.monotonic()``); see
+    :func:`open_camera`."""
     retry_interval = min(max(1.0 / fps, 0.005), 0.2)
     index = 0
     failed_at: list[float] = []  # times of the failed reads since the last frame

@@ -13,7 +13,8 @@ the p50 wall time. The cases:
 * scaling: 3 cables at 640x360, 1280x720, 1920x1080 and 3840x2160, and 1 to 5 cables
   (with their crossings) at 1280x720;
 * what a camera model adds: lifting the chains to 3-D, and the MJCF
-  (:mod:`service.bench.lifting`).
+  (:mod:`service.bench.lifting`);
+* what a ROS 2 recording adds per frame (``--outputs mcap``, :mod:`service.bench.recording`).
 
 One thread: the numeric libraries size their thread pools when they are first
 imported, so ``dlo bench`` runs this in a process of its own (``python -m service.cli
@@ -217,6 +218,10 @@ def run_detector_bench(quick: bool, as_json: bool, dataset: Path, frames: int, r
 
     results["lifting"] = run_lifting_cases(quick, frames, repeats)
 
+    from service.bench.recording import run_recording_cases
+
+    results["recording"] = run_recording_cases(quick, frames, repeats)
+
     # ru_maxrss is in KiB on Linux (bytes on macOS).
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     results["peak_rss_mb"] = peak / (1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0)
@@ -342,4 +347,8 @@ def _print_tables(results: dict[str, Any]) -> None:
     from service.bench.lifting import print_lifting_table
 
     print_lifting_table(console, results["lifting"])
+
+    from service.bench.recording import print_recording_table
+
+    print_recording_table(console, results["recording"])
     console.print(f"peak resident memory: {results['peak_rss_mb']:.0f} MB", highlight=False)

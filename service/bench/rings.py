@@ -78,8 +78,14 @@ def run_rings_bench(counts: Sequence[int], repeats: int, as_json: bool) -> int:
     import cv2
     import numba
 
+    from schemas import DetectParams
     from service.console import load_kernels, stderr_console
     from service.perception import detect
+
+    # The brightness path, as when these figures were first measured: the scene is about
+    # merging thousands of chains, and `auto` sends a picture this full of bright rings to
+    # the slower cable-contrast segmentation.
+    params = DetectParams(segmentation="brightness")
 
     cv2.setNumThreads(1)
     numba.set_num_threads(1)
@@ -90,7 +96,7 @@ def run_rings_bench(counts: Sequence[int], repeats: int, as_json: bool) -> int:
         walls, totals, merging = [], [], []
         for _ in range(repeats):
             started = time.perf_counter()
-            detection = detect(image)
+            detection = detect(image, params)
             walls.append((time.perf_counter() - started) * 1000.0)
             totals.append(detection.timings_ms.total)
             merging.append(detection.timings_ms.merging)

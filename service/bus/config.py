@@ -14,6 +14,7 @@ import zenoh
 from service.runtime.settings import DEFAULT_ZENOH_LISTEN, IMAGE_KEYS
 
 __all__ = [
+    "CDR",
     "DEFAULT_ZENOH_LISTEN",
     "IMAGE_KEYS",
     "JSON",
@@ -22,11 +23,18 @@ __all__ = [
     "describe_config",
     "errors_key",
     "make_config",
+    "markers_key",
+    "ros_image_keys",
     "service_config",
 ]
 QUERY_KEY = "dlo/detect"
 """The queryable: ``get`` with the image as payload."""
 JSON = "application/json"
+CDR = zenoh.Encoding.APPLICATION_CDR
+RAW_IMAGE_SUFFIX = "image_raw"
+"""``dlo/<camera>/image_raw``: a CDR ``sensor_msgs/msg/Image`` (ROS 2's camera topic name)."""
+COMPRESSED_IMAGE_SUFFIX = "image_raw/compressed"
+"""``dlo/<camera>/image_raw/compressed``: a CDR ``sensor_msgs/msg/CompressedImage``."""
 
 
 def chains_key(camera: str) -> str:
@@ -37,6 +45,20 @@ def chains_key(camera: str) -> str:
 def errors_key(camera: str) -> str:
     """Where the error records of ``camera``'s unprocessable frames are published."""
     return f"dlo/{camera}/errors"
+
+
+def markers_key(camera: str) -> str:
+    """Where ``camera``'s Detections are published as a CDR ``visualization_msgs/msg/MarkerArray``
+    (the ROS 2 topic ``/dlo/<camera>/markers`` through zenoh-bridge-ros2dds)."""
+    return f"dlo/{camera}/markers"
+
+
+def ros_image_keys(image_key: str) -> tuple[str, str]:
+    """The ROS 2 image keys beside an image key ``dlo/<camera or pattern>/image``:
+    ``.../image_raw`` (``sensor_msgs/msg/Image``) and ``.../image_raw/compressed``
+    (``sensor_msgs/msg/CompressedImage``), for the same cameras."""
+    prefix = image_key.rsplit("/", 1)[0]
+    return f"{prefix}/{RAW_IMAGE_SUFFIX}", f"{prefix}/{COMPRESSED_IMAGE_SUFFIX}"
 
 
 def make_config(

@@ -7,10 +7,17 @@ and
   encoded JPEG or PNG, the optional attachment a JSON object of detection parameters
   (:class:`schemas.DetectParams`) and the frame's identity (:class:`schemas.FrameIdentity`:
   ``frame_id``, ``capture_time``). The Detection JSON is published on
-  ``dlo/<camera>/chains``; a sample that cannot be processed (not an image, bad parameters,
-  too large) gives an error record ``{"camera", "error", "detail"}`` on
-  ``dlo/<camera>/errors`` instead. Both carry :class:`schemas.ResultAttachment` (the
+  ``dlo/<camera>/chains``, and the same detection as a CDR
+  ``visualization_msgs/msg/MarkerArray`` on ``dlo/<camera>/markers`` (ROS 2 through
+  zenoh-bridge-ros2dds, :mod:`service.bus.ros`); a sample that cannot be processed (not an
+  image, bad parameters, too large) gives an error record ``{"camera", "error", "detail"}``
+  on ``dlo/<camera>/errors`` instead. All carry :class:`schemas.ResultAttachment` (the
   identity given back, the frame sample's zenoh timestamp, this replica's id);
+* takes ROS 2 frames of the same cameras beside them: a CDR ``sensor_msgs/msg/Image`` on
+  ``dlo/<camera>/image_raw``, a ``sensor_msgs/msg/CompressedImage`` on
+  ``.../image_raw/compressed`` (the message's ``header.stamp`` is the frame's
+  ``capture_time`` unless a JSON attachment gives one; any other attachment is ignored).
+  They are the camera's frames as any other: the same owner, the latest one wins;
 * shares the cameras with the other replicas of its pool (:mod:`service.bus.ownership`):
   it announces itself with a liveliness token under ``dlo/@replicas/`` and detects only the
   frames of the cameras it owns; the others' frames are dropped before decoding;
@@ -40,11 +47,36 @@ from pydantic import ValidationError
 from schemas import DetectParams, FrameIdentity, ResultAttachment
 from schemas.bus import IDENTITY_FIELDS
 from service.batch import describe_json_validation_error
-from service.bus.config import IMAGE_KEYS, JSON, QUERY_KEY, chains_key, errors_key
+from service.bus.config import (
+    CDR,
+    IMAGE_KEYS,
+    JSON,
+    QUERY_KEY,
+    chains_key,
+    errors_key,
+    markers_key,
+    ros_image_keys,
+)
 from service.bus.ownership import CAMERA_IDLE_S, Ownership, replicas_key
+from service.bus.ros import (
+    ENCODED,
+    frame_kind,
+    markers_payload,
+    read_ros_frame,
+    ros_attachment,
+    with_stamp,
+)
+from service.ros.messages import warm_up as warm_up_ros_messages
 from service.runtime.errors import RequestError
 from service.runtime.frames import Frame, check_upload
-from service.runtime.jobs import OVER_BUDGET, DetectFunction, default_detect, run_detection
+from service.runtime.jobs import (
+    OVER_BUDGET,
+    DetectFunction,
+    budget,
+    default_detect,
+    detect_decoded,
+    run_detection,
+)
 from service.runtime.metrics import Metrics
 
 logger = logging.getLogger(__name__)
@@ -117,6 +149,8 @@ class _Job:
     query: zenoh.Query | None = None
     timestamp: zenoh.Timestamp | None = None
     """The zenoh timestamp of the frame's sample, when it has one."""
+    kind: str = ENCODED
+    """What the payload is: an encoded image, or a ROS 2 message (:mod:`service.bus.ros`)."""
 
 
 class DetectionBus:
@@ -137,7 +171,8 @@ class DetectionBus:
     max_queries : int
         Queries that may wait for the detection thread; beyond that they are refused.
     image_keys : sequence of str
-        The key expressions of the frames to take (``dlo/<camera or pattern>/image``).
+        The key expressions of the frames to take (``dlo/<camera or pattern>/image``), and
+        with each its ROS 2 keys (``.../image_raw``, ``.../image_raw/compressed``).
         Replicas with the same keys share their cameras; other keys make another pool.
     balanced : bool
         How the pool splits its cameras (:func:`service.bus.ownership.assign`).
@@ -231,6 +266,7 @@ class DetectionBus:
             if self._session is not None:
                 raise RuntimeError("the bus is already open")
             self._stopping = False
+            warm_up_ros_messages()  # no frame waits for rosbags to generate its code
             session = zenoh.open(self._config)
             self._session = session
             ownership = Ownership(
@@ -257,7 +293,11 @@ class DetectionBus:
                 liveliness.declare_subscriber(
                     f"{self.replicas_key}/*", self._on_replica, history=True
                 ),
-                *(session.declare_subscriber(key, self._on_sample) for key in self.image_keys),
+                *(
+                    session.declare_subscriber(key, self._on_sample)
+                    for image_key in self.image_keys
+                    for key in (image_key, *ros_image_keys(image_key))
+                ),
                 session.declare_queryable(QUERY_KEY, self._on_query, complete=True),
             ]
             if others and self.learn_s > 0:
@@ -351,13 +391,18 @@ class DetectionBus:
     def _on_sample(self, sample: zenoh.Sample) -> None:
         if sample.kind != zenoh.SampleKind.PUT:
             return
-        camera = str(sample.key_expr).split("/")[1]
+        key = str(sample.key_expr)
+        camera = key.split("/")[1]
         if not self.ownership.owns(camera):  # another replica's: not even copied
             with self._condition:
                 self._count("not_owned")
             return
         job = _Job(
-            sample.payload.to_bytes(), sample.attachment, camera=camera, timestamp=sample.timestamp
+            sample.payload.to_bytes(),
+            sample.attachment,
+            camera=camera,
+            timestamp=sample.timestamp,
+            kind=frame_kind(key),
         )
         with self._condition:
             if self._stopping:
@@ -408,7 +453,10 @@ class DetectionBus:
         where = f"camera {job.camera}" if job.query is None else "query dlo/detect"
         identity = FrameIdentity()
         try:
-            identity, params = read_attachment(job.attachment)
+            ros = job.kind != ENCODED
+            identity, params = read_attachment(
+                ros_attachment(job.attachment) if ros else job.attachment
+            )
             if not job.image:
                 raise RequestError(422, "invalid_image", "image: empty payload (0 bytes)")
             if len(job.image) > self.max_bytes:
@@ -417,10 +465,19 @@ class DetectionBus:
                     "image_too_large",
                     f"image: {len(job.image)} bytes, more than the limit of {self.max_bytes}",
                 )
-            check_upload(job.image, "image", self.max_pixels)
-            _, detection = run_detection(
-                Frame(job.image, params), self._detect, self.max_pixels, self.max_detect_seconds
-            )
+            encoded = job.image
+            if ros:
+                deadline = budget(self.max_detect_seconds)  # counted from here, as below
+                frame = read_ros_frame(job.kind, job.image, self.max_pixels)
+                identity = with_stamp(identity, frame.stamp_s)
+                if frame.image is not None:
+                    detection = detect_decoded(frame.image, params, self._detect, None, deadline)
+                encoded = frame.encoded
+            if encoded is not None:
+                check_upload(encoded, "image", self.max_pixels)
+                _, detection = run_detection(
+                    Frame(encoded, params), self._detect, self.max_pixels, self.max_detect_seconds
+                )
         except RequestError as exc:
             if isinstance(exc, AttachmentError):
                 identity = exc.identity
@@ -446,6 +503,8 @@ class DetectionBus:
             assert job.camera is not None
             self._count("published")
             self.session.put(chains_key(job.camera), body, encoding=JSON, attachment=attachment)
+            markers = markers_payload(detection, job.camera, identity, job.timestamp)
+            self.session.put(markers_key(job.camera), markers, encoding=CDR, attachment=attachment)
 
     def _result_attachment(self, job: _Job, identity: FrameIdentity) -> str:
         """The :class:`ResultAttachment` of every result of ``job``'s frame, as JSON."""

@@ -1,6 +1,7 @@
 """``dlo bench``: the detector per stage on one thread; with ``--service`` what HTTP and
 zenoh add; with ``--startup`` how long whole ``dlo`` processes take; with ``--rings`` how
-detection grows with the number of cables (:mod:`service.bench`).
+detection grows with the number of cables; with ``--viewer`` how the viewer's live mode
+keeps up with a camera (:mod:`service.bench`).
 
 The detector and service benchmarks run in a process of their own with the numeric
 libraries set to one thread (they size their thread pools when first imported); the
@@ -19,7 +20,7 @@ from typing import Annotated
 
 import typer
 
-from service.bench.detector import DEFAULT_DATASET, THREAD_VARIABLES
+from service.bench.detector import DEFAULT_DATASET, THREAD_VARIABLES, cpu_name
 from service.console import exit_usage, stderr_console
 
 
@@ -70,6 +71,14 @@ def bench(
             "--service",
             help="Time the service instead: HTTP and zenoh latency against bare detection "
             "(service/bench/overhead.py).",
+        ),
+    ] = False,
+    recording: Annotated[
+        bool,
+        typer.Option(
+            "--recording",
+            help="Time only what a ROS 2 recording (--outputs mcap) adds per frame "
+            "(service/bench/recording.py); the full run includes it.",
         ),
     ] = False,
     startup: Annotated[
@@ -127,6 +136,28 @@ def bench(
             help="With --replicas: how the replicas share the cameras (DLO_ZENOH_ASSIGNMENT).",
         ),
     ] = Assignment.balanced,
+    viewer: Annotated[
+        bool,
+        typer.Option(
+            "--viewer",
+            help="Run the viewer's live mode in Debian's chromium on a 15 fps 640x480 camera "
+            "instead: frame rate shown, dropped frames, the page's JS heap at start and end "
+            "(service/bench/viewer.py; needs the dev extra's Playwright).",
+        ),
+    ] = False,
+    seconds: Annotated[
+        float,
+        typer.Option(min=1, metavar="S", help="With --viewer: how long the live mode runs."),
+    ] = 60.0,
+    cpu_slowdown: Annotated[
+        float,
+        typer.Option(
+            min=1,
+            metavar="X",
+            help="With --viewer: slow the page's CPU X times (Chrome's throttling), as a "
+            "weak client's.",
+        ),
+    ] = 1.0,
     dlo: Annotated[
         str | None,
         typer.Option(
@@ -138,10 +169,11 @@ def bench(
     ] = None,
 ) -> None:
     """Time the detector per stage on one thread: photographs, generated scenes, scaling."""
-    if service + startup + bombs + (rings is not None) > 1:
+    if service + startup + bombs + (rings is not None) + recording > 1:
         exit_usage(
             stderr_console(),
-            "--service, --startup, --bombs and --rings time different things: give one",
+            "--service, --startup, --bombs, --rings and --recording time different things: "
+            "give one",
         )
     if bombs:
         from service.bench.bombs import run_bomb_bench
@@ -150,6 +182,14 @@ def bench(
     ring_counts = None if rings is None else _ring_counts(rings)
     if dlo is not None and not startup:
         exit_usage(stderr_console(), "--dlo applies only with --startup")
+    if viewer:
+        if service or startup:
+            exit_usage(
+                stderr_console(), "--viewer times the page alone: without --service/--startup"
+            )
+        from service.bench.viewer import run_viewer_bench
+
+        raise typer.Exit(run_viewer_bench(10.0 if quick else seconds, as_json, cpu_slowdown))
     if replicas is not None:
         if not service:
             exit_usage(stderr_console(), "--replicas applies only with --service")
@@ -165,6 +205,10 @@ def bench(
         raise typer.Exit(run_startup_bench(command, dataset, runs, as_json))
     repeats = repeats or 3
     if os.environ.get(CHILD_FLAG) == "1":
+        if recording:
+            from service.bench.recording import run_recording_bench
+
+            raise typer.Exit(run_recording_bench(quick, as_json, frames, repeats, cpu_name()))
         if ring_counts is not None:
             from service.bench.rings import run_rings_bench
 
@@ -180,6 +224,7 @@ def bench(
     args = [sys.executable, "-m", "service.cli", "bench", "--dataset", str(dataset)]
     args += ["--frames", str(frames), "--repeats", str(repeats)]
     args += ["--quick"] * quick + ["--json"] * as_json + ["--service"] * service
+    args += ["--recording"] * recording
     args += [] if rings is None else ["--rings", rings]
     raise typer.Exit(subprocess.call(args, env=env))
 

@@ -46,6 +46,15 @@ def demo(
             "(the README picture).",
         ),
     ] = None,
+    viewer_screenshot: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="FILE",
+            help="Also open the viewer page (GET /) of a service started here in Debian's "
+            "chromium, detect the scene in it, point at its longest chain and save a "
+            "screenshot (the README picture; needs the dev extra's Playwright).",
+        ),
+    ] = None,
     examples: Annotated[
         Path | None,
         typer.Option(
@@ -87,6 +96,25 @@ def demo(
     _print_summary(console, detection, len(scene.cables), elapsed_ms)
     for path in (example, *OutputPaths.for_input(example, out_dir).all()):
         typer.echo(str(path))
+    if viewer_screenshot is not None:
+        try:
+            _screenshot_viewer(example, detection, viewer_screenshot)
+        except Exception as exc:  # no browser, or the page failed: one line
+            print_error(console, failure_message("viewer screenshot", exc))
+            raise typer.Exit(EXIT_FAILED) from None
+        typer.echo(str(viewer_screenshot))
+
+
+def _screenshot_viewer(example: Path, detection: Detection, out: Path) -> None:
+    """Serve the viewer here (no zenoh, no token) and photograph it with ``example``."""
+    from service.browser import screenshot_viewer, serving
+    from service.http import create_app
+    from service.http.server import uvicorn_options
+    from service.runtime.settings import Settings
+
+    settings = Settings(workers=1, zenoh=False, api_token=None, api_token_file=None)
+    with serving(create_app(settings), uvicorn_options("127.0.0.1", 0, "warning")) as base:
+        screenshot_viewer(base, example, detection, out)
 
 
 def write_examples(directory: Path) -> tuple[Path, Path]:

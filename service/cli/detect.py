@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from pydantic import ValidationError
@@ -58,6 +58,9 @@ from service.video import (
     parse_camera,
     process_stream,
 )
+
+if TYPE_CHECKING:
+    from service.ros.recording import McapRecorder
 
 FRAME_MESSAGES_PER_STREAM = 5
 """Skipped frames reported one by one per video; the rest only counted in the summary."""
@@ -183,10 +186,12 @@ def detect(
         str | None,
         typer.Option(
             metavar="LIST",
-            help="What to write, comma-separated from json, labels, overlay, mjcf. Default: "
-            "json, labels and overlay per image (and mjcf with a camera model); json (the "
-            "<stem>.jsonl) per video. For videos, overlay is the overlay video and labels "
-            "are not available.",
+            help="What to write, comma-separated from json, labels, overlay, mjcf, mcap. "
+            "Default: json, labels and overlay per image (and mjcf with a camera model); json "
+            "(the <stem>.jsonl) per video. For videos, overlay is the overlay video and labels "
+            "are not available. mcap: a ROS 2 recording (frames and chains as markers, for "
+            "Foxglove), <stem>.mcap per video or camera, one for all the images (named after "
+            "the one PATH, else images.mcap).",
             show_default=False,
         ),
     ] = None,
@@ -290,8 +295,13 @@ def detect(
     if out_dir is None and outputs is not None:
         exit_usage(console, "--outputs needs --out-dir")
     stream_outputs = (
-        _stream_outputs(console, outputs, selected, overlay_video) if videos else (False, False)
+        _stream_outputs(console, outputs, selected, overlay_video)
+        if videos
+        else (False, False, False)
     )
+    recording = None
+    if "mcap" in selected and images:
+        recording = out_dir / f"{recording_stem(paths)}.mcap"
 
     for note in skipped:
         print_warning(console, note)
@@ -320,10 +330,12 @@ def detect(
     interrupted = False
     if images:
         _, images_failed, interrupted = _detect_images(
-            console, images, params, out_dir, mask, selected, per_image
+            console, images, params, out_dir, mask, selected, per_image, recording
         )
         failed += images_failed
     clashes = find_output_clashes(videos)
+    if recording is not None:  # the images' recording is named like a video's outputs
+        clashes.update({path: images[0] for path in videos if path.stem == recording.stem})
     for path in videos:
         if interrupted:
             break
@@ -354,14 +366,25 @@ def detect(
 
 def _stream_outputs(
     console: Console, given: str | None, selected: Iterable[str], overlay_video: bool
-) -> tuple[bool, bool]:
-    """Which outputs videos get: (JSON Lines, overlay video); labels are a usage error."""
+) -> tuple[bool, bool, bool]:
+    """Which outputs videos get: (JSON Lines, overlay video, MCAP recording); labels are a
+    usage error."""
     chosen = set(selected)
     if given is None:
-        return True, overlay_video
+        return True, overlay_video, False
     if "labels" in chosen:
-        exit_usage(console, "--outputs: labels are not available for videos (use json, overlay)")
-    return "json" in chosen, "overlay" in chosen or overlay_video
+        exit_usage(
+            console, "--outputs: labels are not available for videos (use json, overlay, mcap)"
+        )
+    return "json" in chosen, "overlay" in chosen or overlay_video, "mcap" in chosen
+
+
+def recording_stem(paths: list[Path]) -> str:
+    """The name of the one recording of a run's images: the stem of the one PATH given
+    (a folder's name, or an image's stem), else ``images``."""
+    if len(paths) == 1:
+        return paths[0].stem or paths[0].resolve().name or "images"
+    return "images"
 
 
 def _make_out_dir(console: Console, out_dir: Path) -> None:
@@ -380,12 +403,19 @@ def _detect_images(
     mask: Path | None,
     outputs: Iterable[str],
     per_image: dict,
+    recording_path: Path | None = None,
 ) -> tuple[int, int, bool]:
-    """Process image files into ``out_dir``; returns (processed, failed, interrupted)."""
+    """Process image files into ``out_dir``; returns (processed, failed, interrupted).
+
+    With ``recording_path``, every image processed also goes into that one MCAP recording.
+    """
     outputs = frozenset(outputs)
     clashes = find_output_clashes(images)
     processed = failed = 0
     interrupted = False
+    recording = _open_recording(console, recording_path)
+    if recording_path is not None and recording is None:
+        failed += 1
     progress = Progress(
         TextColumn("{task.description}"),
         BarColumn(),
@@ -407,18 +437,27 @@ def _detect_images(
                     )
                     failed += 1
                 elif (
-                    _process_or_report(console, path, params, out_dir, mask, outputs, **per_image)
-                    is None
-                ):
+                    detection := _process_or_report(
+                        console, path, params, out_dir, mask, outputs, **per_image
+                    )
+                ) is None:
                     failed += 1
                 else:
                     processed += 1
+                    if recording is not None and not _record_image(
+                        console, recording, path, detection
+                    ):
+                        failed += 1
                 progress.advance(task)
     except KeyboardInterrupt:
         interrupted = True
+    finally:
+        if recording is not None and not _close_recording(console, recording):
+            failed += 1
     state = " (interrupted)" if interrupted else ""
+    into = f" (recorded in {recording.path})" if recording is not None and recording.frames else ""
     console.print(
-        f"{processed} of {len(images)} image(s) processed into {out_dir}{state}",
+        f"{processed} of {len(images)} image(s) processed into {out_dir}{into}{state}",
         markup=False,
         highlight=False,
         soft_wrap=True,
@@ -426,12 +465,54 @@ def _detect_images(
     return processed, failed, interrupted
 
 
+def _open_recording(console: Console, path: Path | None) -> McapRecorder | None:
+    """The images' recording at ``path`` (None when not asked for, or when it cannot be
+    created: the error is printed)."""
+    if path is None:
+        return None
+    from service.ros.recording import McapRecorder, RecordingError
+
+    try:
+        return McapRecorder(path)
+    except RecordingError as exc:
+        print_error(console, str(exc))
+        return None
+
+
+def _record_image(
+    console: Console, recording: McapRecorder, path: Path, detection: Detection
+) -> bool:
+    """Add an image's frame to the recording; on failure print the error, return False."""
+    from service.ros.recording import RecordingError
+
+    try:
+        recording.write_file(path, detection)
+    except RecordingError as exc:  # reported per file, as every other output
+        print_error(console, str(exc))
+        return False
+    except Exception as exc:
+        print_error(console, failure_message(path, exc))
+        return False
+    return True
+
+
+def _close_recording(console: Console, recording: McapRecorder) -> bool:
+    from service.ros.recording import RecordingError
+
+    try:
+        recording.close()
+    except RecordingError as exc:
+        print_error(console, str(exc))
+        return False
+    return True
+
+
 def _run_stream(
     console: Console,
     open_source: Callable[[], FrameSource],
     params: DetectParams,
     out_dir: Path,
-    outputs: tuple[bool, bool],
+    outputs: tuple[bool, bool, bool],
     max_frames: int | None,
     segmenter: Segmenter | None = None,
 ) -> StreamSummary | None:
@@ -448,7 +529,7 @@ def _run_stream(
     except KeyboardInterrupt:
         return StreamSummary(source="", interrupted=True)
 
-    jsonl, overlay_video = outputs
+    jsonl, overlay_video, mcap = outputs
     reported = 0
     started = time.perf_counter()
     progress = Progress(
@@ -485,6 +566,7 @@ def _run_stream(
                 out_dir,
                 jsonl=jsonl,
                 overlay_video=overlay_video,
+                mcap=mcap,
                 max_frames=max_frames,
                 on_frame=on_frame,
                 segmenter=segmenter,
@@ -515,7 +597,8 @@ def _stream_summary_line(summary: StreamSummary) -> str:
     state = " (interrupted)" if summary.interrupted else ""
     if summary.stop_reason is not None or summary.output_error is not None:
         state = " (stopped early)"
-    written = [str(path) for path in (summary.jsonl_path, summary.overlay_path) if path is not None]
+    outputs = (summary.jsonl_path, summary.overlay_path, summary.mcap_path)
+    written = [str(path) for path in outputs if path is not None]
     into = f" -> {', '.join(written)}" if written and summary.processed else ""
     return f"{summary.source}: {counts}{timing}{state}{into}"
 

@@ -12,9 +12,11 @@ from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
 
+from service.http.live import live_api, live_socket
 from service.http.middleware import RequestContextMiddleware, error_payload, request_id_of
 from service.http.routes import api, router
 from service.http.state import AppState
+from service.http.viewer import viewer
 from service.perception.segmenter import OnnxSegmenter
 from service.runtime.errors import RequestError
 from service.runtime.jobs import DetectFunction, default_detect, detect_with_segmenter, warm_up
@@ -49,16 +51,17 @@ def create_app(settings: Settings | None = None, detect: DetectFunction | None =
         ``settings.segmenter_model`` cannot be loaded (one-line message).
     """
     settings = Settings() if settings is None else settings
+    segmenter = None
+    if settings.segmenter_model is not None:
+        segmenter = OnnxSegmenter(settings.segmenter_model)
     if detect is None:
-        detect = default_detect
-        if settings.segmenter_model is not None:
-            detect = detect_with_segmenter(OnnxSegmenter(settings.segmenter_model))
+        detect = default_detect if segmenter is None else detect_with_segmenter(segmenter)
     metrics = Metrics()
     api_token = settings.read_api_token()
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        state = AppState.start(settings, metrics, detect, api_token)
+        state = AppState.start(settings, metrics, detect, api_token, segmenter)
         app.state.dlo = state
         logger.info("%s", _where_it_listens(settings, api_token is not None))
         state.background.append(asyncio.create_task(_warm_up(state)))
@@ -76,7 +79,10 @@ def create_app(settings: Settings | None = None, detect: DetectFunction | None =
         lifespan=lifespan,
     )
     app.include_router(api)
+    app.include_router(live_api)
+    app.include_router(live_socket)
     app.include_router(router)
+    app.include_router(viewer)
     app.add_middleware(RequestContextMiddleware, metrics=metrics)
     app.add_exception_handler(RequestError, _request_error)
     app.add_exception_handler(HTTPException, _http_exception)

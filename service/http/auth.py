@@ -1,7 +1,7 @@
 """The optional bearer token (``DLO_API_TOKEN`` or ``DLO_API_TOKEN_FILE``), as FastAPI
-dependencies: :data:`API_TOKEN` on every data route (``/v1/*``, and the viewer's data
-routes when there are some), :data:`METRICS_TOKEN` on ``/metrics`` (only with
-``DLO_PROTECT_METRICS``). ``/healthz`` and ``/readyz`` stay open for probes.
+dependencies: :data:`API_TOKEN` on every data route (``/v1/*``, the viewer's among them;
+its live WebSocket calls :func:`check_token`), :data:`METRICS_TOKEN` on ``/metrics`` (only
+with ``DLO_PROTECT_METRICS``). ``/healthz`` and ``/readyz`` stay open for probes.
 
 The token is compared in constant time (as SHA-256 digests, so that not even its length
 leaks) and never written anywhere: errors say only that it is missing or wrong.
@@ -30,23 +30,36 @@ def require_token(
     request: Request, credentials: HTTPAuthorizationCredentials | None = _CREDENTIALS
 ) -> None:
     """401 unless the request carries ``Authorization: Bearer <token>`` when one is set."""
-    expected = request.app.state.dlo.api_token
+    given = None if credentials is None else credentials.credentials
+    check_token(request.app.state.dlo.api_token, given)
+
+
+def check_token(expected: str | None, given: str | None) -> None:
+    """401 (a :class:`RequestError`) unless ``given`` is the ``expected`` token, or no
+    token is expected. For the transports that carry the token otherwise than in a
+    header FastAPI reads (the viewer's live WebSocket)."""
     if expected is None:
         return
-    if credentials is None or not credentials.credentials.strip():
+    if given is None or not given.strip():
         raise RequestError(
             401,
             "unauthorized",
             "a bearer token is required: send the header 'Authorization: Bearer <token>'",
             headers={"WWW-Authenticate": CHALLENGE},
         )
-    if not _same(credentials.credentials.strip(), expected):
+    if not _same(given.strip(), expected):
         raise RequestError(
             401,
             "unauthorized",
             "the bearer token is not the service's",
             headers={"WWW-Authenticate": f'{CHALLENGE}, error="invalid_token"'},
         )
+
+
+def bearer_token(authorization: str | None) -> str | None:
+    """The token of an ``Authorization: Bearer <token>`` header value (None: no bearer)."""
+    scheme, _, token = (authorization or "").partition(" ")
+    return token if scheme.lower() == "bearer" and token.strip() else None
 
 
 def require_token_for_metrics(

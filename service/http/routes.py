@@ -23,9 +23,9 @@ from service.http.inputs import (
 )
 from service.http.state import AppState
 from service.runtime.errors import RequestError
-from service.runtime.frames import check_frame, check_upload
+from service.runtime.frames import Frame, check_frame, check_upload
 from service.runtime.grasp import GraspFrame, GraspRequest, plan_from_json, run_grasp
-from service.runtime.jobs import OVER_BUDGET, run_detection, run_overlay
+from service.runtime.jobs import OVER_BUDGET, run_detection, run_labels, run_overlay
 from service.runtime.model import run_model
 from service.runtime.pool import PoolBusyError
 
@@ -261,12 +261,19 @@ _MODEL_ERRORS: dict[int | str, dict[str, Any]] = {
 }
 
 
-async def _run(request: Request, job: Any) -> Any:
-    """Read the request, then run ``job`` in the pool (503 at once when it is full)."""
+async def _checked_frame(request: Request) -> tuple[AppState, Frame]:
+    """The app's state and the request's frame, its limits checked."""
     state = app_state(request)
+    frame = await read_frame(request, state.settings.max_body_bytes)
+    check_frame(frame, state.settings.max_pixels)
+    return state, frame
+
+
+async def _run(request: Request, job: Any) -> Any:
+    """Read the request, then run ``job(frame, the app's detect, max_pixels, budget)`` in
+    the pool (503 at once when it is full)."""
+    state, frame = await _checked_frame(request)
     settings = state.settings
-    frame = await read_frame(request, settings.max_body_bytes)
-    check_frame(frame, settings.max_pixels)
     result = await _in_pool(
         state, job, frame, state.detect, settings.max_pixels, settings.max_detect_seconds
     )
@@ -320,6 +327,30 @@ async def detect(request: Request) -> Response:
 async def detect_overlay(request: Request) -> Response:
     """The image with the chains drawn on it (inferred segments dashed), as PNG."""
     png, _ = await _run(request, run_overlay)
+    return Response(png, media_type="image/png")
+
+
+@api.post(
+    "/v1/detect/labels",
+    summary="The instance label image of the detected cables",
+    response_model=None,
+    response_class=Response,
+    responses={
+        200: {"content": {"image/png": {}}, "description": "16-bit PNG of the image's size."},
+        **_ERRORS,
+    },
+    openapi_extra=_DETECT_OPENAPI,
+)
+async def detect_labels(request: Request) -> Response:
+    """Every cable pixel labelled with its chain: 0 background, chain *i* as *i* + 1, the
+    strand on top at crossings, inferred segments as tubes of the chain's radius (as
+    `dlo detect` writes `<stem>.labels.png`)."""
+    state, frame = await _checked_frame(request)
+    settings = state.settings
+    png, detection = await _in_pool(
+        state, run_labels, frame, state.segmenter, settings.max_pixels, settings.max_detect_seconds
+    )
+    state.metrics.observe_detection(detection)
     return Response(png, media_type="image/png")
 
 

@@ -15,6 +15,8 @@ from service.runtime.settings import Settings
 
 if TYPE_CHECKING:
     from service.bus.detection import DetectionBus
+    from service.bus.live import LiveHub
+    from service.perception.segmenter import Segmenter
 
 
 @dataclass
@@ -31,11 +33,16 @@ class AppState:
     pool: WorkerPool
     api_token: str | None = None
     """The bearer token required on /v1/* (:mod:`service.http.auth`); None: open."""
+    segmenter: Segmenter | None = None
+    """The model for ``segmentation=model`` (``DLO_SEGMENTER_MODEL``), for the routes that
+    run the pipeline themselves (the label image); None: none loaded."""
     ready: bool = False
     warm_up_error: str | None = None
     background: list[asyncio.Task[Any] | Future[Any]] = field(default_factory=list)
     bus: DetectionBus | None = None
     bus_error: str | None = None
+    live: LiveHub | None = None
+    """The viewer's live mode on the bus's session, made on first use (:mod:`.live`)."""
 
     @property
     def bus_ready(self) -> bool:
@@ -49,16 +56,24 @@ class AppState:
         metrics: Metrics,
         detect: DetectFunction,
         api_token: str | None = None,
+        segmenter: Segmenter | None = None,
     ) -> AppState:
         pool = WorkerPool(settings.workers, settings.queue_size)
         metrics.in_flight.set_function(lambda: pool.admitted)
         return cls(
-            settings=settings, metrics=metrics, detect=detect, pool=pool, api_token=api_token
+            settings=settings,
+            metrics=metrics,
+            detect=detect,
+            pool=pool,
+            api_token=api_token,
+            segmenter=segmenter,
         )
 
     async def close(self) -> None:
         for task in self.background:
             task.cancel()
+        if self.live is not None:
+            self.live.close()
         if self.bus is not None:
             await asyncio.to_thread(self.bus.close)
         self.pool.shutdown()

@@ -15,7 +15,14 @@ import numpy as np
 
 from schemas import Detection, DetectParams
 from service.imageio import ImageFileError, decode_image, decode_mask
-from service.perception import Deadline, DeadlineExceeded, InvalidInputError, render_overlay
+from service.perception import (
+    Deadline,
+    DeadlineExceeded,
+    InvalidInputError,
+    detect_full,
+    render_labels,
+    render_overlay,
+)
 from service.perception import detect as detect_dlos
 from service.perception import warm_up as warm_up_kernels
 from service.perception.segmenter import Segmenter
@@ -96,15 +103,31 @@ def run_detection(
         422 :data:`OVER_BUDGET` when the budget ran out (the detection stopped, the
         thread is free again).
     """
-    deadline = None if budget_s is None else Deadline(budget_s)
+    deadline = budget(budget_s)
     image, mask = decode_frame(frame, max_pixels)
+    return image, detect_decoded(image, frame.params, detect, mask, deadline)
+
+
+def budget(seconds: float | None) -> Deadline | None:
+    """The deadline ``seconds`` from now (None: no limit)."""
+    return None if seconds is None else Deadline(seconds)
+
+
+def detect_decoded(
+    image: np.ndarray,
+    params: DetectParams,
+    detect: DetectFunction,
+    mask: np.ndarray | None = None,
+    deadline: Deadline | None = None,
+) -> Detection:
+    """Detect the DLOs in an image already decoded (and checked): as :func:`run_detection`
+    after the decoding (422 for unusable input, or when ``deadline`` passes)."""
     try:
-        detection = detect(image, frame.params, mask, deadline)
+        return detect(image, params, mask, deadline)
     except InvalidInputError as exc:
         raise RequestError(422, "invalid_input", str(exc)) from None
     except DeadlineExceeded as exc:
         raise over_budget(exc) from None
-    return image, detection
 
 
 def over_budget(exc: DeadlineExceeded) -> RequestError:
@@ -131,6 +154,31 @@ def run_overlay(
     if not encoded_ok:
         raise RuntimeError("OpenCV could not encode the overlay as PNG")
     return encoded.tobytes(), detection
+
+
+def run_labels(
+    frame: Frame, segmenter: Segmenter | None, max_pixels: int, budget_s: float | None = None
+) -> tuple[bytes, Detection]:
+    """Decode ``frame``, detect, and render the instance labels (as ``dlo detect`` writes
+    ``<stem>.labels.png``: 16-bit, 0 background, chain *i* as *i* + 1), encoded as PNG.
+
+    The labels need the mask the detection used, so this runs the pipeline itself
+    (:func:`service.perception.detect_full`, with ``segmenter`` for ``segmentation=model``),
+    not a front end's injected detect function. Errors as :func:`run_detection`.
+    """
+    deadline = None if budget_s is None else Deadline(budget_s)
+    image, mask = decode_frame(frame, max_pixels)
+    try:
+        result = detect_full(image, frame.params, mask, segmenter=segmenter, deadline=deadline)
+    except InvalidInputError as exc:
+        raise RequestError(422, "invalid_input", str(exc)) from None
+    except DeadlineExceeded as exc:
+        raise over_budget(exc) from None
+    labels = render_labels(result.detection, result.mask, image)
+    encoded_ok, encoded = cv2.imencode(".png", labels)
+    if not encoded_ok:
+        raise RuntimeError("OpenCV could not encode the labels as PNG")
+    return encoded.tobytes(), result.detection
 
 
 def warm_up(detect: DetectFunction) -> Detection:

@@ -4,6 +4,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 DLO = [sys.executable, "-c", "from service.cli import main; main()"]
 
 
@@ -44,6 +46,15 @@ def test_dlo_bench_quick_runs_on_one_thread_and_reports_json(tmp_path):
     ]
     for row in results["lifting"]:
         assert row["joints"] > 0 and 0 < row["lift_ms"]["p50"] <= row["lift_ms"]["max"]
+    assert [row["case"] for row in results["recording"]] == [
+        "640x480, 1 cable(s)",
+        "640x480, 3 cable(s)",
+    ]
+    for row in results["recording"]:
+        for clock in ("wall_ms", "cpu_ms"):
+            assert set(row[clock]) == {"jpeg", "image_message", "markers", "write"}
+            assert 0 < row[clock]["write"]["p50"] <= row[clock]["write"]["max"]
+        assert row["jpeg_kb"] > 0
     assert results["peak_rss_mb"] > 0
 
 
@@ -61,6 +72,7 @@ def test_dlo_bench_prints_tables_by_default(tmp_path):
         "p50 per stage",
         "scaling with image area",
         "a camera model",
+        "a ROS 2 recording per frame",
     ):
         assert heading in completed.stdout
     assert "peak resident memory" in completed.stdout
@@ -85,9 +97,27 @@ def test_dlo_bench_startup_times_whole_processes(tmp_path):
     assert rows["dlo --help"]["target_s"] == 0.3
 
 
-def test_dlo_bench_times_one_thing_at_a_time():
+def test_dlo_bench_recording_alone_reports_its_table_and_the_load(tmp_path):
     completed = subprocess.run(
-        [*DLO, "bench", "--startup", "--service"], capture_output=True, text=True, timeout=60
+        [*DLO, "bench", "--recording", "--quick", "--json"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert completed.returncode == 0, completed.stderr
+    results = json.loads(completed.stdout)
+    assert len(results["load_average"]) == 3
+    assert [row["width"] for row in results["recording"]] == [640, 640]
+    assert all(row["frames"] == 1 for row in results["recording"])
+
+
+@pytest.mark.parametrize(
+    "options",
+    [["--startup", "--service"], ["--recording", "--service"], ["--recording", "--startup"]],
+)
+def test_dlo_bench_times_one_thing_at_a_time(options):
+    completed = subprocess.run(
+        [*DLO, "bench", *options], capture_output=True, text=True, timeout=60
     )
     assert completed.returncode == 2
     assert "give one" in completed.stderr

@@ -189,8 +189,10 @@ def test_frame_identity_travels_through_the_pipe() -> None:
         assert answer.frame_id == 9 and answer.sample_timestamp is None
 
 
-def test_two_replicas_split_the_cameras_and_one_takes_over() -> None:
-    cameras = ["cam1", "cam2", "cam3", "cam4"]
+@contextlib.contextmanager
+def two_replicas() -> Iterator[tuple[zenoh.Session, DetectionBus, DetectionBus]]:
+    """A router, a client and two replicas behind it that know each other; all closed on
+    the way out."""
     with in_process_router() as endpoint, zenoh.open(client_config(endpoint)) as client:
         first, second = replica(endpoint).open(), replica(endpoint).open()
         try:
@@ -198,37 +200,43 @@ def test_two_replicas_split_the_cameras_and_one_takes_over() -> None:
                 lambda: len(first.ownership.replicas) == len(second.ownership.replicas) == 2,
                 "the replicas to see each other",
             )
-            results = Results(client)
-            senders = Cameras(client, cameras)
-            rounds = []
-            for _ in range(3):  # a round at a time: latest frame wins would replace them
-                rounds.append(senders.send_round())
-                assert results.wait_for(rounds[-1])
-            for frame in [frame for frames in rounds for frame in frames]:
-                assert results.times_answered(frame) == 1, frame
-            assert results.replicas_of(rounds[-1]) == {first.replica_id, second.replica_id}
-            assert len(first.ownership.owned()) == len(second.ownership.owned()) == 2
-            # (while the cameras first appear, a newcomer may move another between them)
-            for bus in (first, second):
-                assert bus.counts["published"] + bus.counts["not_owned"] == 12
-            assert first.counts["published"] + second.counts["published"] == 12
-            metrics = first.metrics.render().decode()
-            assert "dlo_zenoh_replicas 2.0" in metrics
-            assert "dlo_zenoh_cameras_owned 2.0" in metrics
-
-            gained = first.ownership.gained
-            second.close()  # a clean stop: its token goes first
-            wait_until(lambda: first.ownership.replicas == [first.replica_id], "the hand-over")
-            frames = senders.send_round()
-            assert results.wait_for(frames)
-            assert results.replicas_of(frames) == {first.replica_id}
-            assert first.ownership.owned() == cameras
-            assert first.ownership.gained == gained + 2
-            handovers = f'dlo_zenoh_handovers_total{{direction="gained"}} {gained + 2:.1f}'
-            assert handovers in first.metrics.render().decode()
+            yield client, first, second
         finally:
             first.close()
             second.close()
+
+
+def test_two_replicas_split_the_cameras_and_one_takes_over() -> None:
+    cameras = ["cam1", "cam2", "cam3", "cam4"]
+    with two_replicas() as (client, first, second):
+        results = Results(client)
+        senders = Cameras(client, cameras)
+        rounds = []
+        for _ in range(3):  # a round at a time: latest frame wins would replace them
+            rounds.append(senders.send_round())
+            assert results.wait_for(rounds[-1])
+        for frame in [frame for frames in rounds for frame in frames]:
+            assert results.times_answered(frame) == 1, frame
+        assert results.replicas_of(rounds[-1]) == {first.replica_id, second.replica_id}
+        assert len(first.ownership.owned()) == len(second.ownership.owned()) == 2
+        # (while the cameras first appear, a newcomer may move another between them)
+        for bus in (first, second):
+            assert bus.counts["published"] + bus.counts["not_owned"] == 12
+        assert first.counts["published"] + second.counts["published"] == 12
+        metrics = first.metrics.render().decode()
+        assert "dlo_zenoh_replicas 2.0" in metrics
+        assert "dlo_zenoh_cameras_owned 2.0" in metrics
+
+        gained = first.ownership.gained
+        second.close()  # a clean stop: its token goes first
+        wait_until(lambda: first.ownership.replicas == [first.replica_id], "the hand-over")
+        frames = senders.send_round()
+        assert results.wait_for(frames)
+        assert results.replicas_of(frames) == {first.replica_id}
+        assert first.ownership.owned() == cameras
+        assert first.ownership.gained == gained + 2
+        handovers = f'dlo_zenoh_handovers_total{{direction="gained"}} {gained + 2:.1f}'
+        assert handovers in first.metrics.render().decode()
 
 
 def test_a_newcomer_watches_the_cameras_before_it_takes_any() -> None:

@@ -388,6 +388,18 @@ def test_a_line_cut_short_is_dropped_when_the_file_is_closed(tmp_path: Path) -> 
     assert path.read_text() == '{"frame": 0}\n'
 
 
+def test_a_whole_line_out_before_the_interrupt_is_kept(tmp_path: Path) -> None:
+    """Ctrl-C between a line's bytes going out and write() noting them keeps the line."""
+    path = tmp_path / "lines.jsonl"
+    writer = _JsonLinesWriter(path)
+    writer.write('{"frame": 0}\n')
+    writer._file.write(b'{"frame": 1}\n{"fra')  # a whole line, then a broken one
+
+    writer.close()
+
+    assert path.read_text() == '{"frame": 0}\n{"frame": 1}\n'
+
+
 def test_max_frames_stops_early(tmp_path: Path, clip_mp4: Path) -> None:
     result = run_dlo("detect", clip_mp4, "--out-dir", tmp_path, "--max-frames", "4")
 
@@ -471,6 +483,9 @@ class FakeClock:
 
     def monotonic(self) -> float:
         return self.now
+
+    def time(self) -> float:  # the wall clock, which cameras' recordings are stamped with
+        return 1_767_225_600.0 + self.now
 
     def sleep(self, seconds: float) -> None:
         self.now += seconds
