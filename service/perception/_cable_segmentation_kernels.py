@@ -60,13 +60,27 @@ def _planar(lab8):
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _window_add(lab, y, x, sign, sums):
+    """Add (``sign`` 1) or take off (-1) the colour at ``(y, x)`` to a window's sums:
+    ``sums`` holds the three channels, the sum of squares and the count."""
+    c0 = lab[0, y, x]
+    c1 = lab[1, y, x]
+    c2 = lab[2, y, x]
+    sums[0] += sign * c0
+    sums[1] += sign * c1
+    sums[2] += sign * c2
+    sums[3] += sign * (c0 * c0 + c1 * c1 + c2 * c2)
+    sums[4] += sign
+
+
 @njit(cache=True, nogil=True)
-def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix):
+def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x):
     """Mean colour and colour variance over the line segment through each pixel.
 
     ``lab`` and ``mean`` are ``(3, H, W)`` planes. The segment is ``2 * half_length`` px
     long at angle ``t`` (cosine and sine given) and centred on the pixel, cut short at
-    the image border. Running sums along each digital line of the family make it O(1)
+    the image border. Sums sliding along each digital line of the family make it O(1)
     per pixel whatever the length.
     """
     _, height, width = lab.shape
@@ -74,6 +88,7 @@ def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix)
     # A line with offset ``line`` visits (s, line + rise[s]); ``rise`` is monotonic, so the
     # stretch inside the image is one run of s, found by bisection.
     rise = np.empty(n_along, np.int64)
+    sums = np.zeros(5, np.float64)
     for s in range(n_along):
         rise[s] = int(np.floor(s * slope + 0.5))
     ascending = rise if slope >= 0 else rise[::-1].copy()
@@ -90,47 +105,37 @@ def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix)
         n = stop - first
         if n <= 0:
             continue
-        p0 = 0.0
-        p1 = 0.0
-        p2 = 0.0
-        p3 = 0.0
-        prefix[0, 0] = 0.0
-        prefix[0, 1] = 0.0
-        prefix[0, 2] = 0.0
-        prefix[0, 3] = 0.0
         for i in range(n):
             s = first + i
             o = line + rise[s]
             if along_x:
-                y, x = o, s
+                buf_y[i] = o
+                buf_x[i] = s
             else:
-                y, x = s, o
-            buf_y[i] = y
-            buf_x[i] = x
-            c0 = lab[0, y, x]
-            c1 = lab[1, y, x]
-            c2 = lab[2, y, x]
-            p0 += c0
-            p1 += c1
-            p2 += c2
-            p3 += c0 * c0 + c1 * c1 + c2 * c2
-            prefix[i + 1, 0] = p0
-            prefix[i + 1, 1] = p1
-            prefix[i + 1, 2] = p2
-            prefix[i + 1, 3] = p3
+                buf_y[i] = s
+                buf_x[i] = o
+        # A window of 2a + 1 samples slides along the line: each sample is added once
+        # as it enters and taken off once as it leaves.
+        sums[:] = 0.0
+        for j in range(min(a, n - 1) + 1):
+            _window_add(lab, buf_y[j], buf_x[j], 1.0, sums)
         for i in range(n):
-            lo = max(i - a, 0)
-            hi = min(i + a + 1, n)
-            inv = 1.0 / (hi - lo)
-            m0 = (prefix[hi, 0] - prefix[lo, 0]) * inv
-            m1 = (prefix[hi, 1] - prefix[lo, 1]) * inv
-            m2 = (prefix[hi, 2] - prefix[lo, 2]) * inv
+            if i > 0:
+                if i + a < n:
+                    _window_add(lab, buf_y[i + a], buf_x[i + a], 1.0, sums)
+                if i - a - 1 >= 0:
+                    _window_add(lab, buf_y[i - a - 1], buf_x[i - a - 1], -1.0, sums)
+            t0, t1, t2, t3, count = sums[0], sums[1], sums[2], sums[3], sums[4]
+            inv = 1.0 / count
+            m0 = t0 * inv
+            m1 = t1 * inv
+            m2 = t2 * inv
             y = buf_y[i]
             x = buf_x[i]
             mean[0, y, x] = m0
             mean[1, y, x] = m1
             mean[2, y, x] = m2
-            v = (prefix[hi, 3] - prefix[lo, 3]) * inv - (m0 * m0 + m1 * m1 + m2 * m2)
+            v = t3 * inv - (m0 * m0 + m1 * m1 + m2 * m2)
             var[y, x] = v if v > 0.0 else 0.0
 
 
@@ -193,7 +198,6 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
     longest = max(height, width) + 2
     buf_y = np.empty(longest, np.int64)
     buf_x = np.empty(longest, np.int64)
-    prefix = np.empty((longest + 1, 4), np.float64)
     best = np.zeros((height, width), np.float32)
     orientation = np.zeros((height, width), np.uint8)
     row = np.empty(width, np.float32)
@@ -202,7 +206,7 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
         angle = np.pi * k / n_orientations
         cos_t = np.cos(angle)
         sin_t = np.sin(angle)
-        _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix)
+        _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x)
         dy = round(offset * cos_t)
         dx = round(-offset * sin_t)
         # A side beyond the picture is taken at its edge: a line running out of the
@@ -231,23 +235,6 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
         for x in range(width):
             best[y, x] = np.sqrt(best[y, x])
     return best, orientation
-
-
-@njit(cache=True, nogil=True)
-def merge_level(best, best_level, ratio, level):
-    """Keep, per pixel of the finest grid, the level whose (nearest) ratio is largest."""
-    grid_h, grid_w = best.shape
-    level_h, level_w = ratio.shape
-    scale_y = level_h / grid_h
-    scale_x = level_w / grid_w
-    for y in range(grid_h):
-        ly = min(int((y + 0.5) * scale_y), level_h - 1)
-        for x in range(grid_w):
-            lx = min(int((x + 0.5) * scale_x), level_w - 1)
-            value = ratio[ly, lx]
-            if value > best[y, x]:
-                best[y, x] = value
-                best_level[y, x] = level
 
 
 @njit(cache=True, nogil=True)

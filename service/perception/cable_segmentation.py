@@ -48,6 +48,10 @@ from service.perception import (
     _segmentation_kernels,
     _shared_kernels,
 )
+from service.perception.deadline import Deadline, check
+
+STAGE = "segmentation"
+"""The stage a :class:`~service.perception.deadline.DeadlineExceeded` names."""
 
 N_ORIENTATIONS = 8
 """Angles of the line segments, 22.5 degrees apart: a segment at most 11.25 degrees off a
@@ -178,7 +182,11 @@ def level_steps(height: int, width: int) -> list[float]:
 
 
 def segment_cables(
-    image_bgr: np.ndarray, min_component_area: int = 0, max_hole_area: int = 0
+    image_bgr: np.ndarray,
+    min_component_area: int = 0,
+    max_hole_area: int = 0,
+    *,
+    deadline: Deadline | None = None,
 ) -> np.ndarray:
     """Foreground mask of the cables in a BGR image, by their contrast with their sides.
 
@@ -188,6 +196,9 @@ def segment_cables(
         ``(H, W, 3)`` BGR ``uint8``.
     min_component_area, max_hole_area : int
         The clean-up of :func:`service.perception.segmentation.clean_mask`.
+    deadline : Deadline, optional
+        Checked after each pyramid level and each later step
+        (:class:`~service.perception.deadline.DeadlineExceeded` past it).
 
     Returns
     -------
@@ -203,22 +214,28 @@ def segment_cables(
     >>> bool(mask[80, 120]), bool(mask[20, 200])
     (True, False)
     """
-    return cable_contrast(image_bgr, min_component_area, max_hole_area).mask
+    return cable_contrast(image_bgr, min_component_area, max_hole_area, deadline=deadline).mask
 
 
 def cable_contrast(
-    image_bgr: np.ndarray, min_component_area: int = 0, max_hole_area: int = 0
+    image_bgr: np.ndarray,
+    min_component_area: int = 0,
+    max_hole_area: int = 0,
+    *,
+    deadline: Deadline | None = None,
 ) -> CableContrast:
     """:func:`segment_cables`, with the line ratios, seeds and levels it used."""
     height, width = image_bgr.shape[:2]
     lab8 = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2Lab)
-    levels = _levels(lab8, level_steps(height, width))
+    levels = _levels(lab8, level_steps(height, width), deadline)
     used = list(range(len(levels)))
-    ratio, best_level, seeds = _seeds(levels, used)
+    on_grid = [_on_grid(level.ratio, levels[0].ratio.shape) for level in levels]
+    ratio, best_level, seeds = _seeds(on_grid, used)
     if seeds.any():
         used = _within_scale_band(levels, best_level, seeds)
         if len(used) < len(levels):
-            ratio, best_level, seeds = _seeds(levels, used)
+            ratio, best_level, seeds = _seeds(on_grid, used)
+    check(deadline, STAGE)
     mask = np.zeros((height, width), bool)
     if seeds.any():
         seeds = _long_seed_runs(ratio, seeds)
@@ -228,7 +245,9 @@ def cable_contrast(
         lines = lines.take(~transitions(lines.colours))
         seeds = seeds.copy()
         seeds[np.nonzero(seeds)] = lines.of_grid >= 0
+        check(deadline, STAGE)
         candidates = _extent(lab8, lines, seeds)
+        check(deadline, STAGE)
         # Seeds hold the mask together: a candidate counts when it touches a seed.
         seeds_full = cv2.resize(
             seeds.view(np.uint8), (width, height), interpolation=cv2.INTER_NEAREST
@@ -246,8 +265,8 @@ def cable_contrast(
     return CableContrast(mask, ratio, best_level, seeds, levels, used)
 
 
-def _levels(lab8: np.ndarray, steps: list[float]) -> list[Level]:
-    """The pyramid's levels, each with its line ratios."""
+def _levels(lab8: np.ndarray, steps: list[float], deadline: Deadline | None) -> list[Level]:
+    """The pyramid's levels, each with its line ratios (the deadline checked after each)."""
     images = _pyramid(lab8, steps)
     levels = []
     for step, small in zip(steps, images, strict=False):
@@ -258,6 +277,7 @@ def _levels(lab8: np.ndarray, steps: list[float]) -> list[Level]:
             small, background, wide, N_ORIENTATIONS, HALF_LENGTH, float(OFFSET), JND * JND
         )
         levels.append(Level(step, small, background, ratio, orientation))
+        check(deadline, STAGE)
     return levels
 
 
@@ -297,13 +317,23 @@ def _sparse_median(lab8: np.ndarray, factor: int) -> np.ndarray:
     return cv2.resize(medians, (width, height), interpolation=cv2.INTER_LINEAR)
 
 
-def _seeds(levels: list[Level], used: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Best ratio and level per pixel of the finest grid, and the seeds among them."""
-    grid_h, grid_w = levels[0].ratio.shape
-    best = np.zeros((grid_h, grid_w), np.float32)
-    best_level = np.zeros((grid_h, grid_w), np.int64)
-    for index in used:
-        _cable_segmentation_kernels.merge_level(best, best_level, levels[index].ratio, index)
+def _on_grid(ratio: np.ndarray, grid_shape: tuple[int, int]) -> np.ndarray:
+    """A level's ratios on the finest grid: each grid pixel takes the level pixel its
+    centre falls in."""
+    grid_h, grid_w = grid_shape
+    return cv2.resize(ratio, (grid_w, grid_h), interpolation=cv2.INTER_NEAREST_EXACT)
+
+
+def _seeds(on_grid: list[np.ndarray], used: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Best ratio and level per pixel of the finest grid, and the seeds among them.
+
+    ``on_grid`` holds every level's ratios on the grid (:func:`_on_grid`); of the
+    ``used`` levels, a pixel keeps the first with the largest ratio.
+    """
+    stack = np.stack([on_grid[index] for index in used])
+    choice = np.argmax(stack, axis=0)
+    best = np.take_along_axis(stack, choice[None], axis=0)[0]
+    best_level = np.asarray(used, np.int64)[choice]
     cue = np.minimum(best * RATIO_BINS, 255.0).astype(np.uint8)
     hist = cv2.calcHist([cue], [0], None, [256], [0, 256]).ravel().astype(np.float64)
     threshold, _ = _segmentation_kernels.otsu_kernel(hist)

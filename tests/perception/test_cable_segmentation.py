@@ -21,9 +21,12 @@ from service.perception.cable_segmentation import (
     OFFSET,
     REACH,
     WIDE_WINDOW,
+    _on_grid,
+    _seeds,
     level_steps,
     segment_cables,
 )
+from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.segmentation import segment, segment_with_cue
 from service.synthetic import make_scene
 from tests.perception.references import cable_segmentation as reference
@@ -211,16 +214,20 @@ def test_seed_colours_equal_the_reference(seed):
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_merge_level_equals_the_reference(seed):
+def test_the_best_level_on_the_grid_equals_the_reference(seed):
+    # Levels of several sizes, some of them not used; ties go to the first level.
     rng = np.random.default_rng(seed)
-    best = rng.random((30, 40)).astype(np.float32)
-    best_level = rng.integers(0, 3, (30, 40)).astype(np.int64)
-    ratio = rng.random((21, 28)).astype(np.float32) * 1.5
-    found_best, found_level = best.copy(), best_level.copy()
-    _cable_segmentation_kernels.merge_level(found_best, found_level, ratio, 3)
-    reference.merge_level(best, best_level, ratio, 3)
-    np.testing.assert_array_equal(found_best, best)
-    np.testing.assert_array_equal(found_level, best_level)
+    shapes = [(30, 40), (21, 28), (15, 20), (11, 14)]
+    ratios = [(rng.integers(0, 4, shape) / 2.0).astype(np.float32) for shape in shapes]
+    used = [0, 1, 3]
+    on_grid = [_on_grid(ratio, shapes[0]) for ratio in ratios]
+    best, best_level, _ = _seeds(on_grid, used)
+    expected_best = np.zeros(shapes[0], np.float32)
+    expected_level = np.zeros(shapes[0], np.int64)
+    for index in used:
+        reference.merge_level(expected_best, expected_level, ratios[index], index)
+    np.testing.assert_array_equal(best, expected_best)
+    np.testing.assert_array_equal(best_level[expected_best > 0], expected_level[expected_best > 0])
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -278,3 +285,23 @@ def test_auto_leaves_brightness_for_a_sheet_of_paper_on_a_dark_table():
     # (The sliver of paper between the cable and the sheet's edge, and the sheet's corner
     # next to it, are thin bright shapes too: some of them are taken.)
     assert dice(mask, truth) > 0.8
+
+
+def test_cable_contrast_stops_at_the_deadline_between_levels():
+    # A clock that moves a second per reading: made at 0 with a 2.5 s budget, the third
+    # check (after the third pyramid level of six) is past it.
+    ticks = itertools.count()
+    readings = []
+
+    def clock():
+        readings.append(next(ticks))
+        return float(readings[-1])
+
+    image, _ = draw_scene(plain(220, shape=(480, 640)), [(30, 30, 30)], shape=(480, 640))
+    assert len(level_steps(480, 640)) > 3
+    with pytest.raises(DeadlineExceeded) as raised:
+        segment_cables(image, deadline=Deadline(2.5, clock=clock))
+    assert raised.value.stage == "segmentation"
+    assert len(readings) == 4  # made, and three checks: it stopped inside the pyramid
+    # Without a budget to run out, the same image is segmented.
+    assert segment_cables(image, deadline=Deadline(60.0)).any()
