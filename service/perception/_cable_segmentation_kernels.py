@@ -61,17 +61,18 @@ def _planar(lab8):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _window_add(lab, y, x, sign, sums):
-    """Add (``sign`` 1) or take off (-1) the colour at ``(y, x)`` to a window's sums:
-    ``sums`` holds the three channels, the sum of squares and the count."""
+def _window_add(lab, y, x, sign, t0, t1, t2, t3):
+    """A window's sums of the three channels and of their squares, with the colour at
+    ``(y, x)`` added (``sign`` 1) or taken off (-1)."""
     c0 = lab[0, y, x]
     c1 = lab[1, y, x]
     c2 = lab[2, y, x]
-    sums[0] += sign * c0
-    sums[1] += sign * c1
-    sums[2] += sign * c2
-    sums[3] += sign * (c0 * c0 + c1 * c1 + c2 * c2)
-    sums[4] += sign
+    return (
+        t0 + sign * c0,
+        t1 + sign * c1,
+        t2 + sign * c2,
+        t3 + sign * (c0 * c0 + c1 * c1 + c2 * c2),
+    )
 
 
 @njit(cache=True, nogil=True)
@@ -88,7 +89,6 @@ def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x):
     # A line with offset ``line`` visits (s, line + rise[s]); ``rise`` is monotonic, so the
     # stretch inside the image is one run of s, found by bisection.
     rise = np.empty(n_along, np.int64)
-    sums = np.zeros(5, np.float64)
     for s in range(n_along):
         rise[s] = int(np.floor(s * slope + 0.5))
     ascending = rise if slope >= 0 else rise[::-1].copy()
@@ -116,16 +116,21 @@ def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x):
                 buf_x[i] = o
         # A window of 2a + 1 samples slides along the line: each sample is added once
         # as it enters and taken off once as it leaves.
-        sums[:] = 0.0
+        t0 = t1 = t2 = t3 = 0.0
+        count = 0
         for j in range(min(a, n - 1) + 1):
-            _window_add(lab, buf_y[j], buf_x[j], 1.0, sums)
+            t0, t1, t2, t3 = _window_add(lab, buf_y[j], buf_x[j], 1.0, t0, t1, t2, t3)
+            count += 1
         for i in range(n):
             if i > 0:
-                if i + a < n:
-                    _window_add(lab, buf_y[i + a], buf_x[i + a], 1.0, sums)
-                if i - a - 1 >= 0:
-                    _window_add(lab, buf_y[i - a - 1], buf_x[i - a - 1], -1.0, sums)
-            t0, t1, t2, t3, count = sums[0], sums[1], sums[2], sums[3], sums[4]
+                j = i + a
+                if j < n:
+                    t0, t1, t2, t3 = _window_add(lab, buf_y[j], buf_x[j], 1.0, t0, t1, t2, t3)
+                    count += 1
+                j = i - a - 1
+                if j >= 0:
+                    t0, t1, t2, t3 = _window_add(lab, buf_y[j], buf_x[j], -1.0, t0, t1, t2, t3)
+                    count -= 1
             inv = 1.0 / count
             m0 = t0 * inv
             m1 = t1 * inv
