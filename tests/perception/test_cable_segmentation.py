@@ -305,3 +305,18 @@ def test_cable_contrast_stops_at_the_deadline_between_levels():
     assert len(readings) == 4  # made, and three checks: it stopped inside the pyramid
     # Without a budget to run out, the same image is segmented.
     assert segment_cables(image, deadline=Deadline(60.0)).any()
+
+
+def test_detect_on_white_paper_stops_inside_cable_contrast_at_its_deadline():
+    # auto takes cable contrast on white paper, which checks the deadline after each
+    # pyramid level: with a clock moving a second per reading, a 2.5 s budget runs out
+    # at its third check, inside segmentation (the brightness path checks only once
+    # segmentation is done, and would stop in a later step).
+    from service.synthetic.families import make_family_scene
+
+    image = make_family_scene("bright", 0, 320, 240).image
+    assert len(level_steps(240, 320)) >= 3
+    ticks = itertools.count()
+    with pytest.raises(DeadlineExceeded) as raised:
+        detect(image, deadline=Deadline(2.5, clock=lambda: float(next(ticks))))
+    assert raised.value.stage == "segmentation"
