@@ -243,6 +243,18 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
 
 
 @njit(cache=True, nogil=True)
+def keep_larger(best, best_level, values, level):
+    """Where ``values`` exceeds ``best``, take it and mark the pixel as ``level``'s (ties
+    stay with the level already there)."""
+    height, width = best.shape
+    for y in range(height):
+        for x in range(width):
+            if values[y, x] > best[y, x]:
+                best[y, x] = values[y, x]
+                best_level[y, x] = level
+
+
+@njit(cache=True, nogil=True)
 def seed_colours(lab8, background8, rows, cols, orientation, n_orientations, half_length, offset):
     """The cable colour and the colours around it at seed pixels of one level.
 
