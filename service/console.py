@@ -14,6 +14,8 @@ Exit statuses (the same for every command):
 from __future__ import annotations
 
 import inspect
+from collections.abc import Sequence
+from importlib import import_module
 from typing import Any, NoReturn
 
 import click
@@ -128,50 +130,37 @@ def typer_app(**settings: Any) -> typer.Typer:
 FIRST_RUN_NOTICE = "compiling the detection kernels, once per machine, about 20 s"
 
 
-def load_kernels(console: Console) -> None:
-    """Load the detector's compiled kernels before the first detection is timed.
+KERNEL_SETS = {"detection": "service.perception:warm_up"}
+"""Each set of compiled kernels a front end may load, by name: its warm-up function
+(``"module:function"``, imported only when the set is loaded). A warm-up loads (on a
+machine's first run: compiles) its kernels and writes its group's stamp
+(:func:`service.perception.kernels_cached` with the same name). A front end loads only the
+sets it uses: a one-image ``dlo detect`` the detector's alone."""
+
+
+def load_kernels(console: Console, kernel_sets: Sequence[str] = ("detection",)) -> None:
+    """Load the compiled kernels of ``kernel_sets`` (:data:`KERNEL_SETS`) before the first
+    detection is timed.
 
     On a machine's first run numba compiles them (tens of seconds): say so on one line of
     ``console`` first. Either way the next detection's ``timings_ms`` are detection time
     alone, not compiling or loading machine code. Ctrl-C meanwhile exits with
-    :data:`EXIT_INTERRUPTED` (nothing was processed yet).
+    :data:`EXIT_INTERRUPTED` (nothing was processed yet). Kernels load without numba's
+    registries and BLAS probe (:mod:`service.numba_start`).
     """
-    from service.perception import kernels_cached, warm_up
+    from service.numba_start import load_cached_kernels_lightly, skip_numba_blas_probe
+    from service.perception import kernels_cached
 
     skip_numba_blas_probe()
-    if not kernels_cached():
+    load_cached_kernels_lightly()
+    if not all(kernels_cached(name) for name in kernel_sets):
         console.print(FIRST_RUN_NOTICE, markup=False, highlight=False, soft_wrap=True)
     try:
-        warm_up()
+        for name in kernel_sets:
+            module, _, function = KERNEL_SETS[name].partition(":")
+            getattr(import_module(module), function)()
     except KeyboardInterrupt:
         raise typer.Exit(EXIT_INTERRUPTED) from None
-
-
-def skip_numba_blas_probe() -> None:
-    """Tell numba, in this ``dlo`` process, not to look for a BLAS library.
-
-    The first time numba compiles or loads a kernel it imports its array-maths support,
-    which probes for BLAS by importing all of ``scipy.linalg``: about 0.2 s of a one-image
-    ``dlo detect``. The detector's kernels use neither BLAS nor LAPACK (a test in
-    tests/perception/test_warm_up.py reads their sources to keep it so), so the probe only
-    costs time. Only the CLI does this, never the library: a program that imports
-    ``service.perception`` may compile numba code of its own that needs BLAS. A numba
-    whose internals differ keeps its probe.
-    """
-    import sys
-
-    if "numba.np.arraymath" in sys.modules:  # too late: numba has probed already
-        return
-    try:
-        from numba.np import linalg
-    except ImportError:
-        return
-
-    def no_blas() -> None:
-        raise ImportError("BLAS not probed: the dlo kernels need none")
-
-    if hasattr(linalg, "ensure_blas"):
-        linalg.ensure_blas = no_blas
 
 
 def stderr_console() -> Console:

@@ -2,17 +2,22 @@
 
 Timed, each as a separate process, as a user runs them: ``dlo --help``, ``dlo version``
 and a one-image ``dlo detect IMAGE --out-dir DIR`` (the first photograph of the data set
-when present, else a generated 1280x720 scene with three cables). One untimed
+when present, else a generated 1280x720 scene with three cables), and under them the
+floors (:data:`FLOORS`: Python, its native libraries, the kernels loaded). One untimed
 ``dlo detect`` of the image runs first, so the kernels are compiled (once per machine)
 and the files are in the page cache: the figures are those of a warm kernel cache.
 Then the commands run round after round, one of each per round, so that a busy spell of a
 shared machine slows all of them alike; each is reported as min, median and max over its
-runs, against the targets of issue 15.
+runs, against the targets of issue 15. With ``PYTHONDONTWRITEBYTECODE`` set, Python compiles
+every module of ``dlo`` from source in every process (about 0.15 s of a ``dlo detect``), so
+the table says so: those are not the figures of an installed ``dlo``.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -27,11 +32,32 @@ from service.bench.detector import cpu_name
 TARGETS_S = {"dlo --help": 0.3, "dlo detect IMAGE --out-dir DIR": 0.7}
 """Whole-process targets, in seconds (issue 15)."""
 GENERATED_SIZE = (1280, 720)
+_PYTHON = sys.executable
+FLOORS = {
+    "floor: python -c pass": [_PYTHON, "-c", "pass"],
+    "floor: import numpy, cv2, numba": [_PYTHON, "-c", "import numpy, cv2, numba"],
+    "floor: + every kernel loaded (warm_up)": [
+        _PYTHON,
+        "-c",
+        "from service.numba_start import load_cached_kernels_lightly, skip_numba_blas_probe\n"
+        "skip_numba_blas_probe()\n"
+        "load_cached_kernels_lightly()\n"
+        "import cv2\n"
+        "from service.perception import warm_up\n"
+        "warm_up()",
+    ],
+}
+"""What any ``dlo detect`` costs before its own work, timed as the commands are: Python
+alone, the three native libraries it needs, and those with every detection kernel loaded
+from numba's cache as ``dlo`` loads them (this Python and this checkout, whatever
+``--dlo`` says)."""
 
 
 @dataclass
 class StartupRow:
-    """The wall times of one command, in seconds."""
+    """The wall times of one command, in seconds, and the median CPU time its process
+    used (user and system, all threads): on a busy machine the wall time carries the
+    waiting for a core, the CPU time hardly."""
 
     command: str
     runs: int
@@ -39,6 +65,7 @@ class StartupRow:
     median_s: float
     max_s: float
     target_s: float | None
+    cpu_median_s: float
 
 
 def dlo_command() -> list[str]:
@@ -65,12 +92,17 @@ def run_startup_bench(dlo: list[str], dataset: Path, runs: int, as_json: bool) -
                 "--out-dir",
                 str(out_dir),
             ],
+            **FLOORS,
         }
         _run(commands["dlo detect IMAGE --out-dir DIR"])  # warm: kernels, page cache
+        load_before = os.getloadavg()
         seconds: dict[str, list[float]] = {name: [] for name in commands}
+        cpu: dict[str, list[float]] = {name: [] for name in commands}
         for _ in range(runs):
             for name, command in commands.items():
-                seconds[name].append(_run(command))
+                wall, used = _run(command)
+                seconds[name].append(wall)
+                cpu[name].append(used)
     rows = [
         StartupRow(
             command=name,
@@ -79,6 +111,7 @@ def run_startup_bench(dlo: list[str], dataset: Path, runs: int, as_json: bool) -
             median_s=statistics.median(times),
             max_s=max(times),
             target_s=TARGETS_S.get(name),
+            cpu_median_s=statistics.median(cpu[name]),
         )
         for name, times in seconds.items()
     ]
@@ -87,6 +120,8 @@ def run_startup_bench(dlo: list[str], dataset: Path, runs: int, as_json: bool) -
         "image": image_note,
         "rows": [asdict(row) for row in rows],
         "cpu": cpu_name(),
+        "bytecode_cached": not os.environ.get("PYTHONDONTWRITEBYTECODE"),
+        "load_average": {"before": load_before, "after": os.getloadavg()},
     }
     if as_json:
         print(json.dumps(results, indent=2))
@@ -95,15 +130,19 @@ def run_startup_bench(dlo: list[str], dataset: Path, runs: int, as_json: bool) -
     return 0
 
 
-def _run(command: list[str]) -> float:
-    """Run ``command`` to its end; its wall time in seconds. Fails loudly if it fails."""
+def _run(command: list[str]) -> tuple[float, float]:
+    """Run ``command`` to its end; its wall time and CPU time in seconds. Fails loudly if
+    it fails."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.perf_counter()
     finished = subprocess.run(command, capture_output=True, check=False)
     elapsed = time.perf_counter() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    used = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if finished.returncode != 0:
         detail = finished.stderr.decode(errors="replace").strip().splitlines()[-1:]
         raise RuntimeError(f"{' '.join(command)} exited {finished.returncode}: {detail}")
-    return elapsed
+    return elapsed, used
 
 
 def _image(dataset: Path, folder: Path) -> tuple[Path, str]:
@@ -132,7 +171,7 @@ def _print_table(results: dict[str, Any], rows: list[StartupRow]) -> None:
         highlight=False,
     )
     table = Table(title="start-up", title_justify="left")
-    for column in ("command", "runs", "min", "median", "max", "target"):
+    for column in ("command", "runs", "min", "median", "max", "target", "CPU median"):
         table.add_column(column, justify="left" if column == "command" else "right")
     for row in rows:
         if row.target_s is None:
@@ -147,5 +186,20 @@ def _print_table(results: dict[str, Any], rows: list[StartupRow]) -> None:
             f"{row.median_s:.3f}",
             f"{row.max_s:.3f}",
             target,
+            f"{row.cpu_median_s:.3f}",
         )
     console.print(table)
+    load = results["load_average"]
+    console.print(
+        "load average (1, 5, 15 min) before "
+        + " / ".join(f"{value:.1f}" for value in load["before"])
+        + ", after "
+        + " / ".join(f"{value:.1f}" for value in load["after"]),
+        highlight=False,
+    )
+    if not results["bytecode_cached"]:
+        console.print(
+            "PYTHONDONTWRITEBYTECODE is set: every run compiled dlo's modules from source "
+            "(unset it for an installed dlo's figures)",
+            highlight=False,
+        )

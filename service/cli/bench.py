@@ -86,7 +86,8 @@ def bench(
         typer.Option(
             "--startup",
             help="Time whole dlo processes instead: dlo --help, dlo version and a one-image "
-            "dlo detect, with a warm kernel cache (service/bench/startup.py).",
+            "dlo detect, with a warm kernel cache, and the floors under them "
+            "(service/bench/startup.py).",
         ),
     ] = False,
     bombs: Annotated[

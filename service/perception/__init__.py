@@ -12,9 +12,10 @@ render_overlay(image, detection) -> np.ndarray (BGR uint8)
 warm_up() -> None
     Load (on a machine's first run: compile) every compiled kernel, so that the next
     detection's timings are detection time alone.
-kernels_cached() -> bool
+kernels_cached(group="detection") -> bool
     Whether the kernels are already compiled into numba's cache on this machine (a
-    cheap check, before ``warm_up``, for front ends that say when a run compiles).
+    cheap check, before ``warm_up``, for front ends that say when a run compiles); other
+    groups are sets of kernels with warm-ups of their own (``service.console.KERNEL_SETS``).
 """
 
 from service.perception._kernel_cache import kernels_cached

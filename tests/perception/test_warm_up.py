@@ -153,7 +153,11 @@ def own_stamp(tmp_path, monkeypatch):
         copies.append(tmp_path / path.name)
         shutil.copy2(path, copies[-1])
     monkeypatch.setattr(_kernel_cache, "KERNEL_SOURCES", tuple(copies))
-    monkeypatch.setattr(_kernel_cache, "stamp_path", lambda: tmp_path / "stamp" / "kernels")
+    monkeypatch.setattr(
+        _kernel_cache,
+        "stamp_path",
+        lambda group=_kernel_cache.DETECTION: tmp_path / "stamp" / f"kernels-{group}",
+    )
     return tmp_path
 
 
@@ -161,7 +165,7 @@ def test_kernels_cached_turns_true_after_warm_up(own_stamp):
     assert not kernels_cached()
     warm_up()
     assert kernels_cached()
-    stamp = json.loads((own_stamp / "stamp" / "kernels").read_text())
+    stamp = json.loads((own_stamp / "stamp" / "kernels-detection").read_text())
     assert stamp["key"] == _kernel_cache.kernels_key()
 
 
@@ -177,7 +181,7 @@ def test_kernels_cached_turns_false_when_a_kernel_source_changes(own_stamp):
 
 def test_kernels_cached_turns_false_when_numbas_cache_is_gone(own_stamp):
     warm_up()
-    stamp_file = own_stamp / "stamp" / "kernels"
+    stamp_file = own_stamp / "stamp" / "kernels-detection"
     stamp = json.loads(stamp_file.read_text())
     empty = own_stamp / "empty-cache"
     empty.mkdir()
@@ -187,10 +191,30 @@ def test_kernels_cached_turns_false_when_numbas_cache_is_gone(own_stamp):
     assert not kernels_cached()
 
 
+def test_a_kernel_file_the_detector_never_loads_needs_no_index_nor_its_warm_up(
+    own_stamp, monkeypatch
+):
+    """Kernels with a warm-up of their own (a tracker's, say): a one-image ``dlo detect``
+    neither loads them nor takes their missing machine code for a first run."""
+    others = own_stamp / "_elsewhere_kernels.py"
+    others.write_text("from numba import njit\n")
+    monkeypatch.setattr(_kernel_cache, "KERNEL_SOURCES", (*_kernel_cache.KERNEL_SOURCES, others))
+    warm_up()
+    assert kernels_cached()  # the detector's group, though _elsewhere has no index
+    stamp = json.loads((own_stamp / "stamp" / "kernels-detection").read_text())
+    assert "_elsewhere_kernels" not in stamp["files"]
+    assert {path.stem for path in KERNEL_FILES} <= set(stamp["files"])
+    assert not kernels_cached("elsewhere")  # its warm-up has not run
+    assert _kernel_cache.write_stamp(stamp["numba_cache"], group="elsewhere")
+    assert kernels_cached("elsewhere") and kernels_cached()
+    others.write_text("from numba import njit\n# an edit\n")
+    assert not kernels_cached() and not kernels_cached("elsewhere")
+
+
 def test_an_unwritable_stamp_is_no_error(tmp_path, monkeypatch):
     blocker = tmp_path / "a file"
     blocker.write_text("")
-    monkeypatch.setattr(_kernel_cache, "stamp_path", lambda: blocker / "stamp")
+    monkeypatch.setattr(_kernel_cache, "stamp_path", lambda group="detection": blocker / group)
     assert _kernel_cache.write_stamp(str(tmp_path)) is False
     warm_up()
     assert not kernels_cached()
@@ -198,7 +222,7 @@ def test_an_unwritable_stamp_is_no_error(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("path", KERNEL_FILES, ids=lambda path: path.stem)
 def test_no_kernel_needs_blas_or_lapack(path: Path):
-    """`dlo` tells numba not to probe for BLAS (service.console.skip_numba_blas_probe):
+    """`dlo` tells numba not to probe for BLAS (service.numba_start.skip_numba_blas_probe):
     that holds only while no kernel multiplies matrices or calls np.linalg."""
     for node in ast.walk(ast.parse(path.read_text())):
         assert not (isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult)), path
@@ -212,7 +236,7 @@ def test_a_dlo_process_loads_the_kernels_without_scipy():
     """With the probe skipped, warm-up and a detection never import scipy.linalg."""
     script = (
         "import sys\n"
-        "from service.console import skip_numba_blas_probe\n"
+        "from service.numba_start import skip_numba_blas_probe\n"
         "skip_numba_blas_probe()\n"
         "import numpy as np\n"
         "from service.perception import detect, warm_up\n"

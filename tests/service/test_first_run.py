@@ -9,6 +9,7 @@ into a numba cache of its own.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import re
@@ -20,12 +21,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from rich.console import Console
 from typer.testing import CliRunner
 
 import service.cli.serve
+import service.console
 from schemas import Detection
 from service.cli import app
-from service.console import FIRST_RUN_NOTICE
+from service.console import FIRST_RUN_NOTICE, load_kernels
 from service.perception import _kernel_cache, kernels_cached, warm_up
 
 DLO = [sys.executable, "-c", "from service.cli import main; main()"]
@@ -48,7 +51,11 @@ def image(tmp_path: Path) -> Path:
 def first_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """This machine looks as if the kernels were never compiled: no stamp yet."""
     stamp = tmp_path / "stamp" / "kernels"
-    monkeypatch.setattr(_kernel_cache, "stamp_path", lambda: stamp)
+    monkeypatch.setattr(
+        _kernel_cache,
+        "stamp_path",
+        lambda group="detection": stamp if group == "detection" else stamp.with_name(group),
+    )
     assert not kernels_cached()
     return stamp
 
@@ -78,6 +85,43 @@ def test_demo_and_eval_say_so(first_run: Path, tmp_path: Path) -> None:
     evaluated = run_dlo("eval", "--synthetic", "1", "--width", "160", "--height", "120")
     assert evaluated.exit_code in (0, 1), evaluated.stderr
     assert FIRST_RUN_NOTICE in evaluated.stderr
+
+
+OTHER_WARM_UPS: list[str] = []
+
+
+def warm_up_other_kernels() -> None:
+    """The warm-up of a set of kernels that only some front ends load (a tracker's, say)."""
+    OTHER_WARM_UPS.append("ran")
+    _kernel_cache.write_stamp(str(tmp_numba_cache()), group="other")
+
+
+def tmp_numba_cache() -> str:
+    stamp = json.loads(_kernel_cache.stamp_path().read_text())
+    return stamp["numba_cache"]
+
+
+def test_a_front_end_loads_only_its_kernel_sets_and_says_so_for_a_missing_one(
+    first_run: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(service.console.KERNEL_SETS, "other", f"{__name__}:warm_up_other_kernels")
+    OTHER_WARM_UPS.clear()
+    console = Console(file=io.StringIO())
+    load_kernels(console)  # the detector's, as a first run: notice, and its stamp
+    assert console.file.getvalue().splitlines() == [FIRST_RUN_NOTICE]
+    assert kernels_cached() and not kernels_cached("other") and OTHER_WARM_UPS == []
+
+    console = Console(file=io.StringIO())
+    load_kernels(console)  # nothing to compile for a one-image dlo detect now
+    assert console.file.getvalue() == ""
+
+    console = Console(file=io.StringIO())
+    load_kernels(console, ("detection", "other"))  # a front end that needs both
+    assert console.file.getvalue().splitlines() == [FIRST_RUN_NOTICE]
+    assert OTHER_WARM_UPS == ["ran"] and kernels_cached("other")
+    console = Console(file=io.StringIO())
+    load_kernels(console, ("detection", "other"))
+    assert console.file.getvalue() == ""
 
 
 def test_serve_says_so_before_starting(first_run: Path, monkeypatch: pytest.MonkeyPatch) -> None:
