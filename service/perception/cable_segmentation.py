@@ -330,9 +330,10 @@ def _seeds(on_grid: list[np.ndarray], used: list[int]) -> tuple[np.ndarray, np.n
     ``on_grid`` holds every level's ratios on the grid (:func:`_on_grid`); of the
     ``used`` levels, a pixel keeps the first with the largest ratio.
     """
-    best = on_grid[used[0]].copy()
+    # Ratios are never negative: from zeros, a pixel whose ratios are all 0 keeps the first.
+    best = np.zeros(on_grid[used[0]].shape, np.float32)
     best_level = np.full(best.shape, used[0], np.int64)
-    for index in used[1:]:
+    for index in used:
         _cable_segmentation_kernels.keep_larger(best, best_level, on_grid[index], index)
     cue = np.minimum(best * RATIO_BINS, 255.0).astype(np.uint8)
     hist = cv2.calcHist([cue], [0], None, [256], [0, 256]).ravel().astype(np.float64)
