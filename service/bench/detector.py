@@ -12,6 +12,9 @@ the p50 wall time. The cases:
 * generated 1280x720 scenes with 1, 2 and 3 cables, and 1920x1080 scenes;
 * scaling: 3 cables at 640x360, 1280x720, 1920x1080 and 3840x2160, and 1 to 5 cables
   (with their crossings) at 1280x720;
+* other backgrounds, where ``segmentation=auto`` takes cable contrast: the ``bright``
+  and ``textured`` scene families, and the photographs of ``../shared/datasets/ariadne``
+  (beside the mbest folder) when present;
 * what a camera model adds: lifting the chains to 3-D, and the MJCF
   (:mod:`service.bench.lifting`);
 * what a ROS 2 recording adds per frame (``--outputs mcap``, :mod:`service.bench.recording`).
@@ -188,6 +191,10 @@ def run_detector_bench(quick: bool, as_json: bool, dataset: Path, frames: int, r
     else:
         results["notes"].append(f"no photographs timed: {dataset} not found")
 
+    results["backgrounds"] = _background_cases(
+        dataset.parent / "ariadne", base, frames, repeats, photo_limit, time_frames, summary
+    )
+
     for n_cables in (1, 2, 3):
         samples, _, _ = time_frames(scenes(*base, n_cables, frames), repeats)
         name = f"generated {base[0]}x{base[1]}, {n_cables} cable(s)"
@@ -231,6 +238,36 @@ def run_detector_bench(quick: bool, as_json: bool, dataset: Path, frames: int, r
     else:
         _print_tables(results)
     return 0
+
+
+def _background_cases(ariadne, base, frames, repeats, photo_limit, time_frames, summary):
+    """The cases on bright and textured backgrounds (cable contrast), timed like the others."""
+    import cv2
+
+    from service.synthetic.families import make_family_scene
+
+    def family_scenes(family):
+        for seed in range(frames):
+            image = make_family_scene(family, seed, *base).image
+            yield image, 0
+            del image
+
+    # Families are drawn at 320x240 at least (--quick's images are smaller).
+    base = (max(base[0], 320), max(base[1], 240))
+    cases = []
+    for family in ("bright", "textured"):
+        samples, _, _ = time_frames(family_scenes(family), repeats)
+        cases.append(summary(f"{family} family {base[0]}x{base[1]}", *base, samples))
+    photos = sorted(ariadne.glob("*/images/*.jpg")) if ariadne.is_dir() else []
+    if photo_limit is not None:
+        photos = photos[:photo_limit]
+    read = (cv2.imread(str(path), cv2.IMREAD_COLOR) for path in photos)
+    images = [(image, 0) for image in read if image is not None]
+    if images:
+        height, width = images[0][0].shape[:2]
+        samples, _, _ = time_frames(iter(images), 1)
+        cases.append(summary(f"photographs ({ariadne.name})", width, height, samples))
+    return cases
 
 
 def cpu_name() -> str:
@@ -280,7 +317,8 @@ def _print_tables(results: dict[str, Any]) -> None:
         table.add_column(stage, justify="right")
     table.add_column("steps 2-5", justify="right")
     table.add_column("fps", justify="right")
-    for case in results["cases"]:
+    # The other backgrounds (bright, textured) take cable contrast under auto.
+    for case in results["cases"] + results.get("backgrounds", []):
         stats = case["stages_ms"]
         table.add_row(
             case["case"],
@@ -295,7 +333,7 @@ def _print_tables(results: dict[str, Any]) -> None:
     table.add_column("case")
     for stage in columns:
         table.add_column(stage, justify="right")
-    for case in results["cases"]:
+    for case in results["cases"] + results.get("backgrounds", []):
         stats = case["stages_ms"]
         table.add_row(
             case["case"],

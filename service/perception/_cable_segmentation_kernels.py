@@ -60,13 +60,28 @@ def _planar(lab8):
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _window_add(lab, y, x, sign, t0, t1, t2, t3):
+    """A window's sums of the three channels and of their squares, with the colour at
+    ``(y, x)`` added (``sign`` 1) or taken off (-1)."""
+    c0 = lab[0, y, x]
+    c1 = lab[1, y, x]
+    c2 = lab[2, y, x]
+    return (
+        t0 + sign * c0,
+        t1 + sign * c1,
+        t2 + sign * c2,
+        t3 + sign * (c0 * c0 + c1 * c1 + c2 * c2),
+    )
+
+
 @njit(cache=True, nogil=True)
-def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix):
+def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x):
     """Mean colour and colour variance over the line segment through each pixel.
 
     ``lab`` and ``mean`` are ``(3, H, W)`` planes. The segment is ``2 * half_length`` px
     long at angle ``t`` (cosine and sine given) and centred on the pixel, cut short at
-    the image border. Running sums along each digital line of the family make it O(1)
+    the image border. Sums sliding along each digital line of the family make it O(1)
     per pixel whatever the length.
     """
     _, height, width = lab.shape
@@ -90,48 +105,71 @@ def _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix)
         n = stop - first
         if n <= 0:
             continue
-        p0 = 0.0
-        p1 = 0.0
-        p2 = 0.0
-        p3 = 0.0
-        prefix[0, 0] = 0.0
-        prefix[0, 1] = 0.0
-        prefix[0, 2] = 0.0
-        prefix[0, 3] = 0.0
         for i in range(n):
             s = first + i
             o = line + rise[s]
             if along_x:
-                y, x = o, s
+                buf_y[i] = o
+                buf_x[i] = s
             else:
-                y, x = s, o
-            buf_y[i] = y
-            buf_x[i] = x
-            c0 = lab[0, y, x]
-            c1 = lab[1, y, x]
-            c2 = lab[2, y, x]
-            p0 += c0
-            p1 += c1
-            p2 += c2
-            p3 += c0 * c0 + c1 * c1 + c2 * c2
-            prefix[i + 1, 0] = p0
-            prefix[i + 1, 1] = p1
-            prefix[i + 1, 2] = p2
-            prefix[i + 1, 3] = p3
+                buf_y[i] = s
+                buf_x[i] = o
+        # A window of 2a + 1 samples slides along the line: each sample is added once
+        # as it enters and taken off once as it leaves.
+        t0 = t1 = t2 = t3 = 0.0
+        count = 0
+        for j in range(min(a, n - 1) + 1):
+            t0, t1, t2, t3 = _window_add(lab, buf_y[j], buf_x[j], 1.0, t0, t1, t2, t3)
+            count += 1
         for i in range(n):
-            lo = max(i - a, 0)
-            hi = min(i + a + 1, n)
-            inv = 1.0 / (hi - lo)
-            m0 = (prefix[hi, 0] - prefix[lo, 0]) * inv
-            m1 = (prefix[hi, 1] - prefix[lo, 1]) * inv
-            m2 = (prefix[hi, 2] - prefix[lo, 2]) * inv
+            if i > 0:
+                j = i + a
+                if j < n:
+                    t0, t1, t2, t3 = _window_add(lab, buf_y[j], buf_x[j], 1.0, t0, t1, t2, t3)
+                    count += 1
+                j = i - a - 1
+                if j >= 0:
+                    t0, t1, t2, t3 = _window_add(lab, buf_y[j], buf_x[j], -1.0, t0, t1, t2, t3)
+                    count -= 1
+            inv = 1.0 / count
+            m0 = t0 * inv
+            m1 = t1 * inv
+            m2 = t2 * inv
             y = buf_y[i]
             x = buf_x[i]
             mean[0, y, x] = m0
             mean[1, y, x] = m1
             mean[2, y, x] = m2
-            v = (prefix[hi, 3] - prefix[lo, 3]) * inv - (m0 * m0 + m1 * m1 + m2 * m2)
+            v = t3 * inv - (m0 * m0 + m1 * m1 + m2 * m2)
             var[y, x] = v if v > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _planar_distance2(m0, m1, m2, planes, y, x):
+    """Squared CIELAB distance from ``(m0, m1, m2)`` to ``planes[:, y, x]``."""
+    d0 = m0 - planes[0, y, x]
+    d1 = m1 - planes[1, y, x]
+    d2 = m2 - planes[2, y, x]
+    return d0 * d0 + d1 * d1 + d2 * d2
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _side_contrast(mean, background, wide, var, floor, y, x, y1, x1, y2, x2):
+    """Squared line ratio of pixel ``(y, x)`` with its sides at ``(y1, x1)`` and ``(y2, x2)``."""
+    m0 = mean[0, y, x]
+    m1 = mean[1, y, x]
+    m2 = mean[2, y, x]
+    contrast2 = min(
+        min(
+            _planar_distance2(m0, m1, m2, mean, y1, x1),
+            _planar_distance2(m0, m1, m2, mean, y2, x2),
+        ),
+        min(
+            _planar_distance2(m0, m1, m2, background, y, x),
+            _planar_distance2(m0, m1, m2, wide, y, x),
+        ),
+    )
+    return contrast2 / (var[y, x] + floor)
 
 
 @njit(cache=True, nogil=True)
@@ -146,8 +184,8 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
     added to the variance) it is the line's contrast-to-spread ratio. A cable along the
     line gives a high ratio: a uniform colour that differs from both sides and from the
     background. A step edge (one side the same), texture (a large spread) and the
-    background between two cables (the background colour) give a low one. A pixel whose
-    side segment would lie outside the picture gets no ratio at that angle.
+    background between two cables (the background colour) give a low one. A side segment
+    that would lie beyond the picture is taken at the picture's edge.
 
     Returns
     -------
@@ -165,7 +203,6 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
     longest = max(height, width) + 2
     buf_y = np.empty(longest, np.int64)
     buf_x = np.empty(longest, np.int64)
-    prefix = np.empty((longest + 1, 4), np.float64)
     best = np.zeros((height, width), np.float32)
     orientation = np.zeros((height, width), np.uint8)
     row = np.empty(width, np.float32)
@@ -174,37 +211,28 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
         angle = np.pi * k / n_orientations
         cos_t = np.cos(angle)
         sin_t = np.sin(angle)
-        _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x, prefix)
+        _line_means(lab, cos_t, sin_t, half_length, mean, var, buf_y, buf_x)
         dy = round(offset * cos_t)
         dx = round(-offset * sin_t)
-        # Sides outside the picture are not known to differ: those pixels get no ratio.
-        x_lo = abs(dx)
-        x_hi = width - abs(dx)
-        for y in range(abs(dy), height - abs(dy)):
-            y1 = y + dy
-            y2 = y - dy
+        # A side beyond the picture is taken at its edge: a line running out of the
+        # picture is judged up to the edge, and one along the edge, whose clamped side
+        # falls on the line itself, is not taken for a line.
+        x_lo = min(abs(dx), width)
+        x_hi = max(width - abs(dx), x_lo)
+        for y in range(height):
+            y1 = min(max(y + dy, 0), height - 1)
+            y2 = min(max(y - dy, 0), height - 1)
             for x in range(x_lo, x_hi):
-                m0 = mean[0, y, x]
-                m1 = mean[1, y, x]
-                m2 = mean[2, y, x]
-                a0 = m0 - mean[0, y1, x + dx]
-                a1 = m1 - mean[1, y1, x + dx]
-                a2 = m2 - mean[2, y1, x + dx]
-                b0 = m0 - mean[0, y2, x - dx]
-                b1 = m1 - mean[1, y2, x - dx]
-                b2 = m2 - mean[2, y2, x - dx]
-                c0 = m0 - background[0, y, x]
-                c1 = m1 - background[1, y, x]
-                c2 = m2 - background[2, y, x]
-                d0 = m0 - wide[0, y, x]
-                d1 = m1 - wide[1, y, x]
-                d2 = m2 - wide[2, y, x]
-                contrast2 = min(
-                    min(a0 * a0 + a1 * a1 + a2 * a2, b0 * b0 + b1 * b1 + b2 * b2),
-                    min(c0 * c0 + c1 * c1 + c2 * c2, d0 * d0 + d1 * d1 + d2 * d2),
+                row[x] = _side_contrast(
+                    mean, background, wide, var, floor, y, x, y1, x + dx, y2, x - dx
                 )
-                row[x] = contrast2 / (var[y, x] + floor)
-            for x in range(x_lo, x_hi):
+            # The columns near the left and right edges, their sides clamped.
+            for edge in range(x_lo + width - x_hi):
+                x = edge if edge < x_lo else x_hi + edge - x_lo
+                x1 = min(max(x + dx, 0), width - 1)
+                x2 = min(max(x - dx, 0), width - 1)
+                row[x] = _side_contrast(mean, background, wide, var, floor, y, x, y1, x1, y2, x2)
+            for x in range(width):
                 if row[x] > best[y, x]:
                     best[y, x] = row[x]
                     orientation[y, x] = k
@@ -215,19 +243,14 @@ def level_contrast(lab8, background8, wide8, n_orientations, half_length, offset
 
 
 @njit(cache=True, nogil=True)
-def merge_level(best, best_level, ratio, level):
-    """Keep, per pixel of the finest grid, the level whose (nearest) ratio is largest."""
-    grid_h, grid_w = best.shape
-    level_h, level_w = ratio.shape
-    scale_y = level_h / grid_h
-    scale_x = level_w / grid_w
-    for y in range(grid_h):
-        ly = min(int((y + 0.5) * scale_y), level_h - 1)
-        for x in range(grid_w):
-            lx = min(int((x + 0.5) * scale_x), level_w - 1)
-            value = ratio[ly, lx]
-            if value > best[y, x]:
-                best[y, x] = value
+def keep_larger(best, best_level, values, level):
+    """Where ``values`` exceeds ``best``, take it and mark the pixel as ``level``'s (ties
+    stay with the level already there)."""
+    height, width = best.shape
+    for y in range(height):
+        for x in range(width):
+            if values[y, x] > best[y, x]:
+                best[y, x] = values[y, x]
                 best_level[y, x] = level
 
 
@@ -300,12 +323,22 @@ def seed_colours(lab8, background8, rows, cols, orientation, n_orientations, hal
 
 
 @njit(cache=True, nogil=True)
-def nearest_colour_class(lab8, nearest, distance, grid_step, reach, colours):
-    """Cable pixels: nearer in colour to the nearest seed's cable than to what is round it.
+def colour_class_within_reach(
+    lab8, centres_y, centres_x, angles, steps, ahead, behind, reach, core, side, colours
+):
+    """Cable pixels: near in colour to the cable colour of some seed within reach.
 
-    ``nearest`` and ``distance`` are, on the seeds' grid, the index of the nearest seed
-    and the distance to it (grid px, ``grid_step`` image px each); a pixel of the image
-    is judged against that seed when it lies within ``reach[seed]`` image px of it.
+    Seed ``i`` at ``(centres_y[i], centres_x[i])`` (image px) judges the pixels within
+    ``reach * steps[i]`` px of it. A pixel is cable when its colour lies within half the
+    distance from ``colours[i, 0]`` (the cable) to the nearest of ``colours[i, 1:]`` (its
+    sides and the background): at most half way to what lies round the cable, and not of
+    some third colour. A pixel any seed takes is cable.
+
+    A seed that ends a line also follows it ``ahead[i]`` px forward (direction
+    ``(cos, sin)`` of ``angles[i]`` in ``(x, y)``) and ``behind[i]`` px back, one pixel
+    at a time, for as long as the line stays a line: the pixel on it of the cable's colour
+    and the pixels ``side * steps[i]`` px to either side (where its sides were seen) not.
+    The pixels within ``core * steps[i]`` px of the line there are judged as above.
 
     Returns
     -------
@@ -313,27 +346,91 @@ def nearest_colour_class(lab8, nearest, distance, grid_step, reach, colours):
         ``(H, W)``, 1 on cable pixels.
     """
     height, width, _ = lab8.shape
-    grid_h, grid_w = nearest.shape
     out = np.zeros((height, width), np.uint8)
-    for y in range(height):
-        gy = min(int((y + 0.5) * grid_h / height), grid_h - 1)
-        for x in range(width):
-            gx = min(int((x + 0.5) * grid_w / width), grid_w - 1)
-            seed = nearest[gy, gx]
-            if seed < 0 or distance[gy, gx] * grid_step > reach[seed]:
-                continue
-            c0 = lab8[y, x, 0] * _L_SCALE
-            c1 = np.float32(lab8[y, x, 1]) - _AB_OFFSET
-            c2 = np.float32(lab8[y, x, 2]) - _AB_OFFSET
-            to_cable = _distance2(c0, c1, c2, colours, seed, 0)
-            around = min(
-                _distance2(c0, c1, c2, colours, seed, 1),
-                _distance2(c0, c1, c2, colours, seed, 2),
-                _distance2(c0, c1, c2, colours, seed, 3),
-            )
-            if to_cable < around:
-                out[y, x] = 1
+    for seed in range(centres_y.size):
+        ball2 = _nearest_around2(colours, seed)
+        cy = centres_y[seed]
+        cx = centres_x[seed]
+        r = reach * steps[seed]
+        r2 = r * r
+        y0 = max(int(np.ceil(cy - r)), 0)
+        y1 = min(int(np.floor(cy + r)), height - 1)
+        x0 = max(int(np.ceil(cx - r)), 0)
+        x1 = min(int(np.floor(cx + r)), width - 1)
+        for y in range(y0, y1 + 1):
+            for x in range(x0, x1 + 1):
+                if out[y, x] or (x - cx) * (x - cx) + (y - cy) * (y - cy) > r2:
+                    continue
+                if _near_cable(lab8, y, x, colours, seed, ball2):
+                    out[y, x] = 1
+        ux = np.cos(angles[seed])
+        uy = np.sin(angles[seed])
+        c = core * steps[seed]
+        for sign, length in ((1.0, ahead[seed]), (-1.0, behind[seed])):
+            t = 1.0
+            while t <= length:
+                px = cx + sign * t * ux
+                py = cy + sign * t * uy
+                if not _line_goes_on(
+                    lab8, py, px, ux, -uy, side * steps[seed], colours, seed, ball2
+                ):
+                    break
+                # The core's cross-section here.
+                a = -c
+                while a <= c:
+                    qy = int(np.floor(py + a * ux + 0.5))
+                    qx = int(np.floor(px - a * uy + 0.5))
+                    if (
+                        0 <= qy < height
+                        and 0 <= qx < width
+                        and not out[qy, qx]
+                        and _near_cable(lab8, qy, qx, colours, seed, ball2)
+                    ):
+                        out[qy, qx] = 1
+                    a += 0.5
+                t += 1.0
     return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _near_cable(lab8, y, x, colours, seed, ball2):
+    """Is the colour of pixel ``(y, x)`` within half of ``ball2``'s root of the seed's cable?"""
+    c0 = lab8[y, x, 0] * _L_SCALE
+    c1 = np.float32(lab8[y, x, 1]) - _AB_OFFSET
+    c2 = np.float32(lab8[y, x, 2]) - _AB_OFFSET
+    return 4.0 * _distance2(c0, c1, c2, colours, seed, 0) < ball2
+
+
+@njit(cache=True, nogil=True)
+def _line_goes_on(lab8, py, px, ny, nx, side, colours, seed, ball2):
+    """At ``(py, px)``: the pixel of the cable's colour, those ``side`` px across (along the
+    normal ``(ny, nx)``) either way not (or beyond the picture)."""
+    height, width, _ = lab8.shape
+    y = int(np.floor(py + 0.5))
+    x = int(np.floor(px + 0.5))
+    if not (0 <= y < height and 0 <= x < width) or not _near_cable(
+        lab8, y, x, colours, seed, ball2
+    ):
+        return False
+    for sign in (1.0, -1.0):
+        sy = int(np.floor(py + sign * side * ny + 0.5))
+        sx = int(np.floor(px + sign * side * nx + 0.5))
+        if 0 <= sy < height and 0 <= sx < width and _near_cable(lab8, sy, sx, colours, seed, ball2):
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _nearest_around2(colours, seed):
+    """Squared distance from a seed's cable colour to the nearest colour round it."""
+    c0 = colours[seed, 0, 0]
+    c1 = colours[seed, 0, 1]
+    c2 = colours[seed, 0, 2]
+    return min(
+        _distance2(c0, c1, c2, colours, seed, 1),
+        _distance2(c0, c1, c2, colours, seed, 2),
+        _distance2(c0, c1, c2, colours, seed, 3),
+    )
 
 
 @njit(cache=True, nogil=True)

@@ -48,6 +48,10 @@ from service.perception import (
     _segmentation_kernels,
     _shared_kernels,
 )
+from service.perception.deadline import Deadline, check
+
+STAGE = "segmentation"
+"""The stage a :class:`~service.perception.deadline.DeadlineExceeded` names."""
 
 N_ORIENTATIONS = 8
 """Angles of the line segments, 22.5 degrees apart: a segment at most 11.25 degrees off a
@@ -58,13 +62,18 @@ cable, short enough to stay on a cable bending to a radius of four of its widths
 OFFSET = 4
 """The side segments lie this far (level px) from the centre: beyond a 3.5 px cable's rim
 from anywhere on its centre line."""
-BACKGROUND_WINDOW = 4 * OFFSET + 1
-"""The local background is the median colour over a window this wide (level px): a cable
-covers under a fifth of it, two cables side by side under half."""
-WIDE_WINDOW = 8 * OFFSET + 1
-"""A line must also differ from the median colour over a window twice as wide, where two
-cables crossing cover under a quarter: the paper in the angle between them (whose narrow
-window two thick cables may fill half) is not taken for a line."""
+MEDIAN_SIZE = 5
+"""Backgrounds are medians over ``MEDIAN_SIZE`` x ``MEDIAN_SIZE`` samples of a level."""
+BACKGROUND_FACTOR = 4
+"""The local background of a level is the median over 5 x 5 of its pixels 4 px apart: a
+window 20 level px wide, of which a cable covers under a fifth and two cables side by side
+under half."""
+WIDE_FACTOR = 8
+"""A line must also differ from the median over a window twice as wide (samples 8 px
+apart), where two cables crossing cover under a quarter: the paper in the angle between
+them (whose narrow window two thick cables may fill half) is not taken for a line."""
+BACKGROUND_WINDOW = MEDIAN_SIZE * BACKGROUND_FACTOR
+WIDE_WINDOW = MEDIAN_SIZE * WIDE_FACTOR
 REACH = 2.0
 """A pixel is judged against its nearest seed when that seed lies within this many level
 px: half the widest cable a level is made for (3.5 px), rounded up."""
@@ -73,6 +82,12 @@ FINEST_STEP = 2.0
 COARSEST_STEP = 16.0
 """The coarsest level brings cables 40 px wide down to 2.5 px."""
 LEVEL_RATIO = float(np.sqrt(2.0))
+END_PROBE = 2.0
+"""A seed ends a line when no seed lies near the point this far ahead on its line (level
+px): half its segment's length."""
+END_WIDTH = 1.0
+"""Ahead of a line's end only its core is judged: within this far of the line (level px),
+half of the narrowest cable a level is made for."""
 MIN_LEVEL_SIDE = 2 * BACKGROUND_WINDOW
 """A level must hold two background windows across its shorter side."""
 JND = 2.3
@@ -89,6 +104,25 @@ near that, and gives an empty mask."""
 SCALE_BAND = 2.0
 """Cables of one picture are within this factor of the typical width: the levels, and the
 components' widths, outside the band are dropped."""
+SHADOW_TINT = 2.0 * JND
+"""A shadow keeps the background's chromaticity to within two just noticeable differences
+(the light left in a shadow, from the room and the sky, may be of another tint)."""
+SHADOW_LIGHT = 0.25
+"""A shadow keeps at least a quarter of the background's luminance: it is cast by part of
+the light only (the soft shadow of a thin cable under a lamp and the room's light)."""
+SHADOW_REACH = 2.0
+"""A cast shadow lies beside its cable: within twice the side segments' offset."""
+RAMP_WIDTH = 0.25
+"""A transition's colour lies within a quarter of its sides' difference of the path
+between them (:func:`transitions`)."""
+RAMP_END = 0.1
+"""... and more than a tenth of the way from either side's colour."""
+RUN_RATIO = 0.5
+"""Runs of line are traced down to half the seeds' lowest ratio (:func:`_long_seed_runs`),
+the usual two to one of hysteresis."""
+LINE_WIDTH = 3.0
+"""A line found at a level is about this wide there (level px): the levels are made for
+cables 2.5 to 3.5 px wide."""
 MIN_ELONGATION = 3.0
 """A component is at least this many of its widths long (by the measure of
 :func:`keep_cable_like`, a disc or a square is 2.3 widths long)."""
@@ -148,7 +182,11 @@ def level_steps(height: int, width: int) -> list[float]:
 
 
 def segment_cables(
-    image_bgr: np.ndarray, min_component_area: int = 0, max_hole_area: int = 0
+    image_bgr: np.ndarray,
+    min_component_area: int = 0,
+    max_hole_area: int = 0,
+    *,
+    deadline: Deadline | None = None,
 ) -> np.ndarray:
     """Foreground mask of the cables in a BGR image, by their contrast with their sides.
 
@@ -158,6 +196,9 @@ def segment_cables(
         ``(H, W, 3)`` BGR ``uint8``.
     min_component_area, max_hole_area : int
         The clean-up of :func:`service.perception.segmentation.clean_mask`.
+    deadline : Deadline, optional
+        Checked after each pyramid level and each later step
+        (:class:`~service.perception.deadline.DeadlineExceeded` past it).
 
     Returns
     -------
@@ -173,25 +214,40 @@ def segment_cables(
     >>> bool(mask[80, 120]), bool(mask[20, 200])
     (True, False)
     """
-    return cable_contrast(image_bgr, min_component_area, max_hole_area).mask
+    return cable_contrast(image_bgr, min_component_area, max_hole_area, deadline=deadline).mask
 
 
 def cable_contrast(
-    image_bgr: np.ndarray, min_component_area: int = 0, max_hole_area: int = 0
+    image_bgr: np.ndarray,
+    min_component_area: int = 0,
+    max_hole_area: int = 0,
+    *,
+    deadline: Deadline | None = None,
 ) -> CableContrast:
     """:func:`segment_cables`, with the line ratios, seeds and levels it used."""
     height, width = image_bgr.shape[:2]
     lab8 = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2Lab)
-    levels = [_level(lab8, step) for step in level_steps(height, width)]
+    levels = _levels(lab8, level_steps(height, width), deadline)
     used = list(range(len(levels)))
-    ratio, best_level, seeds = _seeds(levels, used)
+    on_grid = [_on_grid(level.ratio, levels[0].ratio.shape) for level in levels]
+    ratio, best_level, seeds = _seeds(on_grid, used)
     if seeds.any():
         used = _within_scale_band(levels, best_level, seeds)
         if len(used) < len(levels):
-            ratio, best_level, seeds = _seeds(levels, used)
+            ratio, best_level, seeds = _seeds(on_grid, used)
+    check(deadline, STAGE)
     mask = np.zeros((height, width), bool)
     if seeds.any():
-        candidates = _extent(lab8, levels, best_level, seeds)
+        seeds = _long_seed_runs(ratio, seeds)
+    if seeds.any():
+        lines = seed_lines((height, width), levels, best_level, seeds)
+        lines = _without_shadows(lines, seeds, height / seeds.shape[0])
+        lines = lines.take(~transitions(lines.colours))
+        seeds = seeds.copy()
+        seeds[np.nonzero(seeds)] = lines.of_grid >= 0
+        check(deadline, STAGE)
+        candidates = _extent(lab8, lines, seeds)
+        check(deadline, STAGE)
         # Seeds hold the mask together: a candidate counts when it touches a seed.
         seeds_full = cv2.resize(
             seeds.view(np.uint8), (width, height), interpolation=cv2.INTER_NEAREST
@@ -209,54 +265,105 @@ def cable_contrast(
     return CableContrast(mask, ratio, best_level, seeds, levels, used)
 
 
-def _level(lab8: np.ndarray, step: float) -> Level:
+def _levels(lab8: np.ndarray, steps: list[float], deadline: Deadline | None) -> list[Level]:
+    """The pyramid's levels, each with its line ratios (the deadline checked after each)."""
+    images = _pyramid(lab8, steps)
+    levels = []
+    for step, small in zip(steps, images, strict=False):
+        background, wide = (
+            _sparse_median(small, factor) for factor in (BACKGROUND_FACTOR, WIDE_FACTOR)
+        )
+        ratio, orientation = _cable_segmentation_kernels.level_contrast(
+            small, background, wide, N_ORIENTATIONS, HALF_LENGTH, float(OFFSET), JND * JND
+        )
+        levels.append(Level(step, small, background, ratio, orientation))
+        check(deadline, STAGE)
+    return levels
+
+
+def _pyramid(lab8: np.ndarray, steps: list[float]) -> list[np.ndarray]:
+    """The level images: each is the one two below it halved (the mean of 2 x 2 px), so
+    only the first two are resized from the image itself."""
     height, width = lab8.shape[:2]
-    if step == 1.0:
-        small = lab8
-    else:
+    images = []
+    for index, step in enumerate(steps):
+        if step == 1.0:
+            images.append(lab8)
+            continue
         size = (max(1, round(width / step)), max(1, round(height / step)))
-        small = cv2.resize(lab8, size, interpolation=cv2.INTER_AREA)
-    background, wide = _backgrounds(small)
-    ratio, orientation = _cable_segmentation_kernels.level_contrast(
-        small, background, wide, N_ORIENTATIONS, HALF_LENGTH, float(OFFSET), JND * JND
-    )
-    return Level(step, small, background, ratio, orientation)
+        source = images[index - 2] if index >= 2 else lab8
+        images.append(cv2.resize(source, size, interpolation=cv2.INTER_AREA))
+    return images
 
 
-def _backgrounds(lab8: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The local background colours of a level: medians over the two windows.
+def _sparse_median(lab8: np.ndarray, factor: int) -> np.ndarray:
+    """Median colour over windows ``MEDIAN_SIZE * factor`` px wide, from every
+    ``factor``-th pixel of every ``factor``-th row.
 
-    The background changes slowly next to the windows' size, so the medians are taken
-    on the level halved (windows halved, odd) and enlarged again: a quarter of the work.
+    The samples are pixels of the level, not block means: a block across a cable's rim
+    would give a colour between cable and background, and between two close cables the
+    median of such blends is neither (the paper between them would look like a line).
+    Medians over :data:`MEDIAN_SIZE` px of the samples cost a small fraction of medians
+    over the whole windows; the background changes slowly beside the windows' size, so
+    they are enlarged back bilinearly. A level with too few samples gets its overall
+    median.
     """
     height, width = lab8.shape[:2]
-    half = cv2.resize(lab8, ((width + 1) // 2, (height + 1) // 2), interpolation=cv2.INTER_AREA)
-    return tuple(
-        cv2.resize(
-            _median(half, (window // 2) | 1), (width, height), interpolation=cv2.INTER_LINEAR
-        )
-        for window in (BACKGROUND_WINDOW, WIDE_WINDOW)
-    )
+    samples = np.ascontiguousarray(lab8[factor // 2 :: factor, factor // 2 :: factor])
+    if min(samples.shape[:2]) < MEDIAN_SIZE:
+        median = np.median(lab8.reshape(-1, 3), axis=0).round().astype(np.uint8)
+        return np.broadcast_to(median, lab8.shape).copy()
+    medians = cv2.medianBlur(samples, MEDIAN_SIZE)
+    return cv2.resize(medians, (width, height), interpolation=cv2.INTER_LINEAR)
 
 
-def _median(lab8: np.ndarray, window: int) -> np.ndarray:
-    """Median of each channel over a ``window`` px square (OpenCV's O(1) median for uint8)."""
-    channels = [cv2.medianBlur(np.ascontiguousarray(lab8[:, :, c]), window) for c in range(3)]
-    return cv2.merge(channels)
+def _on_grid(ratio: np.ndarray, grid_shape: tuple[int, int]) -> np.ndarray:
+    """A level's ratios on the finest grid: each grid pixel takes the level pixel its
+    centre falls in."""
+    grid_h, grid_w = grid_shape
+    return cv2.resize(ratio, (grid_w, grid_h), interpolation=cv2.INTER_NEAREST_EXACT)
 
 
-def _seeds(levels: list[Level], used: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Best ratio and level per pixel of the finest grid, and the seeds among them."""
-    grid_h, grid_w = levels[0].ratio.shape
-    best = np.zeros((grid_h, grid_w), np.float32)
-    best_level = np.zeros((grid_h, grid_w), np.int64)
+def _seeds(on_grid: list[np.ndarray], used: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Best ratio and level per pixel of the finest grid, and the seeds among them.
+
+    ``on_grid`` holds every level's ratios on the grid (:func:`_on_grid`); of the
+    ``used`` levels, a pixel keeps the first with the largest ratio.
+    """
+    # Ratios are never negative: from zeros, a pixel whose ratios are all 0 keeps the first.
+    best = np.zeros(on_grid[used[0]].shape, np.float32)
+    best_level = np.full(best.shape, used[0], np.int64)
     for index in used:
-        _cable_segmentation_kernels.merge_level(best, best_level, levels[index].ratio, index)
+        _cable_segmentation_kernels.keep_larger(best, best_level, on_grid[index], index)
     cue = np.minimum(best * RATIO_BINS, 255.0).astype(np.uint8)
     hist = cv2.calcHist([cue], [0], None, [256], [0, 256]).ravel().astype(np.float64)
     threshold, _ = _segmentation_kernels.otsu_kernel(hist)
     threshold = max(threshold, MIN_RATIO * RATIO_BINS)
     return best, best_level, cue > threshold
+
+
+def _long_seed_runs(ratio: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """The seeds on runs of line at least :data:`MIN_ELONGATION` of their widths long.
+
+    A cable is a line over its whole length; a fleck of paint, a blob of texture or a
+    short stroke is a line over a few widths at most. A run is a connected stretch of the
+    finest grid where the ratio is at least :data:`RUN_RATIO` of the seeds' lowest (a
+    faint cable whose ratio wavers about the seeds' threshold, or a tight loop whose ratio
+    is high only where the segments fit the curve, is one run, not many); its width and
+    length are measured as :func:`keep_cable_like` measures a component's.
+    """
+    line = ((ratio >= RUN_RATIO * ratio[seeds].min()) | seeds).view(np.uint8)
+    distance = _shared_kernels.distance_transform(line)
+    labels, area, width = _cable_segmentation_kernels.component_widths(line, distance)
+    # A band w px wide has pixel distances 1 .. w / 2 to the background: four times their
+    # mean is w + 2 on a grid this coarse.
+    width = np.maximum(width - 2.0, 1.0)
+    # The seeds are the evidence, the weaker pixels only join them: a run's seeds must
+    # cover that length themselves.
+    seed_area = np.bincount(labels[seeds], minlength=area.size)
+    keep = seed_area >= MIN_ELONGATION * width**2
+    keep[0] = False
+    return seeds & keep[labels]
 
 
 def _within_scale_band(levels: list[Level], best_level: np.ndarray, seeds: np.ndarray) -> list[int]:
@@ -273,20 +380,61 @@ def _within_scale_band(levels: list[Level], best_level: np.ndarray, seeds: np.nd
     return [index for index, step in enumerate(steps) if low <= step <= high]
 
 
-def _extent(
-    lab8: np.ndarray, levels: list[Level], best_level: np.ndarray, seeds: np.ndarray
-) -> np.ndarray:
-    """Image pixels near a seed whose colour is nearer the seed's cable than its surroundings."""
-    width = lab8.shape[1]
+@dataclass(frozen=True)
+class SeedLines:
+    """The seeds, one per pixel of its own level, and the colours of their lines.
+
+    Attributes
+    ----------
+    centres_y, centres_x : ndarray of float64
+        The centre of the seed's level pixel, image px.
+    angles : ndarray of float64
+        The direction of the seed's line (``(cos, sin)`` in ``(x, y)``), radians.
+    steps : ndarray of float64
+        The seed's level step (image px per level px).
+    colours : ndarray of float32
+        ``(N, 4, 3)`` CIELAB: the line's colour, its two sides and the background.
+    of_grid : ndarray of int64
+        For every seed of the finest grid (in ``np.nonzero`` order), its index here.
+    """
+
+    centres_y: np.ndarray
+    centres_x: np.ndarray
+    angles: np.ndarray
+    steps: np.ndarray
+    colours: np.ndarray
+    of_grid: np.ndarray
+
+    def take(self, keep: np.ndarray) -> SeedLines:
+        """The seeds where ``keep``; ``of_grid`` is -1 for the grid seeds of the others."""
+        renumber = np.cumsum(keep) - 1
+        of_grid = np.where(keep[self.of_grid], renumber[self.of_grid], -1)
+        return SeedLines(
+            self.centres_y[keep],
+            self.centres_x[keep],
+            self.angles[keep],
+            self.steps[keep],
+            self.colours[keep],
+            of_grid,
+        )
+
+
+def seed_lines(
+    shape: tuple[int, int], levels: list[Level], best_level: np.ndarray, seeds: np.ndarray
+) -> SeedLines:
+    """The seeds of the finest grid gathered per pixel of their own level, with colours."""
+    height, width = shape
     grid_h, grid_w = seeds.shape
     rows, cols = np.nonzero(seeds)
-    colours = np.empty((rows.size, 4, 3), np.float32)
-    reach = np.empty(rows.size, np.float32)
     seed_level = best_level[rows, cols]
+    of_grid = np.empty(rows.size, np.int64)
+    parts = []
+    count = 0
     for index, level in enumerate(levels):
         pick = np.flatnonzero(seed_level == index)
         if pick.size == 0:
             continue
+        # One seed per pixel of its own level: the finer grid's seeds repeat its colours.
         level_h, level_w = level.ratio.shape
         level_rows = np.minimum(
             ((rows[pick] + 0.5) * level_h / grid_h).astype(np.int64), level_h - 1
@@ -294,7 +442,11 @@ def _extent(
         level_cols = np.minimum(
             ((cols[pick] + 0.5) * level_w / grid_w).astype(np.int64), level_w - 1
         )
-        colours[pick] = _cable_segmentation_kernels.seed_colours(
+        cells, inverse = np.unique(level_rows * level_w + level_cols, return_inverse=True)
+        of_grid[pick] = count + inverse.ravel()
+        count += cells.size
+        level_rows, level_cols = cells // level_w, cells % level_w
+        colours = _cable_segmentation_kernels.seed_colours(
             level.lab8,
             level.background8,
             level_rows,
@@ -304,16 +456,119 @@ def _extent(
             HALF_LENGTH,
             float(OFFSET),
         )
-        reach[pick] = REACH * level.step
-    # The nearest seed of every grid pixel, and how far it is.
-    distance, labels = cv2.distanceTransformWithLabels(
-        (~seeds).view(np.uint8), cv2.DIST_L2, 3, labelType=cv2.DIST_LABEL_PIXEL
+        parts.append(
+            (
+                # The centre of the level pixel, in image pixel coordinates.
+                (level_rows + 0.5) * (height / level_h) - 0.5,
+                (level_cols + 0.5) * (width / level_w) - 0.5,
+                np.pi * level.orientation[level_rows, level_cols] / N_ORIENTATIONS,
+                np.full(cells.size, level.step),
+                colours,
+            )
+        )
+    if not parts:
+        empty = np.empty(0)
+        return SeedLines(empty, empty, empty, empty, np.empty((0, 4, 3), np.float32), of_grid)
+    return SeedLines(*(np.concatenate(column) for column in zip(*parts, strict=True)), of_grid)
+
+
+def shadow_coloured(colours: np.ndarray) -> np.ndarray:
+    """Which lines have the colour of their background in shadow.
+
+    A shadow is the background with less light: the same chromaticity (CIELAB's a and
+    b scale with L + 16 as light dims) within :data:`SHADOW_TINT`, darker, and keeping
+    at least :data:`SHADOW_LIGHT` of the background's luminance.
+    """
+    line = colours[:, 0].astype(np.float64)
+    background = colours[:, 3].astype(np.float64)
+    luminance = ((line[:, 0] + 16.0) / (background[:, 0] + 16.0)) ** 3
+    scale = (line[:, 0] + 16.0) / (background[:, 0] + 16.0)
+    tint = np.hypot(line[:, 1] - background[:, 1] * scale, line[:, 2] - background[:, 2] * scale)
+    return (tint <= SHADOW_TINT) & (luminance >= SHADOW_LIGHT) & (luminance < 1.0)
+
+
+def transitions(colours: np.ndarray) -> np.ndarray:
+    """Which lines are transitions between their sides rather than lines of their own.
+
+    A cable differs from both its sides alike: darker than both, brighter than both, or
+    of another colour. A band whose colour lies on the way from one side's colour to the
+    other's (within :data:`RAMP_WIDTH` of their difference from that path, and not at
+    either end of it) is the soft rim of something beside it: a shadow between a cable
+    and the paper, the strip of wood between white paper and a dark table.
+    """
+    line, one, two = (colours[:, k].astype(np.float64) for k in range(3))
+    path = two - one
+    length2 = np.maximum((path * path).sum(axis=1), 1e-12)
+    along = ((line - one) * path).sum(axis=1) / length2
+    off = line - (one + np.clip(along, 0.0, 1.0)[:, None] * path)
+    return (
+        (along > RAMP_END)
+        & (along < 1.0 - RAMP_END)
+        & ((off * off).sum(axis=1) < RAMP_WIDTH**2 * length2)
     )
-    seed_of_label = np.full(int(labels.max()) + 1, -1, np.int64)
-    seed_of_label[labels[rows, cols]] = np.arange(rows.size)
-    nearest = seed_of_label[labels]
-    return _cable_segmentation_kernels.nearest_colour_class(
-        lab8, nearest, distance, width / grid_w, reach, colours
+
+
+def _without_shadows(lines: SeedLines, seeds: np.ndarray, grid_step: float) -> SeedLines:
+    """The seeds less the shadows cables cast: shadow-coloured lines (:func:`shadow_coloured`)
+    within :data:`SHADOW_REACH` of their own widths of a line that is not.
+
+    A grey cable on white paper is shadow-coloured too; away from other cables it stays.
+    """
+    shadow = shadow_coloured(lines.colours)
+    if not shadow.any() or shadow.all():
+        return lines
+    grid_h, grid_w = seeds.shape
+    caster = np.ones(seeds.shape, np.uint8)
+    rows, cols = np.nonzero(seeds)
+    casting = ~shadow[lines.of_grid]
+    caster[rows[casting], cols[casting]] = 0
+    distance = cv2.distanceTransform(caster, cv2.DIST_L2, 3)
+    # A shadow seed's distance to the nearest casting seed, in image px (from the grid).
+    ys = np.clip(
+        np.round((lines.centres_y + 0.5) / grid_step - 0.5).astype(np.int64), 0, grid_h - 1
+    )
+    xs = np.clip(
+        np.round((lines.centres_x + 0.5) / grid_step - 0.5).astype(np.int64), 0, grid_w - 1
+    )
+    near_caster = distance[ys, xs] * grid_step <= SHADOW_REACH * OFFSET * lines.steps
+    return lines.take(~(shadow & near_caster))
+
+
+def _extent(lab8: np.ndarray, lines: SeedLines, seeds: np.ndarray) -> np.ndarray:
+    """Image pixels near a seed whose colour is near the seed's cable colour.
+
+    A pixel counts when any seed within reach says so, not only the nearest: where two
+    cables of different colours cross, the lower one's pixels beside the upper one's seeds
+    are still judged by the lower one's own seeds. Where a line of seeds ends, its last
+    seeds also judge the core of the line ahead of them, out to the length of their
+    segment: there the segment ran past the cable's end and its ratio fell.
+    """
+    height = lab8.shape[0]
+    grid_h, grid_w = seeds.shape
+    grid_step = height / grid_h
+    around = cv2.dilate(seeds.view(np.uint8), np.ones((3, 3), np.uint8))
+    ahead = []
+    for sign in (1.0, -1.0):
+        probe_x = lines.centres_x + sign * END_PROBE * lines.steps * np.cos(lines.angles)
+        probe_y = lines.centres_y + sign * END_PROBE * lines.steps * np.sin(lines.angles)
+        gx = np.floor((probe_x + 0.5) / grid_step).astype(np.int64)
+        gy = np.floor((probe_y + 0.5) / grid_step).astype(np.int64)
+        inside = (gx >= 0) & (gx < grid_w) & (gy >= 0) & (gy < grid_h)
+        continues = np.ones(gx.size, bool)
+        continues[inside] = around[gy[inside], gx[inside]] > 0
+        ahead.append(np.where(continues, 0.0, HALF_LENGTH * lines.steps))
+    return _cable_segmentation_kernels.colour_class_within_reach(
+        lab8,
+        lines.centres_y,
+        lines.centres_x,
+        lines.angles,
+        lines.steps,
+        ahead[0],
+        ahead[1],
+        REACH,
+        END_WIDTH,
+        float(OFFSET),
+        lines.colours,
     )
 
 

@@ -236,7 +236,9 @@ def detect_full(
             validate_mask(mask, shape), params.min_component_area, params.max_hole_area
         )
     else:
-        foreground, cue, image_low = segment_with_cue(image_bgr, params, segmenter)
+        foreground, cue, image_low = segment_with_cue(
+            image_bgr, params, segmenter, deadline=deadline
+        )
     watch.lap("segmentation")
     check(deadline, "segmentation")
     if not foreground.any():

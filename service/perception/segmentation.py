@@ -29,6 +29,7 @@ import numpy as np
 from schemas import DetectParams, SegmentationMethod
 from service.perception import _segmentation_kernels
 from service.perception.cable_segmentation import segment_cables
+from service.perception.deadline import Deadline
 from service.perception.errors import InvalidInputError
 from service.perception.segmenter import Segmenter, run_segmenter
 
@@ -148,19 +149,23 @@ def _cable_like(cue: np.ndarray, threshold: float, separability: float, hist: np
 
 # The widest cable the defaults are made for (DetectParams: cables 6 to 40 px wide).
 MAX_CABLE_WIDTH = 40
+# Cables lying on a table cover at most a third of the picture (mbest: 3-9 %; the rings
+# scene of dlo bench, a ring in every 40 px cell: 26 %); a sheet of paper or a lit table
+# top in view is most of it (ariadne's paper: 74-93 %).
+CABLES_SHARE = 1.0 / 3.0
 BLOCK = 4
 
 
 def _thin_bright_class(hist: np.ndarray, threshold: float, mask: np.ndarray) -> bool:
     """Is the bright class of a brightness split made of cables, not of a bright surface?
 
-    Cables are thin: the bright class covers at most :data:`THIN_FOREGROUND_SHARE` of
-    the image, and at most that share of the mask lies where a square wider than the
-    widest cable fits inside it. A sheet of paper, a lit table top or the light half of
-    a busy print fails one or the other.
+    Cables are thin: the bright class covers at most :data:`CABLES_SHARE` of the
+    image, and at most :data:`THIN_FOREGROUND_SHARE` of the mask lies where a square
+    wider than the widest cable fits inside it. A sheet of paper, a lit table top or the
+    light half of a busy print fails one or the other.
     """
     above = float(hist[int(threshold) + 1 :].sum())
-    if above > THIN_FOREGROUND_SHARE * mask.size:
+    if above > CABLES_SHARE * mask.size:
         return False
     area = np.count_nonzero(mask)
     if area == 0:
@@ -177,7 +182,11 @@ def _thin_bright_class(hist: np.ndarray, threshold: float, mask: np.ndarray) -> 
 
 
 def segment_auto(
-    image_bgr: np.ndarray, min_component_area: int = 0, max_hole_area: int = 0
+    image_bgr: np.ndarray,
+    min_component_area: int = 0,
+    max_hole_area: int = 0,
+    *,
+    deadline: Deadline | None = None,
 ) -> np.ndarray:
     """``brightness`` where the image shows that it applies, else ``contrast``.
 
@@ -188,17 +197,21 @@ def segment_auto(
     light or textured background, dark cables) :func:`segment_cables` finds the cables
     by their contrast with what lies beside them.
     """
-    return _segment_auto(image_bgr, min_component_area, max_hole_area)[0]
+    return _segment_auto(image_bgr, min_component_area, max_hole_area, deadline)[0]
 
 
 def _segment_auto(
-    image_bgr: np.ndarray, min_component_area: int, max_hole_area: int
+    image_bgr: np.ndarray,
+    min_component_area: int,
+    max_hole_area: int,
+    deadline: Deadline | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None, float]:
     """:func:`segment_auto`, and the brightness and weak threshold when brightness made it."""
     found = _segment_by_brightness(image_bgr, min_component_area, max_hole_area, thin_only=True)
     if found is not None:
         return found
-    return segment_cables(image_bgr, min_component_area, max_hole_area), None, 0.0
+    mask = segment_cables(image_bgr, min_component_area, max_hole_area, deadline=deadline)
+    return mask, None, 0.0
 
 
 def segment_brightness(
@@ -301,7 +314,11 @@ def clean_mask(mask: np.ndarray, min_component_area: int, max_hole_area: int) ->
 
 
 def segment_with_cue(
-    image_bgr: np.ndarray, params: DetectParams, segmenter: Segmenter | None = None
+    image_bgr: np.ndarray,
+    params: DetectParams,
+    segmenter: Segmenter | None = None,
+    *,
+    deadline: Deadline | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None, float]:
     """:func:`segment`, with the brightness image and the weak threshold it was cut at.
 
@@ -311,10 +328,10 @@ def segment_with_cue(
     area, holes = params.min_component_area, params.max_hole_area
     method = params.segmentation
     if method is SegmentationMethod.auto:
-        return _segment_auto(image_bgr, area, holes)
+        return _segment_auto(image_bgr, area, holes, deadline)
     if method is SegmentationMethod.brightness:
         return _segment_brightness(image_bgr, area, holes)
-    return segment(image_bgr, params, segmenter), None, 0.0
+    return segment(image_bgr, params, segmenter, deadline=deadline), None, 0.0
 
 
 # Each cable's own threshold is found among the pixels within this many of its radii
@@ -433,7 +450,11 @@ def grow_by_own_thresholds(
 
 
 def segment(
-    image_bgr: np.ndarray, params: DetectParams, segmenter: Segmenter | None = None
+    image_bgr: np.ndarray,
+    params: DetectParams,
+    segmenter: Segmenter | None = None,
+    *,
+    deadline: Deadline | None = None,
 ) -> np.ndarray:
     """Step 1 of the pipeline: the cleaned foreground mask of an image.
 
@@ -447,6 +468,9 @@ def segment(
     segmenter : callable, optional
         For ``segmentation="model"``: called with ``image_bgr``, returns the mask
         (:func:`service.perception.segmenter.run_segmenter` checks it).
+    deadline : Deadline, optional
+        Checked inside cable contrast (``auto`` and ``contrast``), whose work grows with
+        the image.
 
     Returns
     -------
@@ -469,7 +493,7 @@ def segment(
     if method is SegmentationMethod.model:
         return clean_mask(run_segmenter(segmenter, image_bgr), area, holes)
     if method is SegmentationMethod.contrast:
-        return segment_cables(image_bgr, area, holes)
+        return segment_cables(image_bgr, area, holes, deadline=deadline)
     if method is SegmentationMethod.brightness:
         return segment_brightness(image_bgr, area, holes)
-    return segment_auto(image_bgr, area, holes)
+    return segment_auto(image_bgr, area, holes, deadline=deadline)

@@ -19,10 +19,14 @@ from service.perception.cable_segmentation import (
     JND,
     N_ORIENTATIONS,
     OFFSET,
+    REACH,
     WIDE_WINDOW,
+    _on_grid,
+    _seeds,
     level_steps,
     segment_cables,
 )
+from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.segmentation import segment, segment_with_cue
 from service.synthetic import make_scene
 from tests.perception.references import cable_segmentation as reference
@@ -172,7 +176,7 @@ def level_inputs(seed, shape=(48, 64)):
     lab8 = cv2.cvtColor(small, cv2.COLOR_BGR2Lab)
     background8, wide8 = (
         cv2.merge([cv2.medianBlur(np.ascontiguousarray(lab8[:, :, c]), size) for c in range(3)])
-        for size in (BACKGROUND_WINDOW, WIDE_WINDOW)
+        for size in (BACKGROUND_WINDOW | 1, WIDE_WINDOW | 1)
     )
     return lab8, background8, wide8
 
@@ -210,26 +214,62 @@ def test_seed_colours_equal_the_reference(seed):
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_merge_level_and_nearest_colour_class_equal_the_reference(seed):
+def test_the_best_level_on_the_grid_equals_the_reference(seed):
+    # Levels of several sizes, some of them not used; ties go to the first level.
     rng = np.random.default_rng(seed)
-    best = rng.random((30, 40)).astype(np.float32)
-    best_level = rng.integers(0, 3, (30, 40)).astype(np.int64)
-    ratio = rng.random((21, 28)).astype(np.float32) * 1.5
-    found_best, found_level = best.copy(), best_level.copy()
-    _cable_segmentation_kernels.merge_level(found_best, found_level, ratio, 3)
-    reference.merge_level(best, best_level, ratio, 3)
-    np.testing.assert_array_equal(found_best, best)
-    np.testing.assert_array_equal(found_level, best_level)
+    shapes = [(30, 40), (21, 28), (15, 20), (11, 14)]
+    ratios = [(rng.integers(0, 4, shape) / 2.0).astype(np.float32) for shape in shapes]
+    used = [0, 1, 3]
+    on_grid = [_on_grid(ratio, shapes[0]) for ratio in ratios]
+    best, best_level, _ = _seeds(on_grid, used)
+    expected_best = np.zeros(shapes[0], np.float32)
+    expected_level = np.zeros(shapes[0], np.int64)
+    for index in used:
+        reference.merge_level(expected_best, expected_level, ratios[index], index)
+    np.testing.assert_array_equal(best, expected_best)
+    np.testing.assert_array_equal(best_level[expected_best > 0], expected_level[expected_best > 0])
 
-    lab8 = rng.integers(0, 256, (59, 81, 3)).astype(np.uint8)
-    nearest = rng.integers(-1, 12, (30, 40)).astype(np.int64)
-    distance = (rng.random((30, 40)) * 6).astype(np.float32)
-    reach = (rng.random(12) * 10).astype(np.float32)
-    colours = (rng.random((12, 4, 3)) * 100 - 30).astype(np.float32)
-    found = _cable_segmentation_kernels.nearest_colour_class(
-        lab8, nearest, distance, 81 / 40, reach, colours
+
+@pytest.mark.parametrize("seed", range(3))
+def test_colour_class_within_reach_equals_the_reference(seed):
+    # Short lines of random colours on a noisy grey, seeds on them along their direction
+    # (so that the walks ahead of line ends go on and stop), and seeds of random colours.
+    rng = np.random.default_rng(seed)
+    image = np.clip(rng.normal(128, 12, (59, 81, 3)), 0, 255).astype(np.uint8)
+    n_lines, n = 5, 12
+    centres_y = rng.uniform(-3, 62, n)
+    centres_x = rng.uniform(-3, 84, n)
+    orientation = rng.integers(0, N_ORIENTATIONS, n)
+    angles = np.pi * orientation / N_ORIENTATIONS
+    for i in range(n_lines):
+        start = (centres_x[i], centres_y[i])
+        length = rng.uniform(5, 25)
+        end = (start[0] + length * np.cos(angles[i]), start[1] + length * np.sin(angles[i]))
+        colour = tuple(int(c) for c in rng.integers(0, 256, 3))
+        cv2.line(
+            image,
+            tuple(round(v) for v in start),
+            tuple(round(v) for v in end),
+            colour,
+            int(rng.integers(2, 5)),
+        )
+    lab8 = cv2.cvtColor(image, cv2.COLOR_BGR2Lab)
+    lab = reference.lab_float(lab8)
+    steps = rng.choice([1.0, 2.0, 2.0 * np.sqrt(2.0)], n)
+    colours = (rng.random((n, 4, 3)) * 100 - 30).astype(np.float32)
+    inside_y = np.clip(np.round(centres_y).astype(int), 0, 58)
+    inside_x = np.clip(np.round(centres_x).astype(int), 0, 80)
+    colours[:n_lines, 0] = lab[inside_y[:n_lines], inside_x[:n_lines]]
+    colours[:n_lines, 1:] = lab[0, 0]  # the grey round them
+    ahead = np.where(rng.random(n) < 0.7, HALF_LENGTH * steps * 4, 0.0)
+    behind = np.where(rng.random(n) < 0.7, HALF_LENGTH * steps * 4, 0.0)
+    args = (centres_y, centres_x, angles, steps, ahead, behind, REACH, 1.0, OFFSET, colours)
+    found = _cable_segmentation_kernels.colour_class_within_reach(lab8, *args)
+    expected = reference.colour_class_within_reach(lab8, *args)
+    without_walks = reference.colour_class_within_reach(
+        lab8, *args[:4], ahead * 0, behind * 0, *args[6:]
     )
-    expected = reference.nearest_colour_class(lab8, nearest, distance, 81 / 40, reach, colours)
+    assert expected.sum() > without_walks.sum()  # the walks add pixels
     assert (found != expected).mean() < 1e-3  # float32 against float64 at exact ties
 
 
@@ -245,3 +285,38 @@ def test_auto_leaves_brightness_for_a_sheet_of_paper_on_a_dark_table():
     # (The sliver of paper between the cable and the sheet's edge, and the sheet's corner
     # next to it, are thin bright shapes too: some of them are taken.)
     assert dice(mask, truth) > 0.8
+
+
+def test_cable_contrast_stops_at_the_deadline_between_levels():
+    # A clock that moves a second per reading: made at 0 with a 2.5 s budget, the third
+    # check (after the third pyramid level of six) is past it.
+    ticks = itertools.count()
+    readings = []
+
+    def clock():
+        readings.append(next(ticks))
+        return float(readings[-1])
+
+    image, _ = draw_scene(plain(220, shape=(480, 640)), [(30, 30, 30)], shape=(480, 640))
+    assert len(level_steps(480, 640)) > 3
+    with pytest.raises(DeadlineExceeded) as raised:
+        segment_cables(image, deadline=Deadline(2.5, clock=clock))
+    assert raised.value.stage == "segmentation"
+    assert len(readings) == 4  # made, and three checks: it stopped inside the pyramid
+    # Without a budget to run out, the same image is segmented.
+    assert segment_cables(image, deadline=Deadline(60.0)).any()
+
+
+def test_detect_on_white_paper_stops_inside_cable_contrast_at_its_deadline():
+    # auto takes cable contrast on white paper, which checks the deadline after each
+    # pyramid level: with a clock moving a second per reading, a 2.5 s budget runs out
+    # at its third check, inside segmentation (the brightness path checks only once
+    # segmentation is done, and would stop in a later step).
+    from service.synthetic.families import make_family_scene
+
+    image = make_family_scene("bright", 0, 320, 240).image
+    assert len(level_steps(240, 320)) >= 3
+    ticks = itertools.count()
+    with pytest.raises(DeadlineExceeded) as raised:
+        detect(image, deadline=Deadline(2.5, clock=lambda: float(next(ticks))))
+    assert raised.value.stage == "segmentation"

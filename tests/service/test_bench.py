@@ -24,7 +24,10 @@ def test_dlo_bench_quick_runs_on_one_thread_and_reports_json(tmp_path):
     assert settings["cv2_threads"] == 1 and settings["numba_threads"] == 1
     assert any(str(missing) in note for note in results["notes"])
     assert len(results["cases"]) == 4  # 1, 2, 3 cables and the larger size
-    for case in results["cases"] + results["scaling_area"] + results["scaling_cables"]:
+    # Bright and textured backgrounds (no ariadne beside the missing folder).
+    assert [case["case"].split()[0] for case in results["backgrounds"]] == ["bright", "textured"]
+    cases = results["cases"] + results["backgrounds"]
+    for case in cases + results["scaling_area"] + results["scaling_cables"]:
         stats = case["stages_ms"]
         assert set(stats) == {
             "segmentation",

@@ -76,19 +76,9 @@ def orientation_ratios(lab8, background8, wide8, n_orientations, half_length, of
         mean, spread = line_mean_and_spread(lab, angle, half_length)
         dy = round(offset * np.cos(angle))
         dx = round(-offset * np.sin(angle))
+        # A side beyond the picture is taken at the picture's edge.
         side_one = mean[np.clip(rows + dy, 0, height - 1), np.clip(cols + dx, 0, width - 1)]
         side_two = mean[np.clip(rows - dy, 0, height - 1), np.clip(cols - dx, 0, width - 1)]
-        # A side outside the picture is not known to differ: no line at that angle.
-        seen = (
-            (rows + dy >= 0)
-            & (rows + dy < height)
-            & (cols + dx >= 0)
-            & (cols + dx < width)
-            & (rows - dy >= 0)
-            & (rows - dy < height)
-            & (cols - dx >= 0)
-            & (cols - dx < width)
-        )
         contrast2 = np.minimum.reduce(
             [
                 ((mean - side_one) ** 2).sum(axis=2),
@@ -97,7 +87,7 @@ def orientation_ratios(lab8, background8, wide8, n_orientations, half_length, of
                 ((mean - wide) ** 2).sum(axis=2),
             ]
         )
-        ratios[k] = np.where(seen, np.sqrt(contrast2 / (spread + floor2)), 0.0)
+        ratios[k] = np.sqrt(contrast2 / (spread + floor2))
     return ratios
 
 
@@ -143,17 +133,45 @@ def merge_level(best, best_level, ratio, level):
     best_level[better] = level
 
 
-def nearest_colour_class(lab8, nearest, distance, grid_step, reach, colours):
+def colour_class_within_reach(
+    lab8, centres_y, centres_x, angles, steps, ahead, behind, reach, core, side, colours
+):
+    """Pixels within ``reach * step`` of a seed whose colour lies within half the distance
+    from the seed's cable colour to the nearest colour round it; and, ahead of a line's
+    end, those within ``core * step`` of its line while the line goes on (its pixel of the
+    cable's colour, those ``side * step`` to either side not)."""
     lab = lab_float(lab8)
     height, width, _ = lab.shape
-    grid_h, grid_w = nearest.shape
-    gy = np.minimum(((np.arange(height) + 0.5) * grid_h / height).astype(int), grid_h - 1)
-    gx = np.minimum(((np.arange(width) + 0.5) * grid_w / width).astype(int), grid_w - 1)
-    seed = nearest[gy[:, None], gx[None, :]]
-    near = (seed >= 0) & (
-        distance[gy[:, None], gx[None, :]] * grid_step <= reach[np.maximum(seed, 0)]
-    )
-    chosen = colours[np.maximum(seed, 0)]  # (H, W, 4, 3)
-    to = ((lab[:, :, None, :] - chosen) ** 2).sum(axis=3)  # (H, W, 4)
-    nearest_is_cable = (to[:, :, :1] < to[:, :, 1:]).all(axis=2)
-    return (near & nearest_is_cable).astype(np.uint8)
+    rows, cols = np.mgrid[0:height, 0:width]
+    out = np.zeros((height, width), bool)
+
+    def near(cable, ball2, y, x):
+        return 4.0 * ((lab[y, x] - cable) ** 2).sum() < ball2
+
+    for i in range(len(centres_y)):
+        cable = colours[i, 0].astype(np.float64)
+        ball2 = min(((cable - colours[i, k]) ** 2).sum() for k in (1, 2, 3))
+        disc = (cols - centres_x[i]) ** 2 + (rows - centres_y[i]) ** 2 <= (reach * steps[i]) ** 2
+        out |= disc & (4.0 * ((lab - cable) ** 2).sum(axis=2) < ball2)
+        ux, uy = np.cos(angles[i]), np.sin(angles[i])
+        for sign, length in ((1.0, ahead[i]), (-1.0, behind[i])):
+            t = 1.0
+            while t <= length:
+                px, py = centres_x[i] + sign * t * ux, centres_y[i] + sign * t * uy
+                y, x = int(np.floor(py + 0.5)), int(np.floor(px + 0.5))
+                if not (0 <= y < height and 0 <= x < width) or not near(cable, ball2, y, x):
+                    break
+                blocked = False
+                for s in (1.0, -1.0):
+                    sy = int(np.floor(py + s * side * steps[i] * ux + 0.5))
+                    sx = int(np.floor(px - s * side * steps[i] * uy + 0.5))
+                    if 0 <= sy < height and 0 <= sx < width and near(cable, ball2, sy, sx):
+                        blocked = True
+                if blocked:
+                    break
+                for a in np.arange(-core * steps[i], core * steps[i] + 1e-9, 0.5):
+                    qy, qx = int(np.floor(py + a * ux + 0.5)), int(np.floor(px - a * uy + 0.5))
+                    if 0 <= qy < height and 0 <= qx < width and near(cable, ball2, qy, qx):
+                        out[qy, qx] = True
+                t += 1.0
+    return out.astype(np.uint8)
