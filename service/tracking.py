@@ -21,19 +21,15 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator
 
-from pydantic import BaseModel, Field
-
 from schemas import DetectParams, TrackParams, Tracks
 from service.perception import Tracker
 from service.perception.segmenter import Segmenter
-from service.video import Frame
+from service.video import Frame, FrameRecord, read_frame_records
 
 
-class TrackRecord(BaseModel):
+class TrackRecord(FrameRecord):
     """One line of ``dlo track``'s JSON Lines: a frame's tracks with its position."""
 
-    frame: int = Field(ge=0, description="Frame index in the stream, from 0.")
-    timestamp_s: float = Field(description="Presentation time of the frame in seconds.")
     detection: Tracks
 
 
@@ -81,7 +77,4 @@ def read_track_records(path: str | os.PathLike[str]) -> Iterator[TrackRecord]:
     pydantic.ValidationError
         A line is not a valid :class:`TrackRecord`.
     """
-    with open(path, encoding="utf-8") as stream:
-        for line in stream:
-            if line.strip():
-                yield TrackRecord.model_validate_json(line)
+    return read_frame_records(path, TrackRecord)

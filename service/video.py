@@ -41,7 +41,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple, Protocol
+from typing import NamedTuple, Protocol, TypeVar
 from urllib.parse import urlsplit
 
 import cv2
@@ -167,6 +167,9 @@ class FrameRecord(BaseModel):
     frame: int = Field(ge=0, description="Frame index in the stream, from 0.")
     timestamp_s: float = Field(description="Presentation time of the frame in seconds.")
     detection: SerializeAsAny[Detection]
+
+
+_Record = TypeVar("_Record", bound=FrameRecord)
 
 
 class StreamAnalyser(Protocol):
@@ -552,12 +555,16 @@ def process_stream(
     return summary
 
 
-def read_frame_records(path: str | os.PathLike[str]) -> Iterator[FrameRecord]:
+def read_frame_records(
+    path: str | os.PathLike[str], record_type: type[_Record] = FrameRecord
+) -> Iterator[_Record]:
     """Read back a JSON Lines file written by :func:`process_stream`, line by line.
 
     Parameters
     ----------
     path : str or Path
+    record_type : type of FrameRecord
+        The class of each line (``service.tracking.TrackRecord`` for ``dlo track``'s).
 
     Yields
     ------
@@ -566,12 +573,12 @@ def read_frame_records(path: str | os.PathLike[str]) -> Iterator[FrameRecord]:
     Raises
     ------
     pydantic.ValidationError
-        A line is not a valid :class:`FrameRecord`.
+        A line is not a valid ``record_type``.
     """
     with open(path, encoding="utf-8") as stream:
         for line in stream:
             if line.strip():
-                yield FrameRecord.model_validate_json(line)
+                yield record_type.model_validate_json(line)
 
 
 def _run(

@@ -12,6 +12,23 @@ from service.perception._shared_kernels import solve_small
 
 
 @njit(cache=True, nogil=True)
+def circle_exit(ax, ay, bx, by, cx, cy, step_sq):
+    """Where, as a fraction of segment a-b in [0, 1], the circle of squared radius
+    ``step_sq`` round (cx, cy) is left by a walk along the segment (the far root of the
+    quadratic; 1 for a segment of no length)."""
+    dx = bx - ax
+    dy = by - ay
+    fx = ax - cx
+    fy = ay - cy
+    qa = dx * dx + dy * dy
+    qb = 2.0 * (fx * dx + fy * dy)
+    qc = fx * fx + fy * fy - step_sq
+    disc = max(qb * qb - 4.0 * qa * qc, 0.0)
+    t = (-qb + np.sqrt(disc)) / (2.0 * qa) if qa > 0.0 else 1.0
+    return min(max(t, 0.0), 1.0)
+
+
+@njit(cache=True, nogil=True)
 def resample_kernel(points, step):
     """The loop of geometry.resample in float64 (a correctly rounded square root)."""
     n = points.shape[0]
@@ -34,18 +51,9 @@ def resample_kernel(points, step):
         if (bx - cx) ** 2 + (by - cy) ** 2 < step_sq:
             edge += 1
             continue
-        dx = bx - ax
-        dy = by - ay
-        fx = ax - cx
-        fy = ay - cy
-        qa = dx * dx + dy * dy
-        qb = 2.0 * (fx * dx + fy * dy)
-        qc = fx * fx + fy * fy - step_sq
-        disc = max(qb * qb - 4.0 * qa * qc, 0.0)
-        t = (-qb + np.sqrt(disc)) / (2.0 * qa) if qa > 0 else 1.0
-        t = min(max(t, 0.0), 1.0)
-        cx = ax + t * dx
-        cy = ay + t * dy
+        t = circle_exit(ax, ay, bx, by, cx, cy, step_sq)
+        cx = ax + t * (bx - ax)
+        cy = ay + t * (by - ay)
         if count + 2 > capacity:
             capacity *= 2
             grown = np.empty((capacity, 2), np.float64)

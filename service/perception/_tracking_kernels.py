@@ -8,6 +8,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from service.perception._geometry_kernels import circle_exit
+
 
 @njit(cache=True, nogil=True)
 def _nearest_on_segment(px, py, ax, ay, bx, by):
@@ -410,18 +412,9 @@ def chord_walk(points, arcs, start, sign, step, limit):
             vertex += 1 if sign > 0 else -1
             continue
         # Where the circle of radius step round the last point leaves segment a-b.
-        dx = bx - ax
-        dy = by - ay
-        fx = ax - cx
-        fy = ay - cy
-        qa = dx * dx + dy * dy
-        qb = 2.0 * (fx * dx + fy * dy)
-        qc = fx * fx + fy * fy - step_sq
-        disc = max(qb * qb - 4.0 * qa * qc, 0.0)
-        t = (-qb + np.sqrt(disc)) / (2.0 * qa) if qa > 0.0 else 1.0
-        t = min(max(t, 0.0), 1.0)
-        cx = ax + t * dx
-        cy = ay + t * dy
+        t = circle_exit(ax, ay, bx, by, cx, cy, step_sq)
+        cx = ax + t * (bx - ax)
+        cy = ay + t * (by - ay)
         ax = cx
         ay = cy
         out[count, 0] = cx
