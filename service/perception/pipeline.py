@@ -459,8 +459,10 @@ def warm_up() -> None:
     ]
     ends = chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
     choose_joins(ends, len(strands), DetectParams(), radius)  # the candidates' grid
-    # The image's evidence: ends running to the border, the ends' colours.
-    merge_chains(strands, DetectParams(), radius, zones, distance, image=image, mask=mask)
+    # The image's evidence: ends running to the border, the ends' colours (the colour
+    # cost is off by default; warmed so that turning it on compiles nothing).
+    colour = DetectParams(colour_weight=0.5)
+    merge_chains(strands, colour, radius, zones, distance, image=image, mask=mask)
     join_cost(ends[0], ends[2], DetectParams(), radius)  # one pair's (junctions)
     east, north = np.array([1.0, 0.0]), np.array([0.0, 1.0])
     for shape in GapCurve:

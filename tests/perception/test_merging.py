@@ -352,7 +352,7 @@ def test_ends_of_clearly_different_colour_are_not_joined():
     for image, right in ((one, (40, 40, 200)), (two, (200, 60, 30))):
         cv2.line(image, (10, 50), (80, 50), (40, 40, 200), 7)
         cv2.line(image, (110, 50), (190, 50), right, 7)
-    params = DetectParams()
+    params = DetectParams(colour_weight=0.5)
     assert len(merge_chains(pieces, params, 3.5, image=one).paths) == 1
     assert len(merge_chains(pieces, params, 3.5, image=two).paths) == 2
     assert (
