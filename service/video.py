@@ -50,7 +50,7 @@ from pydantic import BaseModel, Field, SerializeAsAny
 
 from schemas import Detection, DetectParams
 from service.imageio import OutputWriteError, _opencv_quiet
-from service.interrupts import interrupts_held
+from service.interrupts import interrupts_held, raise_if_interrupted
 from service.perception import InvalidInputError, detect, render_overlay
 from service.perception.segmenter import Segmenter
 
@@ -625,6 +625,7 @@ def _run(
             except InvalidInputError as exc:
                 problem = f"frame {index}: {_one_line(exc)}"
             except Exception as exc:  # one bad frame does not end the stream
+                raise_if_interrupted(exc)
                 problem = f"frame {index}: internal error: {type(exc).__name__}: {_one_line(exc)}"
             if detection is None:
                 summary.failed += 1

@@ -56,6 +56,7 @@ from service.console import (
     stderr_console,
 )
 from service.imageio import OutputWriteError
+from service.interrupts import raise_if_interrupted
 from service.perception.segmenter import Segmenter
 from service.video import (
     FrameOutcome,
@@ -570,6 +571,7 @@ def _process_or_report(
             segmenter=segmenter,
         )
     except Exception as exc:  # every failure is reported per file and the batch goes on
+        raise_if_interrupted(exc)
         print_error(console, failure_message(path, exc))
         return None
 

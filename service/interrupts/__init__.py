@@ -36,3 +36,20 @@ def interrupts_held() -> Iterator[None]:
                 previous(signal.SIGINT, caught[0])
             elif previous == signal.SIG_DFL:
                 signal.raise_signal(signal.SIGINT)
+
+
+def raise_if_interrupted(exc: BaseException) -> None:
+    """Raise ``KeyboardInterrupt`` when ``exc`` wraps one, else do nothing.
+
+    Ctrl-C that lands while compiled code runs (a numba kernel) surfaces as a
+    ``SystemError`` ("returned a result with an exception set") caused by the
+    ``KeyboardInterrupt``; a catch-all that reports one bad frame or file must not swallow
+    the user's Ctrl-C with it.
+    """
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            raise KeyboardInterrupt from exc
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
