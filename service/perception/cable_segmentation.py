@@ -23,7 +23,10 @@ backgrounds, for dark and bright cables together:
    (a wooden board's edge, a strip of paper margin).
 4. **Seeds.** Pixels whose ratio is above Otsu's threshold of the ratios (and above
    :data:`MIN_RATIO` whatever Otsu says) are seeds; each gets its cable's colour and the
-   colours round it (both sides, the background).
+   colours round it (both sides, the background). Seeds on shadows cables cast, on
+   transitions between their sides, and on strips whose two sides differ from each other
+   more than from the strip (:func:`between_unlike_sides`: the paper's edge between
+   paper and table) are dropped.
 5. **Extent.** Every pixel near a seed is cable when its colour is nearer the seed's
    cable colour than each colour round it: the border falls half way between cable and
    background, whatever the two are, and a shadow or a blurred rim that looks more
@@ -243,6 +246,7 @@ def cable_contrast(
         lines = seed_lines((height, width), levels, best_level, seeds)
         lines = _without_shadows(lines, seeds, height / seeds.shape[0])
         lines = lines.take(~transitions(lines.colours))
+        lines = lines.take(~between_unlike_sides(lines.colours))
         seeds = seeds.copy()
         seeds[np.nonzero(seeds)] = lines.of_grid >= 0
         check(deadline, STAGE)
@@ -506,6 +510,23 @@ def transitions(colours: np.ndarray) -> np.ndarray:
         & (along < 1.0 - RAMP_END)
         & ((off * off).sum(axis=1) < RAMP_WIDTH**2 * length2)
     )
+
+
+def between_unlike_sides(colours: np.ndarray) -> np.ndarray:
+    """Which lines lie between two sides more unlike each other than the line is unlike them.
+
+    A cable lies on one surface: what is beside it on the left is what is beside it on the
+    right (the same paper, the same table), and the cable differs from both. A strip along
+    the border of two surfaces (the paper's edge between white paper and a dark table, a
+    margin between a print and the board under it) has a different surface on each side:
+    when its two sides differ from each other by more than the line differs from the
+    nearer of them, the line is a step from one surface to the other with a strip in it,
+    not a ridge. (A cable crossing such a border runs across it, where its two sides
+    each straddle the border alike; only a line along the border is judged so.)
+    """
+    line, one, two = (colours[:, k].astype(np.float64) for k in range(3))
+    contrast = np.minimum(np.linalg.norm(line - one, axis=1), np.linalg.norm(line - two, axis=1))
+    return np.linalg.norm(one - two, axis=1) > contrast
 
 
 def _without_shadows(lines: SeedLines, seeds: np.ndarray, grid_step: float) -> SeedLines:

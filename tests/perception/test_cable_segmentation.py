@@ -23,6 +23,7 @@ from service.perception.cable_segmentation import (
     WIDE_WINDOW,
     _on_grid,
     _seeds,
+    between_unlike_sides,
     level_steps,
     segment_cables,
 )
@@ -320,3 +321,30 @@ def test_detect_on_white_paper_stops_inside_cable_contrast_at_its_deadline():
     with pytest.raises(DeadlineExceeded) as raised:
         detect(image, deadline=Deadline(2.5, clock=lambda: float(next(ticks))))
     assert raised.value.stage == "segmentation"
+
+
+def test_a_strip_along_the_border_of_two_surfaces_is_no_cable():
+    # White paper above a dark table, a strip of light wood 6 px wide between them (the
+    # paper's edge), and a black cable on the paper: the strip has a different surface on
+    # each side, the cable the same paper on both.
+    shape = (300, 400)
+    scene = plain(225, shape=shape)
+    scene[200:] = plain(45, shape=shape)[200:]
+    scene[194:200] = (120, 160, 190)
+    image, truth = draw_scene(scene, [(30, 30, 30)])
+    mask = segment_cables(image, 120, 60)
+    assert dice(mask, truth) > 0.9
+    assert not mask[190:204, 40:360].any()
+
+
+def test_between_unlike_sides_tells_a_border_strip_from_a_cable():
+    paper, table, wood, black = (90.0, 0.0, 0.0), (20.0, 0.0, 0.0), (70.0, 5.0, 24.0), (15.0, 0, 0)
+    colours = np.array(
+        [
+            [black, paper, paper, paper],  # a cable on paper
+            [wood, paper, table, paper],  # the paper's edge
+            [black, paper, (60.0, 0.0, 0.0), paper],  # a cable beside a grey one
+        ],
+        np.float32,
+    )
+    assert between_unlike_sides(colours).tolist() == [False, True, False]
