@@ -301,24 +301,30 @@ def _pyramid(lab8: np.ndarray, steps: list[float]) -> list[np.ndarray]:
 
 
 def _sparse_median(lab8: np.ndarray, factor: int) -> np.ndarray:
-    """Median colour over windows ``MEDIAN_SIZE * factor`` px wide, from every
-    ``factor``-th pixel of every ``factor``-th row.
+    """Median colour over a window ``MEDIAN_SIZE * factor`` px wide centred on each pixel,
+    from the pixels of the window on the pixel's own rows and columns every ``factor``
+    px (``MEDIAN_SIZE`` x ``MEDIAN_SIZE`` samples).
 
     The samples are pixels of the level, not block means: a block across a cable's rim
     would give a colour between cable and background, and between two close cables the
     median of such blends is neither (the paper between them would look like a line).
-    Medians over :data:`MEDIAN_SIZE` px of the samples cost a small fraction of medians
-    over the whole windows; the background changes slowly beside the windows' size, so
-    they are enlarged back bilinearly. A level with too few samples gets its overall
-    median.
+    Every pixel gets the median of its own window, not one interpolated from its
+    neighbours' windows: at the border of two surfaces (a sheet of paper on a dark
+    table) an interpolated background is a blend of the two, the colour of neither, and
+    the paper left between a cable and the sheet's edge would differ from it. The
+    ``factor`` x ``factor`` phases of the grid (each a ``factor`` times smaller image) are
+    laid side by side (:func:`~._cable_segmentation_kernels.phase_mosaic`) and filtered at
+    once: the whole costs one median filter of the level. A level with too
+    few samples gets its overall median.
     """
     height, width = lab8.shape[:2]
-    samples = np.ascontiguousarray(lab8[factor // 2 :: factor, factor // 2 :: factor])
-    if min(samples.shape[:2]) < MEDIAN_SIZE:
+    if min(height, width) // factor < MEDIAN_SIZE:
         median = np.median(lab8.reshape(-1, 3), axis=0).round().astype(np.uint8)
         return np.broadcast_to(median, lab8.shape).copy()
-    medians = cv2.medianBlur(samples, MEDIAN_SIZE)
-    return cv2.resize(medians, (width, height), interpolation=cv2.INTER_LINEAR)
+    mosaic = _cable_segmentation_kernels.phase_mosaic(lab8, factor, MEDIAN_SIZE // 2)
+    return _cable_segmentation_kernels.from_phase_mosaic(
+        cv2.medianBlur(mosaic, MEDIAN_SIZE), factor, MEDIAN_SIZE // 2, height, width
+    )
 
 
 def _on_grid(ratio: np.ndarray, grid_shape: tuple[int, int]) -> np.ndarray:
