@@ -668,8 +668,9 @@ def _joined(tracks: list[TrackRecord], found: list[Join], now: float) -> list[Tr
     for join in found:
         older = result[join.older]
         joined = Continuation(join.older, join.end, join.anchor, join.joints, join.tip)
-        # Hidden joints beyond the younger track's far end stay, unless that end is free.
-        result[join.older] = _extended(older, joined, now, keep_hidden=not join.tip)
+        # Joints are never dropped (a track's joints keep their numbers, and the first
+        # is 0 or below): hidden ones beyond the younger track's far end keep their shape.
+        result[join.older] = _extended(older, joined, now)
     retired = {join.younger for join in found}
     return [track for index, track in enumerate(result) if index not in retired]
 
@@ -690,23 +691,19 @@ def _seen_mask(track: TrackRecord) -> np.ndarray:
     return np.ones(len(track.joints), bool) if track.seen is None else track.seen
 
 
-def _extended(
-    track: TrackRecord, joined: Continuation, now: float, *, keep_hidden: bool = True
-) -> TrackRecord:
+def _extended(track: TrackRecord, joined: Continuation, now: float) -> TrackRecord:
     """A track continued by a candidate from its outermost seen joint at one end.
 
     The joints beyond that one (hidden: the end they led to was the edge of something
     lying on the cable) are laid along the candidate, and joints are added if it goes
-    further; if it does not reach as far, the rest keep their shape, moved on (unless
-    ``keep_hidden`` is False: the candidate reaches the cable's end, as another track
-    of the same cable does when the two are joined).
+    further; if it does not reach as far, the rest keep their shape, moved on.
     """
     joints = track.joints
     anchor = joined.anchor
     added = joined.joints
     # The hidden joints beyond the anchor, nearest it first.
     hidden = joints[:anchor][::-1] if joined.end == 0 else joints[anchor + 1 :]
-    if keep_hidden and len(added) < len(hidden):
+    if len(added) < len(hidden):
         rest = hidden[len(added) :] + (added[-1] - hidden[len(added) - 1] if len(added) else 0.0)
         added = np.vstack([added, rest]) if len(added) else hidden
     grown = len(added) - len(hidden)

@@ -14,7 +14,7 @@ from service.perception import Tracker, warm_up
 from service.perception.track_identity import Candidate, revived_joints
 from service.perception.track_matching import Chains, Fit, Piece, arcs_of, fit_pieces
 from service.perception.track_merging import joins
-from service.perception.tracking import _motion, _started
+from service.perception.tracking import _joined, _motion, _started
 
 STEP = 10.0
 
@@ -99,6 +99,16 @@ def test_a_hidden_free_end_does_not_stop_a_join():
     assert join.tip
     np.testing.assert_allclose(join.joints[:, 1], 100.0, atol=1e-6)
     np.testing.assert_allclose(join.joints[-1], [400.0, 100.0], atol=1e-6)
+    # Made, the older track keeps all its joints and their numbers, even where the
+    # younger one is shorter than the stretch it lays again (joint 0 of the older track
+    # stays its first joint).
+    short = record(1, straight(140.0, 10), (False, True), born=5)
+    short_fits = [fits[0], Fit(1, 1, 0.0, 0.1, 1.0)]
+    short_pieces = [pieces[0], piece_of(0, chain, 14, 23, (False, True))]
+    made = _joined([older, short], joins([older, short], short_pieces, short_fits, chains), 0.0)
+    assert len(made) == 1 and len(made[0].joints) >= len(older_joints)
+    assert made[0].first_joint == 0
+    np.testing.assert_allclose(made[0].joints[: len(older_joints) - 30], older_joints[:11])
     # A free end seen this frame does not go on, nor does the younger track's.
     seen_end = record(0, straight(0.0, 11), (True, True))
     assert joins([seen_end, younger], pieces, fits, chains) == []
