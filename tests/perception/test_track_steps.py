@@ -147,3 +147,24 @@ def test_a_free_end_moving_fast_along_its_cable_is_not_taken_for_more_cable():
         assert tracks[0].first_joint == 0 and tracks[0].ends[0] == "tip"
         # ... and it moves on with the cable.
         assert tracks[0].points[0][0] > 250 + 32 * (frame - 1)
+
+
+def test_a_join_at_the_first_end_keeps_joint_numbers_at_or_below_zero():
+    # The same cable as above, the older track running the other way: its hidden free
+    # end is its first, and the younger track is shorter than the stretch beyond the
+    # older one's outermost seen joint.
+    chain = straight(0.0, 41)[::-1]  # x from 400 down to 0
+    older_joints = straight(0.0, 41)
+    older_joints[11:, 1] += np.linspace(5.0, 150.0, 30)
+    older = record(0, older_joints[::-1].copy(), (True, True), seen=np.arange(41) >= 30)
+    younger = record(1, straight(140.0, 10), (False, True), born=5)
+    chains = chains_of([chain])
+    pieces = [piece_of(0, chain, 17, 26), piece_of(0, chain, 30, 40, (False, True))]
+    fits = [Fit(1, -1, 90.0, 0.1, 1.0), Fit(0, 1, 300.0, 0.1, 1.0)]
+    found = joins([older, younger], pieces, fits, chains)
+    assert [(j.older, j.younger, j.end, j.anchor) for j in found] == [(0, 1, 0, 30)]
+    made = _joined([older, younger], found, 0.0)
+    assert len(made) == 1
+    assert made[0].first_joint <= 0
+    assert len(made[0].joints) >= 41
+    np.testing.assert_allclose(made[0].joints[-11:], older.joints[30:])
