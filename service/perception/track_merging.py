@@ -3,12 +3,17 @@
 A cable can start as two tracks: the detection of the first frame was cut where the
 cable crossed another one, or the cable was seen in two parts (under something, at the
 picture's edge) before the parts were known to be one. When a later detection joins
-them, one chain of it holding pieces of both, with their open ends facing each other
+them, one chain of it holding pieces of both, with their ends facing each other
 across what lies between those pieces (a crossing, a hidden stretch), the two look
-alike (colour, width) and the gap is short, the younger track is joined onto the older:
-its joints are laid on, through the chain's stretch between the pieces, each ``l_s``
-from the one before; the older track keeps its id and its joints' numbers (joints added
-before its first one count down from it), the younger one's id is retired.
+alike (colour, width) and the gap is short, the younger track is joined onto the older.
+Each track's end is taken at its outermost joint seen this frame (the joints beyond it
+are guesses); the younger's must be open, the older's open or a free end hidden now (a
+free end the track remembers, while its stretch beyond the last seen joint went astray).
+The younger's joints are laid on from the older's outermost seen joint, through the
+chain's stretch between the pieces, each ``l_s`` from the one before (the older's hidden
+joints beyond are laid again; none is dropped); the older track keeps its id and its
+joints' numbers (joints added before its first one count down from it), the younger
+one's id is retired.
 """
 
 from __future__ import annotations
