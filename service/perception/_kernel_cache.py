@@ -31,8 +31,9 @@ import platform
 import sys
 from pathlib import Path
 
-PACKAGE_DIR = Path(__file__).resolve().parent
-KERNEL_SOURCES = tuple(sorted(PACKAGE_DIR.glob("_*_kernels.py")))
+from service.perception import _aot
+from service.perception._aot import KERNEL_SOURCES, PACKAGE_DIR
+
 STAMP_NAME = "dlo-kernels.stamp"
 DETECTION = "detection"
 """The group of the detector's kernels, those :func:`service.perception.warm_up` loads."""
@@ -127,7 +128,12 @@ def kernels_cached(group: str = DETECTION) -> bool:
     >>> if not kernels_cached():
     ...     print("compiling the detection kernels (once per machine) ...", file=sys.stderr)
     >>> warm_up()
+
+    True, too, when the kernels of ``group`` run compiled ahead of time
+    (:mod:`service.perception._aot`): nothing is left to compile or load.
     """
+    if _aot.covers(group):
+        return True
     try:
         stamp = json.loads(stamp_path(group).read_text(encoding="utf-8"))
     except (OSError, ValueError):
