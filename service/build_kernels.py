@@ -9,6 +9,12 @@ it was built from and, per kernel, the compiled signatures; :mod:`service.percep
 reads it when the package is imported. Needs a C and C++ compiler and Python's headers
 (gcc, g++ and python3-dev on Debian), at build time only.
 
+The machine code is for this CPU, with the features numba's JIT would use (LLVM's host
+CPU name and feature list), and releases the GIL as the kernels' ``nogil=True`` does:
+the same code as numba's JIT, which keeps detections bit-identical (pycc's default, the
+architecture's generic CPU, made the kernels of a photograph about 25 % slower). The
+manifest's key holds the CPU's model and flags, so that another CPU runs numba's kernels.
+
 Only what a step calls is compiled: a kernel module's own public kernels, with the
 argument types the warm-ups gave them (array, float, int and bool arguments). A signature
 with other argument types (a tuple, a list, ``None``) stays with numba and is listed in
@@ -40,10 +46,6 @@ from typing import Any
 from service.console import KERNEL_SETS
 from service.perception import _aot
 from service.perception._kernel_cache import KERNEL_SOURCES
-
-CPU_ENVIRONMENT = "DLO_KERNELS_CPU"
-"""The CPU the compiled module is built for: ``generic`` (the default: any CPU of this
-architecture, so that a Docker image runs anywhere) or ``host``."""
 
 
 def _argument_spec(argument: Any) -> dict[str, Any] | None:
@@ -106,6 +108,13 @@ def _flags_releasing_the_gil() -> Any:
     return flags
 
 
+def _host_features(codegen: Any) -> str:
+    """The CPU features numba's JIT compiles for (this CPU's own, as LLVM reads them):
+    pycc would take only those of the CPU model's name, which a virtual machine may
+    not all have."""
+    return codegen._get_host_cpu_features()
+
+
 def build(force: bool = False, quiet: bool = False) -> Path | None:
     """Build the module unless a fresh one is there; returns its manifest's path."""
     manifest_path = _aot.build_manifest_path()
@@ -129,12 +138,11 @@ def build(force: bool = False, quiet: bool = False) -> Path | None:
     exports, kept = collect()
 
     import numba.pycc.compiler
+    from numba.core.codegen import AOTCPUCodegen
     from numba.pycc import CC
 
     cc = CC(_aot.MODULE_NAME, source_module=__name__)
-    cc.target_cpu = os.environ.get(CPU_ENVIRONMENT, "generic").strip() or "generic"
-    if cc.target_cpu == "generic":
-        cc.target_cpu = ""  # pycc's name for the architecture's generic CPU
+    cc.target_cpu = "host"
     manifest_exports: dict[str, dict[str, list[dict[str, Any]]]] = {}
     for stem, kernels in exports.items():
         for name, signatures in kernels.items():
@@ -155,18 +163,21 @@ def build(force: bool = False, quiet: bool = False) -> Path | None:
     build_dir = Path(tempfile.mkdtemp(prefix="dlo-kernels-", dir=manifest_path.parent))
     original_flags = numba.pycc.compiler.Flags
     numba.pycc.compiler.Flags = _flags_releasing_the_gil  # type: ignore[assignment,misc]
+    original_features = AOTCPUCodegen._customize_tm_features
+    AOTCPUCodegen._customize_tm_features = _host_features  # type: ignore[method-assign]
     try:
         cc.output_dir = str(build_dir)
         cc.compile()
         os.replace(build_dir / cc.output_file, manifest_path.parent / library)
     finally:
         numba.pycc.compiler.Flags = original_flags  # type: ignore[misc]
+        AOTCPUCodegen._customize_tm_features = original_features  # type: ignore[method-assign]
         shutil.rmtree(build_dir, ignore_errors=True)
     manifest = {
         "key": key,
         "format": _aot.FORMAT,
         "library": library,
-        "cpu": cc.target_cpu or "generic",
+        "cpu": _aot.cpu_description(),
         "groups": sorted(KERNEL_SETS),
         "exports": manifest_exports,
         "kept_jit": kept,

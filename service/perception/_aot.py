@@ -32,6 +32,7 @@ import importlib
 import importlib.util
 import json
 import os
+import platform
 import sys
 import threading
 import types
@@ -64,6 +65,21 @@ _jit_modules: dict[str, types.ModuleType] = {}
 _C, _F, _ALIGNED, _WRITEABLE = 0x1, 0x2, 0x100, 0x400
 
 
+def cpu_description() -> str:
+    """The CPU's model name and feature flags (the first processor's), or the machine."""
+    found = []
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as cpuinfo:
+            for line in cpuinfo:
+                if line.startswith(("model name", "flags", "Features")):
+                    found.append(line.partition(":")[2].strip())
+                elif not line.strip() and found:
+                    break
+    except OSError:
+        pass
+    return "|".join(found) or platform.processor() or platform.machine()
+
+
 def numba_version_text() -> str:
     """numba's version file as text, found without importing numba ("" when absent)."""
     try:
@@ -80,13 +96,16 @@ def numba_version_text() -> str:
 
 def source_key() -> str:
     """A hash of what the compiled module must match: the kernel sources' text, this
-    Python and this numba (its version file). Reads about 100 kB; imports nothing."""
+    Python, this numba (its version file) and this CPU (model and feature flags: the
+    module is compiled for the CPU it is built on, as numba's JIT compiles). Reads about
+    100 kB; imports nothing."""
     digest = hashlib.sha256()
     for path in KERNEL_SOURCES:
         digest.update(f"{path.name}\0".encode())
         digest.update(path.read_bytes())
         digest.update(b"\0")
     digest.update(f"{FORMAT}\0{sys.implementation.cache_tag}\0{sys.platform}\0".encode())
+    digest.update(cpu_description().encode())
     digest.update(numba_version_text().encode())
     return digest.hexdigest()
 

@@ -41,21 +41,6 @@ DETECTION = "detection"
 _NUMBA_SETTINGS = ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "NUMBA_CACHE_DIR", "NUMBA_OPT")
 
 
-def _cpu() -> str:
-    """The CPU's model name and feature flags (the first processor's), or the machine."""
-    found = []
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as cpuinfo:
-            for line in cpuinfo:
-                if line.startswith(("model name", "flags", "Features")):
-                    found.append(line.partition(":")[2].strip())
-                elif not line.strip() and found:
-                    break
-    except OSError:
-        pass
-    return "|".join(found) or platform.processor() or platform.machine()
-
-
 def kernels_key() -> str:
     """A hash of what numba's cached machine code depends on, for this source and machine."""
     digest = hashlib.sha256()
@@ -70,7 +55,7 @@ def kernels_key() -> str:
         numba.__version__,
         sys.implementation.cache_tag or "",
         platform.machine(),
-        _cpu(),
+        _aot.cpu_description(),
         *(os.environ.get(name, "") for name in _NUMBA_SETTINGS),
     ]
     digest.update("\0".join(parts).encode())
