@@ -144,7 +144,7 @@ def read_manifest() -> tuple[dict[str, Any] | None, str]:
         except (OSError, ValueError):
             continue
         if not isinstance(manifest, dict) or manifest.get("key") != key:
-            reason = f"stale: built from other kernel sources or another numba ({path})"
+            reason = f"stale: built from other kernel sources, numba or CPU ({path})"
             continue
         manifest["library_path"] = str(path.parent / str(manifest.get("library", "")))
         return manifest, ""
@@ -180,9 +180,13 @@ def install(package: types.ModuleType) -> str:
         return status()
     try:
         library = _load_library(Path(manifest["library_path"]))
+        # Every kernel module, those without compiled kernels too: numba's kernel modules
+        # must never import a stand-in's kernels (see jit_module).
         stand_ins = {
-            stem: _stand_in(package.__name__, stem, exports, library)
-            for stem, exports in manifest["exports"].items()
+            path.stem: _stand_in(
+                package.__name__, path.stem, manifest["exports"].get(path.stem, {}), library
+            )
+            for path in KERNEL_SOURCES
         }
     except Exception as error:
         _state["status"] = f"jit: the compiled module did not load ({error})"

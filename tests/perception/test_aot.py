@@ -197,6 +197,39 @@ def test_arguments_of_other_types_go_to_numba_unconverted(compiled):
     assert _aot.FALLBACKS[label] == before + len(others)
 
 
+FALL_BACK_IN_AN_AOT_PROCESS = """
+import json, sys
+import numpy as np
+import service.perception
+from service.perception import _aot, _pruning_kernels, _shared_kernels
+joints = np.arange(24.0).reshape(12, 2) ** 1.5
+ends = np.array([5, 12], np.int64)
+compiled = _pruning_kernels.chain_lengths(joints, ends)
+before = "numba" in sys.modules
+other = _pruning_kernels.chain_lengths(np.asfortranarray(joints), ends)  # numba's kernel
+jit = _aot.jit_module("_pruning_kernels")
+print(json.dumps({
+    "status": _aot.status(), "numba_before": before, "numba_after": "numba" in sys.modules,
+    "same": compiled.tobytes() == other.tobytes(), "fallbacks": _aot.FALLBACKS,
+    "stand_ins_kept": sys.modules["service.perception._pruning_kernels"] is _pruning_kernels
+        and service.perception._pruning_kernels is _pruning_kernels,
+    "jit_is_numba": type(jit.chain_lengths).__name__ == "CPUDispatcher",
+    "jit_imports_numba_kernels": type(jit.pairwise_sum).__name__ == "CPUDispatcher",
+    "ring": _shared_kernels.RING_DR.tolist(),
+}))
+"""
+
+
+def test_in_a_process_on_the_build_a_call_it_lacks_loads_numbas_kernels():
+    fresh_build()
+    result = python_json(FALL_BACK_IN_AN_AOT_PROCESS, env={**os.environ, "DLO_KERNELS": "auto"})
+    assert result["status"] == "aot" and not result["numba_before"] and result["numba_after"]
+    assert result["same"] and result["fallbacks"] == {"_pruning_kernels.chain_lengths": 1}
+    assert result["stand_ins_kept"] and result["jit_is_numba"]
+    assert result["jit_imports_numba_kernels"]
+    assert result["ring"] == [0, 1, 1, 1, 0, -1, -1, -1]  # a constant, from numba's module
+
+
 @pytest.fixture
 def no_build(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """The manifests are looked for in an empty folder."""
