@@ -15,8 +15,9 @@ the same code as numba's JIT, which keeps detections bit-identical (pycc's defau
 architecture's generic CPU, made the kernels of a photograph about 25 % slower). The
 manifest's key holds the CPU's model and flags, so that another CPU runs numba's kernels.
 
-Only what a step calls is compiled: a kernel module's own public kernels, with the
-argument types the warm-ups gave them (array, float, int and bool arguments). A signature
+Only what a step calls is compiled (each ``_<step>_kernels.name`` in the package's other
+modules), with the argument types the warm-ups gave it (array, float, int and bool
+arguments); kernels that only other kernels call are compiled into their callers. A signature
 with other argument types (a tuple, a list, ``None``) stays with numba and is listed in
 the manifest under ``kept_jit``; a call with it then goes to numba's kernel.
 
@@ -45,7 +46,6 @@ from typing import Any
 
 from service.console import KERNEL_SETS
 from service.perception import _aot
-from service.perception._kernel_cache import KERNEL_SOURCES
 
 
 def _argument_spec(argument: Any) -> dict[str, Any] | None:
@@ -73,29 +73,24 @@ def _argument_spec(argument: Any) -> dict[str, Any] | None:
 
 
 def collect() -> tuple[dict[str, dict[str, list[Any]]], list[str]]:
-    """After the warm-ups: per kernel module, each public kernel defined in it, with the
-    numba signatures to compile; and the signatures left to numba."""
+    """After the warm-ups: per kernel module, each kernel a step calls, with the numba
+    signatures to compile (those the warm-ups gave it); and the signatures left to numba.
+    A kernel that only other kernels call is compiled into its callers."""
     from numba.core.dispatcher import Dispatcher
 
     exports: dict[str, dict[str, list[Any]]] = {}
     kept: list[str] = []
-    for path in KERNEL_SOURCES:
-        module = sys.modules.get(f"service.perception.{path.stem}")
-        if module is None:
+    for stem, name in sorted(_aot.kernels_the_steps_call()):
+        kernel = getattr(sys.modules.get(f"service.perception.{stem}"), name, None)
+        if not isinstance(kernel, Dispatcher) or not kernel.signatures:
+            kept.append(f"{stem}.{name}: no warm-up calls it")
             continue
-        for name, kernel in sorted(vars(module).items()):
-            if not isinstance(kernel, Dispatcher) or name.startswith("_"):
-                continue
-            if kernel.py_func.__module__ != module.__name__:
-                continue  # imported from another kernel module: compiled there
-            for signature in kernel.nopython_signatures:
-                specs = [_argument_spec(argument) for argument in signature.args]
-                if all(specs):
-                    exports.setdefault(path.stem, {}).setdefault(name, []).append(
-                        (signature, specs)
-                    )
-                else:
-                    kept.append(f"{path.stem}.{name}{signature}")
+        for signature in kernel.nopython_signatures:
+            specs = [_argument_spec(argument) for argument in signature.args]
+            if all(specs):
+                exports.setdefault(stem, {}).setdefault(name, []).append((signature, specs))
+            else:
+                kept.append(f"{stem}.{name}{signature}")
     return exports, kept
 
 

@@ -110,6 +110,26 @@ def source_key() -> str:
     return digest.hexdigest()
 
 
+def kernels_the_steps_call() -> set[tuple[str, str]]:
+    """``(kernel module, kernel)`` for every ``_<step>_kernels.name`` that a module of
+    the perception package other than a kernel module reads (read from the sources)."""
+    import ast
+    import re
+
+    found = set()
+    for path in sorted(PACKAGE_DIR.glob("*.py")):
+        if path in KERNEL_SOURCES:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if (
+                isinstance(node, ast.Attribute)
+                and isinstance(node.value, ast.Name)
+                and re.fullmatch(r"_\w+_kernels", node.value.id)
+            ):
+                found.add((node.value.id, node.attr))
+    return found
+
+
 def manifest_paths() -> list[Path]:
     """Where a build's manifest may be, in the order they are read: the package's
     ``__pycache__`` (beside numba's cache of the kernels), then the user's cache."""
