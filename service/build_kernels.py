@@ -132,9 +132,17 @@ def build(force: bool = False, quiet: bool = False) -> Path | None:
         getattr(import_module(module), function)()
     exports, kept = collect()
 
-    import numba.pycc.compiler
+    import warnings
+
     from numba.core.codegen import AOTCPUCodegen
-    from numba.pycc import CC
+    from numba.core.errors import NumbaPendingDeprecationWarning
+
+    with warnings.catch_warnings():
+        # pycc is pending deprecation (since numba 0.57) with no replacement released yet:
+        # known, and the JIT stays the fallback should a numba drop it.
+        warnings.simplefilter("ignore", NumbaPendingDeprecationWarning)
+        import numba.pycc.compiler
+        from numba.pycc import CC
 
     cc = CC(_aot.MODULE_NAME, source_module=__name__)
     cc.target_cpu = "host"
