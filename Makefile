@@ -5,9 +5,10 @@ VENV := .venv
 BIN := $(VENV)/bin
 INSTALLED := $(VENV)/.installed
 # The kernels compiled ahead of time (python -m service.build_kernels): their manifest,
-# rebuilt when a kernel file or the install changes. A failed build (no C compiler) warns
-# and leaves numba's JIT in use.
-KERNEL_SOURCES := $(wildcard service/perception/_*_kernels.py)
+# rebuilt when a kernel file, the build's code or the install changes (the build itself
+# checks the manifest's key). A failed build (no C compiler) warns and leaves numba's JIT in use.
+KERNEL_SOURCES := $(wildcard service/perception/_*_kernels.py) service/perception/_aot.py \
+	service/build_kernels.py
 AOT_MANIFEST := service/perception/__pycache__/dlo-kernels-aot.json
 
 .PHONY: run demo test lint venv kernels clean distclean

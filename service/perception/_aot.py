@@ -96,15 +96,16 @@ def numba_version_text() -> str:
 
 def source_key() -> str:
     """A hash of what the compiled module must match: the kernel sources' text, this
-    Python, this numba (its version file) and this CPU (model and feature flags: the
-    module is compiled for the CPU it is built on, as numba's JIT compiles). Reads about
-    100 kB; imports nothing."""
+    Python and NumPy (whose C API the module uses), this numba (its version file) and
+    this CPU (model and feature flags: the module is compiled for the CPU it is built on,
+    as numba's JIT compiles). Reads about 100 kB; imports nothing."""
     digest = hashlib.sha256()
     for path in KERNEL_SOURCES:
         digest.update(f"{path.name}\0".encode())
         digest.update(path.read_bytes())
         digest.update(b"\0")
-    digest.update(f"{FORMAT}\0{sys.implementation.cache_tag}\0{sys.platform}\0".encode())
+    python = f"{sys.implementation.cache_tag}\0{sys.platform}\0numpy {np.__version__}"
+    digest.update(f"{FORMAT}\0{python}\0".encode())
     digest.update(cpu_description().encode())
     digest.update(numba_version_text().encode())
     return digest.hexdigest()
@@ -164,7 +165,7 @@ def read_manifest() -> tuple[dict[str, Any] | None, str]:
         except (OSError, ValueError):
             continue
         if not isinstance(manifest, dict) or manifest.get("key") != key:
-            reason = f"stale: built from other kernel sources, numba or CPU ({path})"
+            reason = f"stale: built from other kernel sources, Python, NumPy, numba or CPU ({path})"
             continue
         manifest["library_path"] = str(path.parent / str(manifest.get("library", "")))
         return manifest, ""
