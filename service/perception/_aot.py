@@ -182,8 +182,9 @@ def active() -> bool:
     return _state["status"] == "aot"
 
 
-def covers(group: str) -> bool:
-    """Does the compiled module in use hold the kernels of warm-up ``group``?"""
+def covers(group: str = "detection") -> bool:
+    """Does the compiled module in use hold the kernels of warm-up ``group`` (a name of
+    ``service.console.KERNEL_SETS``; the detector's by default)?"""
     manifest = _state["manifest"]
     return active() and manifest is not None and group in manifest.get("groups", [])
 

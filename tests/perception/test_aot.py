@@ -150,7 +150,9 @@ for family in FAMILY_NAMES:
     for detection in (detect(scene.image), detect(None, mask=scene.mask)):
         text = detection.model_dump_json(exclude={"timings_ms"})
         digests.append(hashlib.sha1(text.encode()).hexdigest())
+from service.perception import compiled_ahead_of_time
 print(json.dumps({"status": _aot.status(), "numba": "numba" in sys.modules,
+                  "covers": compiled_ahead_of_time() and compiled_ahead_of_time("tracking"),
                   "llvmlite": "llvmlite" in sys.modules, "fallbacks": _aot.FALLBACKS,
                   "digests": digests}))
 """
@@ -163,7 +165,7 @@ def run_fresh(kernels: str) -> dict:
 def test_a_fresh_process_detects_as_numba_does_without_importing_numba():
     fresh_build()
     compiled, jit = run_fresh("auto"), run_fresh("jit")
-    assert compiled["status"] == "aot"
+    assert compiled["status"] == "aot" and compiled["covers"]
     assert not compiled["numba"] and not compiled["llvmlite"]
     assert compiled["fallbacks"] == {}
     assert jit["status"] == "jit: DLO_KERNELS=jit" and jit["numba"]
