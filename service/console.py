@@ -128,6 +128,10 @@ def typer_app(**settings: Any) -> typer.Typer:
 
 
 FIRST_RUN_NOTICE = "compiling the detection kernels, once per machine, about 20 s"
+AOT_BUILD_NOTICE = (
+    "compiling the kernels ahead of time, once per machine, about a minute"
+    " (later runs start without numba)"
+)
 
 
 KERNEL_SETS = {
@@ -138,32 +142,67 @@ KERNEL_SETS = {
 (``"module:function"``, imported only when the set is loaded). A warm-up loads (on a
 machine's first run: compiles) its kernels and writes its group's stamp
 (:func:`service.perception.kernels_cached` with the same name). A front end loads only the
-sets it uses: a one-image ``dlo detect`` the detector's alone."""
+sets it uses: a one-image ``dlo detect`` the detector's alone. ``python -m
+service.build_kernels`` compiles every set ahead of time."""
 
 
 def load_kernels(console: Console, kernel_sets: Sequence[str] = ("detection",)) -> None:
     """Load the compiled kernels of ``kernel_sets`` (:data:`KERNEL_SETS`) before the first
     detection is timed.
 
-    On a machine's first run numba compiles them (tens of seconds): say so on one line of
-    ``console`` first. Either way the next detection's ``timings_ms`` are detection time
-    alone, not compiling or loading machine code. Ctrl-C meanwhile exits with
-    :data:`EXIT_INTERRUPTED` (nothing was processed yet). Kernels load without numba's
-    registries and BLAS probe (:mod:`service.numba_start`).
+    When the kernels run compiled ahead of time (:mod:`service.build_kernels`) there is
+    nothing to load from numba and numba is not imported. Otherwise, on a machine's first
+    run numba compiles them (tens of seconds): say so on one line of ``console`` first,
+    and afterwards compile them ahead of time for the next runs (saying so too; a failed
+    build is a one-line warning, and numba's kernels stay in use). Either way the next
+    detection's ``timings_ms`` are detection time alone, not compiling or loading machine
+    code. Ctrl-C meanwhile exits with :data:`EXIT_INTERRUPTED` (nothing was processed yet).
+    Kernels load without numba's registries and BLAS probe (:mod:`service.numba_start`).
     """
-    from service.numba_start import load_cached_kernels_lightly, skip_numba_blas_probe
-    from service.perception import kernels_cached
+    from service.perception import compiled_ahead_of_time, kernels_cached
 
-    skip_numba_blas_probe()
-    load_cached_kernels_lightly()
-    if not all(kernels_cached(name) for name in kernel_sets):
+    on_numba = not all(compiled_ahead_of_time(name) for name in kernel_sets)
+    first_run = not all(kernels_cached(name) for name in kernel_sets)
+    if on_numba:
+        from service.numba_start import load_cached_kernels_lightly, skip_numba_blas_probe
+
+        skip_numba_blas_probe()
+        load_cached_kernels_lightly()
+    if first_run:
         console.print(FIRST_RUN_NOTICE, markup=False, highlight=False, soft_wrap=True)
     try:
         for name in kernel_sets:
             module, _, function = KERNEL_SETS[name].partition(":")
             getattr(import_module(module), function)()
+        if first_run and on_numba:
+            build_ahead_of_time(console)
     except KeyboardInterrupt:
         raise typer.Exit(EXIT_INTERRUPTED) from None
+
+
+def build_ahead_of_time(console: Console) -> bool:
+    """Compile the kernels ahead of time in a child process (``python -m
+    service.build_kernels``), unless ``DLO_KERNELS=jit``; returns whether it built."""
+    import os
+    import subprocess
+    import sys
+
+    if os.environ.get("DLO_KERNELS", "").strip().lower() == "jit":
+        return False
+    console.print(AOT_BUILD_NOTICE, markup=False, highlight=False, soft_wrap=True)
+    result = subprocess.run(
+        [sys.executable, "-m", "service.build_kernels", "--quiet"],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        check=False,
+    )
+    if result.returncode != 0:
+        lines = result.stderr.strip().splitlines() or ["failed"]
+        print_warning(console, f"kernels not compiled ahead of time: {lines[-1]}")
+        return False
+    return True
 
 
 def stderr_console() -> Console:

@@ -9,6 +9,7 @@ Import as ``from tests.helpers import free_port, wait_until`` (the repository ro
 from __future__ import annotations
 
 import contextlib
+import json
 import socket
 import subprocess
 import sys
@@ -26,6 +27,7 @@ __all__ = [
     "dlo_serve",
     "free_port",
     "free_udp_port",
+    "python_json",
     "wait_until",
 ]
 
@@ -38,6 +40,22 @@ DLO = [sys.executable, "-c", "from service.cli import main; main()"]
 """The ``dlo`` command of this checkout, for child processes."""
 READY_TIMEOUT_S = 120.0
 """A first start on a machine compiles the numba kernels before a service is ready."""
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def python_json(code: str, *args: str, env: dict[str, str] | None = None) -> object:
+    """Run ``code`` in a fresh Python of this checkout (``args`` as its ``sys.argv[1:]``)
+    and return the JSON of the last line it prints; fails the test when it fails."""
+    result = subprocess.run(
+        [sys.executable, "-c", code, *args],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stderr
+    return json.loads(result.stdout.strip().splitlines()[-1])
 
 
 def free_port(host: str = "127.0.0.1", kind: int = socket.SOCK_STREAM) -> int:

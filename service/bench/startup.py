@@ -33,24 +33,29 @@ TARGETS_S = {"dlo --help": 0.3, "dlo detect IMAGE --out-dir DIR": 0.7}
 """Whole-process targets, in seconds (issue 15)."""
 GENERATED_SIZE = (1280, 720)
 _PYTHON = sys.executable
+_WARM_UP = "import cv2\nfrom service.perception import warm_up\nwarm_up()"
 FLOORS = {
     "floor: python -c pass": [_PYTHON, "-c", "pass"],
+    "floor: import numpy, cv2": [_PYTHON, "-c", "import numpy, cv2"],
     "floor: import numpy, cv2, numba": [_PYTHON, "-c", "import numpy, cv2, numba"],
-    "floor: + every kernel loaded (warm_up)": [
+    "floor: + every kernel loaded (warm_up), numba's JIT": [
         _PYTHON,
         "-c",
+        "import os\n"
+        "os.environ['DLO_KERNELS'] = 'jit'\n"
         "from service.numba_start import load_cached_kernels_lightly, skip_numba_blas_probe\n"
         "skip_numba_blas_probe()\n"
-        "load_cached_kernels_lightly()\n"
-        "import cv2\n"
-        "from service.perception import warm_up\n"
-        "warm_up()",
+        "load_cached_kernels_lightly()\n" + _WARM_UP,
     ],
+    "floor: + every kernel loaded (warm_up), as dlo loads them": [_PYTHON, "-c", _WARM_UP],
 }
 """What any ``dlo detect`` costs before its own work, timed as the commands are: Python
-alone, the three native libraries it needs, and those with every detection kernel loaded
-from numba's cache as ``dlo`` loads them (this Python and this checkout, whatever
-``--dlo`` says)."""
+alone, the native libraries it needs (with and without numba), and those with every
+detection kernel loaded: from numba's cache as ``dlo`` loads them without the
+ahead-of-time build, and as this checkout loads them (compiled ahead of time when
+``python -m service.build_kernels`` built them; see ``kernels`` in the results). This
+Python and this checkout, whatever ``--dlo`` says."""
+_KERNELS_STATUS = "from service.perception import _aot\nprint(_aot.status())"
 
 
 @dataclass
@@ -95,6 +100,9 @@ def run_startup_bench(dlo: list[str], dataset: Path, runs: int, as_json: bool) -
             **FLOORS,
         }
         _run(commands["dlo detect IMAGE --out-dir DIR"])  # warm: kernels, page cache
+        kernels = subprocess.run(
+            [_PYTHON, "-c", _KERNELS_STATUS], capture_output=True, text=True, check=False
+        ).stdout.strip()
         load_before = os.getloadavg()
         seconds: dict[str, list[float]] = {name: [] for name in commands}
         cpu: dict[str, list[float]] = {name: [] for name in commands}
@@ -121,6 +129,7 @@ def run_startup_bench(dlo: list[str], dataset: Path, runs: int, as_json: bool) -
         "rows": [asdict(row) for row in rows],
         "cpu": cpu_name(),
         "bytecode_cached": not os.environ.get("PYTHONDONTWRITEBYTECODE"),
+        "kernels": kernels,
         "load_average": {"before": load_before, "after": os.getloadavg()},
     }
     if as_json:
@@ -167,7 +176,8 @@ def _print_table(results: dict[str, Any], rows: list[StartupRow]) -> None:
     console = Console(width=160)
     console.print(
         f"dlo bench --startup: whole processes of {results['dlo']}, warm kernel cache; "
-        f"image {results['image']}; CPU {results['cpu']}; times in s",
+        f"image {results['image']}; CPU {results['cpu']}; kernels: {results['kernels']}; "
+        "times in s",
         highlight=False,
     )
     table = Table(title="start-up", title_justify="left")

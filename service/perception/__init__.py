@@ -12,6 +12,9 @@ render_overlay(image, detection) -> np.ndarray (BGR uint8)
 warm_up() -> None
     Load (on a machine's first run: compile) every compiled kernel, so that the next
     detection's timings are detection time alone.
+compiled_ahead_of_time(group="detection") -> bool
+    Whether the kernels of ``group`` run compiled ahead of time in this process (a
+    build of ``python -m service.build_kernels`` for these kernel sources), without numba.
 kernels_cached(group="detection") -> bool
     Whether the kernels are already compiled into numba's cache on this machine (a
     cheap check, before ``warm_up``, for front ends that say when a run compiles); other
@@ -22,12 +25,21 @@ Tracker(params=None, track_params=None)
     of a :class:`TrackerState` (see :mod:`service.perception.tracking`).
 """
 
-from service.perception._kernel_cache import kernels_cached
-from service.perception.deadline import Deadline, DeadlineExceeded
-from service.perception.errors import InvalidInputError
-from service.perception.pipeline import DetectionResult, detect, detect_full, warm_up
-from service.perception.render import render_labels, render_overlay
-from service.perception.tracking import Tracker, TrackerState, advance, new_state
+import sys as _sys
+
+from service.perception import _aot
+
+# Before any step module imports its kernels: run the ahead-of-time compiled ones when a
+# fresh build is there (see service.perception._aot), else numba's.
+_aot.install(_sys.modules[__name__])
+compiled_ahead_of_time = _aot.covers
+
+from service.perception._kernel_cache import kernels_cached  # noqa: E402
+from service.perception.deadline import Deadline, DeadlineExceeded  # noqa: E402
+from service.perception.errors import InvalidInputError  # noqa: E402
+from service.perception.pipeline import DetectionResult, detect, detect_full, warm_up  # noqa: E402
+from service.perception.render import render_labels, render_overlay  # noqa: E402
+from service.perception.tracking import Tracker, TrackerState, advance, new_state  # noqa: E402
 
 __all__ = [
     "Deadline",
@@ -37,6 +49,7 @@ __all__ = [
     "Tracker",
     "TrackerState",
     "advance",
+    "compiled_ahead_of_time",
     "detect",
     "detect_full",
     "kernels_cached",

@@ -31,28 +31,14 @@ import platform
 import sys
 from pathlib import Path
 
-PACKAGE_DIR = Path(__file__).resolve().parent
-KERNEL_SOURCES = tuple(sorted(PACKAGE_DIR.glob("_*_kernels.py")))
+from service.perception import _aot
+from service.perception._aot import KERNEL_SOURCES, PACKAGE_DIR
+
 STAMP_NAME = "dlo-kernels.stamp"
 DETECTION = "detection"
 """The group of the detector's kernels, those :func:`service.perception.warm_up` loads."""
 # numba's own settings that change the machine code or where it is cached.
 _NUMBA_SETTINGS = ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "NUMBA_CACHE_DIR", "NUMBA_OPT")
-
-
-def _cpu() -> str:
-    """The CPU's model name and feature flags (the first processor's), or the machine."""
-    found = []
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as cpuinfo:
-            for line in cpuinfo:
-                if line.startswith(("model name", "flags", "Features")):
-                    found.append(line.partition(":")[2].strip())
-                elif not line.strip() and found:
-                    break
-    except OSError:
-        pass
-    return "|".join(found) or platform.processor() or platform.machine()
 
 
 def kernels_key() -> str:
@@ -69,7 +55,7 @@ def kernels_key() -> str:
         numba.__version__,
         sys.implementation.cache_tag or "",
         platform.machine(),
-        _cpu(),
+        _aot.cpu_description(),
         *(os.environ.get(name, "") for name in _NUMBA_SETTINGS),
     ]
     digest.update("\0".join(parts).encode())
@@ -127,7 +113,12 @@ def kernels_cached(group: str = DETECTION) -> bool:
     >>> if not kernels_cached():
     ...     print("compiling the detection kernels (once per machine) ...", file=sys.stderr)
     >>> warm_up()
+
+    True, too, when the kernels of ``group`` run compiled ahead of time
+    (:mod:`service.perception._aot`): nothing is left to compile or load.
     """
+    if _aot.covers(group):
+        return True
     try:
         stamp = json.loads(stamp_path(group).read_text(encoding="utf-8"))
     except (OSError, ValueError):

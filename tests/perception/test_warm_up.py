@@ -17,7 +17,7 @@ import pytest
 from numba.core.dispatcher import Dispatcher
 
 import service.perception
-from service.perception import _kernel_cache, kernels_cached, warm_up
+from service.perception import _aot, _kernel_cache, kernels_cached, warm_up
 from service.perception.tracking_warm_up import warm_up_tracking
 
 PACKAGE = Path(service.perception.__file__).parent
@@ -40,17 +40,7 @@ def dispatchers(path: Path) -> dict[str, Dispatcher]:
 
 
 def kernels_the_steps_call() -> set[tuple[str, str]]:
-    """``(kernel module, kernel)`` for every ``_x_kernels.name`` in a non-kernel module."""
-    found = set()
-    for path in STEP_FILES:
-        for node in ast.walk(ast.parse(path.read_text())):
-            if (
-                isinstance(node, ast.Attribute)
-                and isinstance(node.value, ast.Name)
-                and re.fullmatch(r"_\w+_kernels", node.value.id)
-            ):
-                found.add((node.value.id, node.attr))
-    return found
+    return _aot.kernels_the_steps_call()
 
 
 def test_the_kernel_files_are_found_and_the_cache_key_covers_them_all():

@@ -94,7 +94,7 @@ def test_dlo_bench_startup_times_whole_processes(tmp_path):
     assert "generated" in results["image"]  # no photographs in an empty folder
     rows = {row["command"]: row for row in results["rows"]}
     assert {"dlo --help", "dlo version", "dlo detect IMAGE --out-dir DIR"} <= set(rows)
-    assert len([name for name in rows if name.startswith("floor: ")]) == 3
+    assert len([name for name in rows if name.startswith("floor: ")]) == 5
     for row in rows.values():
         assert row["runs"] == 2
         assert 0 < row["min_s"] <= row["median_s"] <= row["max_s"]
@@ -102,6 +102,7 @@ def test_dlo_bench_startup_times_whole_processes(tmp_path):
     assert rows["dlo --help"]["target_s"] == 0.3
     assert len(results["load_average"]["before"]) == len(results["load_average"]["after"]) == 3
     assert results["bytecode_cached"] in (True, False)
+    assert results["kernels"] == "jit: DLO_KERNELS=jit"  # as tests/conftest.py sets
 
 
 def test_dlo_bench_recording_alone_reports_its_table_and_the_load(tmp_path):

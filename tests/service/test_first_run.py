@@ -87,6 +87,35 @@ def test_demo_and_eval_say_so(first_run: Path, tmp_path: Path) -> None:
     assert FIRST_RUN_NOTICE in evaluated.stderr
 
 
+@pytest.mark.parametrize("built", [True, False])
+def test_a_first_run_on_numba_then_compiles_the_kernels_ahead_of_time(
+    first_run: Path, monkeypatch: pytest.MonkeyPatch, built: bool
+) -> None:
+    """Without DLO_KERNELS=jit (which the tests set), the first run builds the module
+    in a child process (here a stand-in for it), saying so; a failed build is a warning."""
+    children = []
+
+    def child(command, **_):
+        children.append(command)
+        return subprocess.CompletedProcess(command, 0 if built else 1, "", "no gcc\n")
+
+    monkeypatch.setattr(subprocess, "run", child)
+    monkeypatch.delenv("DLO_KERNELS")
+    console = Console(file=io.StringIO(), width=300)
+    load_kernels(console)
+    lines = console.file.getvalue().splitlines()
+    assert lines[:2] == [FIRST_RUN_NOTICE, service.console.AOT_BUILD_NOTICE]
+    assert children == [[sys.executable, "-m", "service.build_kernels", "--quiet"]]
+    assert lines[2:] == ([] if built else ["warning: kernels not compiled ahead of time: no gcc"])
+
+    children.clear()
+    load_kernels(Console(file=io.StringIO()))  # not a first run: nothing to build
+    monkeypatch.setenv("DLO_KERNELS", "jit")
+    first_run.unlink()
+    load_kernels(Console(file=io.StringIO()))  # a first run, but the JIT is asked for
+    assert children == []
+
+
 OTHER_WARM_UPS: list[str] = []
 
 

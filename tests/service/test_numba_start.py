@@ -7,14 +7,9 @@ is set up already).
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-from pathlib import Path
-
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.helpers import python_json
 
 DETECTIONS = """
 import hashlib, json, sys
@@ -59,15 +54,7 @@ print(json.dumps({
 
 
 def run_detections(mode: str) -> dict:
-    result = subprocess.run(
-        [sys.executable, "-c", DETECTIONS, mode],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert result.returncode == 0, result.stderr
-    return json.loads(result.stdout.strip().splitlines()[-1])
+    return python_json(DETECTIONS, mode)
 
 
 @pytest.fixture(scope="module")
