@@ -720,7 +720,7 @@ def merge_chains(
         leaving = at_border if leaving is None else leaving | at_border
     colours = None
     if image is not None and params.colour_weight > 0:
-        colours = end_colours(image, pieces, ends, radius)
+        colours = end_colours(image, pieces, ends, radius, distance)
     picture = None
     if zones is not None or mask is not None:
         picture = (zones if zones is not None else mask).shape[:2]

@@ -31,11 +31,25 @@ def bgr_means(image_bgr, points):
     return total / (9.0 * 255.0)
 
 
-def end_colours(image_bgr, pieces, ends, skip, length):
-    """Per end: the median Lab colour along its stretch and the samples' median distance."""
-    colour, spread = np.zeros((len(ends), 3)), np.zeros(len(ends))
+def end_colours(
+    image_bgr, pieces, ends, skip, length, distance=None, max_distance=np.inf, min_samples=1
+):
+    """Per end: the median Lab colour along its stretch and the samples' median distance,
+    of the samples (1 px apart) more than ``ceil(max_distance)`` before the first where
+    ``distance`` exceeds ``max_distance`` (NaN with fewer than ``min_samples``)."""
+    colour, spread = np.full((len(ends), 3), np.nan), np.full(len(ends), np.nan)
     for index, end in enumerate(ends):
-        bgr = bgr_means(image_bgr, end_stretch(pieces[end.piece], end.at_start, skip, length))
+        points = end_stretch(pieces[end.piece], end.at_start, skip, length)
+        if distance is not None:
+            height, width = distance.shape
+            cols = np.clip(np.rint(points[:, 0]).astype(np.int64), 0, width - 1)
+            rows = np.clip(np.rint(points[:, 1]).astype(np.int64), 0, height - 1)
+            wide = np.flatnonzero(distance[rows, cols] > max_distance)
+            if len(wide):
+                points = points[: max(wide[0] - int(np.ceil(max_distance)), 0)]
+        if len(points) < min_samples:
+            continue
+        bgr = bgr_means(image_bgr, points)
         lab = cv2.cvtColor(bgr.astype(np.float32).reshape(-1, 1, 3), cv2.COLOR_BGR2LAB)
         lab = lab.reshape(-1, 3).astype(np.float64)
         colour[index] = np.median(lab, axis=0)
