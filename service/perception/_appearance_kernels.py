@@ -30,8 +30,9 @@ def end_samples(image, joints, starts, end_piece, end_at_start, skip, length):
     ``length`` of a shorter piece, or the whole piece when that is under 1 px). Points are
     rounded half to even and the 3x3 neighbourhood is clipped to the image.
 
-    Returns ``(samples, bounds, pixels)``: end ``e``'s samples are
-    ``samples[bounds[e]:bounds[e + 1]]``; ``pixels`` holds each sample's (row, col).
+    Returns ``(samples, bounds, pixels, lengths)``: end ``e``'s samples are
+    ``samples[bounds[e]:bounds[e + 1]]``; ``pixels`` holds each sample's (row, col) and
+    ``lengths[e]`` the arc length of the end's piece.
     """
     height, width = image.shape[0], image.shape[1]
     count = end_piece.size
@@ -99,7 +100,7 @@ def end_samples(image, joints, starts, end_piece, end_at_start, skip, length):
             samples[out, 0] = blue / (9.0 * 255.0)
             samples[out, 1] = green / (9.0 * 255.0)
             samples[out, 2] = red / (9.0 * 255.0)
-    return samples, bounds, pixels
+    return samples, bounds, pixels, totals
 
 
 @njit(cache=True, nogil=True)

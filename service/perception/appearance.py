@@ -14,7 +14,9 @@ piece runs into something that is not one cable, most often an object segmented 
 the cables (an occluder of a cable-like colour) whose skeleton carries the piece on
 into the object. Its colour there is the object's, and an end that lies in such a blob
 has no colour of its own (too few samples before it): it is judged on geometry alone,
-as with the colour cost off.
+as with the colour cost off. Nor has a piece shorter than two radii (a scrap where the
+skeleton meets a blob or a junction): no point of it is a radius from both its ends,
+clear of the rims.
 """
 
 from __future__ import annotations
@@ -81,14 +83,15 @@ def end_colours(
         where it exceeds ``limit``, :data:`WIDE_FACTOR` times the full half width
         (``radius + 0.5``), on are left out, and so are the ``limit`` px before it
         (the rim of the wide blob, where it widens from a cable's width). An end
-        left with fewer than :data:`MIN_SAMPLES` has an unknown colour (NaN).
+        left with fewer than :data:`MIN_SAMPLES` has an unknown colour (NaN), as has
+        every end of a piece shorter than two radii.
     """
     count = len(ends)
     if count == 0:
         return EndColours(np.zeros((0, 3)), np.zeros(0))
     starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
     joints = np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64)
-    samples, bounds, pixels = _appearance_kernels.end_samples(
+    samples, bounds, pixels, lengths = _appearance_kernels.end_samples(
         np.ascontiguousarray(image_bgr, dtype=np.uint8),
         joints,
         starts,
@@ -105,6 +108,8 @@ def end_colours(
     colour, spread = _appearance_kernels.colour_medians(
         np.ascontiguousarray(lab), bounds, wide, MIN_SAMPLES, int(np.ceil(limit))
     )
+    scraps = lengths < 2.0 * STRETCH_SKIP_RADII * radius
+    colour[scraps], spread[scraps] = np.nan, np.nan
     return EndColours(colour, spread)
 
 

@@ -36,9 +36,12 @@ def end_colours(
 ):
     """Per end: the median Lab colour along its stretch and the samples' median distance,
     of the samples (1 px apart) more than ``ceil(max_distance)`` before the first where
-    ``distance`` exceeds ``max_distance`` (NaN with fewer than ``min_samples``)."""
+    ``distance`` exceeds ``max_distance`` (NaN with fewer than ``min_samples``, and for
+    every end of a piece shorter than ``2 * skip``)."""
     colour, spread = np.full((len(ends), 3), np.nan), np.full(len(ends), np.nan)
     for index, end in enumerate(ends):
+        if np.hypot(*np.diff(pieces[end.piece], axis=0).T).sum() < 2 * skip:
+            continue
         points = end_stretch(pieces[end.piece], end.at_start, skip, length)
         if distance is not None:
             height, width = distance.shape
