@@ -12,9 +12,10 @@ from numba import njit
 
 @njit(cache=True, nogil=True)
 def _stretch_bounds(total, skip, length):
-    """Arc lengths (from the end) of the first and last sample of an end stretch."""
-    stop = min(skip + length, total)
-    start = min(skip, max(total - length, 0.0))
+    """Arc lengths (from the end) of the first and last sample of an end stretch: from
+    ``skip`` on, at most ``length`` long, and ``skip`` clear of the piece's other end."""
+    start = skip
+    stop = min(skip + length, total - skip)
     if stop - start < 1.0:
         start, stop = 0.0, total
     return start, stop
@@ -26,8 +27,8 @@ def end_samples(image, joints, starts, end_piece, end_at_start, skip, length):
 
     End ``e`` belongs to piece ``end_piece[e]`` (joints ``joints[starts[k]:starts[k + 1]]``)
     and sits at its first joint when ``end_at_start[e]``, else at its last. Its stretch
-    runs from ``skip`` to ``skip + length`` of arc from the end (or over the last
-    ``length`` of a shorter piece, or the whole piece when that is under 1 px). Points are
+    runs from ``skip`` to ``skip + length`` of arc from the end, and stops ``skip``
+    before the piece's other end (the whole piece when that leaves under 1 px). Points are
     rounded half to even and the 3x3 neighbourhood is clipped to the image.
 
     Returns ``(samples, bounds, pixels, lengths)``: end ``e``'s samples are

@@ -3,8 +3,9 @@
 Two pieces of one cable look alike where they meet a gap or a crossing; two cables
 of clearly different colour are not one cable, however well their ends line up. Each
 end gets the colour of the cable just inside it (the median, in CIE Lab, of the 3x3
-means at points 1 px apart along a stretch of the piece starting one radius in, so a
-cut's rim and an occluder's shadow are left out) and how much its samples scatter
+means at points 1 px apart along a stretch of the piece starting one radius in and
+stopping a radius before the piece's other end, so cuts' rims and occluders' shadows
+are left out) and how much its samples scatter
 round that (shading, texture, a stripe). :func:`colour_penalty` turns the difference
 of two ends' colours, beyond what their own scatter explains, into a join cost.
 
@@ -14,9 +15,9 @@ piece runs into something that is not one cable, most often an object segmented 
 the cables (an occluder of a cable-like colour) whose skeleton carries the piece on
 into the object. Its colour there is the object's, and an end that lies in such a blob
 has no colour of its own (too few samples before it): it is judged on geometry alone,
-as with the colour cost off. Nor has a piece shorter than two radii (a scrap where the
-skeleton meets a blob or a junction): no point of it is a radius from both its ends,
-clear of the rims.
+as with the colour cost off. Nor has a piece shorter than three radii (a scrap where
+the skeleton meets a blob or a junction): it has no radius of cable clear of the rims
+at both its ends.
 """
 
 from __future__ import annotations
@@ -28,7 +29,8 @@ import numpy as np
 
 from service.perception import _appearance_kernels
 
-# The end stretch starts this many radii in from the end and is this many radii long.
+# The end stretch starts this many radii in from the end, is at most this many radii
+# long and stops as far from the piece's other end (a cut, a junction, an occluder's rim).
 STRETCH_SKIP_RADII = 1.0
 STRETCH_RADII = 7.0
 # Colours closer than this (Lab units, lightness counted at half weight, after the two
@@ -84,7 +86,7 @@ def end_colours(
         (``radius + 0.5``), on are left out, and so are the ``limit`` px before it
         (the rim of the wide blob, where it widens from a cable's width). An end
         left with fewer than :data:`MIN_SAMPLES` has an unknown colour (NaN), as has
-        every end of a piece shorter than two radii.
+        every end of a piece shorter than three radii.
     """
     count = len(ends)
     if count == 0:
@@ -108,7 +110,7 @@ def end_colours(
     colour, spread = _appearance_kernels.colour_medians(
         np.ascontiguousarray(lab), bounds, wide, MIN_SAMPLES, int(np.ceil(limit))
     )
-    scraps = lengths < 2.0 * STRETCH_SKIP_RADII * radius
+    scraps = lengths < 3.0 * STRETCH_SKIP_RADII * radius
     colour[scraps], spread[scraps] = np.nan, np.nan
     return EndColours(colour, spread)
 

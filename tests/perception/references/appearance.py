@@ -5,12 +5,12 @@ import numpy as np
 
 
 def end_stretch(points, at_start, skip, length):
-    """Points 1 px apart along a piece from ``skip`` to ``skip + length`` of arc from an end."""
+    """Points 1 px apart along a piece from ``skip`` to ``skip + length`` of arc from an
+    end, stopping ``skip`` before the other end (the whole piece if under 1 px is left)."""
     ordered = points if at_start else points[::-1]
     steps = np.hypot(*np.diff(ordered, axis=0).T)
     arc = np.concatenate([[0.0], np.cumsum(steps)])
-    stop = min(skip + length, arc[-1])
-    start = min(skip, max(arc[-1] - length, 0.0))
+    start, stop = skip, min(skip + length, arc[-1] - skip)
     if stop - start < 1.0:
         start, stop = 0.0, arc[-1]
     s = np.arange(start, stop + 1e-9, 1.0)
@@ -37,10 +37,10 @@ def end_colours(
     """Per end: the median Lab colour along its stretch and the samples' median distance,
     of the samples (1 px apart) more than ``ceil(max_distance)`` before the first where
     ``distance`` exceeds ``max_distance`` (NaN with fewer than ``min_samples``, and for
-    every end of a piece shorter than ``2 * skip``)."""
+    every end of a piece shorter than ``3 * skip``)."""
     colour, spread = np.full((len(ends), 3), np.nan), np.full(len(ends), np.nan)
     for index, end in enumerate(ends):
-        if np.hypot(*np.diff(pieces[end.piece], axis=0).T).sum() < 2 * skip:
+        if np.hypot(*np.diff(pieces[end.piece], axis=0).T).sum() < 3 * skip:
             continue
         points = end_stretch(pieces[end.piece], end.at_start, skip, length)
         if distance is not None:
