@@ -17,7 +17,9 @@ into the object. Its colour there is the object's, and an end that lies in such 
 has no colour of its own (too few samples before it): it is judged on geometry alone,
 as with the colour cost off. Nor has a piece shorter than three radii (a scrap where
 the skeleton meets a blob or a junction): it has no radius of cable clear of the rims
-at both its ends.
+at both its ends. Nor has an end whose colour differs from that of its own piece further
+in: an occluder segmented with the cable, not much wider than it, that the piece runs
+into.
 """
 
 from __future__ import annotations
@@ -86,21 +88,45 @@ def end_colours(
         (``radius + 0.5``), on are left out, and so are the ``limit`` px before it
         (the rim of the wide blob, where it widens from a cable's width). An end
         left with fewer than :data:`MIN_SAMPLES` has an unknown colour (NaN), as has
-        every end of a piece shorter than three radii.
+        every end of a piece shorter than three radii, and an end whose colour
+        differs (a :func:`colour_penalty` above 0) from its piece's further in (the
+        next stretch as long, where the piece is long enough).
     """
     count = len(ends)
     if count == 0:
         return EndColours(np.zeros((0, 3)), np.zeros(0))
     starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
     joints = np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64)
+    end_piece = np.array([end.piece for end in ends], np.int64)
+    end_at_start = np.array([end.at_start for end in ends], np.bool_)
+    image = np.ascontiguousarray(image_bgr, dtype=np.uint8)
+
+    def stretch(skip):
+        return _stretch_colours(
+            image, joints, starts, end_piece, end_at_start, skip, radius, distance
+        )
+
+    colour, spread, lengths = stretch(STRETCH_SKIP_RADII * radius)
+    scraps = lengths < 3.0 * STRETCH_SKIP_RADII * radius
+    colour[scraps], spread[scraps] = np.nan, np.nan
+    # The same piece further in: where the end's colour is not the body's, the end
+    # lies on something else segmented with the cable.
+    body_skip = (STRETCH_SKIP_RADII + STRETCH_RADII) * radius
+    body, body_spread, _ = stretch(body_skip)
+    short = lengths - body_skip - STRETCH_SKIP_RADII * radius < 1.0
+    body[short], body_spread[short] = np.nan, np.nan
+    both = EndColours(np.concatenate([colour, body]), np.concatenate([spread, body_spread]))
+    index = np.arange(count)
+    changed = colour_penalty(both, index, index + count) > 0
+    colour[changed], spread[changed] = np.nan, np.nan
+    return EndColours(colour, spread)
+
+
+def _stretch_colours(image, joints, starts, end_piece, end_at_start, skip, radius, distance):
+    """Median colour and scatter of every end's stretch from ``skip`` on, and the
+    length of its piece (see :func:`end_colours`)."""
     samples, bounds, pixels, lengths = _appearance_kernels.end_samples(
-        np.ascontiguousarray(image_bgr, dtype=np.uint8),
-        joints,
-        starts,
-        np.array([end.piece for end in ends], np.int64),
-        np.array([end.at_start for end in ends], np.bool_),
-        STRETCH_SKIP_RADII * radius,
-        STRETCH_RADII * radius,
+        image, joints, starts, end_piece, end_at_start, skip, STRETCH_RADII * radius
     )
     lab = cv2.cvtColor(samples.reshape(-1, 1, 3), cv2.COLOR_BGR2LAB).reshape(-1, 3)
     limit = WIDE_FACTOR * (radius + 0.5)
@@ -110,9 +136,7 @@ def end_colours(
     colour, spread = _appearance_kernels.colour_medians(
         np.ascontiguousarray(lab), bounds, wide, MIN_SAMPLES, int(np.ceil(limit))
     )
-    scraps = lengths < 3.0 * STRETCH_SKIP_RADII * radius
-    colour[scraps], spread[scraps] = np.nan, np.nan
-    return EndColours(colour, spread)
+    return colour, spread, lengths
 
 
 def colour_penalty(colours: EndColours, first: np.ndarray, second: np.ndarray) -> np.ndarray:
