@@ -111,8 +111,8 @@ class DetectParams(BaseModel):
         description="Weight of the colour difference of two ends (per 10 Lab units beyond "
         "their own scatter, at most 2); 0 joins on geometry alone. Needs the image. An end "
         "whose piece runs into something much wider than a cable (an object segmented "
-        "with the cables), or whose piece is shorter than three radii, has no colour and "
-        "costs nothing.",
+        "with the cables), whose colour is not its piece's further in, or whose piece is "
+        "shorter than three radii, has no colour and costs nothing.",
     )
     min_chain_length: float = Field(
         20.0, ge=0, le=10_000, description="Chains shorter than this after merging are dropped."
