@@ -5,8 +5,10 @@ and
 
 * subscribes to its image keys (``dlo/*/image`` unless told otherwise): the payload is an
   encoded JPEG or PNG, the optional attachment a JSON object of detection parameters
-  (:class:`schemas.DetectParams`) and the frame's identity (:class:`schemas.FrameIdentity`:
-  ``frame_id``, ``capture_time``). The Detection JSON is published on
+  (:class:`schemas.DetectParams`), the frame's identity (:class:`schemas.FrameIdentity`:
+  ``frame_id``, ``capture_time``) and optionally ``mask``: a PNG or JPEG of the image's
+  size, non-zero on cable pixels, as base64 text (:data:`MASK_FIELD`), detected from as
+  HTTP's ``mask`` upload is. The Detection JSON is published on
   ``dlo/<camera>/chains``, and the same detection as a CDR
   ``visualization_msgs/msg/MarkerArray`` on ``dlo/<camera>/markers`` (ROS 2 through
   zenoh-bridge-ros2dds, :mod:`service.bus.ros`); a sample that cannot be processed (not an
@@ -35,6 +37,8 @@ are never replaced, but at most ``max_queries`` wait; beyond that they are refus
 
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 import logging
 import threading
@@ -72,11 +76,12 @@ from service.bus.ros import (
 from service.bus.tracks import CameraTrackers, tracks_key
 from service.ros.messages import warm_up as warm_up_ros_messages
 from service.runtime.errors import RequestError
-from service.runtime.frames import Frame, check_upload
+from service.runtime.frames import Frame, check_frame, check_upload
 from service.runtime.jobs import (
     OVER_BUDGET,
     DetectFunction,
     budget,
+    decode_upload_mask,
     default_detect,
     detect_decoded,
     run_detection,
@@ -89,21 +94,38 @@ RENDEZVOUS_LEARN_S = 1.0
 """How long a newcomer watches the pool before announcing itself, with plain rendezvous."""
 
 
-def read_attachment(attachment: zenoh.ZBytes | None) -> tuple[FrameIdentity, DetectParams]:
-    """The frame's identity and the detection parameters a sample's attachment holds.
+MASK_FIELD = "mask"
+"""The attachment key of a frame's mask: a PNG or JPEG file as base64 text (RFC 4648)."""
 
-    The attachment is a JSON object: ``frame_id`` and ``capture_time`` are the identity, any
-    other key a parameter; either part may be missing, or the whole attachment (defaults).
+
+@dataclass(frozen=True)
+class FrameAttachment:
+    """What a frame's (or a query's) attachment holds."""
+
+    identity: FrameIdentity
+    params: DetectParams
+    mask: bytes | None = None
+    """The encoded mask (PNG or JPEG), not yet decoded or checked; None: segment the image."""
+
+
+def read_attachment(attachment: zenoh.ZBytes | None) -> FrameAttachment:
+    """The frame's identity, the detection parameters and the mask a sample's attachment
+    holds.
+
+    The attachment is a JSON object: ``frame_id`` and ``capture_time`` are the identity,
+    :data:`MASK_FIELD` the mask, any other key a parameter; any part may be missing, or the
+    whole attachment (defaults, no mask).
 
     Raises
     ------
     RequestError
         422 ``invalid_attachment`` when it is not a JSON object or the identity is invalid,
-        ``invalid_params`` when a parameter is (the identity is then in ``identity`` of
-        :class:`AttachmentError`, so that the error record can still carry it).
+        ``invalid_params`` when a parameter is, ``invalid_mask`` when the mask is not base64
+        text (the identity is then in ``identity`` of :class:`AttachmentError`, so that the
+        error record can still carry it).
     """
     if attachment is None:
-        return FrameIdentity(), DetectParams()
+        return FrameAttachment(FrameIdentity(), DetectParams())
     try:
         fields = json.loads(attachment.to_bytes())
     except (ValueError, UnicodeDecodeError) as exc:
@@ -116,6 +138,7 @@ def read_attachment(attachment: zenoh.ZBytes | None) -> tuple[FrameIdentity, Det
             422, "invalid_params", f"attachment: a JSON {type(fields).__name__}, not an object"
         )
     identity_fields = {name: fields.pop(name) for name in IDENTITY_FIELDS if name in fields}
+    mask_text = fields.pop(MASK_FIELD, None)
     try:
         identity = FrameIdentity.model_validate(identity_fields)
     except ValidationError as exc:
@@ -128,12 +151,40 @@ def read_attachment(attachment: zenoh.ZBytes | None) -> tuple[FrameIdentity, Det
         raise AttachmentError(
             422, "invalid_params", f"parameters: {problems}", identity=identity
         ) from None
-    return identity, params
+    return FrameAttachment(identity, params, _mask_bytes(mask_text, identity))
+
+
+def _mask_bytes(text: object, identity: FrameIdentity) -> bytes | None:
+    """The mask file the attachment's base64 text holds (None: no mask)."""
+    if text is None:
+        return None
+    if not isinstance(text, str):
+        raise AttachmentError(
+            422,
+            "invalid_mask",
+            f"attachment: {MASK_FIELD} is a JSON {type(text).__name__}; send the mask's PNG "
+            "file as base64 text",
+            identity=identity,
+        )
+    try:
+        data = base64.b64decode(text, validate=True)
+    except (binascii.Error, ValueError):
+        raise AttachmentError(
+            422,
+            "invalid_mask",
+            f"attachment: {MASK_FIELD} is not base64 text; send the mask's PNG file as base64",
+            identity=identity,
+        ) from None
+    if not data:
+        raise AttachmentError(
+            422, "invalid_mask", f"attachment: {MASK_FIELD} is empty (0 bytes)", identity=identity
+        )
+    return data
 
 
 def params_from_attachment(attachment: zenoh.ZBytes | None) -> DetectParams:
     """The parameters of :func:`read_attachment` (defaults without an attachment)."""
-    return read_attachment(attachment)[1]
+    return read_attachment(attachment).params
 
 
 @dataclass
@@ -472,17 +523,17 @@ class DetectionBus:
         image = None
         try:
             ros = job.kind != ENCODED
-            identity, params = read_attachment(
-                ros_attachment(job.attachment) if ros else job.attachment
-            )
+            attached = read_attachment(ros_attachment(job.attachment) if ros else job.attachment)
+            identity, params, mask = attached.identity, attached.params, attached.mask
             if not job.image:
                 raise RequestError(422, "invalid_image", "image: empty payload (0 bytes)")
-            if len(job.image) > self.max_bytes:
-                raise RequestError(
-                    413,
-                    "image_too_large",
-                    f"image: {len(job.image)} bytes, more than the limit of {self.max_bytes}",
-                )
+            for name, data in (("image", job.image), ("mask", mask)):
+                if data is not None and len(data) > self.max_bytes:
+                    raise RequestError(
+                        413,
+                        f"{name}_too_large",
+                        f"{name}: {len(data)} bytes, more than the limit of {self.max_bytes}",
+                    )
             encoded = job.image
             if ros:
                 deadline = budget(self.max_detect_seconds)  # counted from here, as below
@@ -490,12 +541,19 @@ class DetectionBus:
                 identity = with_stamp(identity, frame.stamp_s)
                 if frame.image is not None:
                     image = frame.image
-                    detection = detect_decoded(frame.image, params, self._detect, None, deadline)
+                    decoded_mask = None
+                    if mask is not None:
+                        check_upload(mask, "mask", self.max_pixels)
+                        decoded_mask = decode_upload_mask(mask, image.shape)
+                    detection = detect_decoded(image, params, self._detect, decoded_mask, deadline)
                 encoded = frame.encoded
             if encoded is not None:
-                check_upload(encoded, "image", self.max_pixels)
+                check_frame(Frame(encoded, params, mask), self.max_pixels)
                 image, detection = run_detection(
-                    Frame(encoded, params), self._detect, self.max_pixels, self.max_detect_seconds
+                    Frame(encoded, params, mask),
+                    self._detect,
+                    self.max_pixels,
+                    self.max_detect_seconds,
                 )
         except RequestError as exc:
             if isinstance(exc, AttachmentError):

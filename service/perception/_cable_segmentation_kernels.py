@@ -478,3 +478,55 @@ def component_widths(mask, distance):
             areas.append(float(count))
             widths.append(4.0 * total / count)
     return labels, np.array(areas), np.array(widths)
+
+
+@njit(cache=True, nogil=True)
+def phase_mosaic(image, factor, margin):
+    """The ``factor`` x ``factor`` phases of an image side by side, each with a margin.
+
+    Phase ``(p, q)`` is ``image[p::factor, q::factor]``; it fills tile ``(p, q)`` of the
+    mosaic, every tile ``ceil(H / factor) + 2 * margin`` by ``ceil(W / factor) + 2 *
+    margin`` px, with the phase's own edge pixels repeated into the margin and into the
+    row or column a shorter phase lacks: a median filter of the mosaic then gives, within
+    each tile, what a filter of that phase alone (edges replicated) gives.
+
+    Returns
+    -------
+    ndarray of uint8
+        ``(factor * tile_h, factor * tile_w, C)``.
+    """
+    height, width, channels = image.shape
+    rows = (height + factor - 1) // factor
+    cols = (width + factor - 1) // factor
+    tile_h = rows + 2 * margin
+    tile_w = cols + 2 * margin
+    out = np.empty((factor * tile_h, factor * tile_w, channels), np.uint8)
+    for p in range(factor):
+        last_row = (height - 1 - p) // factor
+        for q in range(factor):
+            last_col = (width - 1 - q) // factor
+            for i in range(tile_h):
+                y = p + factor * min(max(i - margin, 0), last_row)
+                for j in range(tile_w):
+                    x = q + factor * min(max(j - margin, 0), last_col)
+                    for c in range(channels):
+                        out[p * tile_h + i, q * tile_w + j, c] = image[y, x, c]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def from_phase_mosaic(mosaic, factor, margin, height, width):
+    """The image back from a mosaic of :func:`phase_mosaic` (its margins left out)."""
+    channels = mosaic.shape[2]
+    tile_h = mosaic.shape[0] // factor
+    tile_w = mosaic.shape[1] // factor
+    out = np.empty((height, width, channels), np.uint8)
+    for p in range(factor):
+        for q in range(factor):
+            for i in range((height - p + factor - 1) // factor):
+                row = p * tile_h + margin + i
+                for j in range((width - q + factor - 1) // factor):
+                    col = q * tile_w + margin + j
+                    for c in range(channels):
+                        out[p + factor * i, q + factor * j, c] = mosaic[row, col, c]
+    return out

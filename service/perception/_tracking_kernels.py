@@ -268,17 +268,22 @@ def _place_next(x, fixed, moved, length):
 
 
 @njit(cache=True, nogil=True)
-def fit_statistics(distance, arc, cosine, sample_arc, starts, counts, gates, min_cosine):
+def fit_statistics(
+    distance, arc, cosine, sample_arc, starts, counts, gates, min_cosine, track_lengths
+):
     """How each piece lies along each track, from its samples' projections.
 
     Piece ``p`` owns samples ``starts[p] : starts[p] + counts[p]`` (rows of the ``(S, T)``
     projection arrays of :func:`nearest_on_polylines`, ``arc`` in px); ``sample_arc`` is
     each sample's arc along its piece. A sample is near a track when its distance is
-    finite and the directions agree (``|cosine| >= min_cosine``). Per piece and track:
+    finite and the directions agree (``|cosine| >= min_cosine``). ``track_lengths``: per
+    track, its length (px). Per piece and track:
 
     ok
-        At least 3 samples, and half of the piece's, are near, and their offsets agree
-        (median spread at most half the piece's length).
+        At least 3 samples are near, and half of as many as the shorter of the piece and
+        the track can hold (a piece longer than its track, at an end coming into view,
+        overlaps it by the track's length at most), and their offsets agree (median
+        spread at most half the piece's length).
     sign
         +1 when the piece runs along the track's direction, -1 against it.
     offset
@@ -309,7 +314,9 @@ def fit_statistics(distance, arc, cosine, sample_arc, starts, counts, gates, min
                     near += 1
                     cos_sum += cosine[i, t]
                     distance_sum += distance[i, t]
-            if near < 3 or near < 0.5 * count:
+            # Samples of the piece a stretch of the track's length holds.
+            along_track = (count - 1) * track_lengths[t] / max(length, 1e-9) + 1.0
+            if near < 3 or near < 0.5 * min(count, along_track):
                 continue
             direction = 1 if cos_sum >= 0.0 else -1
             k = 0

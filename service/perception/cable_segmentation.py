@@ -23,7 +23,10 @@ backgrounds, for dark and bright cables together:
    (a wooden board's edge, a strip of paper margin).
 4. **Seeds.** Pixels whose ratio is above Otsu's threshold of the ratios (and above
    :data:`MIN_RATIO` whatever Otsu says) are seeds; each gets its cable's colour and the
-   colours round it (both sides, the background).
+   colours round it (both sides, the background). Seeds on shadows cables cast, on
+   transitions between their sides, and on strips whose two sides differ from each other
+   more than from the strip (:func:`between_unlike_sides`: the paper's edge between
+   paper and table) are dropped.
 5. **Extent.** Every pixel near a seed is cable when its colour is nearer the seed's
    cable colour than each colour round it: the border falls half way between cable and
    background, whatever the two are, and a shadow or a blurred rim that looks more
@@ -243,6 +246,7 @@ def cable_contrast(
         lines = seed_lines((height, width), levels, best_level, seeds)
         lines = _without_shadows(lines, seeds, height / seeds.shape[0])
         lines = lines.take(~transitions(lines.colours))
+        lines = lines.take(~between_unlike_sides(lines.colours))
         seeds = seeds.copy()
         seeds[np.nonzero(seeds)] = lines.of_grid >= 0
         check(deadline, STAGE)
@@ -297,24 +301,30 @@ def _pyramid(lab8: np.ndarray, steps: list[float]) -> list[np.ndarray]:
 
 
 def _sparse_median(lab8: np.ndarray, factor: int) -> np.ndarray:
-    """Median colour over windows ``MEDIAN_SIZE * factor`` px wide, from every
-    ``factor``-th pixel of every ``factor``-th row.
+    """Median colour over a window ``MEDIAN_SIZE * factor`` px wide centred on each pixel,
+    from the pixels of the window on the pixel's own rows and columns every ``factor``
+    px (``MEDIAN_SIZE`` x ``MEDIAN_SIZE`` samples).
 
     The samples are pixels of the level, not block means: a block across a cable's rim
     would give a colour between cable and background, and between two close cables the
     median of such blends is neither (the paper between them would look like a line).
-    Medians over :data:`MEDIAN_SIZE` px of the samples cost a small fraction of medians
-    over the whole windows; the background changes slowly beside the windows' size, so
-    they are enlarged back bilinearly. A level with too few samples gets its overall
-    median.
+    Every pixel gets the median of its own window, not one interpolated from its
+    neighbours' windows: at the border of two surfaces (a sheet of paper on a dark
+    table) an interpolated background is a blend of the two, the colour of neither, and
+    the paper left between a cable and the sheet's edge would differ from it. The
+    ``factor`` x ``factor`` phases of the grid (each a ``factor`` times smaller image) are
+    laid side by side (:func:`~._cable_segmentation_kernels.phase_mosaic`) and filtered at
+    once: the whole costs one median filter of the level. A level with too
+    few samples gets its overall median.
     """
     height, width = lab8.shape[:2]
-    samples = np.ascontiguousarray(lab8[factor // 2 :: factor, factor // 2 :: factor])
-    if min(samples.shape[:2]) < MEDIAN_SIZE:
+    if min(height, width) // factor < MEDIAN_SIZE:
         median = np.median(lab8.reshape(-1, 3), axis=0).round().astype(np.uint8)
         return np.broadcast_to(median, lab8.shape).copy()
-    medians = cv2.medianBlur(samples, MEDIAN_SIZE)
-    return cv2.resize(medians, (width, height), interpolation=cv2.INTER_LINEAR)
+    mosaic = _cable_segmentation_kernels.phase_mosaic(lab8, factor, MEDIAN_SIZE // 2)
+    return _cable_segmentation_kernels.from_phase_mosaic(
+        cv2.medianBlur(mosaic, MEDIAN_SIZE), factor, MEDIAN_SIZE // 2, height, width
+    )
 
 
 def _on_grid(ratio: np.ndarray, grid_shape: tuple[int, int]) -> np.ndarray:
@@ -506,6 +516,23 @@ def transitions(colours: np.ndarray) -> np.ndarray:
         & (along < 1.0 - RAMP_END)
         & ((off * off).sum(axis=1) < RAMP_WIDTH**2 * length2)
     )
+
+
+def between_unlike_sides(colours: np.ndarray) -> np.ndarray:
+    """Which lines lie between two sides more unlike each other than the line is unlike them.
+
+    A cable lies on one surface: what is beside it on the left is what is beside it on the
+    right (the same paper, the same table), and the cable differs from both. A strip along
+    the border of two surfaces (the paper's edge between white paper and a dark table, a
+    margin between a print and the board under it) has a different surface on each side:
+    when its two sides differ from each other by more than the line differs from the
+    nearer of them, the line is a step from one surface to the other with a strip in it,
+    not a ridge. (A cable crossing such a border runs across it, where its two sides
+    each straddle the border alike; only a line along the border is judged so.)
+    """
+    line, one, two = (colours[:, k].astype(np.float64) for k in range(3))
+    contrast = np.minimum(np.linalg.norm(line - one, axis=1), np.linalg.norm(line - two, axis=1))
+    return np.linalg.norm(one - two, axis=1) > contrast
 
 
 def _without_shadows(lines: SeedLines, seeds: np.ndarray, grid_step: float) -> SeedLines:

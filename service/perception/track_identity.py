@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from service.perception import _geometry_kernels
-from service.perception.track_matching import Chains, Piece, lab_under
+from service.perception.track_matching import Chains, Piece
 
 MIN_CANDIDATE_SEGMENTS = 3
 """A stretch shorter than this many segments does not start a track."""
@@ -110,7 +110,7 @@ def _candidate(chains, chain_index, pieces, run, image, step) -> list[Candidate]
             joints=stretch,
             tips=(first.tips[0], last.tips[1]),
             radius=chains.radii[chain_index],
-            colour=colour_along(image, stretch),
+            colour=chains.colour(chain_index, first.first, last.last),
         )
     ]
 
@@ -250,29 +250,6 @@ def colour_distance(first: np.ndarray | None, second: np.ndarray | None) -> floa
     return float(np.linalg.norm((first - second) * LAB_WEIGHTS))
 
 
-def colours_along(image: np.ndarray | None, polylines: list[np.ndarray]) -> list[np.ndarray | None]:
-    """:func:`colour_along` for several polylines, converting their pixels at once."""
-    if image is None or not polylines:
-        return [None] * len(polylines)
-    lab, inside = lab_under(image, np.concatenate(polylines))
-    colours: list[np.ndarray | None] = []
-    first = 0
-    for points in polylines:
-        keep = inside[first : first + len(points)]
-        seen = lab[first : first + len(points)][keep]
-        colours.append(np.median(seen, axis=0) if len(seen) else None)
-        first += len(points)
-    return colours
-
-
-def colour_along(image: np.ndarray | None, points: np.ndarray) -> np.ndarray | None:
-    """Median Lab colour (OpenCV's 8-bit scaling) of the pixels under ``points`` that lie
-    in the picture; None without an image or without such points."""
-    if image is None or len(points) == 0:
-        return None
-    return colours_along(image, [points])[0]
-
-
 def orientation(
     candidate: Candidate,
     track_joints: np.ndarray,
@@ -341,9 +318,21 @@ def revived_joints(
     """A remembered track's joints laid along a candidate that shows its cable again.
 
     The joints from the matching end follow the candidate; the rest keep the track's old
-    shape, moved rigidly to join on (they are outside the picture or hidden).
+    shape, moved rigidly to join on (they are outside the picture or hidden). The
+    matching end is the track's end the candidate's free end is, when it shows exactly
+    one (the other end of the candidate may be the picture's edge, mid-cable), else the
+    track's first end.
     """
     seen = candidate.joints if first_is_head else candidate.joints[::-1]
+    tips = candidate.tips if first_is_head else candidate.tips[::-1]
+    if tips[1] and not tips[0]:  # the candidate shows the track's last end
+        return _laid_from_first(old[::-1], seen[::-1], step)[::-1]
+    return _laid_from_first(old, seen, step)
+
+
+def _laid_from_first(old: np.ndarray, seen: np.ndarray, step: float) -> np.ndarray:
+    """``old``'s joints laid along ``seen`` from its first joint on, ``step`` apart; those
+    beyond its end keep ``old``'s shape, moved rigidly to join on."""
     arcs = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seen, axis=0), axis=1))])
     n = len(old)
     wanted = np.arange(n) * step

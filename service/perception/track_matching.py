@@ -50,6 +50,9 @@ class Chains:
     colour_breaks : list of (n - 1,) bool ndarray
         Per chain, the segments where its colour changes (the detection joined two
         cables of different colours there); all False without an image.
+    lab : list of (n, 3) ndarray, or None
+        Per chain, the Lab colour under each joint, NaN outside the picture (None
+        without an image).
     """
 
     joints: list[np.ndarray]
@@ -60,11 +63,19 @@ class Chains:
     height: int
     step: float
     colour_breaks: list[np.ndarray]
+    lab: list[np.ndarray] | None = None
 
     @classmethod
     def of(cls, detection: Detection, image: np.ndarray | None = None) -> Chains:
         joints = [np.asarray(chain.points, dtype=np.float64) for chain in detection.chains]
         inferred = [np.asarray(chain.inferred, dtype=bool) for chain in detection.chains]
+        lab = None
+        if image is not None and joints:
+            # Every chain's joints converted at once: the pieces' and the candidates'
+            # colours are read from here.
+            values, inside = lab_under(image, np.concatenate(joints))
+            values[~inside] = np.nan
+            lab = np.split(values, np.cumsum([len(points) for points in joints])[:-1])
         return cls(
             joints=joints,
             arcs=[arcs_of(points) for points in joints],
@@ -73,8 +84,25 @@ class Chains:
             width=detection.width,
             height=detection.height,
             step=detection.segment_length,
-            colour_breaks=_colour_breaks(image, joints, inferred),
+            colour_breaks=_colour_breaks(image, lab, inferred),
+            lab=lab,
         )
+
+    def colour(self, chain: int, first: int, last: int) -> np.ndarray | None:
+        """Median Lab colour under joints ``first`` to ``last`` of a chain that lie in
+        the picture (None without an image or without such joints)."""
+        if self.lab is None:
+            return None
+        values = self.lab[chain][first : last + 1]
+        return column_median(values[~np.isnan(values[:, 0])])
+
+    def colour_of(self, pieces: list[Piece]) -> np.ndarray | None:
+        """Median Lab colour under the pieces' joints that lie in the picture (a track's
+        colour where this frame shows it)."""
+        if self.lab is None or not pieces:
+            return None
+        values = np.concatenate([self.lab[p.chain][p.first : p.last + 1] for p in pieces])
+        return column_median(values[~np.isnan(values[:, 0])])
 
 
 @dataclass(frozen=True, eq=False)
@@ -214,6 +242,7 @@ def fit_pieces(
         counts_per_piece,
         np.ascontiguousarray(gates, dtype=np.float64),
         MIN_COSINE,
+        (counts - 1).astype(np.float64) * step,
     )
     if compatible is not None:
         ok &= compatible
@@ -258,27 +287,33 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     return [(int(b), int(e)) for b, e in zip(begins, ends, strict=True)]
 
 
+def column_median(values: np.ndarray) -> np.ndarray | None:
+    """Per column, the median of the rows (as ``np.median(values, axis=0)``, without its
+    per-call cost on a few rows); None for no rows."""
+    count = len(values)
+    if count == 0:
+        return None
+    ordered = np.sort(values, axis=0)
+    return 0.5 * (ordered[(count - 1) // 2] + ordered[count // 2])
+
+
 def _colour_breaks(
-    image: np.ndarray | None, chains: list[np.ndarray], inferred: list[np.ndarray]
+    image: np.ndarray | None, chain_lab: list[np.ndarray] | None, inferred: list[np.ndarray]
 ) -> list[np.ndarray]:
     """Per chain, the segments across which its colour changes: the median Lab colour of
     the :data:`COLOUR_SPAN` joints before differs from that of the ones after by more
     than :data:`COLOUR_JUMP` (lightness weighted by half). Joints on an inferred
     stretch (under an occluder, across a gap) show something else's colour and are left
     out of the medians; a side with none of its joints seen makes no break."""
-    breaks = [np.zeros(max(len(points) - 1, 0), dtype=bool) for points in chains]
-    if image is None or not chains or image.ndim < 3:
+    breaks = [np.zeros(len(flags), dtype=bool) for flags in inferred]
+    if image is None or chain_lab is None or image.ndim < 3:
         return breaks  # no image, or a grey one: no colour to go by
-    lab, _ = lab_under(image, np.concatenate(chains))
-    lab *= COLOUR_WEIGHTS
     span = COLOUR_SPAN
-    first = 0
-    for points, hidden_segments, flags in zip(chains, inferred, breaks, strict=True):
-        colours = lab[first : first + len(points)].copy()
-        first += len(points)
-        if len(points) < 2 * span + 1:
+    for values, hidden_segments, flags in zip(chain_lab, inferred, breaks, strict=True):
+        if len(values) < 2 * span + 1:
             continue
-        hidden = np.zeros(len(points), dtype=bool)
+        colours = values * COLOUR_WEIGHTS  # NaN outside the picture: no colour there
+        hidden = np.zeros(len(values), dtype=bool)
         hidden[:-1] |= hidden_segments
         hidden[1:] |= hidden_segments
         colours[hidden] = np.nan
@@ -286,7 +321,7 @@ def _colour_breaks(
         # with joints k + 1 .. k + span.
         before_median = _window_medians(colours, span + 1)
         after_median = _window_medians(colours[1:], span)
-        ks = np.arange(span, len(points) - span)
+        ks = np.arange(span, len(values) - span)
         jump = np.linalg.norm(before_median[ks - span] - after_median[ks], axis=1)
         flags[ks] = np.nan_to_num(jump, nan=0.0) > COLOUR_JUMP
     return breaks

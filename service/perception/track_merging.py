@@ -3,12 +3,17 @@
 A cable can start as two tracks: the detection of the first frame was cut where the
 cable crossed another one, or the cable was seen in two parts (under something, at the
 picture's edge) before the parts were known to be one. When a later detection joins
-them, one chain of it holding pieces of both, with their open ends facing each other
+them, one chain of it holding pieces of both, with their ends facing each other
 across what lies between those pieces (a crossing, a hidden stretch), the two look
-alike (colour, width) and the gap is short, the younger track is joined onto the older:
-its joints are laid on, through the chain's stretch between the pieces, each ``l_s``
-from the one before; the older track keeps its id and its joints' numbers (joints added
-before its first one count down from it), the younger one's id is retired.
+alike (colour, width) and the gap is short, the younger track is joined onto the older.
+Each track's end is taken at its outermost joint seen this frame (the joints beyond it
+are guesses); the younger's must be open, the older's open or a free end hidden now (a
+free end the track remembers, while its stretch beyond the last seen joint went astray).
+The younger's joints are laid on from the older's outermost seen joint, through the
+chain's stretch between the pieces, each ``l_s`` from the one before (the older's hidden
+joints beyond are laid again; none is dropped); the older track keeps its id and its
+joints' numbers (joints added before its first one count down from it), the younger
+one's id is retired.
 """
 
 from __future__ import annotations
@@ -34,7 +39,8 @@ class Join:
     older: int
     younger: int
     end: int
-    joints: np.ndarray  # the joints laid beyond the older track's end, nearest first
+    anchor: int  # the older track's outermost joint seen at that end: the join starts there
+    joints: np.ndarray  # the joints laid beyond the anchor, nearest first
     younger_end: int  # the end of the younger track that faced the older one
     tip: bool  # whether the younger track's far end is a tip
 
@@ -73,8 +79,12 @@ def joins(
             end_a = 1 if first.sign > 0 else 0
             end_b = 0 if second.sign > 0 else 1
             track_a, track_b = tracks[first.track], tracks[second.track]
-            if track_a.tips[end_a] or track_b.tips[end_b]:
-                continue  # a free end does not go on
+            anchor_a, anchor_b = _anchor(track_a, end_a), _anchor(track_b, end_b)
+            a_is_older = (track_a.born, track_a.id) <= (track_b.born, track_b.id)
+            if _stops(track_a, end_a, anchor_a, a_is_older) or _stops(
+                track_b, end_b, anchor_b, not a_is_older
+            ):
+                continue
             if colour_distance(track_a.colour, track_b.colour) > COLOUR_TOLERANCE:
                 continue
             ratio = max(track_a.radius, track_b.radius) / max(
@@ -82,40 +92,74 @@ def joins(
             )
             if ratio > RADIUS_TOLERANCE:
                 continue
-            if not _faces(track_a, end_a, pieces[a], first, step) or not _faces(
-                track_b, end_b, pieces[b], second, step
+            if not _faces(end_a, anchor_a, pieces[a], first, step) or not _faces(
+                end_b, anchor_b, pieces[b], second, step
             ):
                 continue
-            if (track_a.born, track_a.id) <= (track_b.born, track_b.id):
+            if a_is_older:
                 older, younger, older_end, younger_end = first.track, second.track, end_a, end_b
+                older_anchor, younger_anchor = anchor_a, anchor_b
                 bridge = chains.joints[chain_index][pieces[a].last : pieces[b].first + 1]
             else:
                 older, younger, older_end, younger_end = second.track, first.track, end_b, end_a
+                older_anchor, younger_anchor = anchor_b, anchor_a
                 bridge = chains.joints[chain_index][pieces[a].last : pieces[b].first + 1][::-1]
-            laid = _laid(tracks[older], older_end, bridge, tracks[younger], younger_end, step)
+            laid = _laid(
+                tracks[older].joints[older_anchor],
+                bridge,
+                tracks[younger].joints,
+                younger_end,
+                younger_anchor,
+                step,
+            )
             if laid is None:
                 continue
             tip = tracks[younger].tips[1 - younger_end]
-            found.append(Join(older, younger, older_end, laid, younger_end, tip))
+            found.append(Join(older, younger, older_end, older_anchor, laid, younger_end, tip))
             used |= {first.track, second.track}
     return found
 
 
-def _faces(track, end: int, piece: Piece, fit: Fit, step: float) -> bool:
-    """Whether the piece reaches to within a few segments of the track's end there."""
-    total = (len(track.joints) - 1) * step
-    reach = fit.offset if (fit.sign > 0) == (end == 0) else fit.sign * piece.length + fit.offset
+def _anchor(track, end: int) -> int:
+    """The track's outermost joint seen this frame at one end: the joints beyond it are
+    guesses (hidden, predicted), so a join is measured, and laid, from there."""
+    seen = np.ones(len(track.joints), bool) if track.seen is None else track.seen
+    seen_at = np.flatnonzero(seen)
+    if len(seen_at) == 0:
+        return 0 if end == 0 else len(track.joints) - 1
+    return int(seen_at[0] if end == 0 else seen_at[-1])
+
+
+def _stops(track, end: int, anchor: int, older: bool) -> bool:
+    """Whether the track's end is a free end that nothing goes on from: always for the
+    younger track (what it knows of its ends is recent), and for the older one when the
+    end was seen this frame. A free end of the older track that is hidden is where the
+    track last saw it, and its joints beyond the outermost seen one are guesses that a
+    chain showing the cable going on from there replaces."""
+    if not track.tips[end]:
+        return False
+    return not older or anchor == (0 if end == 0 else len(track.joints) - 1)
+
+
+def _faces(end: int, anchor: int, piece: Piece, fit: Fit, step: float) -> bool:
+    """Whether the piece reaches to within a few segments of the track's outermost seen
+    joint at that end (``anchor``), or beyond it."""
+    ends = (fit.offset, fit.sign * piece.length + fit.offset)
     limit = 3.0 * step
-    return abs(reach - (0.0 if end == 0 else total)) <= limit or (
-        (end == 0 and reach < 0) or (end == 1 and reach > total)
+    if end == 0:
+        return min(ends) <= anchor * step + limit
+    return max(ends) >= anchor * step - limit
+
+
+def _laid(start, bridge, younger_joints, younger_end, younger_anchor, step):
+    """The joints that continue the older track from ``start`` (its anchor) through the
+    bridge along the younger one, each ``step`` from the one before: the younger
+    track's joints from its own anchor on (the ones beyond it are guesses)."""
+    rest = (
+        younger_joints[younger_anchor:]
+        if younger_end == 0
+        else younger_joints[: younger_anchor + 1][::-1]
     )
-
-
-def _laid(older, older_end, bridge, younger, younger_end, step):
-    """The joints that continue the older track through the bridge along the younger
-    one, from the older track's end joint, each ``step`` from the one before."""
-    start = older.joints[0] if older_end == 0 else older.joints[-1]
-    rest = younger.joints if younger_end == 0 else younger.joints[::-1]
     # From the older end, along the detection's stretch between the pieces, then along
     # the younger track from its facing end (skipping its joints before the bridge's end).
     target = bridge[-1] if len(bridge) else rest[0]

@@ -18,7 +18,7 @@ that covers it goes on beyond it: new joints are added there, along that chain.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -75,6 +75,10 @@ class Observation:
     slide : float
         How far (px) the free ends showed the cable slid along itself, beyond what the
         registration of its body found.
+    free_ends : (bool, bool)
+        Whether a free end of the cable was seen at each end of the track this frame.
+    free_end_points : (2, 2) ndarray
+        Where (px), NaN where none was seen.
     """
 
     targets: np.ndarray
@@ -83,6 +87,8 @@ class Observation:
     head_growth: np.ndarray
     tail_growth: np.ndarray
     slide: float = 0.0
+    free_ends: tuple[bool, bool] = (False, False)
+    free_end_points: np.ndarray = field(default_factory=lambda: np.full((2, 2), np.nan))
 
 
 def observe(
@@ -92,6 +98,7 @@ def observe(
     chains: Chains,
     claimed: np.ndarray,
     chain_of_piece: list[tuple[int, int, int]],
+    moving_tips: tuple[bool, bool] = (False, False),
 ) -> Observation:
     """The targets the fitted pieces give a track's joints, and how its ends grow.
 
@@ -116,6 +123,11 @@ def observe(
         already fits it, or its colour is not this track's (growth stops there).
     chain_of_piece : list of (chain, first joint, last joint)
         Per piece of the detection, where it lies in its chain.
+    moving_tips : (bool, bool)
+        Per end, whether it is a free end seen in the last frame while the track's
+        velocity is not known yet (just begun or back): the cable seen beyond it then is
+        the cable moving along itself, not more cable (which only an end that was hidden
+        could show), so it does not grow there.
     """
     step = chains.step
     n = len(joints)
@@ -182,7 +194,7 @@ def observe(
             points, reached_tip = _grow(
                 piece, sign, offset, end, total, chains, claimed, chain_of_piece, tips[end]
             )
-            if tips[end] and len(points) < TIP_GROWTH:
+            if tips[end] and (len(points) < TIP_GROWTH or moving_tips[end]):
                 points = np.empty((0, 2))  # a tip seen a little further out: not more cable
             if len(points):
                 new_tips[end] = reached_tip
@@ -194,6 +206,8 @@ def observe(
         head_growth=growth[0],
         tail_growth=growth[1],
         slide=slide.shift,
+        free_ends=slide.tips,
+        free_end_points=slide.points,
     )
 
 
@@ -205,6 +219,7 @@ class _Slide:
     shift: float = 0.0
     tips: tuple[bool, bool] = (False, False)
     whole: bool = False  # both ends seen, agreeing on the cable's length
+    points: np.ndarray = field(default_factory=lambda: np.full((2, 2), np.nan))
 
 
 def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Slide:
@@ -223,33 +238,37 @@ def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Sl
     """
     tolerance = TIP_TOLERANCE * step
     window = TIP_WINDOW * step
-    seen: list[list[tuple[float, float]]] = [[], []]  # per end: (outward, offset change)
+    # per end: (outward, offset change, x, y of the free end)
+    seen: list[list[tuple[float, float, float, float]]] = [[], []]
     for piece, sign, offset, arcs in placed:
         for end, u_end in ((0, 0.0), (1, float(arcs[-1]))):
             if not piece.tips[end]:
                 continue
             s_tip = sign * u_end + offset
+            x, y = piece.joints[-end]
             if abs(s_tip) <= window and s_tip < 0.5 * total:
-                seen[0].append((-s_tip, -s_tip))
+                seen[0].append((-s_tip, -s_tip, x, y))
             elif abs(s_tip - total) <= window and s_tip > 0.5 * total:
-                seen[1].append((s_tip - total, total - s_tip))
+                seen[1].append((s_tip - total, total - s_tip, x, y))
     outward = [max(found)[0] if found else None for found in seen]
     change = [max(found)[1] if found else None for found in seen]
+    points = np.array([max(found)[2:] if found else (np.nan, np.nan) for found in seen])
     inward = TIP_INWARD * step
     tips = (bool(seen[0]), bool(seen[1]))
     if outward[0] is not None and outward[1] is not None:
         if outward[0] + outward[1] >= -tolerance:  # not much shorter: both are real ends
-            return _Slide(TIP_GAIN * 0.5 * (change[0] + change[1]), tips, whole=True)
+            shift = TIP_GAIN * 0.5 * (change[0] + change[1])
+            return _Slide(shift, tips, whole=True, points=points)
         end = 0 if outward[0] > outward[1] else 1  # the other one is hidden
     elif outward[0] is not None:
         end = 0
     elif outward[1] is not None:
         end = 1
     else:
-        return _Slide(0.0, tips)
+        return _Slide(0.0, tips, points=points)
     if outward[end] < -inward and not outside[1 - end]:
-        return _Slide(0.0, tips)  # went in: hidden, more likely than slid
-    return _Slide(TIP_GAIN * change[end], tips)
+        return _Slide(0.0, tips, points=points)  # went in: hidden, more likely than slid
+    return _Slide(TIP_GAIN * change[end], tips, points=points)
 
 
 def _grow(piece, sign, offset, end, total, chains, claimed, chain_of_piece, at_tip):

@@ -48,9 +48,7 @@ from service.perception.track_identity import (
     COLOUR_TOLERANCE,
     Candidate,
     Continuation,
-    colour_along,
     colour_distance,
-    colours_along,
     confirm,
     continuation,
     orientation,
@@ -130,6 +128,7 @@ class TrackRecord:
     unseen: int = 0
     steady: int = 0  # frames seen in a row since it began or came back (its velocity known)
     seen: np.ndarray | None = None  # (N,) bool: joints seen in the last frame it was seen
+    free_end_points: np.ndarray | None = None  # (2, 2): free ends seen last frame (NaN: not)
 
     @property
     def length(self) -> float:
@@ -250,7 +249,7 @@ def advance(
     gates = np.array([_gate(track, step, dt) for track in state.tracks])
     # A piece of a colour unlike a track's is another cable's (where the detection
     # joined two cables at a crossing, say).
-    colours = colours_along(image, [piece.joints for piece in pieces])
+    colours = [chains.colour(piece.chain, piece.first, piece.last) for piece in pieces]
     compatible = np.array(
         [[colour_distance(c, t.colour) <= COLOUR_TOLERANCE for t in state.tracks] for c in colours],
         dtype=bool,
@@ -267,8 +266,19 @@ def advance(
             continue
         # Growth may take free pieces of the track's own colour only.
         taken = claimed | ~compatible[:, index]
-        observation = observe(predicted[index], track.tips, fitted, chains, taken, chain_of_piece)
-        tracks.append(_moved(track, predicted[index], observation, step, dt, now, frame, image))
+        observation = observe(
+            predicted[index],
+            track.tips,
+            fitted,
+            chains,
+            taken,
+            chain_of_piece,
+            _moving_tips(track),
+        )
+        seen_colour = chains.colour_of([piece for piece, _ in fitted])
+        tracks.append(
+            _moved(track, predicted[index], observation, step, dt, now, frame, seen_colour)
+        )
     tracks = _joined(tracks, joins(tracks, pieces, fits, chains), now)
     tracks = _bridged(tracks, bridges(tracks, step, set()), now)
 
@@ -453,6 +463,7 @@ def _unseen(track: TrackRecord, predicted: np.ndarray) -> TrackRecord:
         velocity=track.velocity * UNSEEN_DAMPING,
         unseen=track.unseen + 1,
         steady=0,
+        free_end_points=None,
     )
 
 
@@ -464,9 +475,10 @@ def _moved(
     dt: float,
     now: float,
     frame: int,
-    image: np.ndarray | None,
+    seen_colour: np.ndarray | None,
 ) -> TrackRecord:
-    """The track registered onto what the frame shows of it (growth included)."""
+    """The track registered onto what the frame shows of it (growth included);
+    ``seen_colour``: the colour of the pieces of the detection that show it."""
     head, tail = observation.head_growth[::-1], observation.tail_growth
     targets = np.vstack([head, observation.targets, tail])
     covered = np.concatenate(
@@ -488,11 +500,20 @@ def _moved(
     if len(tail):
         use[-len(tail) :] = False
     if np.count_nonzero(use) >= 3:
-        measured = _motion(previous, joints, use) / dt
+        # A free end seen in this frame and the last is a material point found again:
+        # its whole motion is seen, along the cable too.
+        pinned = []
+        if track.free_end_points is not None:
+            moved = observation.free_end_points - track.free_end_points
+            for end, grown in ((0, len(head)), (1, len(tail))):
+                if not grown and np.all(np.isfinite(moved[end])):
+                    pinned.append((0 if end == 0 else len(previous) - 1, moved[end]))
+        tangents = _tangents(joints)
+        measured = _motion(previous, joints, use, pinned, tangents) / dt
         # A slide moves each joint back along the track (lower joint numbers) by its size.
-        measured -= (observation.slide / dt) * _tangents(joints)
+        measured -= (observation.slide / dt) * tangents
         velocity = VELOCITY_SMOOTHING * measured + (1.0 - VELOCITY_SMOOTHING) * velocity
-    colour = colour_along(image, joints[covered])
+    colour = seen_colour
     if track.colour is not None and colour is not None:
         colour = (1.0 - COLOUR_SMOOTHING) * track.colour + COLOUR_SMOOTHING * colour
     elif colour is None:
@@ -521,15 +542,37 @@ def _moved(
         unseen=0,
         steady=track.steady + 1,
         seen=covered,
+        free_end_points=observation.free_end_points,
     )
 
 
+def _moving_tips(track: TrackRecord) -> tuple[bool, bool]:
+    """Per end: a free end seen in the last frame, the track's velocity not known yet."""
+    if track.steady >= STEADY_FRAMES or track.free_end_points is None:
+        return (False, False)
+    seen = np.isfinite(track.free_end_points[:, 0])
+    return (bool(track.tips[0] and seen[0]), bool(track.tips[1] and seen[1]))
+
+
 def _tangents(joints: np.ndarray) -> np.ndarray:
-    tangent = np.gradient(joints, axis=0)
-    return tangent / np.maximum(np.linalg.norm(tangent, axis=1), 1e-12)[:, None]
+    """Unit tangents at the joints (central differences, one-sided at the ends)."""
+    tangent = np.empty_like(joints)
+    if len(joints) < 2:
+        return np.zeros_like(joints)
+    tangent[0] = joints[1] - joints[0]
+    tangent[-1] = joints[-1] - joints[-2]
+    tangent[1:-1] = (joints[2:] - joints[:-2]) / 2.0
+    length = np.sqrt(tangent[:, 0] ** 2 + tangent[:, 1] ** 2)
+    return tangent / np.maximum(length, 1e-12)[:, None]
 
 
-def _motion(previous: np.ndarray, current: np.ndarray, use: np.ndarray) -> np.ndarray:
+def _motion(
+    previous: np.ndarray,
+    current: np.ndarray,
+    use: np.ndarray,
+    pinned: list[tuple[int, np.ndarray]] = (),
+    tangent: np.ndarray | None = None,
+) -> np.ndarray:
     """Each joint's displacement, with its part along the cable from the whole cable.
 
     Across the cable a joint's displacement is measured; along it, hardly (a stretch of
@@ -538,20 +581,36 @@ def _motion(previous: np.ndarray, current: np.ndarray, use: np.ndarray) -> np.nd
     along-cable part wherever the cable bends enough to tell (a ridge keeps a straight
     cable's slide at zero); the cross-cable remainder of each joint, smoothed along the
     cable, is added back. The motion coherence of CPD-style trackers, along the cable.
+    ``pinned`` are ``(joint, displacement)``: a free end seen in both frames, a material
+    point found again, whose whole displacement (along the cable too) is measured; it
+    weighs in the fit as much as the cross-cable displacements of all the joints in
+    ``use`` together, so that a cable moving along itself is followed wherever one of
+    its ends is seen. ``tangent``: :func:`_tangents` of ``current``, when known.
     """
-    tangent = _tangents(current)
+    tangent = _tangents(current) if tangent is None else tangent
     normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
     across = ((current - previous) * normal).sum(axis=1)
     centre = previous[use].mean(axis=0)
     arm = previous - centre
     turned = np.column_stack([-arm[:, 1], arm[:, 0]])
     design = np.column_stack([normal, (turned * normal).sum(axis=1)])
+    count = np.count_nonzero(use)
     scale = max(float(np.sqrt((arm[use] ** 2).sum(axis=1).mean())), 1.0)
-    ridge = RIDGE * np.count_nonzero(use) * np.diag([1.0, 1.0, scale * scale])
+    ridge = RIDGE * count * np.diag([1.0, 1.0, scale * scale])
     rows = design[use]
-    translation_x, translation_y, rotation = np.linalg.solve(
-        rows.T @ rows + ridge, rows.T @ across[use]
-    )
+    values = across[use]
+    if len(pinned):
+        weight = math.sqrt(count / (2.0 * len(pinned)))
+        ends = np.array([joint for joint, _ in pinned])
+        moved = np.concatenate([displacement for _, displacement in pinned])
+        end_rows = np.zeros((2 * len(ends), 3))
+        end_rows[0::2, 0] = 1.0
+        end_rows[1::2, 1] = 1.0
+        end_rows[0::2, 2] = turned[ends, 0]
+        end_rows[1::2, 2] = turned[ends, 1]
+        rows = np.vstack([rows, weight * end_rows])
+        values = np.concatenate([values, weight * moved])
+    translation_x, translation_y, rotation = np.linalg.solve(rows.T @ rows + ridge, rows.T @ values)
     rigid = np.array([translation_x, translation_y]) + rotation * turned
     remainder = across - (rigid * normal).sum(axis=1)
     return rigid + _smooth_along(remainder)[:, None] * normal
@@ -587,6 +646,7 @@ def _started(
         seen_s=now,
         ends_seen_s=(now, now),
         ends_last=np.array([joints[0], joints[-1]]),
+        free_end_points=np.where(np.array(tips)[:, None], joints[[0, -1]], np.nan),
     )
 
 
@@ -600,33 +660,17 @@ def _whole_segments(joints: np.ndarray, step: float) -> np.ndarray:
 
 
 def _joined(tracks: list[TrackRecord], found: list[Join], now: float) -> list[TrackRecord]:
-    """The tracks with each join made: the older track continued, the younger retired."""
+    """The tracks with each join made: the older track continued from its outermost seen
+    joint at that end (the hidden joints beyond it laid again), the younger retired."""
     if not found:
         return tracks
     result = list(tracks)
     for join in found:
         older = result[join.older]
-        added = join.joints
-        motion = older.velocity[0] if join.end == 0 else older.velocity[-1]
-        velocity = np.repeat(motion[None, :], len(added), axis=0)
-        if join.end == 0:
-            joints = np.vstack([added[::-1], older.joints])
-            velocities = np.vstack([velocity, older.velocity])
-            tips, first_joint = (join.tip, older.tips[1]), older.first_joint - len(added)
-        else:
-            joints = np.vstack([older.joints, added])
-            velocities = np.vstack([older.velocity, velocity])
-            tips, first_joint = (older.tips[0], join.tip), older.first_joint
-        result[join.older] = replace(
-            older,
-            joints=joints,
-            velocity=velocities,
-            tips=tips,
-            first_joint=first_joint,
-            ends_seen_s=(now, now),
-            ends_last=np.array([joints[0], joints[-1]]),
-            seen=None,
-        )
+        joined = Continuation(join.older, join.end, join.anchor, join.joints, join.tip)
+        # Joints are never dropped (a track's joints keep their numbers, and the first
+        # is 0 or below): hidden ones beyond the younger track's far end keep their shape.
+        result[join.older] = _extended(older, joined, now)
     retired = {join.younger for join in found}
     return [track for index, track in enumerate(result) if index not in retired]
 
@@ -731,6 +775,9 @@ def _recognise(
     )
     joints = exact_chain(joints, step)
     seen_tips = candidate.tips if first_is_head else candidate.tips[::-1]
+    # The candidate's free ends are seen this frame: where the track's ends now are.
+    seen_ends = candidate.joints[[0, -1]] if first_is_head else candidate.joints[[-1, 0]]
+    free_end_points = np.where(np.array(seen_tips)[:, None], seen_ends, np.nan)
     revived = replace(
         track,
         joints=joints,
@@ -741,6 +788,8 @@ def _recognise(
         ends_seen_s=(now, now),
         ends_last=np.array([joints[0], joints[-1]]),
         unseen=0,
+        steady=0,
+        free_end_points=free_end_points,
     )
     return revived, tracks, remembered
 

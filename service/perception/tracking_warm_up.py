@@ -36,6 +36,7 @@ def warm_up_tracking() -> None:
         counts[:1],
         np.full(2, 5.0),
         0.5,
+        np.array([30.0, 20.0]),
     )
     arcs = line[:, 0].copy()
     _tracking_kernels.refine_offset(line, line, arcs, 1, 0.0, 10.0, 2)

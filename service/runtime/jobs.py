@@ -79,13 +79,25 @@ def decode_frame(frame: Frame, max_pixels: int) -> tuple[np.ndarray, np.ndarray 
     check_pixels(image.shape[1], image.shape[0], max_pixels)
     if frame.mask is None:
         return image, None
+    return image, decode_upload_mask(frame.mask, image.shape)
+
+
+def decode_upload_mask(data: bytes, shape: tuple[int, ...]) -> np.ndarray:
+    """Decode an uploaded mask (PNG or JPEG, non-zero = cable) for an image of ``shape``.
+
+    Raises
+    ------
+    RequestError
+        422 ``invalid_mask`` when it cannot be decoded, its size differs from the image's
+        or it marks nothing.
+    """
     try:
-        mask = decode_mask(frame.mask, image.shape, "mask")
+        mask = decode_mask(data, shape, "mask")
     except ImageFileError as exc:
         raise RequestError(422, "invalid_mask", str(exc)) from None
     if not mask.any():
         raise RequestError(422, "invalid_mask", "mask: empty, it marks no cable pixel")
-    return image, mask
+    return mask
 
 
 def run_detection(

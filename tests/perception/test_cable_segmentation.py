@@ -23,6 +23,8 @@ from service.perception.cable_segmentation import (
     WIDE_WINDOW,
     _on_grid,
     _seeds,
+    _sparse_median,
+    between_unlike_sides,
     level_steps,
     segment_cables,
 )
@@ -320,3 +322,57 @@ def test_detect_on_white_paper_stops_inside_cable_contrast_at_its_deadline():
     with pytest.raises(DeadlineExceeded) as raised:
         detect(image, deadline=Deadline(2.5, clock=lambda: float(next(ticks))))
     assert raised.value.stage == "segmentation"
+
+
+def test_a_strip_along_the_border_of_two_surfaces_is_no_cable():
+    # White paper above a dark table, a strip of light wood 6 px wide between them (the
+    # paper's edge), and a black cable on the paper: the strip has a different surface on
+    # each side, the cable the same paper on both.
+    shape = (300, 400)
+    scene = plain(225, shape=shape)
+    scene[200:] = plain(45, shape=shape)[200:]
+    scene[194:200] = (120, 160, 190)
+    image, truth = draw_scene(scene, [(30, 30, 30)])
+    mask = segment_cables(image, 120, 60)
+    assert dice(mask, truth) > 0.9
+    assert not mask[190:204, 40:360].any()
+
+
+def test_between_unlike_sides_tells_a_border_strip_from_a_cable():
+    paper, table, wood, black = (90.0, 0.0, 0.0), (20.0, 0.0, 0.0), (70.0, 5.0, 24.0), (15.0, 0, 0)
+    colours = np.array(
+        [
+            [black, paper, paper, paper],  # a cable on paper
+            [wood, paper, table, paper],  # the paper's edge
+            [black, paper, (60.0, 0.0, 0.0), paper],  # a cable beside a grey one
+        ],
+        np.float32,
+    )
+    assert between_unlike_sides(colours).tolist() == [False, True, False]
+
+
+@pytest.mark.parametrize(("height", "width", "factor"), [(50, 67, 4), (101, 90, 8), (64, 64, 4)])
+def test_the_phase_mosaic_filters_each_phase_as_a_filter_of_that_phase_alone(height, width, factor):
+    image = np.random.default_rng(height).integers(0, 256, (height, width, 3)).astype(np.uint8)
+    mosaic = _cable_segmentation_kernels.phase_mosaic(image, factor, 2)
+    assert (
+        _cable_segmentation_kernels.from_phase_mosaic(mosaic, factor, 2, height, width) == image
+    ).all()
+    found = _sparse_median(image, factor)
+    expected = np.empty_like(image)
+    for row in range(factor):
+        for col in range(factor):
+            phase = np.ascontiguousarray(image[row::factor, col::factor])
+            expected[row::factor, col::factor] = cv2.medianBlur(phase, 5)
+    assert (found == expected).all()
+
+
+def test_the_background_at_the_border_of_two_surfaces_is_one_of_them_never_a_blend():
+    # White paper above a dark table: every pixel's background is the median of its own
+    # window, paper or table, not a colour interpolated between the windows round it
+    # (which beside the border is neither, and makes the paper there look like a line).
+    level = np.full((120, 160, 3), (230, 128, 128), np.uint8)
+    level[67:] = (40, 128, 128)
+    for factor in (4, 8):
+        background = _sparse_median(level, factor)[:, :, 0]
+        assert set(np.unique(background).tolist()) == {40, 230}

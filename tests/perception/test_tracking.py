@@ -95,7 +95,14 @@ def test_fit_statistics_equals_the_reference():
         np.ascontiguousarray(piece), directions, joints, starts, counts, gates
     )
     arc *= 10.0
+    for lengths in (np.array([190.0, 190.0]), np.array([20.0, 190.0])):  # a short track too
+        args = (distance, arc, cosine, sample_arc, np.array([0, 4]), np.array([4, 6]), gates)
+        got = kernels.fit_statistics(*args, 0.5, lengths)
+        want = reference.fit_statistics(*args, 0.5, lengths)
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_allclose(a, b, atol=1e-9)
     args = (distance, arc, cosine, sample_arc, np.array([0, 4]), np.array([4, 6]), gates, 0.5)
+    args += (np.array([190.0, 190.0]),)
     got = kernels.fit_statistics(*args)
     want = reference.fit_statistics(*args)
     assert got[0].any()  # the piece fits its own polyline

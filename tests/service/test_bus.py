@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import contextlib
 import json
 import queue
@@ -159,6 +160,69 @@ def test_bad_samples_are_counted_and_the_next_good_one_works() -> None:
         Detection.model_validate_json(take(chains)[1])
         assert bus.counts["rejected"] == 2 and bus.counts["published"] == 1
         assert chains.empty() and errors.empty()
+
+
+def one_cable_mask(seed: int = 0) -> tuple[np.ndarray, np.ndarray, str]:
+    """A scene's image, a mask of its first cable alone, and the mask's PNG as base64."""
+    scene = make_scene(240, 160, 2, seed=seed, loops=False, noise_sigma=2.0)
+    mask = scene.labels == 1
+    ok, png = cv2.imencode(".png", mask.astype(np.uint8) * 255)
+    assert ok
+    return scene.image, mask, base64.b64encode(png.tobytes()).decode("ascii")
+
+
+def test_a_mask_in_the_attachment_is_what_is_detected_from() -> None:
+    image, mask, mask_text = one_cable_mask()
+    params = DetectParams(segment_length=12)
+    expected = real_detect(image, params, mask).model_dump(exclude={"timings_ms"})
+    unmasked = real_detect(image, params).model_dump(exclude={"timings_ms"})
+    assert expected != unmasked  # the mask leaves out a cable: a different detection
+    ok, png = cv2.imencode(".png", image)
+    assert ok
+    attachment = json.dumps({"segment_length": 12, "frame_id": "f-7", "mask": mask_text})
+    with bus_and_client() as (bus, client):
+        reply = query(client, png.tobytes(), attachment)
+        assert reply.ok is not None, reply.err
+        answered = Detection.model_validate_json(reply.ok.payload.to_bytes())
+        assert answered.model_dump(exclude={"timings_ms"}) == expected
+
+        chains = subscribe(client, "dlo/cam1/chains")
+        publisher = publisher_to_bus(client, "dlo/cam1/image", bus.session)
+        publisher.put(png.tobytes(), attachment=attachment)
+        published = Detection.model_validate_json(take(chains)[1])
+        assert published.model_dump(exclude={"timings_ms"}) == expected
+
+
+def test_bad_masks_in_the_attachment_get_one_line_errors() -> None:
+    image, mask, mask_text = one_cable_mask()
+    ok, png = cv2.imencode(".png", image)
+    assert ok
+    ok, small = cv2.imencode(".png", mask[:80].astype(np.uint8) * 255)
+    assert ok
+    ok, empty = cv2.imencode(".png", np.zeros_like(mask, dtype=np.uint8))
+    assert ok
+    cases = {
+        "not base64 !": "not base64",
+        42: "JSON int",
+        "": "empty",
+        base64.b64encode(small.tobytes()).decode(): "mask is 240x80 but the image is 240x160",
+        base64.b64encode(empty.tobytes()).decode(): "marks no cable pixel",
+        base64.b64encode(b"GIF89a").decode(): "GIF",
+    }
+    with bus_and_client(max_bytes=len(png) + 1000) as (bus, client):
+        for text, said in cases.items():
+            reply = query(client, png.tobytes(), json.dumps({"mask": text, "frame_id": "x"}))
+            assert reply.err is not None, text
+            error = json.loads(reply.err.payload.to_bytes())
+            assert error["error"] in {"invalid_mask", "unsupported_media_type"}, error
+            assert said in error["detail"] and "\n" not in error["detail"], error
+        huge = base64.b64encode(b"\x89PNG" + bytes(len(png) + 2000)).decode()
+        reply = query(client, png.tobytes(), json.dumps({"mask": huge}))
+        assert reply.err is not None
+        assert json.loads(reply.err.payload.to_bytes())["error"] == "mask_too_large"
+        reply = query(client, png.tobytes(), json.dumps({"mask": mask_text}))
+        assert reply.ok is not None, reply.err  # the service goes on
+        assert bus.counts["query_rejected"] == len(cases) + 1
 
 
 class GatedDetect:

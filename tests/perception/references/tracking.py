@@ -72,7 +72,9 @@ def near_any_segment(points, reach, seg_starts, seg_ends):
     )
 
 
-def fit_statistics(distance, arc, cosine, sample_arc, starts, counts, gates, min_cosine):
+def fit_statistics(
+    distance, arc, cosine, sample_arc, starts, counts, gates, min_cosine, track_lengths
+):
     n_pieces, n_tracks = len(starts), len(gates)
     ok = np.zeros((n_pieces, n_tracks), bool)
     sign = np.ones((n_pieces, n_tracks), int)
@@ -86,7 +88,8 @@ def fit_statistics(distance, arc, cosine, sample_arc, starts, counts, gates, min
             d, s, c = distance[rows, t], arc[rows, t], cosine[rows, t]
             near = np.isfinite(d) & (np.abs(c) >= min_cosine)
             n_near = int(near.sum())
-            if n_near < 3 or n_near < 0.5 * counts[p]:
+            along_track = (counts[p] - 1) * track_lengths[t] / max(u[-1], 1e-9) + 1
+            if n_near < 3 or n_near < 0.5 * min(counts[p], along_track):
                 continue
             direction = 1 if c[near].sum() >= 0 else -1
             values = s[near] - direction * u[near]

@@ -4,6 +4,7 @@ on dlo/<camera>/image_raw and .../image_raw/compressed. Real zenoh sessions on l
 
 from __future__ import annotations
 
+import base64
 import json
 import queue
 import re
@@ -30,6 +31,7 @@ from tests.service.test_bus import (
     TIMEOUT,
     bus_and_client,
     encoded_scene,
+    one_cable_mask,
     publisher_to_bus,
     wait_for_subscriber,
 )
@@ -148,6 +150,26 @@ def test_compressed_images_and_foreign_attachments() -> None:
         assert detection.segment_length == DetectParams().segment_length
         identity = ResultAttachment.model_validate_json(attachment)
         assert identity.capture_time == CAPTURE_NS / 1e9 and identity.frame_id is None
+
+
+def test_a_ros_image_takes_a_mask_in_its_json_attachment() -> None:
+    image, mask, mask_text = one_cable_mask(3)
+    expected = real_detect(image, DetectParams(), mask).model_dump(exclude={"timings_ms"})
+    with bus_and_client() as (bus, client):
+        chains = Samples(client, "dlo/cam5/chains")
+        errors = Samples(client, "dlo/cam5/errors")
+        publisher = publisher_to_bus(client, "dlo/cam5/image_raw", bus.session)
+        wait_for_subscriber(bus.session, "dlo/cam5/errors")
+
+        publisher.put(image_message(image, "bgr8"), attachment=json.dumps({"mask": mask_text}))
+        detection = Detection.model_validate_json(chains.take()[1])
+        assert detection.model_dump(exclude={"timings_ms"}) == expected
+
+        small = cv2.imencode(".png", np.zeros((10, 10), np.uint8))[1].tobytes()
+        attachment = json.dumps({"mask": base64.b64encode(small).decode()})
+        publisher.put(image_message(image, "bgr8"), attachment=attachment)
+        record = json.loads(errors.take()[1])
+        assert record["error"] == "invalid_mask" and "10x10" in record["detail"]
 
 
 def test_bad_ros_samples_give_one_line_errors_and_the_next_good_one_works() -> None:

@@ -1,0 +1,170 @@
+"""The tracker's steps on small hand-made cases: the rigid motion a seen free end gives,
+a cable laid again from the free end it shows, joins measured from the joints seen,
+pieces longer than their track, and a free end moving fast along its cable."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+import pytest
+
+from service.perception import Tracker, warm_up
+from service.perception.track_identity import Candidate, revived_joints
+from service.perception.track_matching import Chains, Fit, Piece, arcs_of, fit_pieces
+from service.perception.track_merging import joins
+from service.perception.tracking import _joined, _motion, _started
+
+STEP = 10.0
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _kernels_loaded():
+    warm_up()
+
+
+def straight(x0, count, y=100.0):
+    return np.column_stack([x0 + STEP * np.arange(count), np.full(count, y)])
+
+
+def record(track_id, joints, tips, seen=None, born=0):
+    colour = np.array([120.0, 150.0, 150.0])
+    started = _started(Candidate(joints, tips, 4.0, colour), track_id, STEP, 0.0, born)
+    return replace(started, joints=joints, tips=tips, seen=seen)
+
+
+def test_a_free_end_seen_in_both_frames_gives_the_motion_along_a_straight_cable():
+    previous = straight(0.0, 20)
+    current = previous + np.array([7.0, 0.0])  # slid along itself: nothing across it
+    use = np.ones(20, bool)
+    # Across the cable nothing moved: alone, the fit keeps a straight cable still.
+    assert np.abs(_motion(previous, current, use)).max() < 0.5
+    pinned = [(19, np.array([7.0, 0.0]))]  # its free end, found 7 px further on
+    moved = _motion(previous, current, use, pinned)
+    np.testing.assert_allclose(moved, np.tile([7.0, 0.0], (20, 1)), atol=0.5)
+
+
+def test_a_revived_cable_is_laid_from_the_free_end_it_shows():
+    old = straight(0.0, 30)  # joint 29 is the cable's free end
+    # Back in view: only its last 8 segments, from the picture's edge (mid-cable) down
+    # to its free end at (200, 400).
+    shown = np.column_stack([np.full(9, 200.0), 320.0 + STEP * np.arange(9)])
+    candidate = Candidate(shown, (False, True), 4.0, None)
+    joints = revived_joints(old, candidate, first_is_head=True, step=STEP)
+    assert len(joints) == 30
+    np.testing.assert_allclose(joints[-1], [200.0, 400.0], atol=1e-6)
+    np.testing.assert_allclose(joints[-9:], shown, atol=1e-6)
+    # The rest goes on beyond the edge, away from the free end (up, out of the picture).
+    assert joints[0, 1] < 320.0 - 15 * STEP
+
+
+def chains_of(joints_list, width=640, height=480):
+    return Chains(
+        joints=joints_list,
+        arcs=[arcs_of(points) for points in joints_list],
+        radii=[4.0] * len(joints_list),
+        inferred=[np.zeros(len(points) - 1, bool) for points in joints_list],
+        width=width,
+        height=height,
+        step=STEP,
+        colour_breaks=[np.zeros(len(points) - 1, bool) for points in joints_list],
+    )
+
+
+def piece_of(chain, joints, first, last, tips=(False, False)):
+    part = joints[first : last + 1]
+    return Piece(chain, first, part, tips, 4.0, arcs_of(part))
+
+
+def test_a_hidden_free_end_does_not_stop_a_join():
+    # One cable along y = 100 from x = 0 to 400, its end at x = 400 free. The older
+    # track saw it to x = 100 and its end there once, but that stretch has been hidden
+    # and its guesses went astray; a younger track holds x = 140 .. 400. This frame's
+    # chain runs along the whole cable.
+    chain = straight(0.0, 41)
+    older_joints = straight(0.0, 41)
+    older_joints[11:, 1] += np.linspace(5.0, 150.0, 30)  # the hidden guesses
+    seen = np.arange(41) <= 10
+    older = record(0, older_joints, (True, True), seen=seen)
+    younger = record(1, straight(140.0, 27), (False, True), born=5)
+    chains = chains_of([chain])
+    pieces = [piece_of(0, chain, 0, 10, (True, False)), piece_of(0, chain, 14, 40, (False, True))]
+    fits = [Fit(0, 1, 0.0, 0.1, 1.0), Fit(1, 1, 0.0, 0.1, 1.0)]
+    found = joins([older, younger], pieces, fits, chains)
+    assert len(found) == 1
+    join = found[0]
+    assert (join.older, join.younger, join.end, join.anchor) == (0, 1, 1, 10)
+    # Laid from the last joint seen, along the cable to its free end.
+    assert join.tip
+    np.testing.assert_allclose(join.joints[:, 1], 100.0, atol=1e-6)
+    np.testing.assert_allclose(join.joints[-1], [400.0, 100.0], atol=1e-6)
+    # Made, the older track keeps all its joints and their numbers, even where the
+    # younger one is shorter than the stretch it lays again (joint 0 of the older track
+    # stays its first joint).
+    short = record(1, straight(140.0, 10), (False, True), born=5)
+    short_fits = [fits[0], Fit(1, 1, 0.0, 0.1, 1.0)]
+    short_pieces = [pieces[0], piece_of(0, chain, 14, 23, (False, True))]
+    made = _joined([older, short], joins([older, short], short_pieces, short_fits, chains), 0.0)
+    assert len(made) == 1 and len(made[0].joints) >= len(older_joints)
+    assert made[0].first_joint == 0
+    np.testing.assert_allclose(made[0].joints[: len(older_joints) - 30], older_joints[:11])
+    # A free end seen this frame does not go on, nor does the younger track's.
+    seen_end = record(0, straight(0.0, 11), (True, True))
+    assert joins([seen_end, younger], pieces, fits, chains) == []
+    younger_tip = record(1, straight(140.0, 27), (True, True), born=5)
+    younger_tip = replace(younger_tip, seen=np.arange(27) >= 2)  # its facing end hidden
+    assert joins([older, younger_tip], pieces, fits, chains) == []
+
+
+def test_a_piece_longer_than_its_track_still_fits_it():
+    track = straight(100.0, 5)  # 4 segments: a cable that just came into view
+    piece_joints = straight(90.0, 13)  # 12 segments of it in this frame
+    piece = Piece(0, 0, piece_joints, (False, True), 4.0, arcs_of(piece_joints))
+    fits = fit_pieces([piece], [track], np.array([15.0]), STEP)
+    assert fits[0] is not None and fits[0].track == 0 and fits[0].sign == 1
+    assert abs(fits[0].offset + 10.0) < 1.0
+
+
+def drawn(tip_x, width=640, height=240):
+    """A straight cable from the left edge to a free end at ``tip_x``."""
+    image = np.full((height, width, 3), 40, np.uint8)
+    cv2.line(image, (-50, 120), (int(tip_x), 120), (0, 200, 255), 9)
+    return image
+
+
+def test_a_free_end_moving_fast_along_its_cable_is_not_taken_for_more_cable():
+    # The cable is pulled along itself, out of the left edge into view, 32 px a frame
+    # (more than the 3 segments beyond a free end that would mean more cable hidden
+    # there): its free end leads, the new cable comes in at the edge.
+    tracker = Tracker()
+    first = tracker.update(drawn(250)).chains
+    assert len(first) == 1 and first[0].ends == ("tip", "open")
+    for frame in range(1, 4):
+        tracks = tracker.update(drawn(250 + 32 * frame), timestamp_s=frame / 30).chains
+        assert [chain.id for chain in tracks] == [first[0].id]
+        # Joint 0 is still the free end's: no joints were added before it ...
+        assert tracks[0].first_joint == 0 and tracks[0].ends[0] == "tip"
+        # ... and it moves on with the cable.
+        assert tracks[0].points[0][0] > 250 + 32 * (frame - 1)
+
+
+def test_a_join_at_the_first_end_keeps_joint_numbers_at_or_below_zero():
+    # The same cable as above, the older track running the other way: its hidden free
+    # end is its first, and the younger track is shorter than the stretch beyond the
+    # older one's outermost seen joint.
+    chain = straight(0.0, 41)[::-1]  # x from 400 down to 0
+    older_joints = straight(0.0, 41)
+    older_joints[11:, 1] += np.linspace(5.0, 150.0, 30)
+    older = record(0, older_joints[::-1].copy(), (True, True), seen=np.arange(41) >= 30)
+    younger = record(1, straight(140.0, 10), (False, True), born=5)
+    chains = chains_of([chain])
+    pieces = [piece_of(0, chain, 17, 26), piece_of(0, chain, 30, 40, (False, True))]
+    fits = [Fit(1, -1, 90.0, 0.1, 1.0), Fit(0, 1, 300.0, 0.1, 1.0)]
+    found = joins([older, younger], pieces, fits, chains)
+    assert [(j.older, j.younger, j.end, j.anchor) for j in found] == [(0, 1, 0, 30)]
+    made = _joined([older, younger], found, 0.0)
+    assert len(made) == 1
+    assert made[0].first_joint <= 0
+    assert len(made[0].joints) >= 41
+    np.testing.assert_allclose(made[0].joints[-11:], older.joints[30:])
