@@ -105,13 +105,14 @@ class DetectParams(BaseModel):
         description="Weight of the turning needed to connect (per 2 pi: two turns of up to pi).",
     )
     colour_weight: float = Field(
-        0.0,
+        0.5,
         ge=0,
         le=100,
         description="Weight of the colour difference of two ends (per 10 Lab units beyond "
-        "their own scatter, at most 2); 0 (the default) joins on geometry alone. Needs the "
-        "image. 0.5 suits cables of distinct colours (ariadne: 0.946 -> 0.985 with the true "
-        "mask) but costs occluded and edge scenes end to end, so it is opt-in.",
+        "their own scatter, at most 2); 0 joins on geometry alone. Needs the image. An end "
+        "whose piece runs into something much wider than a cable (an object segmented "
+        "with the cables), whose colour is not its piece's further in, or whose piece is "
+        "shorter than three radii, has no colour and costs nothing.",
     )
     min_chain_length: float = Field(
         20.0, ge=0, le=10_000, description="Chains shorter than this after merging are dropped."

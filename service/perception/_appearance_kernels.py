@@ -12,9 +12,10 @@ from numba import njit
 
 @njit(cache=True, nogil=True)
 def _stretch_bounds(total, skip, length):
-    """Arc lengths (from the end) of the first and last sample of an end stretch."""
-    stop = min(skip + length, total)
-    start = min(skip, max(total - length, 0.0))
+    """Arc lengths (from the end) of the first and last sample of an end stretch: from
+    ``skip`` on, at most ``length`` long, and ``skip`` clear of the piece's other end."""
+    start = skip
+    stop = min(skip + length, total - skip)
     if stop - start < 1.0:
         start, stop = 0.0, total
     return start, stop
@@ -26,11 +27,13 @@ def end_samples(image, joints, starts, end_piece, end_at_start, skip, length):
 
     End ``e`` belongs to piece ``end_piece[e]`` (joints ``joints[starts[k]:starts[k + 1]]``)
     and sits at its first joint when ``end_at_start[e]``, else at its last. Its stretch
-    runs from ``skip`` to ``skip + length`` of arc from the end (or over the last
-    ``length`` of a shorter piece, or the whole piece when that is under 1 px). Points are
+    runs from ``skip`` to ``skip + length`` of arc from the end, and stops ``skip``
+    before the piece's other end (the whole piece when that leaves under 1 px). Points are
     rounded half to even and the 3x3 neighbourhood is clipped to the image.
 
-    Returns ``(samples, bounds)``: end ``e``'s samples are ``samples[bounds[e]:bounds[e + 1]]``.
+    Returns ``(samples, bounds, pixels, lengths)``: end ``e``'s samples are
+    ``samples[bounds[e]:bounds[e + 1]]``; ``pixels`` holds each sample's (row, col) and
+    ``lengths[e]`` the arc length of the end's piece.
     """
     height, width = image.shape[0], image.shape[1]
     count = end_piece.size
@@ -46,6 +49,7 @@ def end_samples(image, joints, starts, end_piece, end_at_start, skip, length):
         first, last = _stretch_bounds(total, skip, length)
         bounds[e + 1] = bounds[e] + int(np.floor(last - first + 1e-9)) + 1
     samples = np.empty((bounds[count], 3), np.float32)
+    pixels = np.empty((bounds[count], 2), np.int64)
     for e in range(count):
         k = end_piece[e]
         n = starts[k + 1] - starts[k]
@@ -92,22 +96,30 @@ def end_samples(image, joints, starts, end_piece, end_at_start, skip, length):
                     green += image[r, c, 1]
                     red += image[r, c, 2]
             out = bounds[e] + s_index
+            pixels[out, 0] = row
+            pixels[out, 1] = col
             samples[out, 0] = blue / (9.0 * 255.0)
             samples[out, 1] = green / (9.0 * 255.0)
             samples[out, 2] = red / (9.0 * 255.0)
-    return samples, bounds
+    return samples, bounds, pixels, totals
 
 
 @njit(cache=True, nogil=True)
-def colour_medians(lab, bounds):
-    """Per end: the median of each channel of its samples, and the median distance of
-    its samples from that colour (as ``np.median``)."""
+def colour_medians(lab, bounds, wide, min_samples, margin):
+    """Per end: the median of each channel of its samples before the first ``wide`` one
+    (in order from the end) less ``margin`` more, and the median distance of those from
+    that colour (as ``np.median``); NaN for an end with fewer than ``min_samples``."""
     count = bounds.size - 1
-    colour = np.zeros((count, 3))
-    spread = np.zeros(count)
+    colour = np.full((count, 3), np.nan)
+    spread = np.full(count, np.nan)
     for e in range(count):
-        chunk = lab[bounds[e] : bounds[e + 1]]
-        if chunk.shape[0] == 0:
+        stop = bounds[e]
+        while stop < bounds[e + 1] and not wide[stop]:
+            stop += 1
+        if stop < bounds[e + 1]:
+            stop = max(stop - margin, bounds[e])
+        chunk = lab[bounds[e] : stop]
+        if chunk.shape[0] == 0 or chunk.shape[0] < min_samples:
             continue
         for channel in range(3):
             colour[e, channel] = np.median(chunk[:, channel].astype(np.float64))

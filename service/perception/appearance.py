@@ -3,10 +3,23 @@
 Two pieces of one cable look alike where they meet a gap or a crossing; two cables
 of clearly different colour are not one cable, however well their ends line up. Each
 end gets the colour of the cable just inside it (the median, in CIE Lab, of the 3x3
-means at points 1 px apart along a stretch of the piece starting one radius in, so a
-cut's rim and an occluder's shadow are left out) and how much its samples scatter
+means at points 1 px apart along a stretch of the piece starting one radius in and
+stopping a radius before the piece's other end, so cuts' rims and occluders' shadows
+are left out) and how much its samples scatter
 round that (shading, texture, a stripe). :func:`colour_penalty` turns the difference
 of two ends' colours, beyond what their own scatter explains, into a join cost.
+
+Only the samples between the end and the first place where the foreground is much
+wider than one cable count, less the stretch over which it widens to that: there the
+piece runs into something that is not one cable, most often an object segmented with
+the cables (an occluder of a cable-like colour) whose skeleton carries the piece on
+into the object. Its colour there is the object's, and an end that lies in such a blob
+has no colour of its own (too few samples before it): it is judged on geometry alone,
+as with the colour cost off. Nor has a piece shorter than three radii (a scrap where
+the skeleton meets a blob or a junction): it has no radius of cable clear of the rims
+at both its ends. Nor has an end whose colour differs from that of its own piece further
+in: an occluder segmented with the cable, not much wider than it, that the piece runs
+into.
 """
 
 from __future__ import annotations
@@ -18,7 +31,8 @@ import numpy as np
 
 from service.perception import _appearance_kernels
 
-# The end stretch starts this many radii in from the end and is this many radii long.
+# The end stretch starts this many radii in from the end, is at most this many radii
+# long and stops as far from the piece's other end (a cut, a junction, an occluder's rim).
 STRETCH_SKIP_RADII = 1.0
 STRETCH_RADII = 7.0
 # Colours closer than this (Lab units, lightness counted at half weight, after the two
@@ -29,17 +43,34 @@ COLOUR_TOLERANCE = 10.0
 MAX_COLOUR_STEPS = 2.0
 # Lightness changes with the light along one cable far more than hue does.
 LIGHTNESS_SHARE = 0.5
+# A sample counts only where the foreground's half width (the distance transform) is at
+# most this many times the cable's: a cable is up to about this much thicker than the
+# typical one, and two touching strands are twice as wide but of the cables' colours.
+WIDE_FACTOR = 2.0
+# Fewer samples than this before the first wide one: the end's colour is unknown.
+MIN_SAMPLES = 3
 
 
 @dataclass(frozen=True)
 class EndColours:
     """Per chain end: the cable's Lab colour next to it and its samples' scatter."""
 
-    colour: np.ndarray  # (E, 3) L (0-100), a, b
+    colour: np.ndarray  # (E, 3) L (0-100), a, b; NaN where unknown
     spread: np.ndarray  # (E,) median Lab distance of the samples from ``colour``
 
+    @property
+    def known(self) -> np.ndarray:
+        """(E,) bool: the end has samples on the cable itself."""
+        return ~np.isnan(self.spread)
 
-def end_colours(image_bgr: np.ndarray, pieces: list[np.ndarray], ends, radius: float) -> EndColours:
+
+def end_colours(
+    image_bgr: np.ndarray,
+    pieces: list[np.ndarray],
+    ends,
+    radius: float,
+    distance: np.ndarray | None = None,
+) -> EndColours:
     """The colour of the cable at every chain end (see the module's docstring).
 
     Parameters
@@ -51,24 +82,61 @@ def end_colours(image_bgr: np.ndarray, pieces: list[np.ndarray], ends, radius: f
         Each with ``piece`` and ``at_start``.
     radius : float
         Cable half width (px).
+    distance : ndarray (H, W), optional
+        The foreground mask's distance transform: an end's samples from the first
+        where it exceeds ``limit``, :data:`WIDE_FACTOR` times the full half width
+        (``radius + 0.5``), on are left out, and so are the ``limit`` px before it
+        (the rim of the wide blob, where it widens from a cable's width). An end
+        left with fewer than :data:`MIN_SAMPLES` has an unknown colour (NaN), as has
+        every end of a piece shorter than three radii, and an end whose colour
+        differs (a :func:`colour_penalty` above 0) from its piece's further in (the
+        next stretch as long, where the piece is long enough).
     """
     count = len(ends)
     if count == 0:
         return EndColours(np.zeros((0, 3)), np.zeros(0))
     starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
     joints = np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64)
-    samples, bounds = _appearance_kernels.end_samples(
-        np.ascontiguousarray(image_bgr, dtype=np.uint8),
-        joints,
-        starts,
-        np.array([end.piece for end in ends], np.int64),
-        np.array([end.at_start for end in ends], np.bool_),
-        STRETCH_SKIP_RADII * radius,
-        STRETCH_RADII * radius,
+    end_piece = np.array([end.piece for end in ends], np.int64)
+    end_at_start = np.array([end.at_start for end in ends], np.bool_)
+    image = np.ascontiguousarray(image_bgr, dtype=np.uint8)
+
+    def stretch(skip):
+        return _stretch_colours(
+            image, joints, starts, end_piece, end_at_start, skip, radius, distance
+        )
+
+    colour, spread, lengths = stretch(STRETCH_SKIP_RADII * radius)
+    scraps = lengths < 3.0 * STRETCH_SKIP_RADII * radius
+    colour[scraps], spread[scraps] = np.nan, np.nan
+    # The same piece further in: where the end's colour is not the body's, the end
+    # lies on something else segmented with the cable.
+    body_skip = (STRETCH_SKIP_RADII + STRETCH_RADII) * radius
+    body, body_spread, _ = stretch(body_skip)
+    short = lengths - body_skip - STRETCH_SKIP_RADII * radius < 1.0
+    body[short], body_spread[short] = np.nan, np.nan
+    both = EndColours(np.concatenate([colour, body]), np.concatenate([spread, body_spread]))
+    index = np.arange(count)
+    changed = colour_penalty(both, index, index + count) > 0
+    colour[changed], spread[changed] = np.nan, np.nan
+    return EndColours(colour, spread)
+
+
+def _stretch_colours(image, joints, starts, end_piece, end_at_start, skip, radius, distance):
+    """Median colour and scatter of every end's stretch from ``skip`` on, and the
+    length of its piece (see :func:`end_colours`)."""
+    samples, bounds, pixels, lengths = _appearance_kernels.end_samples(
+        image, joints, starts, end_piece, end_at_start, skip, STRETCH_RADII * radius
     )
     lab = cv2.cvtColor(samples.reshape(-1, 1, 3), cv2.COLOR_BGR2LAB).reshape(-1, 3)
-    colour, spread = _appearance_kernels.colour_medians(np.ascontiguousarray(lab), bounds)
-    return EndColours(colour, spread)
+    limit = WIDE_FACTOR * (radius + 0.5)
+    wide = np.zeros(len(samples), np.bool_)
+    if distance is not None and len(samples):
+        wide = distance[pixels[:, 0], pixels[:, 1]] > limit
+    colour, spread = _appearance_kernels.colour_medians(
+        np.ascontiguousarray(lab), bounds, wide, MIN_SAMPLES, int(np.ceil(limit))
+    )
+    return colour, spread, lengths
 
 
 def colour_penalty(colours: EndColours, first: np.ndarray, second: np.ndarray) -> np.ndarray:
@@ -76,7 +144,7 @@ def colour_penalty(colours: EndColours, first: np.ndarray, second: np.ndarray) -
 
     0 while the colours differ by no more than :data:`COLOUR_TOLERANCE` plus both ends'
     scatter, then one unit per further :data:`COLOUR_TOLERANCE`, at most
-    :data:`MAX_COLOUR_STEPS`.
+    :data:`MAX_COLOUR_STEPS`; 0 when either end's colour is unknown.
     """
     difference = colours.colour[first] - colours.colour[second]
     distance = np.sqrt(
@@ -85,4 +153,5 @@ def colour_penalty(colours: EndColours, first: np.ndarray, second: np.ndarray) -
         + difference[..., 2] ** 2
     )
     allowed = COLOUR_TOLERANCE + colours.spread[first] + colours.spread[second]
-    return np.clip((distance - allowed) / COLOUR_TOLERANCE, 0.0, MAX_COLOUR_STEPS)
+    steps = np.clip((distance - allowed) / COLOUR_TOLERANCE, 0.0, MAX_COLOUR_STEPS)
+    return np.where(np.isnan(steps), 0.0, steps)

@@ -285,15 +285,20 @@ def _best_matching(
     there is not the cable's, and the gaps are short.
     """
     straight = {member: replace(ends[member], curvature=0.0) for member in members}
-    costs = {}
-    for a_pos, a in enumerate(members):
-        for b in members[a_pos + 1 :]:
-            if ends[a].piece != ends[b].piece:
-                costs[a, b] = join_cost(straight[a], straight[b], params, radius)
-                if colours is not None:
-                    costs[a, b] += params.colour_weight * float(
-                        colour_penalty(colours, np.array(a), np.array(b))
-                    )
+    pairs = [
+        (a, b)
+        for a_pos, a in enumerate(members)
+        for b in members[a_pos + 1 :]
+        if ends[a].piece != ends[b].piece
+    ]
+    colour_costs = [0.0] * len(pairs)
+    if colours is not None and pairs:
+        first, second = np.array(pairs).T
+        colour_costs = (params.colour_weight * colour_penalty(colours, first, second)).tolist()
+    costs = {
+        (a, b): join_cost(straight[a], straight[b], params, radius) + extra
+        for (a, b), extra in zip(pairs, colour_costs, strict=True)
+    }
     return cheapest_pairing(members, costs, params.merge_cost_threshold)
 
 
@@ -720,7 +725,7 @@ def merge_chains(
         leaving = at_border if leaving is None else leaving | at_border
     colours = None
     if image is not None and params.colour_weight > 0:
-        colours = end_colours(image, pieces, ends, radius)
+        colours = end_colours(image, pieces, ends, radius, distance)
     picture = None
     if zones is not None or mask is not None:
         picture = (zones if zones is not None else mask).shape[:2]

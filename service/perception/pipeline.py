@@ -459,8 +459,8 @@ def warm_up() -> None:
     ]
     ends = chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
     choose_joins(ends, len(strands), DetectParams(), radius)  # the candidates' grid
-    # The image's evidence: ends running to the border, the ends' colours (the colour
-    # cost is off by default; warmed so that turning it on compiles nothing).
+    # The image's evidence: ends running to the border, the ends' colours (warmed even
+    # when a caller's colour_weight is 0).
     colour = DetectParams(colour_weight=0.5)
     merge_chains(strands, colour, radius, zones, distance, image=image, mask=mask)
     join_cost(ends[0], ends[2], DetectParams(), radius)  # one pair's (junctions)

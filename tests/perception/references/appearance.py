@@ -3,14 +3,16 @@
 import cv2
 import numpy as np
 
+from service.perception.appearance import EndColours, colour_penalty
+
 
 def end_stretch(points, at_start, skip, length):
-    """Points 1 px apart along a piece from ``skip`` to ``skip + length`` of arc from an end."""
+    """Points 1 px apart along a piece from ``skip`` to ``skip + length`` of arc from an
+    end, stopping ``skip`` before the other end (the whole piece if under 1 px is left)."""
     ordered = points if at_start else points[::-1]
     steps = np.hypot(*np.diff(ordered, axis=0).T)
     arc = np.concatenate([[0.0], np.cumsum(steps)])
-    stop = min(skip + length, arc[-1])
-    start = min(skip, max(arc[-1] - length, 0.0))
+    start, stop = skip, min(skip + length, arc[-1] - skip)
     if stop - start < 1.0:
         start, stop = 0.0, arc[-1]
     s = np.arange(start, stop + 1e-9, 1.0)
@@ -31,13 +33,57 @@ def bgr_means(image_bgr, points):
     return total / (9.0 * 255.0)
 
 
-def end_colours(image_bgr, pieces, ends, skip, length):
-    """Per end: the median Lab colour along its stretch and the samples' median distance."""
-    colour, spread = np.zeros((len(ends), 3)), np.zeros(len(ends))
+def stretch_colours(image_bgr, pieces, ends, skip, length, distance, max_distance, min_samples):
+    """Per end: the median Lab colour along its stretch from ``skip`` and the samples'
+    median distance, of the samples (1 px apart) more than ``ceil(max_distance)`` before
+    the first where ``distance`` exceeds ``max_distance`` (NaN with fewer than
+    ``min_samples``)."""
+    colour, spread = np.full((len(ends), 3), np.nan), np.full(len(ends), np.nan)
     for index, end in enumerate(ends):
-        bgr = bgr_means(image_bgr, end_stretch(pieces[end.piece], end.at_start, skip, length))
+        points = end_stretch(pieces[end.piece], end.at_start, skip, length)
+        if distance is not None:
+            height, width = distance.shape
+            cols = np.clip(np.rint(points[:, 0]).astype(np.int64), 0, width - 1)
+            rows = np.clip(np.rint(points[:, 1]).astype(np.int64), 0, height - 1)
+            wide = np.flatnonzero(distance[rows, cols] > max_distance)
+            if len(wide):
+                points = points[: max(wide[0] - int(np.ceil(max_distance)), 0)]
+        if len(points) < min_samples:
+            continue
+        bgr = bgr_means(image_bgr, points)
         lab = cv2.cvtColor(bgr.astype(np.float32).reshape(-1, 1, 3), cv2.COLOR_BGR2LAB)
         lab = lab.reshape(-1, 3).astype(np.float64)
         colour[index] = np.median(lab, axis=0)
         spread[index] = np.median(np.sqrt(((lab - colour[index]) ** 2).sum(axis=1)))
+    return colour, spread
+
+
+def end_colours(
+    image_bgr, pieces, ends, skip, length, distance=None, max_distance=np.inf, min_samples=1
+):
+    """Per end: :func:`stretch_colours` from ``skip``; NaN for every end of a piece
+    shorter than ``3 * skip``, and for an end whose colour differs (a colour penalty above
+    0) from its piece's next stretch (from ``skip + length``, where the piece is at least
+    ``2 * skip + length + 1`` long)."""
+
+    def colours(start):
+        return stretch_colours(
+            image_bgr, pieces, ends, start, length, distance, max_distance, min_samples
+        )
+
+    colour, spread = colours(skip)
+    body, body_spread = colours(skip + length)
+    for index, end in enumerate(ends):
+        total = np.hypot(*np.diff(pieces[end.piece], axis=0).T).sum()
+        if total < 3 * skip:
+            colour[index], spread[index] = np.nan, np.nan
+            continue
+        if total - (skip + length) - skip < 1.0:
+            continue
+        both = EndColours(
+            np.array([colour[index], body[index]]),
+            np.array([spread[index], body_spread[index]]),
+        )
+        if colour_penalty(both, np.array([0]), np.array([1]))[0] > 0:
+            colour[index], spread[index] = np.nan, np.nan
     return colour, spread
