@@ -439,7 +439,9 @@ def check_three_services(
         if cameras.sent_at[frame] - killed_at >= FAILOVER_S:
             assert results.times_answered(frame) == 1, frame
         else:
-            assert results.times_answered(frame) <= 1, frame
+            # while the survivors' views differ, a camera that moves (the dead replica's, or
+            # one whose first choice gained room) may be answered by both (README)
+            assert results.times_answered(frame) <= 2, frame
     taken_over = [
         cameras.sent_at[frame] - killed_at
         for frame in after
