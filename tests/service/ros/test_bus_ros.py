@@ -17,6 +17,7 @@ import zenoh
 
 from schemas import Detection, DetectParams, ResultAttachment
 from service.bus.config import markers_key, ros_image_keys
+from service.bus.detection import DetectionBus
 from service.perception import detect as real_detect
 from service.perception import warm_up
 from service.ros.messages import MARKER_ARRAY
@@ -64,8 +65,18 @@ class Samples:
         attachment = None if sample.attachment is None else sample.attachment.to_bytes()
         self.queue.put((str(sample.key_expr), sample.payload.to_bytes(), attachment))
 
-    def take(self) -> tuple[str, bytes, bytes | None]:
-        return self.queue.get(timeout=TIMEOUT)
+    def take(self, bus: DetectionBus | None = None) -> tuple[str, bytes, bytes | None]:
+        """The next sample; with ``bus``, a timeout says what the bus did with the frames."""
+        try:
+            return self.queue.get(timeout=TIMEOUT)
+        except queue.Empty:
+            if bus is None:
+                raise
+            ownership = bus.ownership
+            pytest.fail(
+                f"no sample in {TIMEOUT} s; bus counts {dict(bus.counts)}, replicas "
+                f"{ownership.replicas}, owned {ownership.owned()}"
+            )
 
 
 def assert_markers_match(payload: bytes, detection: Detection, frame_id: str, stamp_ns: int):
@@ -121,7 +132,7 @@ def test_a_cdr_image_sample_in_gives_chains_out() -> None:
             attachment=json.dumps({"segment_length": 12, "frame_id": "f-1"}),
         )
 
-        _, body, attachment = chains.take()
+        _, body, attachment = chains.take(bus)
         detection = Detection.model_validate_json(body)
         assert detection.chains
         assert detection.model_dump(exclude={"timings_ms"}) == expected.model_dump(
