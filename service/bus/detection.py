@@ -548,12 +548,10 @@ class DetectionBus:
                     detection = detect_decoded(image, params, self._detect, decoded_mask, deadline)
                 encoded = frame.encoded
             if encoded is not None:
-                check_frame(Frame(encoded, params, mask), self.max_pixels)
+                upload = Frame(encoded, params, mask)
+                check_frame(upload, self.max_pixels)
                 image, detection = run_detection(
-                    Frame(encoded, params, mask),
-                    self._detect,
-                    self.max_pixels,
-                    self.max_detect_seconds,
+                    upload, self._detect, self.max_pixels, self.max_detect_seconds
                 )
         except RequestError as exc:
             if isinstance(exc, AttachmentError):
