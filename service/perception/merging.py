@@ -349,15 +349,18 @@ def choose_joins(
     colours: EndColours | None = None,
     leaving: np.ndarray | None = None,
     picture: tuple[int, int] | None = None,
+    preset: list[tuple[int, int]] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
-    First the ends that meet at each junction (``junction_of_end[i] >= 0``) are paired
-    by the cheapest matching of that junction; then the remaining ends are joined
-    greedily, cheapest first, across gaps, up to ``merge_cost_threshold``; last, two
-    free ends that are each other's clearly cheapest partner are joined up to a looser
-    limit, unless either is ``at_border``. A join never closes a chain on itself.
-    ``deadline`` (optional) is checked while the joins are made.
+    The ``preset`` pairs (strands told apart by :func:`side_by_side_pairs`) are joined
+    before anything else. Then the ends that meet at each junction
+    (``junction_of_end[i] >= 0``) are paired by the cheapest matching of that
+    junction; then the remaining ends are joined greedily, cheapest first, across
+    gaps, up to ``merge_cost_threshold``; last, two free ends that are each other's
+    clearly cheapest partner are joined up to a looser limit, unless either is
+    ``at_border``. A join never closes a chain on itself. ``deadline`` (optional) is
+    checked while the joins are made.
 
     The evidence of the image, when given: ``colours`` (:func:`.appearance.end_colours`)
     adds ``params.colour_weight`` times :func:`.appearance.colour_penalty` to every
@@ -389,6 +392,9 @@ def choose_joins(
         joins.append((i, j, cost))
         return True
 
+    for i, j in preset or ():
+        straight_i, straight_j = (replace(ends[k], curvature=0.0) for k in (i, j))
+        try_join(i, j, join_cost(straight_i, straight_j, params, radius))
     if junction_of_end is not None:
         groups: dict[int, list[int]] = {}
         for index, junction in enumerate(junction_of_end):
@@ -551,6 +557,129 @@ def absorb_shared_pieces(
     return labels, dropped
 
 
+# Two strands lie side by side along a piece when its mask never narrows below this
+# fraction of their two widths together: where two cables cross, even at a shallow
+# angle, the mask narrows to one cable's width (half of the two), while strands that
+# touch all along keep both widths (all of it).
+SIDE_BY_SIDE_WIDTH_FRACTION = 0.75
+
+
+@dataclass
+class SideBySide:
+    """Strands told apart along pieces they share (:func:`side_by_side_pairs`).
+
+    ``junction_of_end`` is the junction labels with the handled junctions' ends set to
+    -1; ``dropped`` the shared pieces; ``pairs`` the ends to join, and ``strands[i, j]``
+    the centreline from end ``i`` to end ``j`` along the shared piece, on its side.
+    """
+
+    junction_of_end: list[int]
+    dropped: set[int] = field(default_factory=set)
+    pairs: list[tuple[int, int]] = field(default_factory=list)
+    strands: dict[tuple[int, int], np.ndarray] = field(default_factory=dict)
+
+
+def side_by_side_pairs(
+    pieces: list[np.ndarray],
+    ends: list[ChainEnd],
+    junction_of_end: list[int],
+    distance: np.ndarray,
+) -> SideBySide:
+    """Pair the strands that run side by side, touching, along one piece.
+
+    Where two strands touch along a stretch (two cables side by side, a cable doubled
+    back on itself), thinning draws one line down the middle of the stretch, with a
+    three-way junction at each end where the strands part. The line belongs to both
+    strands, and since strands that touch all along cannot cross there (crossing, the
+    mask would narrow to one cable's width), each strand keeps its side: the strand on
+    the left where they meet is the one on the left where they part. Such a piece is
+    told by its width (the distance transform at its joints, half its width clear of
+    its ends, never under ``SIDE_BY_SIDE_WIDTH_FRACTION`` of the two other strands' half
+    widths at its junctions together), whatever its length.
+
+    Each strand's centreline along the shared piece is the piece's line moved half
+    the piece's half width to the strand's side (the middle of two touching cables of
+    one width).
+
+    Returns
+    -------
+    SideBySide
+    """
+    labels = list(junction_of_end)
+    members: dict[int, list[int]] = {}
+    for index, label in enumerate(labels):
+        if label >= 0:
+            members.setdefault(label, []).append(index)
+    result = SideBySide(labels)
+    if not members:
+        return result
+    starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
+    widths = _merging_kernels.median_distance_per_piece(
+        np.ascontiguousarray(distance, np.float32),
+        np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64),
+        starts,
+    )
+    height, width = distance.shape
+    for index, points in enumerate(pieces):
+        first, second = result.junction_of_end[2 * index], result.junction_of_end[2 * index + 1]
+        if first < 0 or second < 0 or first == second:
+            continue
+        sides = []
+        for end, label in ((2 * index, first), (2 * index + 1, second)):
+            others = [member for member in members[label] if member // 2 != index]
+            left = None
+            if len(members[label]) == 3 and len(others) == 2:
+                left = _left_strand(ends[end], ends[others[0]], ends[others[1]])
+            if left is None:
+                break
+            # The strand on the left first, seen along the piece from start to end.
+            sides.append(others if left == 0 else others[::-1])
+        if len(sides) != 2:
+            continue
+        strands = np.mean([sum(widths[other // 2] for other in side) for side in sides])
+        cols = np.clip(np.rint(points[:, 0]).astype(int), 0, width - 1)
+        rows = np.clip(np.rint(points[:, 1]).astype(int), 0, height - 1)
+        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+        clear = min(float(widths[index]), along[-1] / 2)
+        inside = (along >= clear) & (along <= along[-1] - clear)
+        if not inside.any():
+            continue
+        if distance[rows[inside], cols[inside]].min() < SIDE_BY_SIDE_WIDTH_FRACTION * strands:
+            continue
+        normals = _left_normals(points)
+        shift = 0.5 * max(float(widths[index]) - 0.5, 0.0)
+        for side, (start, stop) in zip((1.0, -1.0), zip(*sides, strict=True), strict=True):
+            result.pairs.append((start, stop))
+            result.strands[start, stop] = points + side * shift * normals
+        result.dropped.add(index)
+        result.junction_of_end = [
+            -1 if label in (first, second) else label for label in result.junction_of_end
+        ]
+    return result
+
+
+def _left_normals(points: np.ndarray) -> np.ndarray:
+    """Unit normals of a polyline toward the side :func:`_left_strand` calls left."""
+    tangents = np.gradient(np.asarray(points, np.float64), axis=0)
+    tangents /= np.maximum(np.hypot(tangents[:, 0], tangents[:, 1]), 1e-9)[:, None]
+    return np.column_stack([tangents[:, 1], -tangents[:, 0]])
+
+
+def _left_strand(shared: ChainEnd, first: ChainEnd, second: ChainEnd) -> int | None:
+    """Which of two strands at a junction (0: ``first``, 1: ``second``) lies on the left
+    of the shared piece's line there, seen along the piece from its start to its end;
+    None when they do not lie on two sides of it."""
+    heading = -shared.direction if shared.at_start else shared.direction
+    offsets = [
+        float(heading[0] * (other.position[1] - shared.position[1]))
+        - float(heading[1] * (other.position[0] - shared.position[0]))
+        for other in (first, second)
+    ]
+    if offsets[0] * offsets[1] >= 0:
+        return None
+    return 0 if offsets[0] < 0 else 1
+
+
 def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -> list[int]:
     """The junction zone each end touches (its connected-component label), or -1."""
     if zones is None or not zones.any():
@@ -579,9 +708,13 @@ def assemble_paths(
     ends: list[ChainEnd],
     joins: list[tuple[int, int, float]],
     curve: GapCurve | str = GapCurve.smooth,
+    strands: dict[tuple[int, int], np.ndarray] | None = None,
 ) -> list[MergedPath]:
     """Walk every group of joined pieces from one free end to the other; each join is
-    bridged by :func:`gap_curve` of the given ``curve`` shape."""
+    bridged by :func:`gap_curve` of the given ``curve`` shape, or, for a join (i, j) in
+    ``strands``, runs along ``strands[i, j]`` (from end i to end j: a strand seen
+    beside another, not a gap)."""
+    strands = strands or {}
     partner = np.full(len(ends), -1)
     for i, j, _ in joins:
         partner[i], partner[j] = j, i
@@ -604,6 +737,14 @@ def assemble_paths(
             next_entry = partner[exit_end]
             if next_entry == -1:
                 break
+            strand = strands.get((exit_end, next_entry))
+            if strand is None and (next_entry, exit_end) in strands:
+                strand = strands[next_entry, exit_end][::-1]
+            if strand is not None:
+                vertices.append(strand)
+                filled.append(np.zeros(len(strand) + 1, bool))
+                entry = next_entry
+                continue
             bridge = gap_curve(
                 ends[exit_end].position,
                 ends[exit_end].direction,
@@ -699,7 +840,11 @@ def merge_chains(
     full_width = FULL_WIDTH_FRACTION * (radius + 0.5)
     ends = chain_ends(pieces, span, skip=radius, distance=distance, full_width=full_width)
     check(deadline, "merging")
-    junction_of_end, dropped = absorb_shared_pieces(pieces, junctions_of_ends(ends, zones), radius)
+    side_by_side = SideBySide(junctions_of_ends(ends, zones))
+    if distance is not None and pieces:
+        side_by_side = side_by_side_pairs(pieces, ends, side_by_side.junction_of_end, distance)
+    junction_of_end, dropped = absorb_shared_pieces(pieces, side_by_side.junction_of_end, radius)
+    dropped |= side_by_side.dropped
     at_border = None
     if zones is not None or mask is not None:
         height, width = (zones if zones is not None else mask).shape
@@ -740,11 +885,12 @@ def merge_chains(
         colours,
         leaving,
         picture,
+        side_by_side.pairs,
     )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
     bridging_ends = ends_through_short_pieces(pieces, ends, joins, span)
-    assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve)
+    assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, side_by_side.strands)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])

@@ -2,13 +2,15 @@
 
 from collections import Counter
 from dataclasses import replace
+from itertools import pairwise
 
 import cv2
 import numpy as np
 import pytest
 
 from schemas import DetectParams
-from service.perception import _merging_kernels
+from service.evaluation.synthetic_eval import evaluate_scene
+from service.perception import _merging_kernels, detect
 from service.perception.appearance import EndColours
 from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.merging import (
@@ -21,6 +23,7 @@ from service.perception.merging import (
     join_cost,
     merge_chains,
 )
+from service.synthetic.families import make_family_scene
 from tests.perception.references import merging as reference
 
 
@@ -383,3 +386,56 @@ def test_ends_are_not_joined_round_a_bend_outside_the_picture():
     free = merge_chains(pieces, params, 4.0)
     inside = merge_chains(pieces, params, 4.0, zones=np.zeros((100, 240), bool))
     assert len(free.paths) == 1 and len(inside.paths) == 2
+
+
+def _touching_strands_mask(first, second, thickness=9, shape=(200, 500)):
+    """Two cables drawn ``thickness`` px wide along ``first`` and ``second``."""
+    mask = np.zeros(shape, np.uint8)
+    for points in (first, second):
+        cv2.polylines(mask, [np.array(points, np.int32)], False, 1, thickness)
+    return mask > 0
+
+
+def _strand_error(chain: np.ndarray, cable: list) -> float:
+    """Largest distance from the cable's polyline samples to the chain's joints."""
+    cable = np.array(cable, np.float64)
+    samples = np.concatenate([np.linspace(a, b, 40, endpoint=False) for a, b in pairwise(cable)])
+    return float(np.hypot(*(samples[:, None, :] - chain[None]).transpose(2, 0, 1)).min(1).max())
+
+
+def test_cables_touching_side_by_side_keep_their_sides_along_a_long_stretch():
+    """Two cables 9 px wide lie touching for 300 px (66 radii), then part: thinning draws
+    one line down the stretch, and each cable must keep its own side through it.
+    (Without the width the stretch was one cable's piece and the other cable two chains.)"""
+    upper = [(20, 30), (100, 96), (400, 96), (480, 30)]
+    lower = [(20, 170), (100, 104), (400, 104), (480, 170)]
+    detection = detect(None, mask=_touching_strands_mask(upper, lower))
+    chains = [np.asarray(chain.points, np.float64) for chain in detection.chains]
+    assert len(chains) == 2
+    errors = sorted(
+        min(_strand_error(chain, cable) for chain in chains) for cable in (upper, lower)
+    )
+    # Each cable has a chain near its centreline all along: within its half width (4.5
+    # px) and the rounding of the drawn polylines' corners.
+    assert errors[-1] < 6.0
+
+
+@pytest.mark.parametrize(("family", "seed"), [("doubled_back", 105), ("side_by_side", 103)])
+def test_touching_strands_of_generated_scenes_come_out_whole(family, seed):
+    """Scenes (tuning seeds) where strands touch along a stretch: a cable doubled back
+    on itself round a bend that leaves a small hole, and two cables side by side. Each
+    cable must be one chain covering it all (the bridge along the middle of a doubled-back
+    stretch left the strands' outer edges uncovered)."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
+
+
+def test_strands_that_cross_at_a_shallow_angle_are_not_taken_as_side_by_side():
+    """Two cables crossing at 8 degrees overlap along a long stretch too, but there the
+    mask narrows to one cable's width: the side-by-side rule must leave it a crossing."""
+    pieces_mask = _touching_strands_mask([(20, 60), (480, 124)], [(20, 124), (480, 60)])
+    detection = detect(None, mask=pieces_mask)
+    chains = [np.asarray(chain.points, np.float64) for chain in detection.chains]
+    assert len(chains) == 2
+    for cable in ([(20, 60), (480, 124)], [(20, 124), (480, 60)]):
+        assert min(_strand_error(chain, cable) for chain in chains) < 6.0
