@@ -584,6 +584,7 @@ def side_by_side_pairs(
     ends: list[ChainEnd],
     junction_of_end: list[int],
     distance: np.ndarray,
+    leaving: np.ndarray | None = None,
 ) -> SideBySide:
     """Pair the strands that run side by side, touching, along one piece.
 
@@ -595,7 +596,9 @@ def side_by_side_pairs(
     the left where they meet is the one on the left where they part. Such a piece is
     told by its width (the distance transform at its joints, half its width clear of
     its ends, never under ``SIDE_BY_SIDE_WIDTH_FRACTION`` of the two other strands' half
-    widths at its junctions together), whatever its length.
+    widths at its junctions together), whatever its length; the other strands are each
+    at least as long as the stretch is wide (not the scraps thinning leaves at a bulge),
+    or leaving the picture at its other end (``leaving``, per end).
 
     Each strand's centreline along the shared piece is the piece's line moved half
     the piece's half width to the strand's side (the middle of two touching cables of
@@ -619,6 +622,7 @@ def side_by_side_pairs(
         np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64),
         starts,
     )
+    lengths = [polyline_length(points) for points in pieces]
     height, width = distance.shape
     for index, points in enumerate(pieces):
         first, second = result.junction_of_end[2 * index], result.junction_of_end[2 * index + 1]
@@ -635,6 +639,14 @@ def side_by_side_pairs(
             # The strand on the left first, seen along the piece from start to end.
             sides.append(others if left == 0 else others[::-1])
         if len(sides) != 2:
+            continue
+        # Strands, not the scraps thinning leaves where a blob bulges: each at least
+        # as long as the stretch is wide.
+        if any(
+            lengths[other // 2] < 2 * widths[index] and (leaving is None or not leaving[other ^ 1])
+            for side in sides
+            for other in side
+        ):
             continue
         strands = np.mean([sum(widths[other // 2] for other in side) for side in sides])
         cols = np.clip(np.rint(points[:, 0]).astype(int), 0, width - 1)
@@ -840,11 +852,6 @@ def merge_chains(
     full_width = FULL_WIDTH_FRACTION * (radius + 0.5)
     ends = chain_ends(pieces, span, skip=radius, distance=distance, full_width=full_width)
     check(deadline, "merging")
-    side_by_side = SideBySide(junctions_of_ends(ends, zones))
-    if distance is not None and pieces:
-        side_by_side = side_by_side_pairs(pieces, ends, side_by_side.junction_of_end, distance)
-    junction_of_end, dropped = absorb_shared_pieces(pieces, side_by_side.junction_of_end, radius)
-    dropped |= side_by_side.dropped
     at_border = None
     if zones is not None or mask is not None:
         height, width = (zones if zones is not None else mask).shape
@@ -868,6 +875,13 @@ def merge_chains(
     if at_border is not None:
         # An end at the picture's edge is a cable leaving it, too.
         leaving = at_border if leaving is None else leaving | at_border
+    side_by_side = SideBySide(junctions_of_ends(ends, zones))
+    if distance is not None and pieces:
+        side_by_side = side_by_side_pairs(
+            pieces, ends, side_by_side.junction_of_end, distance, leaving
+        )
+    junction_of_end, dropped = absorb_shared_pieces(pieces, side_by_side.junction_of_end, radius)
+    dropped |= side_by_side.dropped
     colours = None
     if image is not None and params.colour_weight > 0:
         colours = end_colours(image, pieces, ends, radius, distance)
