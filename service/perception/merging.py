@@ -33,6 +33,7 @@ from service.perception import _merging_kernels
 from service.perception.appearance import EndColours, colour_penalty, end_colours
 from service.perception.deadline import Deadline, check
 from service.perception.geometry import end_fit, polyline_length
+from service.perception.touching import TouchingSplit, split_touching_strands
 
 # An end whose cable runs on along its direction, within this many radii plus
 # BORDER_REACH_PX, to the picture's border (or within BORDER_MARGIN_PX of it) is a cable
@@ -557,139 +558,22 @@ def absorb_shared_pieces(
     return labels, dropped
 
 
-# Two strands lie side by side along a piece when its mask never narrows below this
-# fraction of their two widths together: where two cables cross, even at a shallow
-# angle, the mask narrows to one cable's width (half of the two), while strands that
-# touch all along keep both widths (all of it).
-SIDE_BY_SIDE_WIDTH_FRACTION = 0.75
-
-
-@dataclass
-class SideBySide:
-    """Strands told apart along pieces they share (:func:`side_by_side_pairs`).
-
-    ``junction_of_end`` is the junction labels with the handled junctions' ends set to
-    -1; ``dropped`` the shared pieces; ``pairs`` the ends to join, and ``strands[i, j]``
-    the centreline from end ``i`` to end ``j`` along the shared piece, on its side.
-    """
-
-    junction_of_end: list[int]
-    dropped: set[int] = field(default_factory=set)
-    pairs: list[tuple[int, int]] = field(default_factory=list)
-    strands: dict[tuple[int, int], np.ndarray] = field(default_factory=dict)
-
-
-def side_by_side_pairs(
-    pieces: list[np.ndarray],
-    ends: list[ChainEnd],
-    junction_of_end: list[int],
-    distance: np.ndarray,
-    leaving: np.ndarray | None = None,
-) -> SideBySide:
-    """Pair the strands that run side by side, touching, along one piece.
-
-    Where two strands touch along a stretch (two cables side by side, a cable doubled
-    back on itself), thinning draws one line down the middle of the stretch, with a
-    three-way junction at each end where the strands part. The line belongs to both
-    strands, and since strands that touch all along cannot cross there (crossing, the
-    mask would narrow to one cable's width), each strand keeps its side: the strand on
-    the left where they meet is the one on the left where they part. Such a piece is
-    told by its width (the distance transform at its joints, half its width clear of
-    its ends, never under ``SIDE_BY_SIDE_WIDTH_FRACTION`` of the two other strands' half
-    widths at its junctions together), whatever its length; the other strands are each
-    at least as long as the stretch is wide (not the scraps thinning leaves at a bulge),
-    or leaving the picture at its other end (``leaving``, per end).
-
-    Each strand's centreline along the shared piece is the piece's line moved half
-    the piece's half width to the strand's side (the middle of two touching cables of
-    one width).
-
-    Returns
-    -------
-    SideBySide
-    """
-    labels = list(junction_of_end)
-    members: dict[int, list[int]] = {}
-    for index, label in enumerate(labels):
-        if label >= 0:
-            members.setdefault(label, []).append(index)
-    result = SideBySide(labels)
-    if not members:
-        return result
-    starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
-    widths = _merging_kernels.median_distance_per_piece(
-        np.ascontiguousarray(distance, np.float32),
-        np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64),
-        starts,
-    )
-    lengths = [polyline_length(points) for points in pieces]
-    height, width = distance.shape
-    for index, points in enumerate(pieces):
-        first, second = result.junction_of_end[2 * index], result.junction_of_end[2 * index + 1]
-        if first < 0 or second < 0 or first == second:
-            continue
-        sides = []
-        for end, label in ((2 * index, first), (2 * index + 1, second)):
-            others = [member for member in members[label] if member // 2 != index]
-            left = None
-            if len(members[label]) == 3 and len(others) == 2:
-                left = _left_strand(ends[end], ends[others[0]], ends[others[1]])
-            if left is None:
-                break
-            # The strand on the left first, seen along the piece from start to end.
-            sides.append(others if left == 0 else others[::-1])
-        if len(sides) != 2:
-            continue
-        # Strands, not the scraps thinning leaves where a blob bulges: each at least
-        # as long as the stretch is wide.
-        if any(
-            lengths[other // 2] < 2 * widths[index] and (leaving is None or not leaving[other ^ 1])
-            for side in sides
-            for other in side
-        ):
-            continue
-        strands = np.mean([sum(widths[other // 2] for other in side) for side in sides])
-        cols = np.clip(np.rint(points[:, 0]).astype(int), 0, width - 1)
-        rows = np.clip(np.rint(points[:, 1]).astype(int), 0, height - 1)
-        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
-        clear = min(float(widths[index]), along[-1] / 2)
-        inside = (along >= clear) & (along <= along[-1] - clear)
-        if not inside.any():
-            continue
-        if distance[rows[inside], cols[inside]].min() < SIDE_BY_SIDE_WIDTH_FRACTION * strands:
-            continue
-        normals = _left_normals(points)
-        shift = 0.5 * max(float(widths[index]) - 0.5, 0.0)
-        for side, (start, stop) in zip((1.0, -1.0), zip(*sides, strict=True), strict=True):
-            result.pairs.append((start, stop))
-            result.strands[start, stop] = points + side * shift * normals
-        result.dropped.add(index)
-        result.junction_of_end = [
-            -1 if label in (first, second) else label for label in result.junction_of_end
-        ]
-    return result
-
-
-def _left_normals(points: np.ndarray) -> np.ndarray:
-    """Unit normals of a polyline toward the side :func:`_left_strand` calls left."""
-    tangents = np.gradient(np.asarray(points, np.float64), axis=0)
-    tangents /= np.maximum(np.hypot(tangents[:, 0], tangents[:, 1]), 1e-9)[:, None]
-    return np.column_stack([tangents[:, 1], -tangents[:, 0]])
-
-
-def _left_strand(shared: ChainEnd, first: ChainEnd, second: ChainEnd) -> int | None:
-    """Which of two strands at a junction (0: ``first``, 1: ``second``) lies on the left
-    of the shared piece's line there, seen along the piece from its start to its end;
-    None when they do not lie on two sides of it."""
-    heading = -shared.direction if shared.at_start else shared.direction
-    offsets = [
-        float(heading[0] * (other.position[1] - shared.position[1]))
-        - float(heading[1] * (other.position[0] - shared.position[0]))
-        for other in (first, second)
-    ]
-    if offsets[0] * offsets[1] >= 0:
-        return None
-    return 0 if offsets[0] < 0 else 1
+def _ends_of_split_pieces(
+    ends: list[ChainEnd], pieces: list[np.ndarray], touching: TouchingSplit, span: float
+) -> list[ChainEnd]:
+    """The ends with those of the pieces :func:`.touching.split_touching_strands` made
+    fitted anew (and the new pieces' appended)."""
+    ends = list(ends)
+    changed = sorted(set(touching.split) | set(range(len(ends) // 2, len(pieces))))
+    fitted = chain_ends([pieces[index] for index in changed], span)
+    for local, index in enumerate(changed):
+        for side in (0, 1):
+            end = replace(fitted[2 * local + side], piece=index)
+            if 2 * index + side < len(ends):
+                ends[2 * index + side] = end
+            else:
+                ends.append(end)
+    return ends
 
 
 def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -> list[int]:
@@ -720,13 +604,9 @@ def assemble_paths(
     ends: list[ChainEnd],
     joins: list[tuple[int, int, float]],
     curve: GapCurve | str = GapCurve.smooth,
-    strands: dict[tuple[int, int], np.ndarray] | None = None,
 ) -> list[MergedPath]:
     """Walk every group of joined pieces from one free end to the other; each join is
-    bridged by :func:`gap_curve` of the given ``curve`` shape, or, for a join (i, j) in
-    ``strands``, runs along ``strands[i, j]`` (from end i to end j: a strand seen
-    beside another, not a gap)."""
-    strands = strands or {}
+    bridged by :func:`gap_curve` of the given ``curve`` shape."""
     partner = np.full(len(ends), -1)
     for i, j, _ in joins:
         partner[i], partner[j] = j, i
@@ -749,14 +629,6 @@ def assemble_paths(
             next_entry = partner[exit_end]
             if next_entry == -1:
                 break
-            strand = strands.get((exit_end, next_entry))
-            if strand is None and (next_entry, exit_end) in strands:
-                strand = strands[next_entry, exit_end][::-1]
-            if strand is not None:
-                vertices.append(strand)
-                filled.append(np.zeros(len(strand) + 1, bool))
-                entry = next_entry
-                continue
             bridge = gap_curve(
                 ends[exit_end].position,
                 ends[exit_end].direction,
@@ -875,13 +747,26 @@ def merge_chains(
     if at_border is not None:
         # An end at the picture's edge is a cable leaving it, too.
         leaving = at_border if leaving is None else leaving | at_border
-    side_by_side = SideBySide(junctions_of_ends(ends, zones))
+    junction_of_end = junctions_of_ends(ends, zones)
+    touching = TouchingSplit(pieces, list(range(len(pieces))), junction_of_end)
     if distance is not None and pieces:
-        side_by_side = side_by_side_pairs(
-            pieces, ends, side_by_side.junction_of_end, distance, leaving
+        touching = split_touching_strands(
+            pieces,
+            np.array([end.position for end in ends], np.float64),
+            np.array([end.direction for end in ends], np.float64),
+            junction_of_end,
+            distance,
+            leaving,
         )
-    junction_of_end, dropped = absorb_shared_pieces(pieces, side_by_side.junction_of_end, radius)
-    dropped |= side_by_side.dropped
+    if touching.split:
+        # Each strand of a shared stretch is a piece of its own now: new ends for them,
+        # and its far ends meet the picture's border where the shared piece's did.
+        pieces = touching.pieces
+        ends = _ends_of_split_pieces(ends, pieces, touching, span)
+        from_ends = np.repeat(np.array(touching.origin), 2) * 2 + np.tile([0, 1], len(pieces))
+        at_border = None if at_border is None else at_border[from_ends]
+        leaving = None if leaving is None else leaving[from_ends]
+    junction_of_end, dropped = absorb_shared_pieces(pieces, touching.junction_of_end, radius)
     colours = None
     if image is not None and params.colour_weight > 0:
         colours = end_colours(image, pieces, ends, radius, distance)
@@ -899,12 +784,12 @@ def merge_chains(
         colours,
         leaving,
         picture,
-        side_by_side.pairs,
+        touching.pairs,
     )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
     bridging_ends = ends_through_short_pieces(pieces, ends, joins, span)
-    assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, side_by_side.strands)
+    assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])

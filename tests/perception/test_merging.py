@@ -397,10 +397,14 @@ def _touching_strands_mask(first, second, thickness=9, shape=(200, 500)):
 
 
 def _strand_error(chain: np.ndarray, cable: list) -> float:
-    """Largest distance from the cable's polyline samples to the chain's joints."""
+    """Largest distance from the cable's polyline samples to the chain's polyline."""
     cable = np.array(cable, np.float64)
     samples = np.concatenate([np.linspace(a, b, 40, endpoint=False) for a, b in pairwise(cable)])
-    return float(np.hypot(*(samples[:, None, :] - chain[None]).transpose(2, 0, 1)).min(1).max())
+    start, step = chain[:-1], np.diff(chain, axis=0)
+    along = ((samples[:, None, :] - start[None]) * step[None]).sum(2)
+    along = np.clip(along / np.maximum((step**2).sum(1), 1e-12)[None], 0.0, 1.0)
+    nearest = start[None] + along[..., None] * step[None]
+    return float(np.hypot(*(samples[:, None, :] - nearest).transpose(2, 0, 1)).min(1).max())
 
 
 def test_cables_touching_side_by_side_keep_their_sides_along_a_long_stretch():
@@ -418,6 +422,24 @@ def test_cables_touching_side_by_side_keep_their_sides_along_a_long_stretch():
     # Each cable has a chain near its centreline all along: within its half width (4.5
     # px) and the rounding of the drawn polylines' corners.
     assert errors[-1] < 6.0
+
+
+def test_a_cable_doubled_back_round_a_tight_bend_is_one_chain_down_and_back():
+    """A cable 13 px wide runs east, turns round a bend too tight to leave a hole and
+    comes back west touching itself for 300 px: one chain, out along one side of the
+    stretch and back along the other. (Thinning draws one line from where the strands
+    part to the bend; without the width that line was one strand, the other another
+    chain.)"""
+    turn = np.linspace(-np.pi / 2, np.pi / 2, 30)
+    bend = [(400 + 6 * np.cos(a), 100 + 6 * np.sin(a)) for a in turn]
+    way_out, way_back = [(20, 30), (90, 94), (400, 94)], [(400, 106), (90, 106), (20, 170)]
+    mask = np.zeros((200, 500), np.uint8)
+    cv2.polylines(mask, [np.array(way_out + bend + way_back, np.int32)], False, 1, 13)
+    detection = detect(None, mask=mask > 0)
+    assert len(detection.chains) == 1
+    chain = np.asarray(detection.chains[0].points, np.float64)
+    # Within the cable's half width along both strands (the bend itself is bridged).
+    assert max(_strand_error(chain, way_out), _strand_error(chain, way_back)) < 6.5
 
 
 @pytest.mark.parametrize(("family", "seed"), [("doubled_back", 105), ("side_by_side", 103)])

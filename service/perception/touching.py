@@ -1,0 +1,186 @@
+"""Strands that touch along a stretch, told apart for merging (step 6, issue 13).
+
+Where two strands touch along a stretch (two cables side by side, a cable doubled back
+on itself), thinning draws one line down the middle of the stretch, with a three-way
+junction where the strands meet and part. That line belongs to both strands. Strands
+that touch all along cannot cross there (crossing, the mask would narrow to one cable's
+width), so each keeps its side: the strand on the left where they meet is the one on
+the left where they part. :func:`split_touching_strands` finds such lines by their
+width and replaces each with two pieces, one per strand, and says which ends join.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from service.perception import _merging_kernels
+from service.perception.geometry import polyline_length
+
+# Two strands lie side by side along a piece when its mask never narrows below this
+# fraction of their two widths together: where two cables cross, even at a shallow
+# angle, the mask narrows to one cable's width (half of the two), while strands that
+# touch all along keep both widths (all of it).
+SIDE_BY_SIDE_WIDTH_FRACTION = 0.75
+
+
+@dataclass
+class TouchingSplit:
+    """The pieces with every shared line split in two (:func:`split_touching_strands`).
+
+    ``pieces[k]`` for ``k < len(input)`` is the input piece, or the left strand of a
+    shared one; the right strands are appended, ``origin[k]`` the input piece each
+    came from (``origin[k] == k`` for the input's). ``junction_of_end`` has the handled
+    junctions' ends (and the new pieces' ends) at -1; ``pairs`` are the ends to join
+    (end ``2 k`` is piece ``k``'s start, ``2 k + 1`` its end).
+    """
+
+    pieces: list[np.ndarray]
+    origin: list[int]
+    junction_of_end: list[int]
+    pairs: list[tuple[int, int]] = field(default_factory=list)
+    split: list[int] = field(default_factory=list)
+
+
+def split_touching_strands(
+    pieces: list[np.ndarray],
+    positions: np.ndarray,
+    directions: np.ndarray,
+    junction_of_end: list[int],
+    distance: np.ndarray,
+    leaving: np.ndarray | None = None,
+) -> TouchingSplit:
+    """Split the pieces two touching strands share into one piece per strand.
+
+    A shared piece is told by its width: longer than it is wide, and the distance
+    transform along it, half its width clear of its ends, never under
+    ``SIDE_BY_SIDE_WIDTH_FRACTION`` of the two other strands' half widths at its
+    junction(s) together, however long it is. At each of its ends there is either a
+    three-way junction where the two strands meet it on two sides of its line, or a
+    tip (a cable doubled back round a bend too tight to leave a hole: the two strands
+    join there); at least one end is a junction. Not at the picture's border
+    (``leaving``): there, strands leaving side by side look as a crossing the border
+    cuts. The other strands must be at least as long as the stretch is wide (not the
+    scraps thinning leaves where a blob bulges), or leave the picture at their far
+    end. Each strand runs along the piece's line moved half the piece's half width to
+    its side (the middle of one of two touching cables of one width).
+
+    Parameters
+    ----------
+    pieces : list of ndarray
+        ``(K, 2)`` joints.
+    positions, directions : ndarray
+        ``(2 N, 2)`` every piece's ends (start then end) and their outward directions.
+    junction_of_end : list of int
+        The junction each end touches, or -1.
+    distance : ndarray
+        Distance transform of the mask.
+    leaving : ndarray of bool, optional
+        Ends whose cable leaves the picture there.
+
+    Returns
+    -------
+    TouchingSplit
+    """
+    labels = list(junction_of_end)
+    result = TouchingSplit(list(pieces), list(range(len(pieces))), list(labels))
+    members: dict[int, list[int]] = {}
+    for index, label in enumerate(labels):
+        if label >= 0:
+            members.setdefault(label, []).append(index)
+    if not members:
+        return result
+    starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
+    widths = _merging_kernels.median_distance_per_piece(
+        np.ascontiguousarray(distance, np.float32),
+        np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64),
+        starts,
+    )
+    lengths = [polyline_length(points) for points in pieces]
+    handled: set[int] = set()
+    for index, points in enumerate(pieces):
+        ends = (2 * index, 2 * index + 1)
+        if {labels[end] for end in ends} & handled:
+            continue
+        kinds = [
+            _end_kind(end, index, labels, members, positions, directions, leaving) for end in ends
+        ]
+        if None in kinds or not any(isinstance(kind, list) for kind in kinds):
+            continue
+        sides = [kind for kind in kinds if isinstance(kind, list)]
+        if any(
+            lengths[other // 2] < 2 * widths[index] and (leaving is None or not leaving[other ^ 1])
+            for side in sides
+            for other in side
+        ):
+            continue
+        strands = np.mean([sum(widths[other // 2] for other in side) for side in sides])
+        if _narrowest(points, distance, float(widths[index])) < (
+            SIDE_BY_SIDE_WIDTH_FRACTION * strands
+        ):
+            continue
+        left, right = _offset_strands(points, float(widths[index]))
+        right_index = len(result.pieces)
+        result.pieces[index] = left
+        result.pieces.append(right)
+        result.origin.append(index)
+        result.junction_of_end.extend([-1, -1])
+        result.split.append(index)
+        for end, kind in zip(ends, kinds, strict=True):
+            left_end, right_end = end, 2 * right_index + end % 2
+            if isinstance(kind, list):
+                result.pairs.extend([(kind[0], left_end), (kind[1], right_end)])
+            elif kind == "tip":
+                result.pairs.append((left_end, right_end))
+        handled |= {labels[end] for end in ends} - {-1}
+    result.junction_of_end = [-1 if label in handled else label for label in result.junction_of_end]
+    return result
+
+
+def _end_kind(end, index, labels, members, positions, directions, leaving):
+    """What one end of piece ``index`` meets: the two other strands of a three-way
+    junction, left one first (a list); "tip"; or None (anything else)."""
+    label = labels[end]
+    if label < 0:
+        # At the picture's border, two strands leaving it side by side look as a
+        # crossing the border cuts (ariadne simple/00017): neither is told.
+        return None if leaving is not None and leaving[end] else "tip"
+    others = [member for member in members[label] if member // 2 != index]
+    if len(members[label]) != 3 or len(others) != 2:
+        return None
+    heading = -directions[end] if end % 2 == 0 else directions[end]
+    offsets = [
+        float(heading[0] * (positions[other, 1] - positions[end, 1]))
+        - float(heading[1] * (positions[other, 0] - positions[end, 0]))
+        for other in others
+    ]
+    if offsets[0] * offsets[1] >= 0:
+        return None
+    return others if offsets[0] < 0 else others[::-1]
+
+
+def _narrowest(points: np.ndarray, distance: np.ndarray, half_width: float) -> float:
+    """The least distance transform along the piece (every pixel of it) half its width
+    clear of its ends; 0 when nothing is left."""
+    points = np.asarray(points, np.float64)
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+    if along[-1] <= 2 * half_width:
+        return 0.0
+    samples = np.arange(half_width, along[-1] - half_width + 1e-9, 1.0)
+    xs, ys = np.interp(samples, along, points[:, 0]), np.interp(samples, along, points[:, 1])
+    height, width = distance.shape
+    cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
+    rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
+    return float(distance[rows, cols].min())
+
+
+def _offset_strands(points: np.ndarray, half_width: float) -> tuple[np.ndarray, np.ndarray]:
+    """The piece's line moved half its half width to the left and to the right (the
+    sides :func:`_end_kind` orders by)."""
+    points = np.asarray(points, np.float64)
+    tangents = np.gradient(points, axis=0)
+    tangents /= np.maximum(np.hypot(tangents[:, 0], tangents[:, 1]), 1e-9)[:, None]
+    left = np.column_stack([tangents[:, 1], -tangents[:, 0]])
+    shift = 0.5 * max(half_width - 0.5, 0.0)
+    return points + shift * left, points - shift * left
