@@ -89,7 +89,13 @@ def split_touching_strands(
     for index, label in enumerate(labels):
         if label >= 0:
             members.setdefault(label, []).append(index)
-    if not members:
+    # Only pieces with a three-way junction at an end can be shared.
+    candidates = [
+        index
+        for index in range(len(pieces))
+        if any(len(members.get(labels[end], ())) == 3 for end in (2 * index, 2 * index + 1))
+    ]
+    if not candidates:
         return result
     starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
     widths = _merging_kernels.median_distance_per_piece(
@@ -97,9 +103,10 @@ def split_touching_strands(
         np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64),
         starts,
     )
-    lengths = [polyline_length(points) for points in pieces]
+    lengths: dict[int, float] = {}
     handled: set[int] = set()
-    for index, points in enumerate(pieces):
+    for index in candidates:
+        points = pieces[index]
         ends = (2 * index, 2 * index + 1)
         if {labels[end] for end in ends} & handled:
             continue
@@ -109,6 +116,9 @@ def split_touching_strands(
         if None in kinds or not any(isinstance(kind, list) for kind in kinds):
             continue
         sides = [kind for kind in kinds if isinstance(kind, list)]
+        for other in (other for side in sides for other in side):
+            if other // 2 not in lengths:
+                lengths[other // 2] = polyline_length(pieces[other // 2])
         if any(
             lengths[other // 2] < 2 * widths[index] and (leaving is None or not leaving[other ^ 1])
             for side in sides
