@@ -56,15 +56,12 @@ def split_touching_strands(
     A shared piece is told by its width: longer than it is wide, and the distance
     transform along it, half its width clear of its ends, never under
     ``SIDE_BY_SIDE_WIDTH_FRACTION`` of the two other strands' half widths at its
-    junction(s) together, however long it is. At each of its ends there is either a
-    three-way junction where the two strands meet it on two sides of its line, or a
-    tip (a cable doubled back round a bend too tight to leave a hole: the two strands
-    join there); at least one end is a junction. Not at the picture's border
-    (``leaving``): there, strands leaving side by side look as a crossing the border
-    cuts. The other strands must be at least as long as the stretch is wide (not the
-    scraps thinning leaves where a blob bulges), or leave the picture at their far
-    end. Each strand runs along the piece's line moved half the piece's half width to
-    its side (the middle of one of two touching cables of one width).
+    junction(s) together, however long it is. At both of its ends there is a
+    three-way junction where the two strands meet it on two sides of its line. The
+    other strands must be at least as long as the stretch is wide (not the scraps
+    thinning leaves where a blob bulges), or leave the picture at their far end. Each
+    strand runs along the piece's line moved half the piece's half width to its side
+    (the middle of one of two touching cables of one width).
 
     Parameters
     ----------
@@ -89,11 +86,15 @@ def split_touching_strands(
     for index, label in enumerate(labels):
         if label >= 0:
             members.setdefault(label, []).append(index)
-    # Only pieces with a three-way junction at an end can be shared.
+    # Only pieces with a three-way junction at both ends are looked at. A free end is
+    # not: where a cable doubled back round a tight bend ends the stretch in a tip, so
+    # does a cable segmented with its shadow (bright scenes end to end), and at the
+    # picture's border two strands leaving side by side look as a crossing the border
+    # cuts (ariadne simple/00017).
     candidates = [
         index
         for index in range(len(pieces))
-        if any(len(members.get(labels[end], ())) == 3 for end in (2 * index, 2 * index + 1))
+        if all(len(members.get(labels[end], ())) == 3 for end in (2 * index, 2 * index + 1))
     ]
     if not candidates:
         return result
@@ -110,12 +111,10 @@ def split_touching_strands(
         ends = (2 * index, 2 * index + 1)
         if {labels[end] for end in ends} & handled:
             continue
-        kinds = [
-            _end_kind(end, index, labels, members, positions, directions, leaving) for end in ends
-        ]
-        if None in kinds or not any(isinstance(kind, list) for kind in kinds):
+        kinds = [_end_kind(end, index, labels, members, positions, directions) for end in ends]
+        if None in kinds:
             continue
-        sides = [kind for kind in kinds if isinstance(kind, list)]
+        sides = kinds
         for other in (other for side in sides for other in side):
             if other // 2 not in lengths:
                 lengths[other // 2] = polyline_length(pieces[other // 2])
@@ -137,25 +136,17 @@ def split_touching_strands(
         result.origin.append(index)
         result.junction_of_end.extend([-1, -1])
         result.split.append(index)
-        for end, kind in zip(ends, kinds, strict=True):
-            left_end, right_end = end, 2 * right_index + end % 2
-            if isinstance(kind, list):
-                result.pairs.extend([(kind[0], left_end), (kind[1], right_end)])
-            elif kind == "tip":
-                result.pairs.append((left_end, right_end))
+        for end, side in zip(ends, sides, strict=True):
+            result.pairs.extend([(side[0], end), (side[1], 2 * right_index + end % 2)])
         handled |= {labels[end] for end in ends} - {-1}
     result.junction_of_end = [-1 if label in handled else label for label in result.junction_of_end]
     return result
 
 
-def _end_kind(end, index, labels, members, positions, directions, leaving):
+def _end_kind(end, index, labels, members, positions, directions):
     """What one end of piece ``index`` meets: the two other strands of a three-way
-    junction, left one first (a list); "tip"; or None (anything else)."""
+    junction, left one first; or None (anything else)."""
     label = labels[end]
-    if label < 0:
-        # At the picture's border, two strands leaving it side by side look as a
-        # crossing the border cuts (ariadne simple/00017): neither is told.
-        return None if leaving is not None and leaving[end] else "tip"
     others = [member for member in members[label] if member // 2 != index]
     if len(members[label]) != 3 or len(others) != 2:
         return None

@@ -424,24 +424,6 @@ def test_cables_touching_side_by_side_keep_their_sides_along_a_long_stretch():
     assert errors[-1] < 6.0
 
 
-def test_a_cable_doubled_back_round_a_tight_bend_is_one_chain_down_and_back():
-    """A cable 13 px wide runs east, turns round a bend too tight to leave a hole and
-    comes back west touching itself for 300 px: one chain, out along one side of the
-    stretch and back along the other. (Thinning draws one line from where the strands
-    part to the bend; without the width that line was one strand, the other another
-    chain.)"""
-    turn = np.linspace(-np.pi / 2, np.pi / 2, 30)
-    bend = [(400 + 6 * np.cos(a), 100 + 6 * np.sin(a)) for a in turn]
-    way_out, way_back = [(20, 30), (90, 94), (400, 94)], [(400, 106), (90, 106), (20, 170)]
-    mask = np.zeros((200, 500), np.uint8)
-    cv2.polylines(mask, [np.array(way_out + bend + way_back, np.int32)], False, 1, 13)
-    detection = detect(None, mask=mask > 0)
-    assert len(detection.chains) == 1
-    chain = np.asarray(detection.chains[0].points, np.float64)
-    # Within the cable's half width along both strands (the bend itself is bridged).
-    assert max(_strand_error(chain, way_out), _strand_error(chain, way_back)) < 6.5
-
-
 @pytest.mark.parametrize(("family", "seed"), [("doubled_back", 105), ("side_by_side", 103)])
 def test_touching_strands_of_generated_scenes_come_out_whole(family, seed):
     """Scenes (tuning seeds) where strands touch along a stretch: a cable doubled back
