@@ -26,7 +26,9 @@ backgrounds, for dark and bright cables together:
    colours round it (both sides, the background). Seeds on shadows cables cast, on
    transitions between their sides, and on strips whose two sides differ from each other
    more than from the strip (:func:`between_unlike_sides`: the paper's edge between
-   paper and table) are dropped.
+   paper and table), and on strips of the colour of the surface on one of their sides
+   (:func:`of_a_side_surface`: the paper between a cable and the sheet's edge) are
+   dropped.
 5. **Extent.** Every pixel near a seed is cable when its colour is nearer the seed's
    cable colour than each colour round it: the border falls half way between cable and
    background, whatever the two are, and a shadow or a blurred rim that looks more
@@ -77,6 +79,9 @@ apart), where two cables crossing cover under a quarter: the paper in the angle 
 them (whose narrow window two thick cables may fill half) is not taken for a line."""
 BACKGROUND_WINDOW = MEDIAN_SIZE * BACKGROUND_FACTOR
 WIDE_WINDOW = MEDIAN_SIZE * WIDE_FACTOR
+SIDE_SURFACE_DISTANCE = WIDE_WINDOW // 2
+"""The surface on either side of a line is the wide background this far (level px) to
+that side: the window lies beside the line, its edge on it."""
 REACH = 2.0
 """A pixel is judged against its nearest seed when that seed lies within this many level
 px: half the widest cable a level is made for (3.5 px), rounded up."""
@@ -138,6 +143,7 @@ class Level:
     step: float
     lab8: np.ndarray
     background8: np.ndarray
+    wide8: np.ndarray
     ratio: np.ndarray
     orientation: np.ndarray
 
@@ -247,6 +253,9 @@ def cable_contrast(
         lines = _without_shadows(lines, seeds, height / seeds.shape[0])
         lines = lines.take(~transitions(lines.colours))
         lines = lines.take(~between_unlike_sides(lines.colours))
+        lines = lines.take(
+            ~of_a_side_surface(lines.colours, side_surfaces((height, width), levels, lines))
+        )
         seeds = seeds.copy()
         seeds[np.nonzero(seeds)] = lines.of_grid >= 0
         check(deadline, STAGE)
@@ -280,7 +289,7 @@ def _levels(lab8: np.ndarray, steps: list[float], deadline: Deadline | None) -> 
         ratio, orientation = _cable_segmentation_kernels.level_contrast(
             small, background, wide, N_ORIENTATIONS, HALF_LENGTH, float(OFFSET), JND * JND
         )
-        levels.append(Level(step, small, background, ratio, orientation))
+        levels.append(Level(step, small, background, wide, ratio, orientation))
         check(deadline, STAGE)
     return levels
 
@@ -533,6 +542,68 @@ def between_unlike_sides(colours: np.ndarray) -> np.ndarray:
     line, one, two = (colours[:, k].astype(np.float64) for k in range(3))
     contrast = np.minimum(np.linalg.norm(line - one, axis=1), np.linalg.norm(line - two, axis=1))
     return np.linalg.norm(one - two, axis=1) > contrast
+
+
+def side_surfaces(shape: tuple[int, int], levels: list[Level], lines: SeedLines) -> np.ndarray:
+    """The colour of the surface on either side of each seed's line.
+
+    The wide background (the median over :data:`WIDE_WINDOW` level px) at
+    :data:`SIDE_SURFACE_DISTANCE` level px from the seed across its line, to the side of
+    its side one and of its side two (:func:`seed_lines`; taken at the picture's edge
+    beyond it). Its window lies beside the line, not across it: at the border of two
+    surfaces each side gets its own, where the window centred on the line may hold
+    either.
+
+    Returns
+    -------
+    ndarray of float32
+        ``(N, 2, 3)`` CIELAB.
+    """
+    height, width = shape
+    surfaces = np.zeros((lines.steps.size, 2, 3), np.float32)
+    cos_t, sin_t = np.cos(lines.angles), np.sin(lines.angles)
+    for level in levels:
+        pick = np.flatnonzero(lines.steps == level.step)
+        if pick.size == 0:
+            continue
+        level_h, level_w = level.wide8.shape[:2]
+        # The seed's own level pixel (seed_lines put the seed at its centre).
+        rows = np.round((lines.centres_y[pick] + 0.5) * level_h / height - 0.5)
+        cols = np.round((lines.centres_x[pick] + 0.5) * level_w / width - 0.5)
+        for side, sign in enumerate((1.0, -1.0)):
+            # Side one lies at (round(d cos t), round(-d sin t)) rows and columns, as in
+            # the kernels' line sides.
+            y = np.clip(rows + sign * np.round(SIDE_SURFACE_DISTANCE * cos_t[pick]), 0, level_h - 1)
+            x = np.clip(cols - sign * np.round(SIDE_SURFACE_DISTANCE * sin_t[pick]), 0, level_w - 1)
+            found = level.wide8[y.astype(np.int64), x.astype(np.int64)].astype(np.float32)
+            found[:, 0] *= 100.0 / 255.0
+            found[:, 1:] -= 128.0
+            surfaces[pick, side] = found
+    return surfaces
+
+
+def of_a_side_surface(colours: np.ndarray, surfaces: np.ndarray) -> np.ndarray:
+    """Which lines have the colour of the surface on one of their sides.
+
+    A cable differs from the surface it lies on, on both its sides. A strip of that
+    surface left between a cable and the border of another surface (the paper between a
+    cable and the sheet's edge, the paper between two cables lying side by side) differs
+    from its sides (the cable, the table) and from a background the window of which
+    straddles the border, but it is the surface on one side. A line counts as of that
+    surface when its colour is nearer the surface's colour than half its contrast with
+    the colours round it: the half-way border of :func:`_extent`, applied to the line.
+
+    Parameters
+    ----------
+    colours : ndarray
+        ``(N, 4, 3)`` CIELAB: line, side one, side two, background (:class:`SeedLines`).
+    surfaces : ndarray
+        ``(N, 2, 3)`` CIELAB: the surface on each side (:func:`side_surfaces`).
+    """
+    line = colours[:, :1].astype(np.float64)
+    contrast = np.linalg.norm(colours[:, 1:] - line, axis=2).min(axis=1)
+    nearest_surface = np.linalg.norm(surfaces - line, axis=2).min(axis=1)
+    return nearest_surface < 0.5 * contrast
 
 
 def _without_shadows(lines: SeedLines, seeds: np.ndarray, grid_step: float) -> SeedLines:

@@ -26,6 +26,7 @@ from service.perception.cable_segmentation import (
     _sparse_median,
     between_unlike_sides,
     level_steps,
+    of_a_side_surface,
     segment_cables,
 )
 from service.perception.deadline import Deadline, DeadlineExceeded
@@ -349,6 +350,50 @@ def test_between_unlike_sides_tells_a_border_strip_from_a_cable():
         np.float32,
     )
     assert between_unlike_sides(colours).tolist() == [False, True, False]
+
+
+def test_of_a_side_surface_tells_the_paper_beside_a_cable_from_a_cable():
+    paper, table, blue, black = (
+        (90.0, 0.0, 0.0),
+        (20.0, 0.0, 0.0),
+        (35.0, 10.0, -40.0),
+        (15.0, 0, 0),
+    )
+    grey = (60.0, 0.0, 0.0)
+    colours = np.array(
+        [
+            [black, paper, paper, paper],  # a cable on paper
+            [paper, blue, table, table],  # paper between a cable and the sheet's edge
+            [black, grey, paper, paper],  # a cable beside a grey one
+            [blue, paper, table, table],  # a cable along the sheet's edge
+        ],
+        np.float32,
+    )
+    surfaces = np.array(
+        [[paper, paper], [paper, table], [paper, paper], [paper, table]], np.float32
+    )
+    assert of_a_side_surface(colours, surfaces).tolist() == [False, True, False, False]
+
+
+@pytest.mark.parametrize("gap", [8, 10])
+def test_the_paper_between_a_cable_and_the_sheets_edge_is_no_cable(gap):
+    # White paper above a dark table, a blue cable 12 px wide along the paper's edge with
+    # a strip of paper ``gap`` px wide between them: the strip differs from its sides (the
+    # cable, the table) and from a background whose window straddles the edge, but it is
+    # the paper of its side. (Before: the strip was taken for a second cable.)
+    shape = (300, 400)
+    scene = plain(225, shape=shape)
+    scene[200:] = plain(45, shape=shape)[200:]
+    top = 200 - gap - 12
+    truth = np.zeros(shape, bool)
+    truth[top : top + 12, 30:370] = True
+    scene[truth] = (150, 60, 20)
+    scene[top + 2 : top + 10, 30:370] = (170, 70, 25)
+    noise = np.random.default_rng(0).normal(0.0, 2.0, scene.shape)
+    image = np.clip(scene + noise + 0.5, 0, 255).astype(np.uint8)
+    mask = segment_cables(image, 120, 60)
+    assert not mask[top + 13 : 200, 40:360].any()
+    assert dice(mask, truth) > 0.95
 
 
 @pytest.mark.parametrize(("height", "width", "factor"), [(50, 67, 4), (101, 90, 8), (64, 64, 4)])
