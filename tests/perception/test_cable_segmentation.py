@@ -25,6 +25,7 @@ from service.perception.cable_segmentation import (
     _seeds,
     _sparse_median,
     between_unlike_sides,
+    fill_slits,
     level_steps,
     of_a_side_surface,
     segment_cables,
@@ -394,6 +395,38 @@ def test_the_paper_between_a_cable_and_the_sheets_edge_is_no_cable(gap):
     mask = segment_cables(image, 120, 60)
     assert not mask[top + 13 : 200, 40:360].any()
     assert dice(mask, truth) > 0.95
+
+
+def test_fill_slits_fills_thin_enclosed_gaps_only():
+    mask = np.zeros((60, 80), bool)
+    mask[10:24, 5:75] = True
+    mask[16:18, 15:65] = False  # a slit 2 px wide along the band: filled
+    mask[30:50, 5:75] = True
+    mask[36:44, 15:65] = False  # a gap 8 px wide: background seen between two bands
+    mask[52:60, 5:75] = True
+    mask[55:57, 0:40] = False  # a slit open to the picture's border: left
+    filled = fill_slits(mask)
+    assert filled[16:18, 15:65].all()
+    assert not filled[36:44, 15:65].any()
+    assert not filled[55:57, 0:40].any()
+    assert (filled & ~mask).sum() == 2 * 50
+
+
+def test_a_highlight_along_a_round_cable_is_part_of_it():
+    # A grey cable on white paper with a highlight 2 px wide along its middle, nearer the
+    # paper's colour than the cable's: the colour test leaves it out, a slit between the
+    # cable's two halves. (Before: 560 px of the cable missing, foreground DICE 0.92.)
+    shape = (300, 400)
+    scene = plain(220, shape=shape)
+    truth = np.zeros(shape, bool)
+    truth[143:157, 20:380] = True
+    scene[truth] = (70, 72, 75)
+    scene[149:151, 60:340] = (190, 192, 195)
+    noise = np.random.default_rng(0).normal(0.0, 2.0, scene.shape)
+    image = np.clip(scene + noise + 0.5, 0, 255).astype(np.uint8)
+    mask = segment_cables(image, 120, 60)
+    assert mask[149:151, 60:340].all()
+    assert dice(mask, truth) > 0.97
 
 
 @pytest.mark.parametrize(("height", "width", "factor"), [(50, 67, 4), (101, 90, 8), (64, 64, 4)])
