@@ -430,9 +430,17 @@ class SeedLines:
     of_grid: np.ndarray
 
     def take(self, keep: np.ndarray) -> SeedLines:
-        """The seeds where ``keep``; ``of_grid`` is -1 for the grid seeds of the others."""
+        """The seeds where ``keep``; ``of_grid`` is -1 for the grid seeds of the others.
+
+        A grid seed dropped before (-1) stays dropped: -1 is not an index here (as an
+        index it would be the last line's, and bring the seed back as that line's).
+        """
         renumber = np.cumsum(keep) - 1
-        of_grid = np.where(keep[self.of_grid], renumber[self.of_grid], -1)
+        if keep.size == 0:
+            of_grid = np.full_like(self.of_grid, -1)
+        else:
+            line = np.maximum(self.of_grid, 0)
+            of_grid = np.where((self.of_grid >= 0) & keep[line], renumber[line], -1)
         return SeedLines(
             self.centres_y[keep],
             self.centres_x[keep],

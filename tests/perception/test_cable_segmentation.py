@@ -21,6 +21,7 @@ from service.perception.cable_segmentation import (
     OFFSET,
     REACH,
     WIDE_WINDOW,
+    SeedLines,
     _on_grid,
     _seeds,
     _sparse_median,
@@ -395,6 +396,21 @@ def test_the_paper_between_a_cable_and_the_sheets_edge_is_no_cable(gap):
     mask = segment_cables(image, 120, 60)
     assert not mask[top + 13 : 200, 40:360].any()
     assert dice(mask, truth) > 0.95
+
+
+def test_a_seed_dropped_once_stays_dropped():
+    # Each filter drops seeds with SeedLines.take; a grid seed dropped by one filter
+    # (-1) must not come back as the last line's seed in the next. (Before: -1 was used
+    # as an index, and the seed took the last line's index whenever that line was kept.)
+    values = np.arange(3, dtype=np.float64)
+    lines = SeedLines(
+        values, values, values, values, np.zeros((3, 4, 3), np.float32), np.array([0, 1, 2, 1])
+    )
+    first = lines.take(np.array([True, False, True]))
+    assert first.of_grid.tolist() == [0, -1, 1, -1]
+    assert first.take(np.array([True, True])).of_grid.tolist() == [0, -1, 1, -1]
+    assert first.take(np.array([False, True])).of_grid.tolist() == [-1, -1, 0, -1]
+    assert first.take(np.array([False, False])).take(np.zeros(0, bool)).of_grid.tolist() == [-1] * 4
 
 
 def test_fill_slits_fills_thin_enclosed_gaps_only():
