@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from service.perception import Tracker, warm_up
-from service.perception.track_identity import Candidate, Continuation, revived_joints
+from service.perception.track_identity import Candidate, Continuation, orientation, revived_joints
 from service.perception.track_matching import Chains, Fit, Piece, arcs_of, fit_pieces
 from service.perception.track_merging import joins
 from service.perception.track_motion import motion
@@ -236,3 +236,29 @@ def test_a_join_onto_a_track_as_long_as_its_cable_moves_it_along():
     # Not known, it grows there.
     grown = _extended(replace(track, length_known=False), Continuation(0, 0, 2, beyond, True), 0.0)
     assert len(grown.joints) == 24 and grown.first_joint == -3
+
+
+def curved(count, turn=0.01):
+    """A cable ``STEP`` apart whose bending grows along it (a shape with no symmetry)."""
+    headings = turn * np.arange(count - 1) ** 1.5
+    steps = STEP * np.column_stack([np.cos(headings), np.sin(headings)])
+    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)]) + np.array([100.0, 100.0])
+
+
+def test_a_cable_back_without_a_free_end_is_laid_where_its_shape_fits():
+    # A remembered cable of 30 joints comes back turned and moved, showing only joints
+    # 12 to 24 (both ends outside the picture): no free end to go by.
+    old = curved(30)
+    angle = 0.3
+    rotation = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    now = old @ rotation.T + [60.0, 25.0]
+    shown = Candidate(now[12:25], (False, False), 4.0, None)
+    ends = (old[0], old[-1])
+    assert orientation(shown, old, (True, True), ends, (0.0, 0.0))
+    reversed_shown = replace(shown, joints=shown.joints[::-1].copy())
+    assert not orientation(reversed_shown, old, (True, True), ends, (0.0, 0.0))
+    joints = revived_joints(old, shown, first_is_head=True, step=STEP)
+    # Its joints 12 .. 24 on the stretch shown, the rest carried along with it.
+    assert len(joints) == 30
+    np.testing.assert_allclose(joints[12:25], now[12:25], atol=0.5)
+    np.testing.assert_allclose(joints[[0, -1]], now[[0, -1]], atol=1.0)
