@@ -26,13 +26,17 @@ backgrounds, for dark and bright cables together:
    colours round it (both sides, the background). Seeds on shadows cables cast, on
    transitions between their sides, and on strips whose two sides differ from each other
    more than from the strip (:func:`between_unlike_sides`: the paper's edge between
-   paper and table) are dropped.
+   paper and table), and on strips of the colour of the surface on one of their sides
+   (:func:`of_a_side_surface`: the paper between a cable and the sheet's edge) are
+   dropped.
 5. **Extent.** Every pixel near a seed is cable when its colour is nearer the seed's
    cable colour than each colour round it: the border falls half way between cable and
    background, whatever the two are, and a shadow or a blurred rim that looks more
    like the paper than like the cable stays out.
-6. **Shape.** Components that are not cable-like are dropped (:func:`keep_cable_like`):
-   compact blobs, and strokes much thinner than the typical cable of the picture.
+6. **Shape.** Slits the mask encloses (:func:`fill_slits`: the highlight along a round
+   cable, lighter than its colour) are filled; components that are not cable-like are
+   dropped (:func:`keep_cable_like`): compact blobs, and strokes much thinner than the
+   typical cable of the picture.
 
 Every threshold comes from the cable model or from perception, not from a data set:
 a just noticeable colour difference (:data:`JND`), a three-sigma line (:data:`MIN_RATIO`),
@@ -77,6 +81,9 @@ apart), where two cables crossing cover under a quarter: the paper in the angle 
 them (whose narrow window two thick cables may fill half) is not taken for a line."""
 BACKGROUND_WINDOW = MEDIAN_SIZE * BACKGROUND_FACTOR
 WIDE_WINDOW = MEDIAN_SIZE * WIDE_FACTOR
+SIDE_SURFACE_DISTANCE = WIDE_WINDOW // 2
+"""The surface on either side of a line is the wide background this far (level px) to
+that side: the window lies beside the line, its edge on it."""
 REACH = 2.0
 """A pixel is judged against its nearest seed when that seed lies within this many level
 px: half the widest cable a level is made for (3.5 px), rounded up."""
@@ -129,6 +136,9 @@ cables 2.5 to 3.5 px wide."""
 MIN_ELONGATION = 3.0
 """A component is at least this many of its widths long (by the measure of
 :func:`keep_cable_like`, a disc or a square is 2.3 widths long)."""
+SLIT_HALF_WIDTH = 1.5
+"""An enclosed gap none of whose pixels lies farther than this (px) from the mask, at most
+2 px wide, is a slit in a cable (:func:`fill_slits`)."""
 
 
 @dataclass(frozen=True)
@@ -138,6 +148,7 @@ class Level:
     step: float
     lab8: np.ndarray
     background8: np.ndarray
+    wide8: np.ndarray
     ratio: np.ndarray
     orientation: np.ndarray
 
@@ -247,6 +258,9 @@ def cable_contrast(
         lines = _without_shadows(lines, seeds, height / seeds.shape[0])
         lines = lines.take(~transitions(lines.colours))
         lines = lines.take(~between_unlike_sides(lines.colours))
+        lines = lines.take(
+            ~of_a_side_surface(lines.colours, side_surfaces((height, width), levels, lines))
+        )
         seeds = seeds.copy()
         seeds[np.nonzero(seeds)] = lines.of_grid >= 0
         check(deadline, STAGE)
@@ -265,7 +279,7 @@ def cable_contrast(
             int(min_component_area),
             int(max_hole_area),
         ).view(np.bool_)
-        mask = keep_cable_like(mask)
+        mask = keep_cable_like(fill_slits(mask))
     return CableContrast(mask, ratio, best_level, seeds, levels, used)
 
 
@@ -280,7 +294,7 @@ def _levels(lab8: np.ndarray, steps: list[float], deadline: Deadline | None) -> 
         ratio, orientation = _cable_segmentation_kernels.level_contrast(
             small, background, wide, N_ORIENTATIONS, HALF_LENGTH, float(OFFSET), JND * JND
         )
-        levels.append(Level(step, small, background, ratio, orientation))
+        levels.append(Level(step, small, background, wide, ratio, orientation))
         check(deadline, STAGE)
     return levels
 
@@ -416,9 +430,17 @@ class SeedLines:
     of_grid: np.ndarray
 
     def take(self, keep: np.ndarray) -> SeedLines:
-        """The seeds where ``keep``; ``of_grid`` is -1 for the grid seeds of the others."""
+        """The seeds where ``keep``; ``of_grid`` is -1 for the grid seeds of the others.
+
+        A grid seed dropped before (-1) stays dropped: -1 is not an index here (as an
+        index it would be the last line's, and bring the seed back as that line's).
+        """
         renumber = np.cumsum(keep) - 1
-        of_grid = np.where(keep[self.of_grid], renumber[self.of_grid], -1)
+        if keep.size == 0:
+            of_grid = np.full_like(self.of_grid, -1)
+        else:
+            line = np.maximum(self.of_grid, 0)
+            of_grid = np.where((self.of_grid >= 0) & keep[line], renumber[line], -1)
         return SeedLines(
             self.centres_y[keep],
             self.centres_x[keep],
@@ -535,6 +557,68 @@ def between_unlike_sides(colours: np.ndarray) -> np.ndarray:
     return np.linalg.norm(one - two, axis=1) > contrast
 
 
+def side_surfaces(shape: tuple[int, int], levels: list[Level], lines: SeedLines) -> np.ndarray:
+    """The colour of the surface on either side of each seed's line.
+
+    The wide background (the median over :data:`WIDE_WINDOW` level px) at
+    :data:`SIDE_SURFACE_DISTANCE` level px from the seed across its line, to the side of
+    its side one and of its side two (:func:`seed_lines`; taken at the picture's edge
+    beyond it). Its window lies beside the line, not across it: at the border of two
+    surfaces each side gets its own, where the window centred on the line may hold
+    either.
+
+    Returns
+    -------
+    ndarray of float32
+        ``(N, 2, 3)`` CIELAB.
+    """
+    height, width = shape
+    surfaces = np.zeros((lines.steps.size, 2, 3), np.float32)
+    cos_t, sin_t = np.cos(lines.angles), np.sin(lines.angles)
+    for level in levels:
+        pick = np.flatnonzero(lines.steps == level.step)
+        if pick.size == 0:
+            continue
+        level_h, level_w = level.wide8.shape[:2]
+        # The seed's own level pixel (seed_lines put the seed at its centre).
+        rows = np.round((lines.centres_y[pick] + 0.5) * level_h / height - 0.5)
+        cols = np.round((lines.centres_x[pick] + 0.5) * level_w / width - 0.5)
+        for side, sign in enumerate((1.0, -1.0)):
+            # Side one lies at (round(d cos t), round(-d sin t)) rows and columns, as in
+            # the kernels' line sides.
+            y = np.clip(rows + sign * np.round(SIDE_SURFACE_DISTANCE * cos_t[pick]), 0, level_h - 1)
+            x = np.clip(cols - sign * np.round(SIDE_SURFACE_DISTANCE * sin_t[pick]), 0, level_w - 1)
+            found = level.wide8[y.astype(np.int64), x.astype(np.int64)].astype(np.float32)
+            found[:, 0] *= 100.0 / 255.0
+            found[:, 1:] -= 128.0
+            surfaces[pick, side] = found
+    return surfaces
+
+
+def of_a_side_surface(colours: np.ndarray, surfaces: np.ndarray) -> np.ndarray:
+    """Which lines have the colour of the surface on one of their sides.
+
+    A cable differs from the surface it lies on, on both its sides. A strip of that
+    surface left between a cable and the border of another surface (the paper between a
+    cable and the sheet's edge, the paper between two cables lying side by side) differs
+    from its sides (the cable, the table) and from a background the window of which
+    straddles the border, but it is the surface on one side. A line counts as of that
+    surface when its colour is nearer the surface's colour than half its contrast with
+    the colours round it: the half-way border of :func:`_extent`, applied to the line.
+
+    Parameters
+    ----------
+    colours : ndarray
+        ``(N, 4, 3)`` CIELAB: line, side one, side two, background (:class:`SeedLines`).
+    surfaces : ndarray
+        ``(N, 2, 3)`` CIELAB: the surface on each side (:func:`side_surfaces`).
+    """
+    line = colours[:, :1].astype(np.float64)
+    contrast = np.linalg.norm(colours[:, 1:] - line, axis=2).min(axis=1)
+    nearest_surface = np.linalg.norm(surfaces - line, axis=2).min(axis=1)
+    return nearest_surface < 0.5 * contrast
+
+
 def _without_shadows(lines: SeedLines, seeds: np.ndarray, grid_step: float) -> SeedLines:
     """The seeds less the shadows cables cast: shadow-coloured lines (:func:`shadow_coloured`)
     within :data:`SHADOW_REACH` of their own widths of a line that is not.
@@ -597,6 +681,41 @@ def _extent(lab8: np.ndarray, lines: SeedLines, seeds: np.ndarray) -> np.ndarray
         float(OFFSET),
         lines.colours,
     )
+
+
+def fill_slits(mask: np.ndarray) -> np.ndarray:
+    """Fill the thin gaps the mask encloses: background components that do not touch the
+    picture's border and that a closing by a 3 x 3 square fills whole (gaps at most 2 px
+    wide, every pixel of them within :data:`SLIT_HALF_WIDTH` px of the mask).
+
+    A round cable under a lamp has a highlight along its middle, lighter than its own
+    colour: on white paper nearer the paper than the cable, so the colour test of
+    :func:`_extent` leaves a slit between the cable's two halves, whatever its length.
+    Background that the mask encloses (inside a loop, between two crossing or touching
+    cables) widens away from where the cables meet, and holds pixels the closing leaves
+    open; a gap that stays within a pixel and a half of the mask all along is the cable's
+    own.
+    """
+    solid = mask.view(np.uint8)
+    closed = cv2.morphologyEx(solid, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    gaps = cv2.subtract(closed, solid)
+    points = cv2.findNonZero(gaps)
+    if points is None:
+        return mask
+    count, labels = cv2.connectedComponents(gaps, connectivity=4)
+    # A gap is part of a wider background component when it touches (4-connected)
+    # background the closing left open, or the picture's border.
+    open_background = np.pad(cv2.bitwise_or(solid, gaps) == 0, 1, constant_values=True)
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    reached = cv2.dilate(open_background.view(np.uint8), cross)[1:-1, 1:-1]
+    xs, ys = points.reshape(-1, 2).T
+    gap_labels = labels[ys, xs]
+    leaks = np.zeros(count, bool)
+    leaks[gap_labels[reached[ys, xs] > 0]] = True
+    slit = ~leaks[gap_labels]
+    filled = mask.copy()
+    filled[ys[slit], xs[slit]] = True
+    return filled
 
 
 def keep_cable_like(mask: np.ndarray) -> np.ndarray:

@@ -263,6 +263,8 @@ def orientation(
     knows exactly one, they pair. Otherwise by shape: the candidate laid rigidly
     (turned and moved) onto the track's joints from either end, the way that fits
     clearly better (a cable keeps its shape while it is out of view, more or less).
+    A candidate without a free end may show any stretch of the cable: it is laid along
+    the track at every offset, and the best fit counts.
     When the shape cannot tell (a nearly straight cable): with one free end in view,
     that end is the track's end seen last (a cable comes back through an edge with the
     end that left last; ties go by distance); otherwise the pairing of the ends that
@@ -272,7 +274,11 @@ def orientation(
         return candidate.tips[0] == track_tips[0]
     fits = []
     for first_is_head in (True, False):
-        fits.append(_shape_misfit(candidate, track_joints, first_is_head))
+        if candidate.tips[0] or candidate.tips[1]:
+            fits.append(_shape_misfit(candidate, track_joints, first_is_head))
+        else:  # a stretch from anywhere along the cable (between edges, say)
+            seen = candidate.joints if first_is_head else candidate.joints[::-1]
+            fits.append(_sliding_misfit(seen, track_joints)[0])
     better, worse = sorted(fits)
     if worse > SHAPE_MARGIN * better + 1.0:
         return fits[0] <= fits[1]
@@ -290,6 +296,36 @@ def orientation(
     return straight <= crossed
 
 
+def _rigid_misfit(a: np.ndarray, b: np.ndarray) -> float:
+    """RMS distance (px) between two point lists laid rigidly (turned and moved) on each
+    other."""
+    a0, b0 = a - a.mean(axis=0), b - b.mean(axis=0)
+    angle = math.atan2(
+        float((a0[:, 0] * b0[:, 1] - a0[:, 1] * b0[:, 0]).sum()), float((a0 * b0).sum())
+    )
+    c, s = math.cos(angle), math.sin(angle)
+    laid = a0 @ np.array([[c, -s], [s, c]]).T
+    return float(np.sqrt(((laid - b0) ** 2).sum(axis=1).mean()))
+
+
+def _sliding_misfit(seen: np.ndarray, track_joints: np.ndarray) -> tuple[float, int]:
+    """The best rigid misfit (px) of ``seen`` laid along the track from each of its
+    joints on (joint ``i`` of ``seen`` on joint ``k + i`` of the track), and that ``k``;
+    0 where the shape cannot tell (no offset fits clearly better than from the track's
+    first joint)."""
+    count = min(len(seen), len(track_joints))
+    if count < 3:
+        return 0.0, 0
+    misfits = [
+        _rigid_misfit(track_joints[k : k + count], seen[:count])
+        for k in range(len(track_joints) - count + 1)
+    ]
+    best = int(np.argmin(misfits))
+    if misfits[0] <= SHAPE_MARGIN * misfits[best] + 1.0:
+        return misfits[best], 0
+    return misfits[best], best
+
+
 def _shape_misfit(candidate: Candidate, track_joints: np.ndarray, first_is_head: bool) -> float:
     """RMS distance (px) between the candidate's joints and the track's, laid rigidly on
     each other from one end: the candidate's free end when it has exactly one (it may
@@ -302,14 +338,7 @@ def _shape_misfit(candidate: Candidate, track_joints: np.ndarray, first_is_head:
     count = min(len(seen), len(track))
     if count < 3:
         return 0.0
-    a, b = track[:count], seen[:count]
-    a0, b0 = a - a.mean(axis=0), b - b.mean(axis=0)
-    angle = math.atan2(
-        float((a0[:, 0] * b0[:, 1] - a0[:, 1] * b0[:, 0]).sum()), float((a0 * b0).sum())
-    )
-    c, s = math.cos(angle), math.sin(angle)
-    laid = a0 @ np.array([[c, -s], [s, c]]).T
-    return float(np.sqrt(((laid - b0) ** 2).sum(axis=1).mean()))
+    return _rigid_misfit(track[:count], seen[:count])
 
 
 def revived_joints(
@@ -320,13 +349,21 @@ def revived_joints(
     The joints from the matching end follow the candidate; the rest keep the track's old
     shape, moved rigidly to join on (they are outside the picture or hidden). The
     matching end is the track's end the candidate's free end is, when it shows exactly
-    one (the other end of the candidate may be the picture's edge, mid-cable), else the
-    track's first end.
+    one (the other end of the candidate may be the picture's edge, mid-cable). One that
+    shows no free end is laid where along the track its shape fits best
+    (:func:`_sliding_misfit`), else from the track's first end.
     """
     seen = candidate.joints if first_is_head else candidate.joints[::-1]
     tips = candidate.tips if first_is_head else candidate.tips[::-1]
     if tips[1] and not tips[0]:  # the candidate shows the track's last end
         return _laid_from_first(old[::-1], seen[::-1], step)[::-1]
+    if not tips[0] and (offset := _sliding_misfit(seen, old)[1]) > 0:
+        # From joint ``offset`` on along the candidate; the joints before it keep their
+        # shape, moved rigidly to join on.
+        laid = _laid_from_first(old[offset:], seen, step)
+        reference = slice(0, min(6, len(laid)))
+        head = _rigidly(old[:offset], old[offset:][reference], laid[reference])
+        return np.vstack([head, laid])
     return _laid_from_first(old, seen, step)
 
 
@@ -345,15 +382,19 @@ def _laid_from_first(old: np.ndarray, seen: np.ndarray, step: float) -> np.ndarr
     if count == n:
         return placed
     reference = slice(max(count - 6, 0), count)
-    source, target = old[reference], placed[reference]
+    joints[:count] = placed
+    joints[count:] = _rigidly(old[count:], old[reference], placed[reference])
+    return joints
+
+
+def _rigidly(points: np.ndarray, source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """``points`` turned and moved as the rigid motion taking ``source`` onto ``target``
+    (least squares)."""
     source_mean, target_mean = source.mean(axis=0), target.mean(axis=0)
     a, b = source - source_mean, target - target_mean
     angle = math.atan2(float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum()), float((a * b).sum()))
     c, s = math.cos(angle), math.sin(angle)
-    rest = (old[count:] - source_mean) @ np.array([[c, -s], [s, c]]).T + target_mean
-    joints[:count] = placed
-    joints[count:] = rest
-    return joints
+    return (points - source_mean) @ np.array([[c, -s], [s, c]]).T + target_mean
 
 
 def _overlap(points: np.ndarray, polyline: np.ndarray, gate: float) -> float:

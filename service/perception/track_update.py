@@ -79,6 +79,9 @@ class Observation:
         Whether a free end of the cable was seen at each end of the track this frame.
     free_end_points : (2, 2) ndarray
         Where (px), NaN where none was seen.
+    length_known : bool
+        Both free ends were seen this frame, as far apart along the cable as the track's
+        ends (within :data:`TIP_TOLERANCE` segments): the track is as long as its cable.
     """
 
     targets: np.ndarray
@@ -89,6 +92,7 @@ class Observation:
     slide: float = 0.0
     free_ends: tuple[bool, bool] = (False, False)
     free_end_points: np.ndarray = field(default_factory=lambda: np.full((2, 2), np.nan))
+    length_known: bool = False
 
 
 def observe(
@@ -99,6 +103,7 @@ def observe(
     claimed: np.ndarray,
     chain_of_piece: list[tuple[int, int, int]],
     moving_tips: tuple[bool, bool] = (False, False),
+    length_known: bool = False,
 ) -> Observation:
     """The targets the fitted pieces give a track's joints, and how its ends grow.
 
@@ -128,12 +133,15 @@ def observe(
         velocity is not known yet (just begun or back): the cable seen beyond it then is
         the cable moving along itself, not more cable (which only an end that was hidden
         could show), so it does not grow there.
+    length_known : bool
+        Whether the track is known to be as long as its cable (both its free ends were
+        seen at once, :attr:`Observation.length_known`): it then never grows (a cable
+        does not stretch): cable seen going on beyond one end is the track slid the
+        other way, and moves it back (a share of the way per frame).
     """
     step = chains.step
     n = len(joints)
     total = (n - 1) * step
-    sums = np.zeros((n, 2))
-    weights = np.zeros(n)
     new_tips = list(tips)
     placed = []
     for piece, fit in fitted:
@@ -152,7 +160,7 @@ def observe(
     # over its body.
     limit = _slide_limit(joints, placed, step)
     going_out = _going_out(joints, placed, chains)
-    slide = _slide(placed, total, step, going_out)
+    slide = _slide(placed, total, step, going_out, _chain_tips(joints, placed, chains))
     if not slide.whole:  # a whole cable's two ends outweigh its body (a bend may travel)
         slide = replace(slide, shift=float(np.clip(slide.shift, -limit, limit)))
     for end in (0, 1):
@@ -160,11 +168,56 @@ def observe(
             new_tips[end] = True
     # The piece reaching furthest towards each end: the cable may go on beyond that end
     # along the piece's chain.
+    sums, weights, reach_source = _laid(placed, slide.shift, n, step)
+    growth = []
+    for end in (0, 1):
+        source = reach_source[end]
+        points = np.empty((0, 2))
+        if source is not None:
+            piece, sign, offset = source
+            points, reached_tip = _grow(
+                piece, sign, offset, end, total, chains, claimed, chain_of_piece, tips[end]
+            )
+            if tips[end] and (len(points) < TIP_GROWTH or moving_tips[end]):
+                points = np.empty((0, 2))  # a tip seen a little further out: not more cable
+            if len(points) and not length_known:
+                new_tips[end] = reached_tip
+        growth.append(points)
+    shift = slide.shift
+    if length_known:
+        # A track as long as its cable never grows: cable seen going on beyond one of
+        # its ends is the track slid along the cable, the other way.
+        if (len(growth[0]) > 0) != (len(growth[1]) > 0):
+            shift += TIP_GAIN * step * (len(growth[0]) - len(growth[1]))
+            sums, weights, _ = _laid(placed, shift, n, step)
+        growth = [np.empty((0, 2)), np.empty((0, 2))]
+    covered = weights > 0
+    targets = joints.copy()
+    targets[covered] = sums[covered] / weights[covered, None]
+    return Observation(
+        targets=targets,
+        covered=covered,
+        tips=(new_tips[0], new_tips[1]),
+        head_growth=growth[0],
+        tail_growth=growth[1],
+        slide=shift,
+        free_ends=slide.tips,
+        free_end_points=slide.points,
+        length_known=slide.exact,
+    )
+
+
+def _laid(placed, shift: float, n: int, step: float):
+    """The pieces laid along a track of ``n`` joints, each offset moved on by ``shift``:
+    per joint the sum of the targets they give and their count, and per end the piece
+    reaching furthest that way as ``(piece, sign, offset)`` (None: no piece)."""
+    sums = np.zeros((n, 2))
+    weights = np.zeros(n)
     reach = [np.inf, -np.inf]
     reach_source: list[tuple[Piece, int, float] | None] = [None, None]
     track_arc = np.arange(n) * step
     for piece, sign, offset, arcs in placed:
-        offset += slide.shift
+        offset += shift
         u = sign * (track_arc - offset)
         inside = np.flatnonzero((u >= 0.0) & (u <= arcs[-1]))
         if len(inside):
@@ -182,33 +235,7 @@ def observe(
         if max(lo, hi) > reach[1]:
             reach[1] = max(lo, hi)
             reach_source[1] = (piece, sign, offset)
-    covered = weights > 0
-    targets = joints.copy()
-    targets[covered] = sums[covered] / weights[covered, None]
-    growth = []
-    for end in (0, 1):
-        source = reach_source[end]
-        points = np.empty((0, 2))
-        if source is not None:
-            piece, sign, offset = source
-            points, reached_tip = _grow(
-                piece, sign, offset, end, total, chains, claimed, chain_of_piece, tips[end]
-            )
-            if tips[end] and (len(points) < TIP_GROWTH or moving_tips[end]):
-                points = np.empty((0, 2))  # a tip seen a little further out: not more cable
-            if len(points):
-                new_tips[end] = reached_tip
-        growth.append(points)
-    return Observation(
-        targets=targets,
-        covered=covered,
-        tips=(new_tips[0], new_tips[1]),
-        head_growth=growth[0],
-        tail_growth=growth[1],
-        slide=slide.shift,
-        free_ends=slide.tips,
-        free_end_points=slide.points,
-    )
+    return sums, weights, reach_source
 
 
 @dataclass(frozen=True)
@@ -218,11 +245,14 @@ class _Slide:
 
     shift: float = 0.0
     tips: tuple[bool, bool] = (False, False)
-    whole: bool = False  # both ends seen, agreeing on the cable's length
+    whole: bool = False  # both ends seen, the cable not clearly shorter than the track
+    exact: bool = False  # both ends seen, the cable as long as the track
     points: np.ndarray = field(default_factory=lambda: np.full((2, 2), np.nan))
 
 
-def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Slide:
+def _slide(
+    placed, total: float, step: float, outside: tuple[bool, bool], chain_tips=None
+) -> _Slide:
     """The slide along the cable that the free ends in view show.
 
     A stretch of cable looks the same slid along itself, so the body's registration
@@ -234,7 +264,9 @@ def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Sl
     that went in
     is taken for one hidden under something (an occluder hides, it never adds) unless the
     track's other end is outside the picture (where the cable can go on), and the one
-    that went out (or stayed) tells the slide.
+    that went out (or stayed) tells the slide. ``chain_tips``: per end, the free ends
+    of the detected chains beyond the pieces (:func:`_chain_tips`), for an end no
+    piece's free end shows.
     """
     tolerance = TIP_TOLERANCE * step
     window = TIP_WINDOW * step
@@ -250,6 +282,13 @@ def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Sl
                 seen[0].append((-s_tip, -s_tip, x, y))
             elif abs(s_tip - total) <= window and s_tip > 0.5 * total:
                 seen[1].append((s_tip - total, total - s_tip, x, y))
+    for end in (0, 1):
+        if not seen[end] and chain_tips is not None:
+            for s_tip, x, y in chain_tips[end]:
+                if end == 0:
+                    seen[0].append((-s_tip, -s_tip, x, y))
+                else:
+                    seen[1].append((s_tip - total, total - s_tip, x, y))
     outward = [max(found)[0] if found else None for found in seen]
     change = [max(found)[1] if found else None for found in seen]
     points = np.array([max(found)[2:] if found else (np.nan, np.nan) for found in seen])
@@ -258,7 +297,8 @@ def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Sl
     if outward[0] is not None and outward[1] is not None:
         if outward[0] + outward[1] >= -tolerance:  # not much shorter: both are real ends
             shift = TIP_GAIN * 0.5 * (change[0] + change[1])
-            return _Slide(shift, tips, whole=True, points=points)
+            exact = abs(outward[0] + outward[1]) <= tolerance
+            return _Slide(shift, tips, whole=True, exact=exact, points=points)
         end = 0 if outward[0] > outward[1] else 1  # the other one is hidden
     elif outward[0] is not None:
         end = 0
@@ -269,6 +309,67 @@ def _slide(placed, total: float, step: float, outside: tuple[bool, bool]) -> _Sl
     if outward[end] < -inward and not outside[1 - end]:
         return _Slide(0.0, tips, points=points)  # went in: hidden, more likely than slid
     return _Slide(TIP_GAIN * change[end], tips, points=points)
+
+
+def _chain_tips(joints, placed, chains):
+    """Free ends of the detected chains beyond the pieces, lying on the track's ends.
+
+    A piece stops short of its chain's end where the chain runs near another one (a
+    crossing, a touching cable) or changes colour; the chain may still end there at the
+    cable's free end. Such an end counts as one seen when the chain is sure of the
+    stretch from the piece on (no inferred segment, no change of colour), the end is
+    clear of the picture's edge and within :data:`TIP_TOLERANCE` segments of the track's
+    end along the piece's registration, and every joint of that stretch lies on the
+    track as predicted (within the cable's radius and half a segment): it is the track's
+    own cable ending, not another cable that the detection joined on at a crossing.
+
+    Returns, per end of the track, a list of ``(s_tip, x, y)``: the track arc (px) the
+    free end lies at, and where it is.
+    """
+    step = chains.step
+    total = (len(joints) - 1) * step
+    tolerance = TIP_TOLERANCE * step
+    found: list[list[tuple[float, float, float]]] = [[], []]
+    # The track, straight on beyond its ends as far as an end may have slid.
+    heads = joints[[0, -1]] - joints[[1, -2]]
+    heads *= tolerance / np.maximum(np.linalg.norm(heads, axis=1), 1e-12)[:, None]
+    extended = np.vstack([joints[:1] + heads[:1], joints, joints[-1:] + heads[1:]])
+    for piece, sign, offset, _ in placed:
+        index = piece.chain
+        arcs = chains.arcs[index]
+        points = chains.joints[index]
+        inferred = chains.inferred[index]
+        breaks = chains.colour_breaks[index]
+        last = len(points) - 1
+        base = arcs[piece.first]
+        for chain_end, stretch in ((0, slice(0, piece.first)), (last, slice(piece.last, last))):
+            if stretch.start == stretch.stop:
+                continue  # the piece reaches it: its own tip flag says
+            if inferred[stretch].any() or breaks[stretch].any():
+                continue
+            radius = chains.radii[index]
+            if not clear_of_edge(points[chain_end], radius, chains.width, chains.height):
+                continue
+            s_tip = sign * (float(arcs[chain_end]) - base) + offset
+            end = 0 if abs(s_tip) <= tolerance else 1 if abs(s_tip - total) <= tolerance else None
+            if end is None:
+                continue
+            beyond = points[stretch.start : stretch.stop + 1]
+            reach = radius + 0.5 * step
+            if _distance_to_polyline(beyond, extended).max() > reach:
+                continue
+            found[end].append((s_tip, *points[chain_end]))
+    return found
+
+
+def _distance_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
+    """Each point's distance from a polyline (its nearest segment)."""
+    a = polyline[:-1]
+    ab = polyline[1:] - a
+    ap = points[:, None, :] - a[None, :, :]
+    t = np.clip((ap * ab).sum(axis=2) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0.0, 1.0)
+    gap = ap - t[:, :, None] * ab[None, :, :]
+    return np.sqrt((gap * gap).sum(axis=2)).min(axis=1)
 
 
 def _grow(piece, sign, offset, end, total, chains, claimed, chain_of_piece, at_tip):

@@ -58,6 +58,7 @@ from service.perception.track_identity import (
 )
 from service.perception.track_matching import Chains, Piece, detection_pieces, fit_pieces
 from service.perception.track_merging import Bridge, Join, bridges, joins
+from service.perception.track_motion import motion, tangents
 from service.perception.track_update import Observation, exact_chain, observe, register
 
 VELOCITY_SMOOTHING = 0.5
@@ -66,11 +67,6 @@ COLOUR_SMOOTHING = 0.1
 """Weight of this frame's colour in a track's colour."""
 UNSEEN_DAMPING = 0.7
 """A track not seen in a frame keeps this share of its velocity."""
-VELOCITY_KERNEL = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
-"""Weights of a joint's velocity and its neighbours' (two each side)."""
-RIDGE = 0.02
-"""How strongly the rigid motion fitted to a cable's cross-cable displacements is kept
-small (relative to the data): enough to leave a straight cable's slide at zero."""
 MAX_STEP_S = 10.0
 STEADY_FRAMES = 3
 """Frames a track must have been seen in a row before its velocity narrows its search."""
@@ -111,6 +107,12 @@ class TrackRecord:
     seen : (N,) bool ndarray or None
         Which joints a piece of the detection placed, the last frame it was seen (None:
         all of them).
+    free_end_points : (2, 2) ndarray or None
+        Where each end's free end was seen the last frame (NaN: not seen).
+    length_known : bool
+        Both free ends of the cable were once seen in one frame, as far apart as the
+        track's ends: it is as long as its cable, and never grows (cable seen beyond
+        one end moves it along instead).
     """
 
     id: int
@@ -129,6 +131,7 @@ class TrackRecord:
     steady: int = 0  # frames seen in a row since it began or came back (its velocity known)
     seen: np.ndarray | None = None  # (N,) bool: joints seen in the last frame it was seen
     free_end_points: np.ndarray | None = None  # (2, 2): free ends seen last frame (NaN: not)
+    length_known: bool = False  # both free ends once seen at once, as far apart as its ends
 
     @property
     def length(self) -> float:
@@ -274,6 +277,7 @@ def advance(
             taken,
             chain_of_piece,
             _moving_tips(track),
+            track.length_known,
         )
         seen_colour = chains.colour_of([piece for piece, _ in fitted])
         tracks.append(
@@ -508,10 +512,10 @@ def _moved(
             for end, grown in ((0, len(head)), (1, len(tail))):
                 if not grown and np.all(np.isfinite(moved[end])):
                     pinned.append((0 if end == 0 else len(previous) - 1, moved[end]))
-        tangents = _tangents(joints)
-        measured = _motion(previous, joints, use, pinned, tangents) / dt
+        tangent = tangents(joints)
+        measured = motion(previous, joints, use, pinned, tangent) / dt
         # A slide moves each joint back along the track (lower joint numbers) by its size.
-        measured -= (observation.slide / dt) * tangents
+        measured -= (observation.slide / dt) * tangent
         velocity = VELOCITY_SMOOTHING * measured + (1.0 - VELOCITY_SMOOTHING) * velocity
     colour = seen_colour
     if track.colour is not None and colour is not None:
@@ -543,6 +547,7 @@ def _moved(
         steady=track.steady + 1,
         seen=covered,
         free_end_points=observation.free_end_points,
+        length_known=track.length_known or observation.length_known,
     )
 
 
@@ -552,76 +557,6 @@ def _moving_tips(track: TrackRecord) -> tuple[bool, bool]:
         return (False, False)
     seen = np.isfinite(track.free_end_points[:, 0])
     return (bool(track.tips[0] and seen[0]), bool(track.tips[1] and seen[1]))
-
-
-def _tangents(joints: np.ndarray) -> np.ndarray:
-    """Unit tangents at the joints (central differences, one-sided at the ends)."""
-    tangent = np.empty_like(joints)
-    if len(joints) < 2:
-        return np.zeros_like(joints)
-    tangent[0] = joints[1] - joints[0]
-    tangent[-1] = joints[-1] - joints[-2]
-    tangent[1:-1] = (joints[2:] - joints[:-2]) / 2.0
-    length = np.sqrt(tangent[:, 0] ** 2 + tangent[:, 1] ** 2)
-    return tangent / np.maximum(length, 1e-12)[:, None]
-
-
-def _motion(
-    previous: np.ndarray,
-    current: np.ndarray,
-    use: np.ndarray,
-    pinned: list[tuple[int, np.ndarray]] = (),
-    tangent: np.ndarray | None = None,
-) -> np.ndarray:
-    """Each joint's displacement, with its part along the cable from the whole cable.
-
-    Across the cable a joint's displacement is measured; along it, hardly (a stretch of
-    cable slid along itself looks the same). A rigid motion (translation and rotation)
-    fitted to the measured cross-cable displacements of the joints in ``use`` gives the
-    along-cable part wherever the cable bends enough to tell (a ridge keeps a straight
-    cable's slide at zero); the cross-cable remainder of each joint, smoothed along the
-    cable, is added back. The motion coherence of CPD-style trackers, along the cable.
-    ``pinned`` are ``(joint, displacement)``: a free end seen in both frames, a material
-    point found again, whose whole displacement (along the cable too) is measured; it
-    weighs in the fit as much as the cross-cable displacements of all the joints in
-    ``use`` together, so that a cable moving along itself is followed wherever one of
-    its ends is seen. ``tangent``: :func:`_tangents` of ``current``, when known.
-    """
-    tangent = _tangents(current) if tangent is None else tangent
-    normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
-    across = ((current - previous) * normal).sum(axis=1)
-    centre = previous[use].mean(axis=0)
-    arm = previous - centre
-    turned = np.column_stack([-arm[:, 1], arm[:, 0]])
-    design = np.column_stack([normal, (turned * normal).sum(axis=1)])
-    count = np.count_nonzero(use)
-    scale = max(float(np.sqrt((arm[use] ** 2).sum(axis=1).mean())), 1.0)
-    ridge = RIDGE * count * np.diag([1.0, 1.0, scale * scale])
-    rows = design[use]
-    values = across[use]
-    if len(pinned):
-        weight = math.sqrt(count / (2.0 * len(pinned)))
-        ends = np.array([joint for joint, _ in pinned])
-        moved = np.concatenate([displacement for _, displacement in pinned])
-        end_rows = np.zeros((2 * len(ends), 3))
-        end_rows[0::2, 0] = 1.0
-        end_rows[1::2, 1] = 1.0
-        end_rows[0::2, 2] = turned[ends, 0]
-        end_rows[1::2, 2] = turned[ends, 1]
-        rows = np.vstack([rows, weight * end_rows])
-        values = np.concatenate([values, weight * moved])
-    translation_x, translation_y, rotation = np.linalg.solve(rows.T @ rows + ridge, rows.T @ values)
-    rigid = np.array([translation_x, translation_y]) + rotation * turned
-    remainder = across - (rigid * normal).sum(axis=1)
-    return rigid + _smooth_along(remainder)[:, None] * normal
-
-
-def _smooth_along(values: np.ndarray) -> np.ndarray:
-    """Per-joint values averaged with their neighbours' (two each side)."""
-    if len(values) < 3:
-        return values
-    padded = np.concatenate([values[:1], values[:1], values, values[-1:], values[-1:]])
-    return sum(VELOCITY_KERNEL[i] * padded[i : i + len(values)] for i in range(5))
 
 
 def _started(
@@ -721,6 +656,13 @@ def _extended(track: TrackRecord, joined: Continuation, now: float) -> TrackReco
         tips = (track.tips[0], joined.tip)
         first_joint = track.first_joint
         ends_seen = (track.ends_seen_s[0], now)
+    if track.length_known and grown > 0:
+        # As long as its cable, the track cannot grow: more cable beyond this end means
+        # it had slid the other way, and its joints beyond the other end lay off the
+        # cable. It slides back: the joints keep their numbers and their count.
+        keep = slice(grown, None) if joined.end == 1 else slice(None, -grown)
+        joints, velocity = joints[keep], velocity[keep]
+        first_joint = track.first_joint
     return replace(
         track,
         joints=joints,

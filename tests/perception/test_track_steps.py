@@ -11,10 +11,12 @@ import numpy as np
 import pytest
 
 from service.perception import Tracker, warm_up
-from service.perception.track_identity import Candidate, revived_joints
+from service.perception.track_identity import Candidate, Continuation, orientation, revived_joints
 from service.perception.track_matching import Chains, Fit, Piece, arcs_of, fit_pieces
 from service.perception.track_merging import joins
-from service.perception.tracking import _joined, _motion, _started
+from service.perception.track_motion import motion
+from service.perception.track_update import observe
+from service.perception.tracking import _extended, _joined, _started
 
 STEP = 10.0
 
@@ -39,9 +41,9 @@ def test_a_free_end_seen_in_both_frames_gives_the_motion_along_a_straight_cable(
     current = previous + np.array([7.0, 0.0])  # slid along itself: nothing across it
     use = np.ones(20, bool)
     # Across the cable nothing moved: alone, the fit keeps a straight cable still.
-    assert np.abs(_motion(previous, current, use)).max() < 0.5
+    assert np.abs(motion(previous, current, use)).max() < 0.5
     pinned = [(19, np.array([7.0, 0.0]))]  # its free end, found 7 px further on
-    moved = _motion(previous, current, use, pinned)
+    moved = motion(previous, current, use, pinned)
     np.testing.assert_allclose(moved, np.tile([7.0, 0.0], (20, 1)), atol=0.5)
 
 
@@ -168,3 +170,95 @@ def test_a_join_at_the_first_end_keeps_joint_numbers_at_or_below_zero():
     assert made[0].first_joint <= 0
     assert len(made[0].joints) >= 41
     np.testing.assert_allclose(made[0].joints[-11:], older.joints[30:])
+
+
+def test_a_whole_cable_in_one_chain_pins_both_ends_though_a_stub_is_cut_off():
+    # A straight cable of 33 segments, detected whole as one chain from x = 40 to 370
+    # with a free end at each end. Its first 5 segments lie near another cable and are
+    # cut off as crowded, so the one piece shows only the free end at x = 370. The track
+    # (x = 50 .. 380) has slid a segment along the cable: that free end is a segment
+    # short of the track's end, which alone reads as an end hidden under something.
+    track = straight(50.0, 34)
+    chain = straight(40.0, 34)
+    chains = chains_of([chain])
+    piece = piece_of(0, chain, 5, 33, (False, True))
+    fitted = [(piece, Fit(0, 1, 40.0, 0.1, 1.0))]
+    observed = observe(track, (True, True), fitted, chains, np.array([True]), [(0, 5, 33)])
+    # The chain shows the whole cable: both of its ends are the cable's, and the track
+    # slides towards them (a share of the segment per frame).
+    assert observed.free_ends == (True, True)
+    assert observed.slide > 0.3 * STEP
+    np.testing.assert_allclose(observed.free_end_points, [[40.0, 100.0], [370.0, 100.0]])
+    # The same chain with its first end inferred (that end hidden, the chain's guess
+    # beyond it): the free end that went in is taken for one hidden, as before.
+    hidden = replace(chains, inferred=[np.r_[True, np.zeros(32, bool)]])
+    observed = observe(track, (True, True), fitted, hidden, np.array([True]), [(0, 5, 33)])
+    assert observed.slide == 0.0 and observed.free_ends == (False, True)
+
+
+def test_a_track_as_long_as_its_cable_slides_instead_of_growing():
+    # The cable: 20 segments from x = 60 to 260, one chain with a free end at each end.
+    # The track (x = 40 .. 240) has slid 2 segments towards x = 0: the chain goes on 2
+    # segments beyond its last joint. A track whose length is not known grows there; one
+    # known to be as long as its cable (both free ends once seen at once) does not, and
+    # slides towards the cable seen beyond it instead.
+    track = straight(40.0, 21)
+    chain = straight(60.0, 21)
+    chains = chains_of([chain])
+    piece = piece_of(0, chain, 0, 20)  # no free end seen (touching something at both)
+    fitted = [(piece, Fit(0, 1, 20.0, 0.1, 1.0))]
+    args = (track, (False, False), fitted, chains, np.array([True]), [(0, 0, 20)])
+    free = observe(*args)
+    assert len(free.tail_growth) == 2 and free.slide == 0.0
+    known = observe(*args, length_known=True)
+    assert len(known.tail_growth) == 0 and len(known.head_growth) == 0
+    assert known.slide < -0.3 * STEP  # the pieces lie further back along the track
+    # Laid from the targets, every joint moves on towards x = 260.
+    assert np.all(known.targets[known.covered, 0] > track[known.covered, 0])
+    # A known length is remembered from a frame showing both free ends as far apart as
+    # the track's ends.
+    both = piece_of(0, chain, 0, 20, (True, True))
+    seen = observe(track, (True, True), [(both, Fit(0, 1, 20.0, 0.1, 1.0))], *args[3:])
+    assert seen.length_known and seen.free_ends == (True, True)
+
+
+def test_a_join_onto_a_track_as_long_as_its_cable_moves_it_along():
+    # A track of 21 joints (x = 100 .. 300) known to be as long as its cable, continued
+    # at its first end from its joint 2 by 5 joints of cable (x = 110 .. 70): 3 more
+    # than it had there. It keeps 21 joints (the 3 at its last end, off the cable, go)
+    # and its joint numbers.
+    track = replace(record(0, straight(100.0, 21), (True, True)), length_known=True)
+    beyond = straight(70.0, 5)[::-1]  # nearest first
+    moved = _extended(track, Continuation(0, 0, 2, beyond, True), 0.0)
+    assert len(moved.joints) == 21 and moved.first_joint == 0
+    np.testing.assert_allclose(moved.joints[0], [70.0, 100.0])
+    np.testing.assert_allclose(moved.joints[-1], [270.0, 100.0])
+    # Not known, it grows there.
+    grown = _extended(replace(track, length_known=False), Continuation(0, 0, 2, beyond, True), 0.0)
+    assert len(grown.joints) == 24 and grown.first_joint == -3
+
+
+def curved(count, turn=0.01):
+    """A cable ``STEP`` apart whose bending grows along it (a shape with no symmetry)."""
+    headings = turn * np.arange(count - 1) ** 1.5
+    steps = STEP * np.column_stack([np.cos(headings), np.sin(headings)])
+    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)]) + np.array([100.0, 100.0])
+
+
+def test_a_cable_back_without_a_free_end_is_laid_where_its_shape_fits():
+    # A remembered cable of 30 joints comes back turned and moved, showing only joints
+    # 12 to 24 (both ends outside the picture): no free end to go by.
+    old = curved(30)
+    angle = 0.3
+    rotation = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    now = old @ rotation.T + [60.0, 25.0]
+    shown = Candidate(now[12:25], (False, False), 4.0, None)
+    ends = (old[0], old[-1])
+    assert orientation(shown, old, (True, True), ends, (0.0, 0.0))
+    reversed_shown = replace(shown, joints=shown.joints[::-1].copy())
+    assert not orientation(reversed_shown, old, (True, True), ends, (0.0, 0.0))
+    joints = revived_joints(old, shown, first_is_head=True, step=STEP)
+    # Its joints 12 .. 24 on the stretch shown, the rest carried along with it.
+    assert len(joints) == 30
+    np.testing.assert_allclose(joints[12:25], now[12:25], atol=0.5)
+    np.testing.assert_allclose(joints[[0, -1]], now[[0, -1]], atol=1.0)
