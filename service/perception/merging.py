@@ -354,14 +354,14 @@ def choose_joins(
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
-    The ``preset`` pairs (strands told apart by :func:`side_by_side_pairs`) are joined
-    before anything else. Then the ends that meet at each junction
-    (``junction_of_end[i] >= 0``) are paired by the cheapest matching of that
-    junction; then the remaining ends are joined greedily, cheapest first, across
-    gaps, up to ``merge_cost_threshold``; last, two free ends that are each other's
+    The ``preset`` pairs (touching strands told apart by
+    :func:`.touching.split_touching_strands`) are joined before anything else. Then the ends
+    that meet at each junction (``junction_of_end[i] >= 0``) are paired by the cheapest
+    matching of that junction; then the remaining ends are joined greedily, cheapest first,
+    across gaps, up to ``merge_cost_threshold``; last, two free ends that are each other's
     clearly cheapest partner are joined up to a looser limit, unless either is
-    ``at_border``. A join never closes a chain on itself. ``deadline`` (optional) is
-    checked while the joins are made.
+    ``at_border``. A join never closes a chain on itself. ``deadline`` (optional) is checked
+    while the joins are made.
 
     The evidence of the image, when given: ``colours`` (:func:`.appearance.end_colours`)
     adds ``params.colour_weight`` times :func:`.appearance.colour_penalty` to every
