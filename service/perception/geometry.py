@@ -117,6 +117,31 @@ def resample(points: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     return np.array(joints), np.array(edges)
 
 
+def arc_lengths(points: np.ndarray) -> np.ndarray:
+    """Arc of each vertex of a polyline from its first (px)."""
+    steps = np.diff(points, axis=0)
+    return np.concatenate([[0.0], np.cumsum(np.sqrt((steps * steps).sum(axis=1)))])
+
+
+def points_along(points: np.ndarray, arcs: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Points at arcs ``at`` along a polyline whose vertices are at ``arcs``
+    (:func:`arc_lengths`)."""
+    x = np.interp(at, arcs, points[:, 0])
+    y = np.interp(at, arcs, points[:, 1])
+    return np.column_stack([x, y])
+
+
+def rigid_fit(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rotation and translation taking ``source`` onto ``target`` (paired points, least
+    squares): ``(source_mean, rotation, target_mean)``, so a point ``p`` goes to
+    ``(p - source_mean) @ rotation.T + target_mean``."""
+    source_mean, target_mean = source.mean(axis=0), target.mean(axis=0)
+    a, b = source - source_mean, target - target_mean
+    angle = math.atan2(float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum()), float((a * b).sum()))
+    c, s = math.cos(angle), math.sin(angle)
+    return source_mean, np.array([[c, -s], [s, c]]), target_mean
+
+
 def polyline_length(points: np.ndarray) -> float:
     """Arc length of a polyline."""
     if len(points) < 2:

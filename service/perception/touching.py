@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from service.perception import _merging_kernels
-from service.perception.geometry import polyline_length
+from service.perception.geometry import arc_lengths, points_along, polyline_length
 
 # Two strands lie side by side along a piece when its mask never narrows below this
 # fraction of their two widths together: where two cables cross, even at a shallow
@@ -111,10 +111,10 @@ def split_touching_strands(
         ends = (2 * index, 2 * index + 1)
         if {labels[end] for end in ends} & handled:
             continue
-        kinds = [_end_kind(end, index, labels, members, positions, directions) for end in ends]
-        if None in kinds:
+        # Per end, its junction's two other strands, left one first.
+        sides = [_end_kind(end, index, labels, members, positions, directions) for end in ends]
+        if None in sides:
             continue
-        sides = kinds
         for other in (other for side in sides for other in side):
             if other // 2 not in lengths:
                 lengths[other // 2] = polyline_length(pieces[other // 2])
@@ -165,11 +165,11 @@ def _narrowest(points: np.ndarray, distance: np.ndarray, half_width: float) -> f
     """The least distance transform along the piece (every pixel of it) half its width
     clear of its ends; 0 when nothing is left."""
     points = np.asarray(points, np.float64)
-    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+    along = arc_lengths(points)
     if along[-1] <= 2 * half_width:
         return 0.0
     samples = np.arange(half_width, along[-1] - half_width + 1e-9, 1.0)
-    xs, ys = np.interp(samples, along, points[:, 0]), np.interp(samples, along, points[:, 1])
+    xs, ys = points_along(points, along, samples).T
     height, width = distance.shape
     cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
     rows = np.clip(np.rint(ys).astype(int), 0, height - 1)

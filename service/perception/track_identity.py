@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from service.perception import _geometry_kernels
+from service.perception.geometry import arc_lengths, points_along, rigid_fit
 from service.perception.track_matching import Chains, Piece
 
 MIN_CANDIDATE_SEGMENTS = 3
@@ -299,13 +300,9 @@ def orientation(
 def _rigid_misfit(a: np.ndarray, b: np.ndarray) -> float:
     """RMS distance (px) between two point lists laid rigidly (turned and moved) on each
     other."""
-    a0, b0 = a - a.mean(axis=0), b - b.mean(axis=0)
-    angle = math.atan2(
-        float((a0[:, 0] * b0[:, 1] - a0[:, 1] * b0[:, 0]).sum()), float((a0 * b0).sum())
-    )
-    c, s = math.cos(angle), math.sin(angle)
-    laid = a0 @ np.array([[c, -s], [s, c]]).T
-    return float(np.sqrt(((laid - b0) ** 2).sum(axis=1).mean()))
+    a_mean, rotation, b_mean = rigid_fit(a, b)
+    laid = (a - a_mean) @ rotation.T
+    return float(np.sqrt(((laid - (b - b_mean)) ** 2).sum(axis=1).mean()))
 
 
 def _sliding_misfit(seen: np.ndarray, track_joints: np.ndarray) -> tuple[float, int]:
@@ -370,14 +367,12 @@ def revived_joints(
 def _laid_from_first(old: np.ndarray, seen: np.ndarray, step: float) -> np.ndarray:
     """``old``'s joints laid along ``seen`` from its first joint on, ``step`` apart; those
     beyond its end keep ``old``'s shape, moved rigidly to join on."""
-    arcs = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seen, axis=0), axis=1))])
+    arcs = arc_lengths(seen)
     n = len(old)
     wanted = np.arange(n) * step
     inside = wanted <= arcs[-1] + 1e-9
     joints = old.copy()
-    placed = np.column_stack(
-        [np.interp(wanted[inside], arcs, seen[:, 0]), np.interp(wanted[inside], arcs, seen[:, 1])]
-    )
+    placed = points_along(seen, arcs, wanted[inside])
     count = int(np.count_nonzero(inside))
     if count == n:
         return placed
@@ -390,11 +385,8 @@ def _laid_from_first(old: np.ndarray, seen: np.ndarray, step: float) -> np.ndarr
 def _rigidly(points: np.ndarray, source: np.ndarray, target: np.ndarray) -> np.ndarray:
     """``points`` turned and moved as the rigid motion taking ``source`` onto ``target``
     (least squares)."""
-    source_mean, target_mean = source.mean(axis=0), target.mean(axis=0)
-    a, b = source - source_mean, target - target_mean
-    angle = math.atan2(float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum()), float((a * b).sum()))
-    c, s = math.cos(angle), math.sin(angle)
-    return (points - source_mean) @ np.array([[c, -s], [s, c]]).T + target_mean
+    source_mean, rotation, target_mean = rigid_fit(source, target)
+    return (points - source_mean) @ rotation.T + target_mean
 
 
 def _overlap(points: np.ndarray, polyline: np.ndarray, gate: float) -> float:

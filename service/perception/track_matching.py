@@ -21,6 +21,7 @@ import numpy as np
 
 from schemas import Detection
 from service.perception import _tracking_kernels
+from service.perception.geometry import arc_lengths
 
 MIN_COSINE = 0.5
 """A piece's point counts as on a track only where their directions are within 60
@@ -78,7 +79,7 @@ class Chains:
             lab = np.split(values, np.cumsum([len(points) for points in joints])[:-1])
         return cls(
             joints=joints,
-            arcs=[arcs_of(points) for points in joints],
+            arcs=[arc_lengths(points) for points in joints],
             radii=[chain.radius for chain in detection.chains],
             inferred=inferred,
             width=detection.width,
@@ -360,12 +361,6 @@ def lab_under(image: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.nda
     pixels = np.ascontiguousarray(pixels[:, :3], dtype=np.uint8).reshape(-1, 1, 3)
     lab = cv2.cvtColor(pixels, cv2.COLOR_BGR2LAB).reshape(-1, 3).astype(np.float64)
     return lab, inside
-
-
-def arcs_of(points: np.ndarray) -> np.ndarray:
-    """Arc of each vertex of a polyline from its first (px)."""
-    steps = np.diff(points, axis=0)
-    return np.concatenate([[0.0], np.cumsum(np.sqrt((steps * steps).sum(axis=1)))])
 
 
 def clear_of_edge(point, radius: float, width: int, height: int) -> bool:

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from service.perception import _tracking_kernels
+from service.perception.geometry import points_along, rigid_fit
 from service.perception.track_matching import Chains, Fit, Piece, clear_of_edge
 
 TIP_WINDOW = 5.0
@@ -409,7 +410,7 @@ def _grow(piece, sign, offset, end, total, chains, claimed, chain_of_piece, at_t
         held = [free for low, high, free in spans if low - slack <= a <= high + slack]
         if held and (at_tip or not all(held)):
             break  # another track's cable (or, beyond a tip, another piece)
-        new.append(_along(chain_joints, chain_arcs, np.array([a]))[0])
+        new.append(points_along(chain_joints, chain_arcs, np.array([a]))[0])
         if held or own[0] - slack <= a <= own[1] + slack:
             keep = len(new)
             reached_end = (a >= chain_arcs[-1] - slack) if direction > 0 else (a <= slack)
@@ -534,17 +535,9 @@ def _rigid(source: np.ndarray, target: np.ndarray, points: np.ndarray) -> np.nda
     (least squares); a translation alone from one pair; None from none."""
     if len(source) == 0:
         return None
-    source_mean = source.mean(axis=0)
-    target_mean = target.mean(axis=0)
     if len(source) == 1:
-        return points + (target_mean - source_mean)
-    a = source - source_mean
-    b = target - target_mean
-    dot = float((a * b).sum())
-    cross = float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum())
-    angle = math.atan2(cross, dot)
-    c, s = math.cos(angle), math.sin(angle)
-    rotation = np.array([[c, -s], [s, c]])
+        return points + (target.mean(axis=0) - source.mean(axis=0))
+    source_mean, rotation, target_mean = rigid_fit(source, target)
     return (points - source_mean) @ rotation.T + target_mean
 
 
@@ -631,10 +624,3 @@ def _going_out(joints, placed, chains) -> tuple[bool, bool]:
 
 def _in_picture(point, width: int, height: int) -> bool:
     return 0.0 <= point[0] <= width - 1 and 0.0 <= point[1] <= height - 1
-
-
-def _along(points: np.ndarray, arcs: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """Points at arcs ``at`` along a polyline whose vertices are at ``arcs``."""
-    x = np.interp(at, arcs, points[:, 0])
-    y = np.interp(at, arcs, points[:, 1])
-    return np.column_stack([x, y])

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from service.perception import Tracker, warm_up
+from service.perception.geometry import arc_lengths
 from service.perception.track_identity import Candidate, Continuation, orientation, revived_joints
-from service.perception.track_matching import Chains, Fit, Piece, arcs_of, fit_pieces
+from service.perception.track_matching import Chains, Fit, Piece, fit_pieces
 from service.perception.track_merging import joins
 from service.perception.track_motion import motion
 from service.perception.track_update import observe
@@ -64,7 +65,7 @@ def test_a_revived_cable_is_laid_from_the_free_end_it_shows():
 def chains_of(joints_list, width=640, height=480):
     return Chains(
         joints=joints_list,
-        arcs=[arcs_of(points) for points in joints_list],
+        arcs=[arc_lengths(points) for points in joints_list],
         radii=[4.0] * len(joints_list),
         inferred=[np.zeros(len(points) - 1, bool) for points in joints_list],
         width=width,
@@ -76,7 +77,7 @@ def chains_of(joints_list, width=640, height=480):
 
 def piece_of(chain, joints, first, last, tips=(False, False)):
     part = joints[first : last + 1]
-    return Piece(chain, first, part, tips, 4.0, arcs_of(part))
+    return Piece(chain, first, part, tips, 4.0, arc_lengths(part))
 
 
 def test_a_hidden_free_end_does_not_stop_a_join():
@@ -122,7 +123,7 @@ def test_a_hidden_free_end_does_not_stop_a_join():
 def test_a_piece_longer_than_its_track_still_fits_it():
     track = straight(100.0, 5)  # 4 segments: a cable that just came into view
     piece_joints = straight(90.0, 13)  # 12 segments of it in this frame
-    piece = Piece(0, 0, piece_joints, (False, True), 4.0, arcs_of(piece_joints))
+    piece = Piece(0, 0, piece_joints, (False, True), 4.0, arc_lengths(piece_joints))
     fits = fit_pieces([piece], [track], np.array([15.0]), STEP)
     assert fits[0] is not None and fits[0].track == 0 and fits[0].sign == 1
     assert abs(fits[0].offset + 10.0) < 1.0
