@@ -23,7 +23,9 @@ backgrounds, for dark and bright cables together:
    (a wooden board's edge, a strip of paper margin).
 4. **Seeds.** Pixels whose ratio is above Otsu's threshold of the ratios (and above
    :data:`MIN_RATIO` whatever Otsu says) are seeds; each gets its cable's colour and the
-   colours round it (both sides, the background). Seeds on shadows cables cast, on
+   colours round it (both sides, the background). Seeds on shadows cables cast (the
+   surface's tint at a lower lightness, or that tint moved part of the way towards the
+   cable beside it: :func:`tinted_by_a_neighbour`), on
    transitions between their sides, and on strips whose two sides differ from each other
    more than from the strip (:func:`between_unlike_sides`: the paper's edge between
    paper and table), and on strips of the colour of the surface on one of their sides
