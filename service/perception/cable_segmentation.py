@@ -693,8 +693,10 @@ def tinted_by_a_neighbour(lines: SeedLines, reach: np.ndarray) -> np.ndarray:
         return found
     centres = np.stack([lines.centres_x, lines.centres_y], axis=1)
     everyone = cKDTree(centres)
-    ab = lines.colours[:, 0, 1:].astype(np.float32)
-    tint = tint.astype(np.float32)
+    # a and b apart: the pairs are many, and whole-array arithmetic on columns is fastest.
+    a, b = (lines.colours[:, 0, k].astype(np.float32) for k in (1, 2))
+    tint_a, tint_b = tint[:, 0].astype(np.float32), tint[:, 1].astype(np.float32)
+    tint2 = tint_a * tint_a + tint_b * tint_b
     for step in np.unique(lines.steps[candidate]):
         # One level at a time: its own reach, so the search stays small.
         own = candidate[lines.steps[candidate] == step]
@@ -704,11 +706,12 @@ def tinted_by_a_neighbour(lines: SeedLines, reach: np.ndarray) -> np.ndarray:
         pairs_i, pairs_j = own[pairs["i"]], pairs["j"]
         # From the line's background dimmed to it (its colour less its tint) towards the
         # other line's colour; the tint's part along that way and across it.
-        t = tint[pairs_i]
-        toward = ab[pairs_j] - ab[pairs_i] + t
-        dot = (t * toward).sum(axis=1)
-        length2 = (toward * toward).sum(axis=1)
-        across2 = (t * t).sum(axis=1) * length2 - dot * dot
+        t_a, t_b = tint_a[pairs_i], tint_b[pairs_i]
+        toward_a = a[pairs_j] - a[pairs_i] + t_a
+        toward_b = b[pairs_j] - b[pairs_i] + t_b
+        dot = t_a * toward_a + t_b * toward_b
+        length2 = toward_a * toward_a + toward_b * toward_b
+        across2 = tint2[pairs_i] * length2 - dot * dot
         bled = (
             (length2 > SHADOW_TINT**2)
             & (dot >= 0.0)
