@@ -51,7 +51,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
 from service.perception import (
     _cable_segmentation_kernels,
@@ -691,6 +690,10 @@ def tinted_by_a_neighbour(lines: SeedLines, reach: np.ndarray) -> np.ndarray:
     found = np.zeros(tint.shape[0], bool)
     if candidate.size == 0:
         return found
+    # Imported here, not at the top: scipy.spatial loads scipy.linalg, which a process
+    # that never takes the contrast path should not pay for at start-up (issue 15).
+    from scipy.spatial import cKDTree
+
     centres = np.stack([lines.centres_x, lines.centres_y], axis=1)
     everyone = cKDTree(centres)
     # a and b apart: the pairs are many, and whole-array arithmetic on columns is fastest.
