@@ -23,6 +23,7 @@ end directions and then one arc of constant curvature.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -30,7 +31,7 @@ import numpy as np
 
 from schemas import DetectParams, GapCurve
 from service.perception import _merging_kernels
-from service.perception.appearance import EndColours, colour_penalty, end_colours
+from service.perception.appearance import EndColours, colour_penalty, end_colours, gap_hidden
 from service.perception.deadline import Deadline, check
 from service.perception.geometry import end_fit, polyline_length
 from service.perception.touching import TouchingSplit, split_touching_strands
@@ -351,6 +352,7 @@ def choose_joins(
     leaving: np.ndarray | None = None,
     picture: tuple[int, int] | None = None,
     preset: list[tuple[int, int]] | None = None,
+    hidden_gap: Callable[[int, int], bool] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
@@ -360,8 +362,10 @@ def choose_joins(
     matching of that junction; then the remaining ends are joined greedily, cheapest first,
     across gaps, up to ``merge_cost_threshold``; last, two free ends that are each other's
     clearly cheapest partner are joined up to a looser limit, unless either is
-    ``at_border``. A join never closes a chain on itself. ``deadline`` (optional) is checked
-    while the joins are made.
+    ``at_border``: across a short gap (:data:`MUTUAL_GAP_RADII`), or a longer one
+    that ``hidden_gap(i, j)`` says something in the image hides
+    (:func:`.appearance.gap_hidden`). A join never closes a chain on itself.
+    ``deadline`` (optional) is checked while the joins are made.
 
     The evidence of the image, when given: ``colours`` (:func:`.appearance.end_colours`)
     adds ``params.colour_weight`` times :func:`.appearance.colour_penalty` to every
@@ -454,6 +458,13 @@ def choose_joins(
         # Ends at the edge of the picture are cables leaving it, never gaps.
         excluded = used if at_border is None else used | at_border
         close = distances <= MUTUAL_GAP_RADII * radius
+        if hidden_gap is not None:
+            # A longer gap only where the image shows something lying over it.
+            limit = MUTUAL_COST_FACTOR * params.merge_cost_threshold
+            for index in np.flatnonzero(~close & (costs <= limit)).tolist():
+                i, j = pairs[index].tolist()
+                if not (excluded[i] or excluded[j]):
+                    close[index] = hidden_gap(i, j)
         near = list(zip(costs[close].tolist(), *pairs[close].T.tolist(), strict=True))
         for cost, i, j in _mutual_best(near, excluded, params.merge_cost_threshold):
             try_join(i, j, cost)
@@ -773,6 +784,16 @@ def merge_chains(
     picture = None
     if zones is not None or mask is not None:
         picture = (zones if zones is not None else mask).shape[:2]
+    hidden_gap = None
+    if image is not None and mask is not None:
+
+        def hidden_gap(i: int, j: int) -> bool:
+            a, b = ends[i], ends[j]
+            curve = gap_curve(
+                a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
+            )
+            return gap_hidden(image, mask, curve, (a, b), radius)
+
     joins = choose_joins(
         ends,
         len(pieces),
@@ -785,6 +806,7 @@ def merge_chains(
         leaving,
         picture,
         touching.pairs,
+        hidden_gap,
     )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.

@@ -25,6 +25,7 @@ from service.perception.merging import (
 )
 from service.synthetic.families import make_family_scene
 from tests.perception.references import merging as reference
+from tests.perception.test_appearance import gap_scene
 
 
 def test_gap_curves_are_straight_for_aligned_ends():
@@ -443,3 +444,28 @@ def test_strands_that_cross_at_a_shallow_angle_are_not_taken_as_side_by_side():
     assert len(chains) == 2
     for cable in ([(20, 60), (480, 124)], [(20, 124), (480, 60)]):
         assert min(_strand_error(chain, cable) for chain in chains) < 6.0
+
+
+def test_two_ends_facing_each_other_across_a_long_gap_join_only_under_an_object():
+    """A straight cable with a 100 px gap (28 radii): its ends are each other's only
+    partner but a little over the threshold. Across a short gap that is enough; across a
+    long one only where the image shows something lying over the gap, not over open
+    paper or under an object of the paper's own colour (which looks as open paper)."""
+    pieces = [
+        np.column_stack([np.linspace(10, 80, 15), np.full(15, 50.0)]),
+        np.column_stack([np.linspace(180, 250, 15), np.full(15, 50.0)]),
+    ]
+    params = DetectParams(merge_cost_threshold=0.35)  # the gap alone costs 0.4
+    counts = []
+    for box in ((60, 140, 60), None, (200, 200, 200)):
+        image, mask, _, _ = gap_scene(box)
+        counts.append(len(merge_chains(pieces, params, 3.5, image=image, mask=mask).paths))
+    assert counts == [1, 2, 2]
+
+
+@pytest.mark.parametrize(("family", "seed"), [("occluded", 118), ("many", 119)])
+def test_cables_under_long_occluders_of_generated_scenes_are_bridged(family, seed):
+    """Tuning scenes where a cable bends under an occluder 18-19 radii across: its two
+    ends are each other's only partner, a little over the threshold; one chain each."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
