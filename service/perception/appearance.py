@@ -164,6 +164,8 @@ BESIDE_BEHIND_RADII = (2.0, 3.0, 4.0, 5.0, 6.0)
 BESIDE_SIDE_RADII = 3.0
 # Gap samples this close (radii) to either end are left out: the cut's rim.
 GAP_END_CLEAR_RADII = 1.5
+# Right past each end, this many radii of the gap's curve: where the cable disappears.
+CUT_REACH_RADII = 2.0
 # Fewer background or gap samples than this: nothing is known.
 MIN_GAP_SAMPLES = 3
 
@@ -204,9 +206,13 @@ def gap_hidden(
     median Lab colour and its samples' scatter. The gap is hidden by something when
     more than half of the curve's samples off the mask (clear of both ends' rims)
     differ from that colour by more than :data:`COLOUR_TOLERANCE` plus twice the
-    scatter, as two ends' colours do in :func:`colour_penalty`: an object lies over
-    the gap. A gap over open background, which looks as the background beside the
-    cables, is not; nor is one with too few samples to tell.
+    scatter, as two ends' colours do in :func:`colour_penalty`, and so do more than
+    half of those right past each end (:data:`CUT_REACH_RADII`) and of the curve moved a
+    radius to either side: an object at least as wide as the cable lies over the gap
+    where the cable disappears at both ends (not a thin line of a pattern crossing it).
+    A gap over open background, which looks as the background beside the cables, is
+    not; nor is one whose ends lie on open background (a cable's own end, or a piece of
+    a pattern), nor one with too few samples to tell.
 
     Parameters
     ----------
@@ -243,16 +249,31 @@ def gap_hidden(
         return points[~mask[rows, cols]]
 
     reference = off_mask(reference)
-    clear = GAP_END_CLEAR_RADII * radius
-    curve = np.asarray(curve, np.float64)
-    away = np.ones(len(curve), bool)
-    for end in ends:
-        away &= np.hypot(*(curve - end.position).T) > clear
-    samples = off_mask(curve[away])
-    if len(reference) < MIN_GAP_SAMPLES or len(samples) < MIN_GAP_SAMPLES:
+    if len(reference) < MIN_GAP_SAMPLES:
         return False
     background = _lab_means(image_bgr, reference)
     colour = np.median(background, axis=0)
     spread = float(np.median(_lab_distance(background, colour)))
-    unlike = _lab_distance(_lab_means(image_bgr, samples), colour) > COLOUR_TOLERANCE + 2 * spread
-    return bool(unlike.mean() > 0.5)
+
+    def mostly_unlike(points):
+        points = off_mask(points)
+        if len(points) < MIN_GAP_SAMPLES:
+            return False
+        distance = _lab_distance(_lab_means(image_bgr, points), colour)
+        return bool(np.mean(distance > COLOUR_TOLERANCE + 2 * spread) > 0.5)
+
+    curve = np.asarray(curve, np.float64)
+    clear = GAP_END_CLEAR_RADII * radius
+    reach = [np.hypot(*(curve - end.position).T) for end in ends]
+    # Something lies over the cable where it disappears, at both ends, and over the gap
+    # along its middle and both its edges: an object at least as wide as the cable.
+    steps = np.gradient(curve, axis=0) if len(curve) > 1 else np.zeros_like(curve)
+    normals = np.column_stack([-steps[:, 1], steps[:, 0]])
+    normals /= np.maximum(np.hypot(normals[:, 0], normals[:, 1]), 1e-9)[:, None]
+    middle = (reach[0] > clear) & (reach[1] > clear)
+    return all(
+        mostly_unlike(curve[(near > clear) & (near <= clear + CUT_REACH_RADII * radius)])
+        for near in reach
+    ) and all(
+        mostly_unlike(curve[middle] + side * radius * normals[middle]) for side in (-1.0, 0.0, 1.0)
+    )
