@@ -155,3 +155,125 @@ def colour_penalty(colours: EndColours, first: np.ndarray, second: np.ndarray) -
     allowed = COLOUR_TOLERANCE + colours.spread[first] + colours.spread[second]
     steps = np.clip((distance - allowed) / COLOUR_TOLERANCE, 0.0, MAX_COLOUR_STEPS)
     return np.where(np.isnan(steps), 0.0, steps)
+
+
+# A gap's hidden stretch is compared with the background beside the two ends' pieces:
+# points this many radii behind each end (along its direction), this many radii to
+# either side of it.
+BESIDE_BEHIND_RADII = (2.0, 3.0, 4.0, 5.0, 6.0)
+BESIDE_SIDE_RADII = 3.0
+# Gap samples this close (radii) to either end are left out: the cut's rim.
+GAP_END_CLEAR_RADII = 1.5
+# Right past each end, this many radii of the gap's curve: where the cable disappears.
+CUT_REACH_RADII = 2.0
+# Fewer background or gap samples than this: nothing is known.
+MIN_GAP_SAMPLES = 3
+
+
+def _lab_means(image_bgr: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Lab colour of the 3x3 mean round each (x, y) point (rounded, clipped)."""
+    height, width = image_bgr.shape[:2]
+    cols = np.clip(np.rint(points[:, 0]).astype(np.int64), 1, width - 2)
+    rows = np.clip(np.rint(points[:, 1]).astype(np.int64), 1, height - 2)
+    patches = np.zeros((len(points), 3), np.float32)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            patches += image_bgr[rows + dy, cols + dx].astype(np.float32)
+    patches /= 9.0 * 255.0
+    return cv2.cvtColor(patches.reshape(-1, 1, 3), cv2.COLOR_BGR2LAB).reshape(-1, 3)
+
+
+def _lab_distance(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    difference = first - second
+    return np.sqrt(
+        (LIGHTNESS_SHARE * difference[..., 0]) ** 2
+        + difference[..., 1] ** 2
+        + difference[..., 2] ** 2
+    )
+
+
+def gap_hidden(
+    image_bgr: np.ndarray,
+    mask: np.ndarray,
+    curve: np.ndarray,
+    ends: tuple,
+    radius: float,
+) -> bool:
+    """Whether something the image shows could hide a cable along a gap's curve.
+
+    The background is what lies beside the two ends' cables just behind the ends
+    (:data:`BESIDE_BEHIND_RADII`, :data:`BESIDE_SIDE_RADII`; points off the mask): its
+    median Lab colour and its samples' scatter. The gap is hidden by something when
+    more than half of the curve's samples off the mask (clear of both ends' rims)
+    differ from that colour by more than :data:`COLOUR_TOLERANCE` plus twice the
+    scatter, as two ends' colours do in :func:`colour_penalty`, and so do more than
+    half of those right past each end (:data:`CUT_REACH_RADII`) and of the curve moved a
+    radius to either side: an object at least as wide as the cable lies over the gap
+    where the cable disappears at both ends (not a thin line of a pattern crossing it).
+    A gap over open background, which looks as the background beside the cables, is
+    not; nor is one whose ends lie on open background (a cable's own end, or a piece of
+    a pattern), nor one with too few samples to tell.
+
+    Parameters
+    ----------
+    image_bgr : ndarray (H, W, 3) uint8
+    mask : ndarray (H, W) bool
+        The foreground.
+    curve : ndarray (M, 2)
+        The gap curve, (x, y) samples about 1 px apart.
+    ends : tuple of two ChainEnd
+        The ends the curve joins (``position``, ``direction`` outwards).
+    radius : float
+        Cable half width (px).
+    """
+    height, width = mask.shape
+    reference = []
+    for end in ends:
+        normal = np.array([-end.direction[1], end.direction[0]])
+        for behind in BESIDE_BEHIND_RADII:
+            centre = end.position - behind * radius * end.direction
+            for side in (-1.0, 1.0):
+                reference.append(centre + side * BESIDE_SIDE_RADII * radius * normal)
+    reference = np.array(reference)
+
+    def off_mask(points):
+        inside = (
+            (points[:, 0] >= 0)
+            & (points[:, 1] >= 0)
+            & (points[:, 0] <= width - 1)
+            & (points[:, 1] <= height - 1)
+        )
+        points = points[inside]
+        cols = np.rint(points[:, 0]).astype(np.int64)
+        rows = np.rint(points[:, 1]).astype(np.int64)
+        return points[~mask[rows, cols]]
+
+    reference = off_mask(reference)
+    if len(reference) < MIN_GAP_SAMPLES:
+        return False
+    background = _lab_means(image_bgr, reference)
+    colour = np.median(background, axis=0)
+    spread = float(np.median(_lab_distance(background, colour)))
+
+    def mostly_unlike(points):
+        points = off_mask(points)
+        if len(points) < MIN_GAP_SAMPLES:
+            return False
+        distance = _lab_distance(_lab_means(image_bgr, points), colour)
+        return bool(np.mean(distance > COLOUR_TOLERANCE + 2 * spread) > 0.5)
+
+    curve = np.asarray(curve, np.float64)
+    clear = GAP_END_CLEAR_RADII * radius
+    reach = [np.hypot(*(curve - end.position).T) for end in ends]
+    # Something lies over the cable where it disappears, at both ends, and over the gap
+    # along its middle and both its edges: an object at least as wide as the cable.
+    steps = np.gradient(curve, axis=0) if len(curve) > 1 else np.zeros_like(curve)
+    normals = np.column_stack([-steps[:, 1], steps[:, 0]])
+    normals /= np.maximum(np.hypot(normals[:, 0], normals[:, 1]), 1e-9)[:, None]
+    middle = (reach[0] > clear) & (reach[1] > clear)
+    return all(
+        mostly_unlike(curve[(near > clear) & (near <= clear + CUT_REACH_RADII * radius)])
+        for near in reach
+    ) and all(
+        mostly_unlike(curve[middle] + side * radius * normals[middle]) for side in (-1.0, 0.0, 1.0)
+    )

@@ -23,7 +23,9 @@ backgrounds, for dark and bright cables together:
    (a wooden board's edge, a strip of paper margin).
 4. **Seeds.** Pixels whose ratio is above Otsu's threshold of the ratios (and above
    :data:`MIN_RATIO` whatever Otsu says) are seeds; each gets its cable's colour and the
-   colours round it (both sides, the background). Seeds on shadows cables cast, on
+   colours round it (both sides, the background). Seeds on shadows cables cast (the
+   surface's tint at a lower lightness, or that tint moved part of the way towards the
+   cable beside it: :func:`tinted_by_a_neighbour`), on
    transitions between their sides, and on strips whose two sides differ from each other
    more than from the strip (:func:`between_unlike_sides`: the paper's edge between
    paper and table), and on strips of the colour of the surface on one of their sides
@@ -117,6 +119,11 @@ components' widths, outside the band are dropped."""
 SHADOW_TINT = 2.0 * JND
 """A shadow keeps the background's chromaticity to within two just noticeable differences
 (the light left in a shadow, from the room and the sky, may be of another tint)."""
+SHADOW_BLEED = 0.5
+"""A shadow beside a coloured cable takes up some of the cable's chromaticity (a JPEG's
+chroma, sampled over 2 x 2 pixels and blurred, spreads over the narrow shadow; the cable
+reflects its own colour into it): up to half the way from the shadowed background's to the
+cable's, past which it is nearer the cable's colour (the half-way rule of the extent)."""
 SHADOW_LIGHT = 0.25
 """A shadow keeps at least a quarter of the background's luminance: it is cast by part of
 the light only (the soft shadow of a thin cable under a lamp and the room's light)."""
@@ -504,19 +511,39 @@ def seed_lines(
     return SeedLines(*(np.concatenate(column) for column in zip(*parts, strict=True)), of_grid)
 
 
-def shadow_coloured(colours: np.ndarray) -> np.ndarray:
-    """Which lines have the colour of their background in shadow.
+def shadow_tint(colours: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How each line's colour differs from its background's in shadow.
 
-    A shadow is the background with less light: the same chromaticity (CIELAB's a and
-    b scale with L + 16 as light dims) within :data:`SHADOW_TINT`, darker, and keeping
-    at least :data:`SHADOW_LIGHT` of the background's luminance.
+    As light dims, CIELAB's a and b scale with L + 16: the background in a shadow as
+    dark as the line has the background's a and b times ``(L_line + 16) / (L_bg + 16)``.
+
+    Returns
+    -------
+    tint : ndarray
+        ``(N, 2)``: the line's a and b less those of its background dimmed to it.
+    luminance : ndarray
+        ``(N,)``: the line's luminance over its background's.
     """
     line = colours[:, 0].astype(np.float64)
     background = colours[:, 3].astype(np.float64)
-    luminance = ((line[:, 0] + 16.0) / (background[:, 0] + 16.0)) ** 3
     scale = (line[:, 0] + 16.0) / (background[:, 0] + 16.0)
-    tint = np.hypot(line[:, 1] - background[:, 1] * scale, line[:, 2] - background[:, 2] * scale)
-    return (tint <= SHADOW_TINT) & (luminance >= SHADOW_LIGHT) & (luminance < 1.0)
+    return line[:, 1:] - background[:, 1:] * scale[:, None], scale**3
+
+
+def shadow_coloured(colours: np.ndarray) -> np.ndarray:
+    """Which lines have the colour of their background in shadow.
+
+    A shadow is the background with less light: the same chromaticity within
+    :data:`SHADOW_TINT` (:func:`shadow_tint`), darker, and keeping at least
+    :data:`SHADOW_LIGHT` of the background's luminance.
+    """
+    tint, luminance = shadow_tint(colours)
+    return (np.hypot(tint[:, 0], tint[:, 1]) <= SHADOW_TINT) & dimmed(luminance)
+
+
+def dimmed(luminance: np.ndarray) -> np.ndarray:
+    """Luminances a shadow may have: under the background's, over :data:`SHADOW_LIGHT` of it."""
+    return (luminance >= SHADOW_LIGHT) & (luminance < 1.0)
 
 
 def transitions(colours: np.ndarray) -> np.ndarray:
@@ -621,13 +648,16 @@ def of_a_side_surface(colours: np.ndarray, surfaces: np.ndarray) -> np.ndarray:
 
 def _without_shadows(lines: SeedLines, seeds: np.ndarray, grid_step: float) -> SeedLines:
     """The seeds less the shadows cables cast: shadow-coloured lines (:func:`shadow_coloured`)
-    within :data:`SHADOW_REACH` of their own widths of a line that is not.
+    within :data:`SHADOW_REACH` of their own widths of a line that is not, and dimmed lines
+    tinted towards a line that near (:func:`tinted_by_a_neighbour`).
 
     A grey cable on white paper is shadow-coloured too; away from other cables it stays.
     """
     shadow = shadow_coloured(lines.colours)
+    reach = SHADOW_REACH * OFFSET * lines.steps
+    tinted = tinted_by_a_neighbour(lines, reach)
     if not shadow.any() or shadow.all():
-        return lines
+        return lines.take(~tinted) if tinted.any() and not shadow.all() else lines
     grid_h, grid_w = seeds.shape
     caster = np.ones(seeds.shape, np.uint8)
     rows, cols = np.nonzero(seeds)
@@ -641,8 +671,58 @@ def _without_shadows(lines: SeedLines, seeds: np.ndarray, grid_step: float) -> S
     xs = np.clip(
         np.round((lines.centres_x + 0.5) / grid_step - 0.5).astype(np.int64), 0, grid_w - 1
     )
-    near_caster = distance[ys, xs] * grid_step <= SHADOW_REACH * OFFSET * lines.steps
-    return lines.take(~(shadow & near_caster))
+    near_caster = distance[ys, xs] * grid_step <= reach
+    return lines.take(~((shadow & near_caster) | tinted))
+
+
+def tinted_by_a_neighbour(lines: SeedLines, reach: np.ndarray) -> np.ndarray:
+    """Which dimmed lines are the background in shadow tinted towards a line near them.
+
+    A line as dark as a shadow (:func:`dimmed`) whose tint (:func:`shadow_tint`) lies on
+    the way from none towards another line's within ``reach`` (image px, per line), no
+    farther than :data:`SHADOW_BLEED` of it and within :data:`SHADOW_TINT` of the way, is
+    the shadow of that line with its colour bled in. Lines along one cable share their
+    tint (all the way, not half) and do not count as each other's shadow; a line within
+    :data:`SHADOW_TINT` of the shadow's tint-free colour shows no way to go.
+    """
+    tint, luminance = shadow_tint(lines.colours)
+    candidate = np.flatnonzero(dimmed(luminance) & (np.hypot(tint[:, 0], tint[:, 1]) > SHADOW_TINT))
+    found = np.zeros(tint.shape[0], bool)
+    if candidate.size == 0:
+        return found
+    # Imported here, not at the top: scipy.spatial loads scipy.linalg, which a process
+    # that never takes the contrast path should not pay for at start-up (issue 15).
+    from scipy.spatial import cKDTree
+
+    centres = np.stack([lines.centres_x, lines.centres_y], axis=1)
+    everyone = cKDTree(centres)
+    # a and b apart: the pairs are many, and whole-array arithmetic on columns is fastest.
+    a, b = (lines.colours[:, 0, k].astype(np.float32) for k in (1, 2))
+    tint_a, tint_b = tint[:, 0].astype(np.float32), tint[:, 1].astype(np.float32)
+    tint2 = tint_a * tint_a + tint_b * tint_b
+    for step in np.unique(lines.steps[candidate]):
+        # One level at a time: its own reach, so the search stays small.
+        own = candidate[lines.steps[candidate] == step]
+        pairs = cKDTree(centres[own]).sparse_distance_matrix(
+            everyone, float(reach[own[0]]), output_type="ndarray"
+        )
+        pairs_i, pairs_j = own[pairs["i"]], pairs["j"]
+        # From the line's background dimmed to it (its colour less its tint) towards the
+        # other line's colour; the tint's part along that way and across it.
+        t_a, t_b = tint_a[pairs_i], tint_b[pairs_i]
+        toward_a = a[pairs_j] - a[pairs_i] + t_a
+        toward_b = b[pairs_j] - b[pairs_i] + t_b
+        dot = t_a * toward_a + t_b * toward_b
+        length2 = toward_a * toward_a + toward_b * toward_b
+        across2 = tint2[pairs_i] * length2 - dot * dot
+        bled = (
+            (length2 > SHADOW_TINT**2)
+            & (dot >= 0.0)
+            & (dot <= SHADOW_BLEED * length2)
+            & (across2 <= SHADOW_TINT**2 * length2)
+        )
+        found[pairs_i[bled]] = True
+    return found
 
 
 def _extent(lab8: np.ndarray, lines: SeedLines, seeds: np.ndarray) -> np.ndarray:

@@ -80,6 +80,32 @@ def end_fit(
     return backwards[0].copy(), unit(backwards[0] - backwards[last]), 0.0
 
 
+def fit_where_skipped(
+    points: np.ndarray, at_start: bool, span: float, skip: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The fit of :func:`end_fit` evaluated at ``skip`` of arc length from the end,
+    where the stretch it fits begins, rather than extrapolated over the skipped tip.
+
+    Returns the position and the outward unit tangent there, or None when nothing was
+    skipped or the stretch was too short to fit.
+    """
+    ordered = points[::-1] if at_start else points
+    backwards = np.ascontiguousarray(ordered[::-1], dtype=np.float64)
+    fitted, x0, y0, dx, dy, _, ddx, ddy = _geometry_kernels.end_fit(
+        backwards, float(skip), float(span)
+    )
+    total = float(np.hypot(*np.diff(backwards, axis=0).T).sum()) if len(backwards) > 1 else 0.0
+    if not fitted or skip <= 0 or total < 2.0 * skip + 1.0:
+        return None
+    position = np.array(
+        [x0 + dx * skip + 0.5 * ddx * skip**2, y0 + dy * skip + 0.5 * ddy * skip**2]
+    )
+    inwards = np.array([dx + ddx * skip, dy + ddy * skip])
+    if float(np.hypot(*inwards)) < 1e-9:
+        return None
+    return position, unit(-inwards)
+
+
 def end_direction(points: np.ndarray, at_start: bool, span: float) -> np.ndarray:
     """Outward unit tangent at one end of a polyline (see :func:`end_tangent`)."""
     return end_tangent(points, at_start, span)[1]

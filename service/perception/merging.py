@@ -23,6 +23,7 @@ end directions and then one arc of constant curvature.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -30,9 +31,9 @@ import numpy as np
 
 from schemas import DetectParams, GapCurve
 from service.perception import _merging_kernels
-from service.perception.appearance import EndColours, colour_penalty, end_colours
+from service.perception.appearance import EndColours, colour_penalty, end_colours, gap_hidden
 from service.perception.deadline import Deadline, check
-from service.perception.geometry import end_fit, polyline_length
+from service.perception.geometry import arc_lengths, end_fit, fit_where_skipped, polyline_length
 from service.perception.touching import TouchingSplit, split_touching_strands
 
 # An end whose cable runs on along its direction, within this many radii plus
@@ -53,13 +54,17 @@ NARROW_END_JOINTS = 4
 
 @dataclass(frozen=True)
 class ChainEnd:
-    """One end of a chain piece: where it is and which way it points (outwards)."""
+    """One end of a chain piece: where it is and which way it points (outwards).
+
+    ``skip`` is the arc length at the tip its fit left out (a cut end's hook).
+    """
 
     piece: int
     at_start: bool
     position: np.ndarray
     direction: np.ndarray
     curvature: float = 0.0
+    skip: float = 0.0
 
 
 @dataclass
@@ -125,7 +130,7 @@ def chain_ends(
             if distance is not None:
                 end_skip = max(skip, _narrow_end_length(points, at_start, distance, piece_full))
             position, direction, curvature = end_fit(points, at_start, span, end_skip)
-            ends.append(ChainEnd(index, at_start, position, direction, curvature))
+            ends.append(ChainEnd(index, at_start, position, direction, curvature, end_skip))
     return ends
 
 
@@ -351,6 +356,7 @@ def choose_joins(
     leaving: np.ndarray | None = None,
     picture: tuple[int, int] | None = None,
     preset: list[tuple[int, int]] | None = None,
+    hidden_gap: Callable[[int, int], bool] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
@@ -360,8 +366,10 @@ def choose_joins(
     matching of that junction; then the remaining ends are joined greedily, cheapest first,
     across gaps, up to ``merge_cost_threshold``; last, two free ends that are each other's
     clearly cheapest partner are joined up to a looser limit, unless either is
-    ``at_border``. A join never closes a chain on itself. ``deadline`` (optional) is checked
-    while the joins are made.
+    ``at_border``: across a short gap (:data:`MUTUAL_GAP_RADII`), or a longer one
+    that ``hidden_gap(i, j)`` says something in the image hides
+    (:func:`.appearance.gap_hidden`). A join never closes a chain on itself.
+    ``deadline`` (optional) is checked while the joins are made.
 
     The evidence of the image, when given: ``colours`` (:func:`.appearance.end_colours`)
     adds ``params.colour_weight`` times :func:`.appearance.colour_penalty` to every
@@ -454,6 +462,19 @@ def choose_joins(
         # Ends at the edge of the picture are cables leaving it, never gaps.
         excluded = used if at_border is None else used | at_border
         close = distances <= MUTUAL_GAP_RADII * radius
+        if hidden_gap is not None and len(costs):
+            # A longer gap only where the image shows something lying over it; looked
+            # at only for two free ends that are each other's cheapest partner.
+            open_pair = (costs <= MUTUAL_COST_FACTOR * params.merge_cost_threshold) & ~(
+                excluded[pairs[:, 0]] | excluded[pairs[:, 1]]
+            )
+            cheapest = np.full(len(ends), np.inf)
+            np.minimum.at(cheapest, pairs[open_pair, 0], costs[open_pair])
+            np.minimum.at(cheapest, pairs[open_pair, 1], costs[open_pair])
+            for index in np.flatnonzero(open_pair & ~close).tolist():
+                i, j = pairs[index].tolist()
+                if costs[index] <= min(cheapest[i], cheapest[j]):
+                    close[index] = hidden_gap(i, j)
         near = list(zip(costs[close].tolist(), *pairs[close].T.tolist(), strict=True))
         for cost, i, j in _mutual_best(near, excluded, params.merge_cost_threshold):
             try_join(i, j, cost)
@@ -604,12 +625,17 @@ def assemble_paths(
     ends: list[ChainEnd],
     joins: list[tuple[int, int, float]],
     curve: GapCurve | str = GapCurve.smooth,
+    trims: np.ndarray | None = None,
 ) -> list[MergedPath]:
     """Walk every group of joined pieces from one free end to the other; each join is
-    bridged by :func:`gap_curve` of the given ``curve`` shape."""
+    bridged by :func:`gap_curve` of the given ``curve`` shape. ``trims[e]`` (optional)
+    is the arc length left out of end ``e``'s piece at that end, where its bridge
+    starts further in."""
     partner = np.full(len(ends), -1)
     for i, j, _ in joins:
         partner[i], partner[j] = j, i
+    if trims is not None:
+        pieces = _trimmed(pieces, trims)
     visited = np.zeros(len(pieces), bool)
     paths = []
     for first_end in range(len(ends)):
@@ -641,6 +667,55 @@ def assemble_paths(
             entry = next_entry
         paths.append(MergedPath(np.concatenate(vertices), np.concatenate(filled), pieces=order))
     return paths
+
+
+def _trimmed(pieces: list[np.ndarray], trims: np.ndarray) -> list[np.ndarray]:
+    """The pieces less the joints within ``trims[2 k]`` of piece ``k``'s start and
+    ``trims[2 k + 1]`` of its end (at least two joints kept)."""
+    result = []
+    for index, points in enumerate(pieces):
+        head, tail = float(trims[2 * index]), float(trims[2 * index + 1])
+        if head <= 0 and tail <= 0:
+            result.append(points)
+            continue
+        along = arc_lengths(points)
+        keep = (along >= head) & (along <= along[-1] - tail)
+        result.append(points[keep] if keep.sum() >= 2 else points)
+    return result
+
+
+def bridge_from_the_fits(
+    pieces: list[np.ndarray],
+    ends: list[ChainEnd],
+    joins: list[tuple[int, int, float]],
+    span: float,
+    junction_of_end: list[int],
+) -> tuple[list[ChainEnd], np.ndarray]:
+    """Ends to bridge gaps from: where each end's fit begins, not extrapolated to the tip.
+
+    An end's position and direction are its fit's extrapolation over the tip it left
+    out (:attr:`ChainEnd.skip`, a cut end's hook); across a gap on a bend that
+    extrapolation turns the bridge off the cable. A gap's bridge (ends in no junction)
+    starts instead where the fitted stretch begins, with the fit's own tangent there,
+    and the piece's joints before that are left out of the path (not for pieces shorter
+    than the fit's ``span``: :func:`ends_through_short_pieces`). Returns the ends and
+    the arc lengths to trim per end (for :func:`assemble_paths`).
+    """
+    adjusted = list(ends)
+    trims = np.zeros(len(ends))
+    for i, j, _ in joins:
+        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
+            continue
+        for k in (i, j):
+            end = ends[k]
+            # Pieces shorter than the fit's span are crossed along their partners' line.
+            if end.skip <= 0 or polyline_length(pieces[end.piece]) < span:
+                continue
+            inner = fit_where_skipped(pieces[end.piece], end.at_start, span, end.skip)
+            if inner is not None:
+                adjusted[k] = replace(end, position=inner[0], direction=inner[1])
+                trims[k] = end.skip
+    return adjusted, trims
 
 
 def ends_through_short_pieces(
@@ -773,6 +848,16 @@ def merge_chains(
     picture = None
     if zones is not None or mask is not None:
         picture = (zones if zones is not None else mask).shape[:2]
+    hidden_gap = None
+    if image is not None and mask is not None:
+
+        def hidden_gap(i: int, j: int) -> bool:
+            a, b = ends[i], ends[j]
+            curve = gap_curve(
+                a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
+            )
+            return gap_hidden(image, mask, curve, (a, b), radius)
+
     joins = choose_joins(
         ends,
         len(pieces),
@@ -785,11 +870,13 @@ def merge_chains(
         leaving,
         picture,
         touching.pairs,
+        hidden_gap,
     )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
-    bridging_ends = ends_through_short_pieces(pieces, ends, joins, span)
-    assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve)
+    inner_ends, trims = bridge_from_the_fits(pieces, ends, joins, span, junction_of_end)
+    bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span)
+    assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])

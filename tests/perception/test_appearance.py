@@ -95,3 +95,44 @@ def test_an_end_inside_an_object_segmented_with_the_cables_has_no_colour():
         assert appearance.colour_penalty(colours, np.array([1]), np.array([2]))[0] == 0.0
     # The cable's own ends keep their colour: white against white.
     np.testing.assert_allclose(seeing.colour[0], seeing.colour[3], atol=3)
+
+
+def gap_scene(box_colour, box=(82, 178)):
+    """A dark cable along y = 50 with a 100 px gap (x 80-180), on light grey paper with
+    a little noise, optionally a box of ``box_colour`` over the gap (from x ``box[0]``
+    to ``box[1]``)."""
+    rng = np.random.default_rng(3)
+    image = np.clip(rng.normal(200, 4, (100, 260, 3)), 0, 255).astype(np.uint8)
+    mask = np.zeros((100, 260), np.uint8)
+    for first, last in ((10, 80), (180, 250)):
+        cv2.line(mask, (first, 50), (last, 50), 1, 7)
+    image[mask > 0] = (40, 40, 60)
+    if box_colour is not None:
+        cv2.rectangle(image, (box[0], 30), (box[1], 70), box_colour, -1)
+    ends = (
+        ChainEnd(0, False, np.array([78.0, 50.0]), np.array([1.0, 0.0])),
+        ChainEnd(1, True, np.array([182.0, 50.0]), np.array([-1.0, 0.0])),
+    )
+    curve = np.column_stack([np.arange(78.0, 183.0), np.full(105, 50.0)])
+    return image, mask > 0, curve, ends
+
+
+def test_a_gap_under_an_object_is_hidden_and_one_over_open_paper_is_not():
+    radius = 3.5
+    for box, hidden in (((60, 140, 60), True), (None, False), ((200, 200, 200), False)):
+        image, mask, curve, ends = gap_scene(box)
+        assert appearance.gap_hidden(image, mask, curve, ends, radius) is hidden, box
+
+
+def test_a_gap_with_too_few_samples_off_the_mask_tells_nothing():
+    image, mask, curve, ends = gap_scene((60, 140, 60))
+    mask[:] = True  # no background beside the ends, nothing of the gap off the mask
+    assert appearance.gap_hidden(image, mask, curve, ends, 3.5) is False
+
+
+def test_a_gap_whose_ends_lie_on_open_paper_is_not_hidden():
+    """An object between two cable ends that both end on open paper (two cables' own
+    ends with something lying between them) does not hide a cable: the cable would
+    disappear under it right at its ends."""
+    image, mask, curve, ends = gap_scene((60, 140, 60), box=(105, 155))
+    assert appearance.gap_hidden(image, mask, curve, ends, 3.5) is False

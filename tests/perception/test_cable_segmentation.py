@@ -30,6 +30,8 @@ from service.perception.cable_segmentation import (
     level_steps,
     of_a_side_surface,
     segment_cables,
+    shadow_coloured,
+    tinted_by_a_neighbour,
 )
 from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.segmentation import segment, segment_with_cue
@@ -470,3 +472,58 @@ def test_the_background_at_the_border_of_two_surfaces_is_one_of_them_never_a_ble
     for factor in (4, 8):
         background = _sparse_median(level, factor)[:, :, 0]
         assert set(np.unique(background).tolist()) == {40, 230}
+
+
+def lines_at(points, colours):
+    """SeedLines of the finest level at ``points`` (x, y) with ``colours`` (N, 4, 3)."""
+    points = np.asarray(points, float)
+    n = len(points)
+    return SeedLines(
+        points[:, 1],
+        points[:, 0],
+        np.zeros(n),
+        np.full(n, 2.0),
+        np.asarray(colours, np.float32),
+        np.arange(n),
+    )
+
+
+def test_a_shadow_tinted_towards_the_cable_beside_it_is_told_from_a_cable():
+    paper, red = np.array([90.0, 0.0, 4.0]), np.array([50.0, 60.0, 40.0])
+    shade = 72.0  # the shadow's lightness
+    dimmed = paper[1:] * (shade + 16.0) / (paper[0] + 16.0)
+
+    def towards_red(fraction, across=(0.0, 0.0)):
+        return np.r_[shade, dimmed + fraction * (red[1:] - dimmed) + np.asarray(across)]
+
+    colours = [
+        [red, paper, paper, paper],  # the red cable
+        [towards_red(0.3), paper, paper, paper],  # its shadow, a third of the way to red
+        [towards_red(0.8), paper, paper, paper],  # an orange cable beside it: most of the way
+        [towards_red(0.3, (-20.0, 30.0)), paper, paper, paper],  # tinted another way
+        [towards_red(0.3), paper, paper, paper],  # a shadow-like line far from any cable
+        [towards_red(0.0), paper, paper, paper],  # the shadow without the red: as before
+    ]
+    lines = lines_at(
+        [(100, 100), (100, 106), (100, 94), (106, 100), (300, 300), (94, 100)], colours
+    )
+    reach = np.full(6, 16.0)
+    assert tinted_by_a_neighbour(lines, reach).tolist() == [False, True, False, False, False, False]
+    # The strict test takes only the untinted shadow.
+    assert shadow_coloured(lines.colours).tolist() == [False, False, False, False, False, True]
+
+
+def test_the_shadow_under_a_cable_stays_out_of_the_mask_after_jpeg():
+    # A red cable on white paper, a soft shadow 4 px wide under it. JPEG keeps chroma at
+    # half resolution and blurs it: the narrow shadow takes on some of the cable's red and
+    # no longer has the paper's tint. (Before: the whole shadow was taken as cable.)
+    scene = np.full((240, 360, 3), (214, 220, 224), np.float64)
+    scene[100:109, 30:330] = (40, 45, 190)
+    scene[109:113, 30:330] = (150, 155, 170)
+    scene += np.random.default_rng(0).normal(0.0, 1.5, scene.shape)
+    image = np.clip(scene + 0.5, 0, 255).astype(np.uint8)
+    _, encoded = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 90])
+    mask = segment_cables(cv2.imdecode(encoded, cv2.IMREAD_COLOR), 120, 60)
+    assert mask[100:109, 40:320].all()
+    # At most the rim row the blur shares with the cable.
+    assert not mask[110:113, 40:320].any()

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from service.perception import _geometry_kernels
-from service.perception.geometry import end_direction, end_fit, resample
+from service.perception.geometry import end_direction, end_fit, fit_where_skipped, resample
 from tests.perception.references import geometry as reference
 
 
@@ -52,3 +52,15 @@ def test_end_fit_measures_the_curvature_of_a_circle_travelled_outwards(radius):
     np.testing.assert_allclose(direction, [-np.sin(1.5), np.cos(1.5)], atol=0.02)
     straight = np.stack([np.linspace(0, 50, 30), np.full(30, 7.0)], axis=1)
     assert end_fit(straight, False, 20.0)[2] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_fit_where_the_skipped_tip_ends_lies_on_a_bend_and_follows_it():
+    """On a circle of radius 60 with joints 10 px apart, the fit evaluated 8 px in from
+    the end lies on the circle and points along it; with nothing skipped there is none."""
+    angles = np.arange(0.0, 1.2, 10.0 / 60.0)
+    arc = np.column_stack([60 * np.cos(angles), 60 * np.sin(angles)])
+    position, direction = fit_where_skipped(arc, False, 40.0, 8.0)
+    assert np.hypot(*position) == pytest.approx(60.0, abs=0.1)
+    along = np.array([-position[1], position[0]]) / 60.0  # the circle's tangent there
+    assert float(direction @ along) == pytest.approx(1.0, abs=1e-3)
+    assert fit_where_skipped(arc, False, 40.0, 0.0) is None

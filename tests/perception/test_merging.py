@@ -13,9 +13,11 @@ from service.evaluation.synthetic_eval import evaluate_scene
 from service.perception import _merging_kernels, detect
 from service.perception.appearance import EndColours
 from service.perception.deadline import Deadline, DeadlineExceeded
+from service.perception.geometry import resample
 from service.perception.merging import (
     ChainEnd,
     assemble_paths,
+    bridge_from_the_fits,
     chain_ends,
     choose_joins,
     ends_through_short_pieces,
@@ -25,6 +27,7 @@ from service.perception.merging import (
 )
 from service.synthetic.families import make_family_scene
 from tests.perception.references import merging as reference
+from tests.perception.test_appearance import gap_scene
 
 
 def test_gap_curves_are_straight_for_aligned_ends():
@@ -95,7 +98,10 @@ def test_merging_bridges_a_gap_and_marks_it_filled():
     path = result.paths[0]
     assert path.filled.any() and not path.filled.all()
     gap_edges = path.vertices[:-1][path.filled]
-    assert gap_edges[:, 0].min() >= 100 - 1e-9 and gap_edges[:, 0].max() < 160
+    # The bridge starts where each end's fit begins, a radius in from the tips (100 and
+    # 160): the joints within it (the tips) are left out of the path.
+    assert gap_edges[:, 0].min() >= 90 - 1e-9 and gap_edges[:, 0].max() < 170
+    assert not np.isin(path.vertices[:, 0], [100.0, 160.0]).any()
 
 
 def test_merging_stops_at_the_expected_count():
@@ -443,3 +449,69 @@ def test_strands_that_cross_at_a_shallow_angle_are_not_taken_as_side_by_side():
     assert len(chains) == 2
     for cable in ([(20, 60), (480, 124)], [(20, 124), (480, 60)]):
         assert min(_strand_error(chain, cable) for chain in chains) < 6.0
+
+
+def test_two_ends_facing_each_other_across_a_long_gap_join_only_under_an_object():
+    """A straight cable with a 100 px gap (28 radii): its ends are each other's only
+    partner but a little over the threshold. Across a short gap that is enough; across a
+    long one only where the image shows something lying over the gap, not over open
+    paper or under an object of the paper's own colour (which looks as open paper)."""
+    pieces = [
+        np.column_stack([np.linspace(10, 80, 15), np.full(15, 50.0)]),
+        np.column_stack([np.linspace(180, 250, 15), np.full(15, 50.0)]),
+    ]
+    params = DetectParams(merge_cost_threshold=0.35)  # the gap alone costs 0.4
+    counts = []
+    for box in ((60, 140, 60), None, (200, 200, 200)):
+        image, mask, _, _ = gap_scene(box)
+        counts.append(len(merge_chains(pieces, params, 3.5, image=image, mask=mask).paths))
+    assert counts == [1, 2, 2]
+
+
+@pytest.mark.parametrize(("family", "seed"), [("occluded", 118), ("many", 119)])
+def test_cables_under_long_occluders_of_generated_scenes_are_bridged(family, seed):
+    """Tuning scenes where a cable bends under an occluder 18-19 radii across: its two
+    ends are each other's only partner, a little over the threshold; one chain each."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
+
+
+def _hairpin_pieces(bend=30.0):
+    """A cable running right along y = 60, round a half circle of radius ``bend`` about
+    (100, 90) and back left along y = 120; the middle quarter of the bend is hidden and
+    each piece's last joint is bent 4 px outwards (the hook thinning leaves at a cut)."""
+
+    def arc(first, last):
+        angle = np.linspace(first, last, 200)
+        return np.column_stack([100 + bend * np.cos(angle), 90 + bend * np.sin(angle)])
+
+    def line(y, start, stop):
+        return np.column_stack([np.linspace(start, stop, 200), np.full(200, float(y))])
+
+    first = resample(np.vstack([line(60, 0, 100), arc(-np.pi / 2, -np.pi / 4)]), 10.0)[0]
+    second = resample(np.vstack([arc(np.pi / 4, np.pi / 2), line(120, 100, 0)]), 10.0)[0]
+    first[-1] += 4 * (first[-1] - [100, 90]) / bend
+    second[0] += 4 * (second[0] - [100, 90]) / bend
+
+    def error(points):
+        on_bend = points[:, 0] > 100
+        round_bend = np.abs(np.hypot(points[:, 0] - 100, points[:, 1] - 90) - bend)
+        straight = np.minimum(np.abs(points[:, 1] - 60), np.abs(points[:, 1] - 120))
+        return np.where(on_bend, round_bend, straight)
+
+    return [first, second], error
+
+
+def test_a_hidden_bend_is_bridged_from_where_the_end_fits_begin():
+    """Across a gap on a tight bend, the end fits extrapolated over the cut tips point
+    the bridge off the cable (5.9 px from its centreline, over its 5 px radius); from
+    where the fits begin, with their own tangents there, it stays on the cable."""
+    pieces, error = _hairpin_pieces()
+    result = merge_chains(pieces, DetectParams(), 5.0)
+    assert len(result.paths) == 1
+    assert error(result.paths[0].vertices).max() < 5.0
+    ends = chain_ends(pieces, 40.0, skip=5.0)
+    inner, trims = bridge_from_the_fits(pieces, ends, [(1, 2, 0.0)], 40.0, [-1] * 4)
+    assert trims.tolist() == [0.0, 5.0, 5.0, 0.0]
+    extrapolated = error(np.array([ends[1].position, ends[2].position]))
+    assert (error(np.array([inner[1].position, inner[2].position])) < extrapolated).all()
