@@ -34,6 +34,11 @@ LENGTH_TOLERANCE = 0.15
 """Largest relative difference between whole cables' lengths (plus two segments)."""
 SHAPE_MARGIN = 1.5
 """The shape decides which end is which when one way fits this much worse than the other."""
+LEFT_GATE = 5.0
+"""A candidate lies where its cable left the view when its joints are this many segments
+(or 4 radii) from the joints of the track seen last, on average ..."""
+LEFT_OVERLAP = 3
+"""... over at least this many joints."""
 MAX_JOIN_GAP = 10.0
 """A candidate continues a track only from within this many segments of its end ..."""
 MAX_JOIN_TURN = math.radians(40.0)
@@ -338,8 +343,79 @@ def _shape_misfit(candidate: Candidate, track_joints: np.ndarray, first_is_head:
     return _rigid_misfit(track[:count], seen[:count])
 
 
+def where_it_left(
+    candidate: Candidate,
+    track_length: int,
+    last_seen: tuple[np.ndarray, np.ndarray] | None,
+    radius: float,
+    step: float,
+) -> tuple[bool, int | None] | None:
+    """Which way round, and from which of the track's joints on, the candidate shows its
+    cable, when it lies where the track was seen last: cable comes back into view where
+    it went out, the material that left last coming back first (the cable is continuous
+    across the picture's edge, or the edge of what hid it).
+
+    ``last_seen`` is ``(joint numbers, points)``: the track's joints seen the last frame
+    it was seen, and where they were then. The candidate lies there when one of its
+    joints is within :data:`LEFT_GATE` segments (or 4 radii) of one of those points.
+    Then a free end it shows (exactly one) is the track's end nearest, along the track,
+    to the stretch seen last (when clearly nearer than the other: at most half as far);
+    a candidate without one is laid on the track at the offset and way round that put
+    its joints nearest the joints seen last (the candidate's joint ``i``, from the chosen
+    end, on the track's joint ``offset + i``, over :data:`LEFT_OVERLAP` joints or more,
+    the other way round clearly worse).
+    Returns ``(first_is_head, offset)`` (offset None: lay from the free end; else
+    clipped at 0), or None when this cannot tell (the shape must).
+    """
+    if last_seen is None or len(last_seen[0]) == 0:
+        return None
+    numbers, points = last_seen
+    gate = max(LEFT_GATE * step, 4.0 * radius)
+    apart = np.linalg.norm(candidate.joints[:, None, :] - points[None, :, :], axis=2)
+    if float(apart.min()) > gate:
+        return None
+    if candidate.tips[0] != candidate.tips[1]:
+        to_first = int(numbers.min())
+        to_last = track_length - 1 - int(numbers.max())
+        if min(to_first, to_last) > 0.5 * max(to_first, to_last):
+            return None
+        free_end_is_head = to_first < to_last
+        return free_end_is_head == candidate.tips[0], None
+    if candidate.tips[0] or len(numbers) < LEFT_OVERLAP:
+        return None
+    where = np.full((track_length, 2), np.nan)
+    where[numbers] = points
+    count = len(candidate.joints)
+    best: dict[bool, tuple[float, int]] = {}
+    for first_is_head in (True, False):
+        seen = candidate.joints if first_is_head else candidate.joints[::-1]
+        for offset in range(-count + LEFT_OVERLAP, track_length - LEFT_OVERLAP + 1):
+            paired_numbers = offset + np.arange(count)
+            inside = (paired_numbers >= 0) & (paired_numbers < track_length)
+            paired = where[paired_numbers[inside]]
+            known = np.isfinite(paired[:, 0])
+            if np.count_nonzero(known) < LEFT_OVERLAP:
+                continue
+            cost = float(np.linalg.norm(seen[inside][known] - paired[known], axis=1).mean())
+            if first_is_head not in best or cost < best[first_is_head][0]:
+                best[first_is_head] = (cost, offset)
+    if not best:
+        return None
+    way = min(best, key=lambda k: best[k][0])
+    cost, offset = best[way]
+    if cost > gate:
+        return None
+    if (not way) in best and best[not way][0] <= SHAPE_MARGIN * cost + 1.0:
+        return None
+    return way, max(offset, 0)
+
+
 def revived_joints(
-    old: np.ndarray, candidate: Candidate, first_is_head: bool, step: float
+    old: np.ndarray,
+    candidate: Candidate,
+    first_is_head: bool,
+    step: float,
+    offset: int | None = None,
 ) -> np.ndarray:
     """A remembered track's joints laid along a candidate that shows its cable again.
 
@@ -347,14 +423,17 @@ def revived_joints(
     shape, moved rigidly to join on (they are outside the picture or hidden). The
     matching end is the track's end the candidate's free end is, when it shows exactly
     one (the other end of the candidate may be the picture's edge, mid-cable). One that
-    shows no free end is laid where along the track its shape fits best
+    shows no free end is laid from joint ``offset`` on when that is known
+    (:func:`where_it_left`), else where along the track its shape fits best
     (:func:`_sliding_misfit`), else from the track's first end.
     """
     seen = candidate.joints if first_is_head else candidate.joints[::-1]
     tips = candidate.tips if first_is_head else candidate.tips[::-1]
     if tips[1] and not tips[0]:  # the candidate shows the track's last end
         return _laid_from_first(old[::-1], seen[::-1], step)[::-1]
-    if not tips[0] and (offset := _sliding_misfit(seen, old)[1]) > 0:
+    if offset is None and not tips[0]:
+        offset = _sliding_misfit(seen, old)[1]
+    if not tips[0] and offset and offset > 0:
         # From joint ``offset`` on along the candidate; the joints before it keep their
         # shape, moved rigidly to join on.
         laid = _laid_from_first(old[offset:], seen, step)

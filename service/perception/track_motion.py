@@ -37,6 +37,7 @@ def motion(
     use: np.ndarray,
     pinned: list[tuple[int, np.ndarray]] = (),
     tangent: np.ndarray | None = None,
+    rigid_only: np.ndarray | None = None,
 ) -> np.ndarray:
     """Each joint's displacement, with its part along the cable from the whole cable.
 
@@ -51,6 +52,9 @@ def motion(
     weighs in the fit as much as the cross-cable displacements of all the joints in
     ``use`` together, so that a cable moving along itself is followed wherever one of
     its ends is seen. ``tangent``: :func:`tangents` of ``current``, when known.
+    ``rigid_only``: joints whose displacement was not measured (beyond the seen ones,
+    outside the picture): they get the rigid motion alone, so that a stretch out of view
+    moves with the cable as a whole and keeps its shape.
     """
     tangent = tangents(current) if tangent is None else tangent
     normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
@@ -78,7 +82,10 @@ def motion(
     translation_x, translation_y, rotation = np.linalg.solve(rows.T @ rows + ridge, rows.T @ values)
     rigid = np.array([translation_x, translation_y]) + rotation * turned
     remainder = across - (rigid * normal).sum(axis=1)
-    return rigid + smooth_along(remainder)[:, None] * normal
+    result = rigid + smooth_along(remainder)[:, None] * normal
+    if rigid_only is not None:
+        result[rigid_only] = rigid[rigid_only]
+    return result
 
 
 def smooth_along(values: np.ndarray) -> np.ndarray:

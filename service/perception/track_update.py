@@ -7,7 +7,9 @@ the track's end is a tip, the offset is taken from the tip instead (a tip pins t
 sliding along the cable that the shape alone cannot). Joints no piece covers (hidden,
 at a crossing, outside the picture) move with their seen neighbours: each run of them
 follows the rigid motion of the seen joints on either side, blended along the run (the
-motion coherence of CPD-style trackers, along the cable rather than across the image).
+motion coherence of CPD-style trackers, along the cable rather than across the image);
+beyond the outermost seen joints (an end outside the picture or hidden) the joints keep
+the last frame's shape, moved rigidly with the seen joints next to them.
 Then the joints are made exactly ``l_s`` apart, the unseen ones moving most, with a
 bending limit where nothing was seen (:func:`_tracking_kernels.constrain_chain`).
 
@@ -47,8 +49,6 @@ UNSEEN_MOBILITY = 25.0
 MIN_BEND_RADII = 2.5
 """The tightest bend assumed where nothing is seen, in cable radii."""
 SWEEPS = 24
-SHAPE_MEMORY = 0.98
-"""Share of its turn a hidden end's segment keeps from one frame to the next."""
 REFINE_STEPS = 2
 BENT_TURN = 0.6
 """Total turn (radians) of the seen stretches from which their registration alone is
@@ -434,6 +434,7 @@ def register(
     observation: Observation,
     step: float,
     radius: float,
+    previous: np.ndarray | None = None,
 ) -> np.ndarray:
     """The track's new joints: covered ones at their targets, the rest carried along,
     all exactly ``step`` apart (see the module's documentation).
@@ -442,10 +443,11 @@ def register(
     rigid motion of the covered joints on either side, blended along the run, and the
     joints are then made ``step`` apart, the uncovered ones moving most, with a bending
     limit where nothing was seen. Beyond the first and the last covered joint (an end
-    hidden, or outside the picture) the joints keep the track's shape: each segment
-    turns from the one before by the angle it turned by as predicted (a little less
-    every frame: with nothing seen, a straighter cable is the safer guess), from the
-    outermost covered segment on.
+    hidden, or outside the picture) the joints keep the shape they had in the last
+    frame (``previous``; by default as predicted) and move as a rigid whole with the
+    covered joints next to them (a fit over :data:`NEIGHBOURS` of them, so that one
+    joint a chain cut by the picture's edge bends astray does not turn the rest): a
+    cable keeps its shape where it is not seen, and nothing seen bends it.
     """
     covered = observation.covered
     targets = observation.targets
@@ -482,39 +484,23 @@ def register(
             int(middle),
         )
     if first > 0 or last < len(joints) - 1:
-        _keep_shape_at_ends(joints, predicted, first, last, step, turn)
+        _ends_rigidly(joints, predicted if previous is None else previous, seen, first, last)
     return joints
 
 
-def _keep_shape_at_ends(joints, predicted, first, last, step, turn_limit) -> None:
-    """Lay the joints before ``first`` and after ``last`` (in place) with the turns of
-    ``predicted``'s segments, damped by :data:`SHAPE_MEMORY` and at most
-    ``turn_limit`` per joint (see :func:`register`)."""
-    steps = np.diff(predicted, axis=0)
-    angles = np.arctan2(steps[:, 1], steps[:, 0])
-    turns = np.zeros(len(predicted))
-    turns[1:-1] = (np.diff(angles) + math.pi) % (2.0 * math.pi) - math.pi
-    turns = np.clip(turns * SHAPE_MEMORY, -turn_limit, turn_limit)
-
-    def direction_of(k):  # of the segment from joint k to k + 1, as now laid
-        if first <= k < last:
-            dx, dy = joints[k + 1] - joints[k]
-            return math.atan2(dy, dx)
-        return float(angles[k])
-
+def _ends_rigidly(joints, shape, seen, first, last) -> None:
+    """Lay the joints before ``first`` and after ``last`` (in place) as ``shape`` lays
+    them, moved by the rigid motion taking the nearest :data:`NEIGHBOURS` seen joints of
+    ``shape`` onto where they are now (``joints``), and joined on at ``first`` /
+    ``last`` (see :func:`register`)."""
     if last < len(joints) - 1:
-        heading = direction_of(last - 1) if last > first else float(angles[max(last - 1, 0)])
-        for k in range(last, len(joints) - 1):
-            heading += turns[k] if k > 0 else 0.0
-            joints[k + 1] = joints[k] + step * np.array([math.cos(heading), math.sin(heading)])
+        near = seen[-NEIGHBOURS:]
+        moved = _rigid(shape[near], joints[near], shape[last:])
+        joints[last + 1 :] = moved[1:] + (joints[last] - moved[0])
     if first > 0:
-        if last > first:
-            heading = direction_of(first)
-        else:
-            heading = float(angles[min(first, len(angles) - 1)])
-        for k in range(first, 0, -1):
-            heading -= turns[k] if k < len(joints) - 1 else 0.0
-            joints[k - 1] = joints[k] - step * np.array([math.cos(heading), math.sin(heading)])
+        near = seen[:NEIGHBOURS]
+        moved = _rigid(shape[near], joints[near], shape[: first + 1])
+        joints[:first] = moved[:-1] + (joints[first] - moved[-1])
 
 
 def exact_chain(joints: np.ndarray, step: float) -> np.ndarray:

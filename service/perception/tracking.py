@@ -55,6 +55,7 @@ from service.perception.track_identity import (
     revived_joints,
     similarity,
     unclaimed_stretches,
+    where_it_left,
 )
 from service.perception.track_matching import Chains, Piece, detection_pieces, fit_pieces
 from service.perception.track_merging import Bridge, Join, bridges, joins
@@ -113,6 +114,9 @@ class TrackRecord:
         Both free ends of the cable were once seen in one frame, as far apart as the
         track's ends: it is as long as its cable, and never grows (cable seen beyond
         one end moves it along instead).
+    last_seen : ((M,) int ndarray, (M, 2) ndarray) or None
+        The joints (their indices into ``joints``) seen the last frame it was seen, and
+        where they were then: where its cable went out of view.
     """
 
     id: int
@@ -132,6 +136,7 @@ class TrackRecord:
     seen: np.ndarray | None = None  # (N,) bool: joints seen in the last frame it was seen
     free_end_points: np.ndarray | None = None  # (2, 2): free ends seen last frame (NaN: not)
     length_known: bool = False  # both free ends once seen at once, as far apart as its ends
+    last_seen: tuple[np.ndarray, np.ndarray] | None = None  # (joint numbers, points) seen last
 
     @property
     def length(self) -> float:
@@ -490,8 +495,8 @@ def _moved(
     )
     before = np.vstack([head, predicted, tail])
     grown = replace(observation, targets=targets, covered=covered)
-    joints = register(before, grown, step, track.radius)
     previous = np.vstack([head, track.joints, tail])
+    joints = register(before, grown, step, track.radius, previous)
     velocity = np.vstack(
         [
             np.repeat(track.velocity[:1], len(head), axis=0),
@@ -513,7 +518,12 @@ def _moved(
                 if not grown and np.all(np.isfinite(moved[end])):
                     pinned.append((0 if end == 0 else len(previous) - 1, moved[end]))
         tangent = tangents(joints)
-        measured = motion(previous, joints, use, pinned, tangent) / dt
+        # Beyond the outermost seen joints (outside the picture, or hidden at an end)
+        # nothing is measured: those joints move with the cable as a whole.
+        seen_at = np.flatnonzero(covered)
+        beyond = np.ones(len(covered), bool)
+        beyond[seen_at[0] : seen_at[-1] + 1] = False
+        measured = motion(previous, joints, use, pinned, tangent, beyond) / dt
         # A slide moves each joint back along the track (lower joint numbers) by its size.
         measured -= (observation.slide / dt) * tangent
         velocity = VELOCITY_SMOOTHING * measured + (1.0 - VELOCITY_SMOOTHING) * velocity
@@ -548,6 +558,7 @@ def _moved(
         seen=covered,
         free_end_points=observation.free_end_points,
         length_known=track.length_known or observation.length_known,
+        last_seen=(np.flatnonzero(covered), joints[covered]),
     )
 
 
@@ -582,6 +593,7 @@ def _started(
         ends_seen_s=(now, now),
         ends_last=np.array([joints[0], joints[-1]]),
         free_end_points=np.where(np.array(tips)[:, None], joints[[0, -1]], np.nan),
+        last_seen=(np.arange(len(joints)), joints),
     )
 
 
@@ -672,6 +684,7 @@ def _extended(track: TrackRecord, joined: Continuation, now: float) -> TrackReco
         ends_seen_s=ends_seen,
         ends_last=np.array([joints[0], joints[-1]]),
         seen=None,
+        last_seen=None,
     )
 
 
@@ -705,15 +718,21 @@ def _recognise(
         tracks = [t for t in tracks if t is not track]
     else:
         remembered = [(t, s) for t, s in remembered if t is not track]
-    first_is_head = orientation(
-        candidate,
-        track.joints,
-        track.tips,
-        (track.ends_last[0], track.ends_last[1]),
-        track.ends_seen_s,
-    )
+    # Where it went out of view, when it is back there, tells which way round it is.
+    left = where_it_left(candidate, len(track.joints), track.last_seen, track.radius, step)
+    offset = None
+    if left is not None:
+        first_is_head, offset = left
+    else:
+        first_is_head = orientation(
+            candidate,
+            track.joints,
+            track.tips,
+            (track.ends_last[0], track.ends_last[1]),
+            track.ends_seen_s,
+        )
     joints = revived_joints(
-        track.joints, _with_whole_segments(candidate, step), first_is_head, step
+        track.joints, _with_whole_segments(candidate, step), first_is_head, step, offset
     )
     joints = exact_chain(joints, step)
     seen_tips = candidate.tips if first_is_head else candidate.tips[::-1]
@@ -732,6 +751,7 @@ def _recognise(
         unseen=0,
         steady=0,
         free_end_points=free_end_points,
+        last_seen=None,
     )
     return revived, tracks, remembered
 

@@ -11,12 +11,18 @@ import numpy as np
 import pytest
 
 from service.perception import Tracker, warm_up
-from service.perception.geometry import arc_lengths
-from service.perception.track_identity import Candidate, Continuation, orientation, revived_joints
+from service.perception.geometry import arc_lengths, rigid_fit
+from service.perception.track_identity import (
+    Candidate,
+    Continuation,
+    orientation,
+    revived_joints,
+    where_it_left,
+)
 from service.perception.track_matching import Chains, Fit, Piece, fit_pieces
 from service.perception.track_merging import joins
 from service.perception.track_motion import motion
-from service.perception.track_update import observe
+from service.perception.track_update import Observation, observe, register
 from service.perception.tracking import _extended, _joined, _started
 
 STEP = 10.0
@@ -263,3 +269,83 @@ def test_a_cable_back_without_a_free_end_is_laid_where_its_shape_fits():
     assert len(joints) == 30
     np.testing.assert_allclose(joints[12:25], now[12:25], atol=0.5)
     np.testing.assert_allclose(joints[[0, -1]], now[[0, -1]], atol=1.0)
+
+
+def turned(points, angle, shift):
+    rotation = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    return points @ rotation.T + np.asarray(shift)
+
+
+def test_the_stretch_out_of_view_keeps_its_shape_and_moves_with_its_seen_neighbours():
+    # A bent cable going out of the picture: joints 0-14 seen this frame, turned and
+    # moved; the last of them a pixel or two off (a chain cut by the picture's edge
+    # bends there), the rest outside the picture.
+    previous = curved(30, turn=0.02)
+    now = turned(previous, 0.05, [12.0, -6.0])
+    targets = now.copy()
+    targets[14] += [0.0, 2.5]
+    covered = np.arange(30) <= 14
+    observation = Observation(targets, covered, (False, False), np.empty((0, 2)), np.empty((0, 2)))
+    joints = register(previous, observation, STEP, 4.0, previous)
+    # The joints out of view are the cable where it now is: its shape kept, carried by
+    # the motion of the seen joints next to them, not bent by the last one's error.
+    np.testing.assert_allclose(joints[15:], now[15:], atol=3.5)
+    np.testing.assert_allclose(np.linalg.norm(np.diff(joints, axis=0), axis=1), STEP, atol=1e-6)
+
+
+def test_joints_out_of_view_move_with_the_cable_as_a_whole():
+    previous = curved(30, turn=0.02)
+    current = turned(previous, 0.02, [4.0, 3.0])
+    guessed = current.copy()
+    guessed[20:] += np.linspace(0.0, 8.0, 10)[:, None] * [0.3, 1.0]  # guesses out of view
+    use = np.arange(30) < 20
+    outside = ~use
+    clean = motion(previous, current, use, rigid_only=outside)
+    moved = motion(previous, guessed, use, rigid_only=outside)
+    # Outside the seen stretch: the rigid motion the seen joints give, whatever was
+    # guessed there (without that, the guesses' own motion leaks in).
+    np.testing.assert_allclose(moved[outside], clean[outside], atol=0.05)
+    leaked = motion(previous, guessed, use)
+    assert np.abs(leaked[outside] - clean[outside]).max() > 1.0
+    # ... and it is one rigid motion: the same turn and shift for every joint there.
+    source, rotation, target = rigid_fit(previous[outside], previous[outside] + moved[outside])
+    laid = (previous[outside] - source) @ rotation.T + target
+    np.testing.assert_allclose(laid, previous[outside] + moved[outside], atol=0.05)
+
+
+def test_a_cable_comes_back_where_it_left_with_what_left_last():
+    # A track of 55 joints whose joints 44-46 were seen last, at the picture's bottom
+    # right; the rest of it out of view. The cable comes back there showing one free end.
+    track_length = 55
+    numbers = np.array([44, 45, 46])
+    points = np.array([[630.0, 474.0], [634.0, 465.0], [637.0, 455.0]])
+    shown = np.column_stack([np.linspace(611.0, 601.0, 6), np.linspace(433.0, 479.0, 6)])
+    tip_first = Candidate(shown, (True, False), 5.0, None)
+    # Its free end is the track's end nearest (along it) the stretch seen last: joint 54.
+    assert where_it_left(tip_first, track_length, (numbers, points), 5.0, STEP) == (False, None)
+    tip_last = Candidate(shown[::-1].copy(), (False, True), 5.0, None)
+    assert where_it_left(tip_last, track_length, (numbers, points), 5.0, STEP) == (True, None)
+    # Elsewhere in the picture it cannot tell: the shape must.
+    far = Candidate(shown - [300.0, 0.0], (True, False), 5.0, None)
+    assert where_it_left(far, track_length, (numbers, points), 5.0, STEP) is None
+    # Seen last in its middle, a free end coming back cannot be told from there.
+    middle = (np.arange(25, 30), np.column_stack([600.0 + STEP * np.arange(5), np.full(5, 470.0)]))
+    near_middle = Candidate(middle[1][:3] - [0.0, 10.0], (True, False), 5.0, None)
+    assert where_it_left(near_middle, track_length, middle, 5.0, STEP) is None
+
+
+def test_a_stretch_back_without_a_free_end_is_laid_on_the_joints_seen_last():
+    # Joints 20-32 of a 52-joint track were seen last along the bottom edge; the cable
+    # comes back there, showing joints 23-30 (no free end), a little further up.
+    old = curved(52, turn=0.004)
+    numbers = np.arange(20, 33)
+    last = (numbers, old[numbers])
+    shown = old[23:31] + np.array([0.0, -6.0])
+    forward = Candidate(shown, (False, False), 4.0, None)
+    assert where_it_left(forward, 52, last, 4.0, STEP) == (True, 23)
+    backward = Candidate(shown[::-1].copy(), (False, False), 4.0, None)
+    way, offset = where_it_left(backward, 52, last, 4.0, STEP)
+    assert not way and offset == 23
+    joints = revived_joints(old, forward, True, STEP, offset=23)
+    np.testing.assert_allclose(joints[23:31], shown, atol=0.5)
+    assert len(joints) == 52
