@@ -176,12 +176,7 @@ def continuation(
     """
     best, best_gap = None, math.inf
     limit = math.cos(MAX_JOIN_TURN)
-    for index, (joints, seen, radius, colour) in enumerate(tracks):
-        seen_at = np.flatnonzero(seen)
-        if len(seen_at) < 2:
-            continue
-        if similarity(candidate, colour, radius, math.inf, (False, False), step) is None:
-            continue
+    for index, joints, seen_at in _alike(candidate, tracks, step):
         for end in (0, 1):
             anchor = int(seen_at[0] if end == 0 else seen_at[-1])
             body = joints[anchor:] if end == 0 else joints[: anchor + 1]
@@ -207,6 +202,18 @@ def continuation(
                 best = Continuation(index, end, anchor, walked[1:], tip)
                 best_gap = gap
     return best
+
+
+def _alike(candidate: Candidate, tracks, step: float):
+    """``(index, joints, seen joints' indices)`` of the tracks seen at two joints or more
+    that look like the candidate (colour, width)."""
+    for index, (joints, seen, radius, colour) in enumerate(tracks):
+        seen_at = np.flatnonzero(seen)
+        if len(seen_at) < 2:
+            continue
+        if similarity(candidate, colour, radius, math.inf, (False, False), step) is None:
+            continue
+        yield index, joints, seen_at
 
 
 def _end_direction(joints: np.ndarray, end: int) -> np.ndarray:
@@ -480,3 +487,85 @@ def _overlap(points: np.ndarray, polyline: np.ndarray, gate: float) -> float:
     foot = a[None] + t[:, :, None] * ab[None]
     distance = np.linalg.norm(points[:, None, :] - foot, axis=2).min(axis=1)
     return float(np.mean(distance <= gate))
+
+
+OTHER_END_TURN = 0.5
+"""A candidate is a track's other end coming into view when turning the track's stretch
+out of view about its outermost seen joint by at most this much (radians) ..."""
+OTHER_END_FIT = 2.0
+"""... lays that stretch's end joints within this many segments of it, on average."""
+
+
+@dataclass(frozen=True)
+class OtherEnd:
+    """A candidate that is the far end of a track seen in part (its stretch out of view).
+
+    Attributes
+    ----------
+    track : int
+    end : int
+        The track's end the candidate's free end is.
+    joints : (N, 2) ndarray
+        The track's joints, its stretch beyond the outermost seen joint at ``end`` turned
+        (and bent, towards the end) onto the candidate.
+    """
+
+    track: int
+    end: int
+    joints: np.ndarray
+
+
+def other_end(
+    candidate: Candidate,
+    tracks: list[tuple[np.ndarray, np.ndarray, float, np.ndarray | None]],
+    step: float,
+) -> OtherEnd | None:
+    """The track whose other end the candidate is, if one is: a cable seen in part (out of
+    view beyond one end) whose far end comes into view elsewhere, across the picture.
+
+    The track's stretch beyond its outermost seen joint keeps the shape it had (out of
+    view nothing measures it), but turned a little about that joint it must lay its end
+    on the candidate's free end and the joints next to it on the candidate (within
+    :data:`OTHER_END_TURN` and :data:`OTHER_END_FIT`); the candidate must show exactly
+    one free end and look like the track (colour, width). ``tracks`` are ``(joints,
+    seen, radius, colour)`` of the tracks seen this frame.
+    """
+    if candidate.tips[0] == candidate.tips[1]:
+        return None
+    from_tip = candidate.joints if candidate.tips[0] else candidate.joints[::-1]
+    m = len(from_tip)
+    best, best_fit = None, OTHER_END_FIT * step
+    for index, joints, seen_at in _alike(candidate, tracks, step):
+        n = len(joints)
+        for end in (0, 1):
+            anchor = int(seen_at[0] if end == 0 else seen_at[-1])
+            beyond = anchor if end == 0 else n - 1 - anchor
+            if beyond < m + 2:
+                continue
+            # Track joints from the end inwards, paired with the candidate's from its tip.
+            order = np.arange(m) if end == 0 else n - 1 - np.arange(m)
+            pivot = joints[anchor]
+            q = joints[order] - pivot
+            c = from_tip - pivot
+            cross = float(np.sum(q[:, 0] * c[:, 1] - q[:, 1] * c[:, 0]))
+            dot = float(np.sum(q * c))
+            angle = math.atan2(cross, dot)
+            if abs(angle) > OTHER_END_TURN:
+                continue
+            cos, sin = math.cos(angle), math.sin(angle)
+            rotation = np.array([[cos, -sin], [sin, cos]])
+            turned = q @ rotation.T
+            misfit = float(np.mean(np.linalg.norm(turned - c, axis=1)))
+            if misfit >= best_fit:
+                continue
+            # The stretch beyond the anchor turned, then bent towards the end so that
+            # its end joints lie on the candidate.
+            stretch = np.arange(anchor) if end == 0 else np.arange(anchor + 1, n)
+            new = joints.copy()
+            new[stretch] = (joints[stretch] - pivot) @ rotation.T + pivot
+            shift = np.mean(c - turned, axis=0)
+            ramp = np.abs(stretch - anchor) / float(beyond)
+            new[stretch] += ramp[:, None] * shift[None, :]
+            new[order] = from_tip
+            best, best_fit = OtherEnd(index, end, new), misfit
+    return best

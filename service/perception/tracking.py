@@ -48,10 +48,12 @@ from service.perception.track_identity import (
     COLOUR_TOLERANCE,
     Candidate,
     Continuation,
+    OtherEnd,
     colour_distance,
     confirm,
     continuation,
     orientation,
+    other_end,
     revived_joints,
     similarity,
     unclaimed_stretches,
@@ -310,6 +312,14 @@ def advance(
         )
         if joined is not None:
             tracks[joined.track] = _extended(tracks[joined.track], joined, now)
+            continue
+        reached = other_end(
+            candidate,
+            [(t.joints, _seen_mask(t), t.radius, t.colour) for t in tracks if t.unseen == 0],
+            step,
+        )
+        if reached is not None:
+            tracks = _reached(tracks, reached, now, step)
             continue
         revived, tracks, remembered = _recognise(candidate, tracks, remembered, step, now, frame)
         if revived is None:
@@ -686,6 +696,27 @@ def _extended(track: TrackRecord, joined: Continuation, now: float) -> TrackReco
         seen=None,
         last_seen=None,
     )
+
+
+def _reached(tracks: list[TrackRecord], reached: OtherEnd, now: float, step: float):
+    """The tracks with one's other end come into view laid on it (:func:`other_end`)."""
+    live = [t for t in tracks if t.unseen == 0]
+    track = live[reached.track]
+    joints = exact_chain(reached.joints, step)
+    ends_seen = list(track.ends_seen_s)
+    ends_seen[reached.end] = now
+    tips = list(track.tips)
+    tips[reached.end] = True
+    new = replace(
+        track,
+        joints=joints,
+        tips=(tips[0], tips[1]),
+        ends_seen_s=(ends_seen[0], ends_seen[1]),
+        ends_last=np.array([joints[0], joints[-1]]),
+        seen=None,
+        last_seen=None,
+    )
+    return [new if t is track else t for t in tracks]
 
 
 def _with_whole_segments(candidate: Candidate, step: float) -> Candidate:

@@ -16,6 +16,7 @@ from service.perception.track_identity import (
     Candidate,
     Continuation,
     orientation,
+    other_end,
     revived_joints,
     where_it_left,
 )
@@ -349,3 +350,32 @@ def test_a_stretch_back_without_a_free_end_is_laid_on_the_joints_seen_last():
     joints = revived_joints(old, forward, True, STEP, offset=23)
     np.testing.assert_allclose(joints[23:31], shown, atol=0.5)
     assert len(joints) == 52
+
+
+def test_the_far_end_of_a_cable_seen_in_part_is_its_track_s_other_end():
+    # An arch of 40 joints over the picture's top edge: joints 0-9 seen, the rest out of
+    # view kept in a shape turned 0.12 rad (about joint 9) from where the cable is. Its
+    # far end comes into view elsewhere: the last 6 joints, its free end last.
+    truth = curved(40, turn=0.01)
+    pivot = truth[9]
+    angle = 0.12
+    rotation = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    kept = truth.copy()
+    kept[10:] = (truth[10:] - pivot) @ rotation.T + pivot
+    seen = np.zeros(40, bool)
+    seen[:10] = True
+    colour = np.array([120.0, 150.0, 150.0])
+    shown = Candidate(truth[34:].copy(), (False, True), 4.0, colour)
+    reached = other_end(shown, [(kept, seen, 4.0, colour)], STEP)
+    assert reached is not None and (reached.track, reached.end) == (0, 1)
+    np.testing.assert_allclose(reached.joints[34:], truth[34:], atol=1e-6)
+    np.testing.assert_allclose(reached.joints[:10], kept[:10])
+    # The stretch between follows: turned back, the truth within a segment.
+    assert np.linalg.norm(reached.joints[10:34] - truth[10:34], axis=1).max() < STEP
+    # Elsewhere in the picture, or without one free end, or of another colour: not it.
+    far = Candidate(truth[34:] + np.array([0.0, 200.0]), (False, True), 4.0, colour)
+    assert other_end(far, [(kept, seen, 4.0, colour)], STEP) is None
+    both = Candidate(truth[34:].copy(), (True, True), 4.0, colour)
+    assert other_end(both, [(kept, seen, 4.0, colour)], STEP) is None
+    other = Candidate(truth[34:].copy(), (False, True), 4.0, np.array([120.0, 100.0, 200.0]))
+    assert other_end(other, [(kept, seen, 4.0, colour)], STEP) is None
