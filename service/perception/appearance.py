@@ -146,12 +146,7 @@ def colour_penalty(colours: EndColours, first: np.ndarray, second: np.ndarray) -
     scatter, then one unit per further :data:`COLOUR_TOLERANCE`, at most
     :data:`MAX_COLOUR_STEPS`; 0 when either end's colour is unknown.
     """
-    difference = colours.colour[first] - colours.colour[second]
-    distance = np.sqrt(
-        (LIGHTNESS_SHARE * difference[..., 0]) ** 2
-        + difference[..., 1] ** 2
-        + difference[..., 2] ** 2
-    )
+    distance = _lab_distance(colours.colour[first], colours.colour[second])
     allowed = COLOUR_TOLERANCE + colours.spread[first] + colours.spread[second]
     steps = np.clip((distance - allowed) / COLOUR_TOLERANCE, 0.0, MAX_COLOUR_STEPS)
     return np.where(np.isnan(steps), 0.0, steps)
@@ -184,6 +179,8 @@ def _lab_means(image_bgr: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 
 def _lab_distance(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """CIELAB distance with lightness weighted by :data:`LIGHTNESS_SHARE` (the light
+    along one cable changes lightness far more than hue)."""
     difference = first - second
     return np.sqrt(
         (LIGHTNESS_SHARE * difference[..., 0]) ** 2

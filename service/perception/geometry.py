@@ -94,8 +94,7 @@ def fit_where_skipped(
     fitted, x0, y0, dx, dy, _, ddx, ddy = _geometry_kernels.end_fit(
         backwards, float(skip), float(span)
     )
-    total = float(np.hypot(*np.diff(backwards, axis=0).T).sum()) if len(backwards) > 1 else 0.0
-    if not fitted or skip <= 0 or total < 2.0 * skip + 1.0:
+    if not fitted or skip <= 0 or polyline_length(backwards) < 2.0 * skip + 1.0:
         return None
     position = np.array(
         [x0 + dx * skip + 0.5 * ddx * skip**2, y0 + dy * skip + 0.5 * ddy * skip**2]
@@ -166,6 +165,17 @@ def rigid_fit(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.nd
     angle = math.atan2(float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum()), float((a * b).sum()))
     c, s = math.cos(angle), math.sin(angle)
     return source_mean, np.array([[c, -s], [s, c]]), target_mean
+
+
+def distances_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
+    """Each point's distance (px) from a polyline of two vertices or more (its nearest
+    segment)."""
+    a = polyline[:-1]
+    ab = polyline[1:] - a
+    ap = points[:, None, :] - a[None, :, :]
+    t = np.clip((ap * ab).sum(axis=2) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0.0, 1.0)
+    gap = ap - t[:, :, None] * ab[None, :, :]
+    return np.sqrt((gap * gap).sum(axis=2)).min(axis=1)
 
 
 def polyline_length(points: np.ndarray) -> float:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from service.perception import _geometry_kernels
-from service.perception.geometry import arc_lengths, points_along, rigid_fit
+from service.perception.geometry import arc_lengths, distances_to_polyline, points_along, rigid_fit
 from service.perception.track_matching import Chains, Piece
 
 MIN_CANDIDATE_SEGMENTS = 3
@@ -479,14 +479,7 @@ def _overlap(points: np.ndarray, polyline: np.ndarray, gate: float) -> float:
     """Share of ``points`` within ``gate`` of the polyline's vertices or segments."""
     if len(polyline) < 2:
         return 0.0
-    a, b = polyline[:-1], polyline[1:]
-    ab = b - a
-    length_sq = np.maximum((ab**2).sum(axis=1), 1e-12)
-    offset = points[:, None, :] - a[None, :, :]
-    t = np.clip((offset * ab[None]).sum(axis=2) / length_sq[None], 0.0, 1.0)
-    foot = a[None] + t[:, :, None] * ab[None]
-    distance = np.linalg.norm(points[:, None, :] - foot, axis=2).min(axis=1)
-    return float(np.mean(distance <= gate))
+    return float(np.mean(distances_to_polyline(points, polyline) <= gate))
 
 
 OTHER_END_TURN = 0.5

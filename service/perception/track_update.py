@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from service.perception import _tracking_kernels
-from service.perception.geometry import points_along, rigid_fit
+from service.perception.geometry import distances_to_polyline, points_along, rigid_fit
 from service.perception.track_matching import Chains, Fit, Piece, clear_of_edge
 
 TIP_WINDOW = 5.0
@@ -357,20 +357,10 @@ def _chain_tips(joints, placed, chains):
                 continue
             beyond = points[stretch.start : stretch.stop + 1]
             reach = radius + 0.5 * step
-            if _distance_to_polyline(beyond, extended).max() > reach:
+            if distances_to_polyline(beyond, extended).max() > reach:
                 continue
             found[end].append((s_tip, *points[chain_end]))
     return found
-
-
-def _distance_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
-    """Each point's distance from a polyline (its nearest segment)."""
-    a = polyline[:-1]
-    ab = polyline[1:] - a
-    ap = points[:, None, :] - a[None, :, :]
-    t = np.clip((ap * ab).sum(axis=2) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0.0, 1.0)
-    gap = ap - t[:, :, None] * ab[None, :, :]
-    return np.sqrt((gap * gap).sum(axis=2)).min(axis=1)
 
 
 def _grow(piece, sign, offset, end, total, chains, claimed, chain_of_piece, at_tip):
