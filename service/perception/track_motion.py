@@ -14,6 +14,10 @@ import numpy as np
 
 VELOCITY_KERNEL = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
 """Weights of a joint's velocity and its neighbours' (two each side)."""
+NO_SLIDE_WEIGHT = 10.0
+"""How strongly, without a free end seen, the rigid motion is kept from sliding the cable
+along itself: its mean motion along the seen joints weighs this much squared (100) times
+all their cross-cable displacements together (a constraint, in effect)."""
 RIDGE = 0.02
 """How strongly the rigid motion fitted to a cable's cross-cable displacements is kept
 small (relative to the data): enough to leave a straight cable's slide at zero."""
@@ -51,7 +55,9 @@ def motion(
     point found again, whose whole displacement (along the cable too) is measured; it
     weighs in the fit as much as the cross-cable displacements of all the joints in
     ``use`` together, so that a cable moving along itself is followed wherever one of
-    its ends is seen. ``tangent``: :func:`tangents` of ``current``, when known.
+    its ends is seen. Without one, the rigid motion is fitted with no mean motion along
+    the seen joints (a travelling bend would otherwise pass for a slide along the
+    cable). ``tangent``: :func:`tangents` of ``current``, when known.
     ``rigid_only``: joints whose displacement was not measured (beyond the seen ones,
     outside the picture): they get the rigid motion alone, so that a stretch out of view
     moves with the cable as a whole and keeps its shape.
@@ -79,6 +85,16 @@ def motion(
         end_rows[1::2, 2] = turned[ends, 1]
         rows = np.vstack([rows, weight * end_rows])
         values = np.concatenate([values, weight * moved])
+    else:
+        # No free end measures the motion along the cable, and the shape cannot: a bend
+        # travelling along it looks the same as the cable sliding along itself (and
+        # turning), which a rigid motion fits well. The slide is taken as nil (the least
+        # motion): a velocity carrying one on slides the track, the next frame finds the
+        # bends moved on again, and the track is dragged along by them.
+        weight = math.sqrt(count) * NO_SLIDE_WEIGHT
+        slide_row = np.column_stack([tangent, (turned * tangent).sum(axis=1)])[use].mean(axis=0)
+        rows = np.vstack([rows, weight * slide_row])
+        values = np.concatenate([values, [0.0]])
     translation_x, translation_y, rotation = np.linalg.solve(rows.T @ rows + ridge, rows.T @ values)
     rigid = np.array([translation_x, translation_y]) + rotation * turned
     remainder = across - (rigid * normal).sum(axis=1)
