@@ -14,10 +14,10 @@ import numpy as np
 
 VELOCITY_KERNEL = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
 """Weights of a joint's velocity and its neighbours' (two each side)."""
-NO_SLIDE_WEIGHT = 10.0
-"""How strongly, without a free end seen, the rigid motion is kept from sliding the cable
-along itself: its mean motion along the seen joints weighs this much squared (100) times
-all their cross-cable displacements together (a constraint, in effect)."""
+SLIDE_KEPT = 0.8
+"""Share of the slide along the cable carried in from the last frame that, with no free
+end in view, the shape may keep up (frame after frame, so a slide no free end measures
+dies away unless the shape keeps showing it)."""
 RIDGE = 0.02
 """How strongly the rigid motion fitted to a cable's cross-cable displacements is kept
 small (relative to the data): enough to leave a straight cable's slide at zero."""
@@ -42,6 +42,7 @@ def motion(
     pinned: list[tuple[int, np.ndarray]] = (),
     tangent: np.ndarray | None = None,
     rigid_only: np.ndarray | None = None,
+    carried: np.ndarray | None = None,
 ) -> np.ndarray:
     """Each joint's displacement, with its part along the cable from the whole cable.
 
@@ -55,9 +56,10 @@ def motion(
     point found again, whose whole displacement (along the cable too) is measured; it
     weighs in the fit as much as the cross-cable displacements of all the joints in
     ``use`` together, so that a cable moving along itself is followed wherever one of
-    its ends is seen. Without one, the rigid motion is fitted with no mean motion along
-    the seen joints (a travelling bend would otherwise pass for a slide along the
-    cable). ``tangent``: :func:`tangents` of ``current``, when known.
+    its ends is seen. Without one, the rigid motion's slide along the cable (its mean
+    motion along the seen joints) is kept between nil and the slide ``carried`` (the
+    joints' displacement the velocity predicted, when given) gives: see
+    :func:`_slide_bounded`. ``tangent``: :func:`tangents` of ``current``, when known.
     ``rigid_only``: joints whose displacement was not measured (beyond the seen ones,
     outside the picture): they get the rigid motion alone, so that a stretch out of view
     moves with the cable as a whole and keeps its shape.
@@ -85,23 +87,48 @@ def motion(
         end_rows[1::2, 2] = turned[ends, 1]
         rows = np.vstack([rows, weight * end_rows])
         values = np.concatenate([values, weight * moved])
-    else:
-        # No free end measures the motion along the cable, and the shape cannot: a bend
-        # travelling along it looks the same as the cable sliding along itself (and
-        # turning), which a rigid motion fits well. The slide is taken as nil (the least
-        # motion): a velocity carrying one on slides the track, the next frame finds the
-        # bends moved on again, and the track is dragged along by them.
-        weight = math.sqrt(count) * NO_SLIDE_WEIGHT
-        slide_row = np.column_stack([tangent, (turned * tangent).sum(axis=1)])[use].mean(axis=0)
-        rows = np.vstack([rows, weight * slide_row])
-        values = np.concatenate([values, [0.0]])
-    translation_x, translation_y, rotation = np.linalg.solve(rows.T @ rows + ridge, rows.T @ values)
+    normal_matrix = rows.T @ rows + ridge
+    fitted = np.linalg.solve(normal_matrix, rows.T @ values)
+    if not len(pinned) and carried is not None:
+        fitted = _slide_bounded(
+            fitted, normal_matrix, tangent, turned, use, carried, tangents(previous)
+        )
+    translation_x, translation_y, rotation = fitted
     rigid = np.array([translation_x, translation_y]) + rotation * turned
     remainder = across - (rigid * normal).sum(axis=1)
     result = rigid + smooth_along(remainder)[:, None] * normal
     if rigid_only is not None:
         result[rigid_only] = rigid[rigid_only]
     return result
+
+
+def _slide_bounded(fitted, normal_matrix, tangent, turned, use, carried, carried_tangent):
+    """The rigid motion ``fitted`` (``tx, ty, rotation``), its slide along the cable kept
+    between nil and :data:`SLIDE_KEPT` of the slide ``carried`` in from the last frames.
+
+    No free end in view measures the motion along the cable, and the shape cannot tell
+    it from a bend travelling along the cable: that looks the same as the cable sliding
+    along itself (and turning), which a rigid motion fits well. A velocity carrying such
+    a slide on slides the track, the next frame finds the bends moved on again, and the
+    track is dragged along by them, faster and faster. So the shape may keep up or slow
+    down a slide that was measured (a free end seen moving along the cable, then lost
+    under a crossing, say, while the cable goes on), but it does not start one, nor
+    speed one up. The slide carried in is measured along the cable as it lay when that
+    motion was measured (``carried_tangent``: the cross-cable part of a bending cable's
+    motion then would show along it now, and ratchet a slide up frame by frame). The
+    bound is a constraint on the least-squares fit (``normal_matrix``: its normal
+    equations), so the motion stays rigid.
+    """
+    slide_row = np.column_stack([tangent, (turned * tangent).sum(axis=1)])[use].mean(axis=0)
+    slide = float(slide_row @ fitted)
+    before = SLIDE_KEPT * float((carried[use] * carried_tangent[use]).sum(axis=1).mean())
+    target = min(max(slide, min(0.0, before)), max(0.0, before))
+    if target == slide:
+        return fitted
+    # The least-squares fit with its slide fixed (Lagrange): move along the direction
+    # that changes the slide at least cost.
+    direction = np.linalg.solve(normal_matrix, slide_row)
+    return fitted + direction * ((target - slide) / max(float(slide_row @ direction), 1e-12))
 
 
 def smooth_along(values: np.ndarray) -> np.ndarray:

@@ -533,7 +533,7 @@ def _moved(
         seen_at = np.flatnonzero(covered)
         beyond = np.ones(len(covered), bool)
         beyond[seen_at[0] : seen_at[-1] + 1] = False
-        measured = motion(previous, joints, use, pinned, tangent, beyond) / dt
+        measured = motion(previous, joints, use, pinned, tangent, beyond, velocity * dt) / dt
         # A slide moves each joint back along the track (lower joint numbers) by its size.
         measured -= (observation.slide / dt) * tangent
         velocity = VELOCITY_SMOOTHING * measured + (1.0 - VELOCITY_SMOOTHING) * velocity
