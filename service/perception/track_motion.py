@@ -14,7 +14,7 @@ import numpy as np
 
 VELOCITY_KERNEL = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
 """Weights of a joint's velocity and its neighbours' (two each side)."""
-SLIDE_KEPT = 0.8
+SLIDE_KEPT = 0.9
 """Share of the slide along the cable carried in from the last frame that, with no free
 end in view, the shape may keep up (frame after frame, so a slide no free end measures
 dies away unless the shape keeps showing it)."""
