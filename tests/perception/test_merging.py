@@ -515,3 +515,41 @@ def test_a_hidden_bend_is_bridged_from_where_the_end_fits_begin():
     assert trims.tolist() == [0.0, 5.0, 5.0, 0.0]
     extrapolated = error(np.array([ends[1].position, ends[2].position]))
     assert (error(np.array([inner[1].position, inner[2].position])) < extrapolated).all()
+
+
+def _cut_cable_scene(tips: str, second_half_width: int = 5):
+    """A dark red cable along y = 60 on grey paper, seen from x 10 to 90 and from 150 to
+    230: a 60 px gap (12 radii of 5 px), its ends cut square or round."""
+    rng = np.random.default_rng(4)
+    image = np.clip(rng.normal(150, 3, (120, 240, 3)), 0, 255).astype(np.uint8)
+    mask = np.zeros((120, 240), np.uint8)
+    for (first, last), half in (((10, 90), 5), ((150, 230), second_half_width)):
+        cv2.rectangle(mask, (first, 60 - half), (last, 60 + half), 1, -1)
+        if tips == "round":
+            tip = last if first == 10 else first
+            cv2.rectangle(mask, (tip - half, 60 - half), (tip + half, 60 + half), 0, -1)
+            cv2.circle(mask, (tip - half if first == 10 else tip + half, 60), half, 1, -1)
+    image[mask > 0] = (40, 30, 150)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    pieces = [
+        np.column_stack([np.linspace(15, 85, 15), np.full(15, 60.0)]),
+        np.column_stack([np.linspace(155, 225, 15), np.full(15, 60.0)]),
+    ]
+    return image, mask > 0, distance, pieces
+
+
+@pytest.mark.parametrize(
+    ("tips", "second_half_width", "chains"),
+    [("cut", 5, 1), ("round", 5, 2), ("cut", 3, 2)],
+)
+def test_two_ends_cut_square_and_alike_join_across_a_gap_over_open_paper(
+    tips, second_half_width, chains
+):
+    """An object of the paper's own colour hides 12 radii of a cable: nothing shows over
+    the gap, but both ends are cut straight across the cable, face each other and agree
+    in colour and width, and are each other's only partner a little over the threshold.
+    Two cables' own round tips, or two cables of different widths, are not joined."""
+    image, mask, distance, pieces = _cut_cable_scene(tips, second_half_width)
+    params = DetectParams(merge_cost_threshold=0.2)  # the gap alone costs 0.24
+    result = merge_chains(pieces, params, 5.0, distance=distance, image=image, mask=mask)
+    assert len(result.paths) == chains
