@@ -41,6 +41,7 @@ from schemas import Crossing, Detection, DetectParams, Track, TrackingStatus, Tr
 from service.perception import _tracking_kernels
 from service.perception.crossings import detect_crossings, find_intersections
 from service.perception.errors import InvalidInputError
+from service.perception.geometry import distances_to_polyline
 from service.perception.pipeline import detect_full
 from service.perception.segmentation import as_bgr
 from service.perception.segmenter import Segmenter
@@ -699,14 +700,15 @@ def _extended(track: TrackRecord, joined: Continuation, now: float) -> TrackReco
 
 
 def _reached(tracks: list[TrackRecord], reached: OtherEnd, now: float, step: float):
-    """The tracks with one's other end come into view laid on it (:func:`other_end`)."""
+    """The tracks with one laid on more of its cable come into view (:func:`other_end`)."""
     live = [t for t in tracks if t.unseen == 0]
     track = live[reached.track]
     joints = exact_chain(reached.joints, step)
     ends_seen = list(track.ends_seen_s)
-    ends_seen[reached.end] = now
     tips = list(track.tips)
-    tips[reached.end] = True
+    if reached.tip:
+        ends_seen[reached.end] = now
+        tips[reached.end] = True
     new = replace(
         track,
         joints=joints,
@@ -782,6 +784,7 @@ def _recognise(
         unseen=0,
         steady=0,
         free_end_points=free_end_points,
+        seen=distances_to_polyline(joints, candidate.joints) <= 0.5 * step,  # laid on it
         last_seen=None,
     )
     return revived, tracks, remembered
