@@ -207,6 +207,21 @@ def continuation(
     return best
 
 
+def waits(candidate: Candidate, young: list[tuple[np.ndarray | None, float]], step: float) -> bool:
+    """Whether a confirmed candidate should wait before it starts a track: it is not a
+    whole cable (at most one free end) and a track just begun or come back, alike in
+    colour and width (``young``: their ``(colour, radius)``), has an open end, its cable
+    going on out of view. They may be two pieces of one cable coming in (broadside over
+    an edge, say) that the next frames show joined; the wait lasts until that track is
+    steady (``tracking.STEADY_FRAMES``), then the candidate goes on as any other."""
+    if all(candidate.tips):
+        return False
+    return any(
+        similarity(candidate, colour, radius, math.inf, (False, False), step) is not None
+        for colour, radius in young
+    )
+
+
 def _alike(candidate: Candidate, tracks, step: float):
     """``(index, joints, seen joints' indices)`` of the tracks seen at two joints or more
     that look like the candidate (colour, width)."""

@@ -58,6 +58,7 @@ from service.perception.track_identity import (
     revived_joints,
     similarity,
     unclaimed_stretches,
+    waits,
     where_it_left,
 )
 from service.perception.track_matching import Chains, Piece, detection_pieces, fit_pieces
@@ -298,10 +299,10 @@ def advance(
     used = claimed | _near_tracks(pieces, tracks)
     found = unclaimed_stretches(chains, pieces, used, image, colours)
     gate = max([_gate_base(c.radius, step) for c in found], default=0.0)
-    candidates = confirm(found, list(state.candidates), gate)
+    candidates = confirm(found, list(state.candidates), 4.0 * gate)
     seeding = state.frame == 0 and not state.tracks
     ready = [c for c in candidates if seeding or c.hits >= params.confirm_frames]
-    waiting = tuple(c for c in candidates if not (seeding or c.hits >= params.confirm_frames))
+    waiting = [c for c in candidates if not (seeding or c.hits >= params.confirm_frames)]
 
     remembered = [
         (track, gone_s) for track, gone_s in state.remembered if now - gone_s <= params.memory_s
@@ -321,6 +322,10 @@ def advance(
         )
         if reached is not None:
             tracks = _reached(tracks, reached, now, step)
+            continue
+        young = [(t.colour, t.radius) for t in tracks if _young(t) and not seeding]
+        if waits(candidate, young, step):
+            waiting.append(candidate)
             continue
         revived, tracks, remembered = _recognise(candidate, tracks, remembered, step, now, frame)
         if revived is None:
@@ -362,7 +367,7 @@ def advance(
         time_s=now,
         tracks=tuple(kept),
         remembered=tuple(remembered),
-        candidates=waiting,
+        candidates=tuple(waiting),
         next_id=next_id,
         frames_lost_total=state.frames_lost_total + frames_lost,
     )
@@ -571,6 +576,11 @@ def _moved(
         length_known=track.length_known or observation.length_known,
         last_seen=(np.flatnonzero(covered), joints[covered]),
     )
+
+
+def _young(track: TrackRecord) -> bool:
+    """Seen, just begun or come back (not steady yet), and its cable goes on out of view."""
+    return track.unseen == 0 and track.steady < STEADY_FRAMES and not all(track.tips)
 
 
 def _moving_tips(track: TrackRecord) -> tuple[bool, bool]:
