@@ -18,6 +18,7 @@ from service.perception.track_identity import (
     orientation,
     other_end,
     revived_joints,
+    waits,
     where_it_left,
 )
 from service.perception.track_matching import Chains, Fit, Piece, fit_pieces
@@ -416,3 +417,29 @@ def test_a_free_end_back_where_one_end_was_last_seen_is_that_end():
     # Back midway between where both ends were: the end seen last.
     middle = Candidate(straight(140.0, 6)[::-1].copy(), (True, False), 4.0, None)
     assert orientation(middle, old, (True, True), ends, (1.0, 0.97))
+
+
+def test_a_cable_coming_in_fast_becomes_a_track_in_its_second_frame():
+    # Nothing in the first frame; then a cable moving 25 px a frame across itself (a
+    # new cable's speed is not known: it is looked for as far as a track just begun).
+    tracker = Tracker()
+    counts = []
+    for shift in (None, 0, 25, 50):
+        image = np.zeros((200, 300, 3), np.uint8)
+        if shift is not None:
+            _ = cv2.line(image, (40 + shift, 20), (60 + shift, 180), (0, 200, 255), 9)
+        counts.append(len(tracker.update(image).chains))
+    assert counts == [0, 0, 1, 1]
+
+
+def test_a_piece_waits_while_a_track_of_its_look_just_begun_goes_on_out_of_view():
+    colour = np.array([120.0, 150.0, 150.0])
+    piece = Candidate(straight(0.0, 8), (False, False), 4.0, colour)
+    young = [(colour, 4.0)]
+    assert waits(piece, young, STEP)
+    assert waits(replace(piece, tips=(True, False)), young, STEP)
+    # A whole cable in view is a cable of its own; so is one of another colour or width.
+    assert not waits(replace(piece, tips=(True, True)), young, STEP)
+    assert not waits(piece, [(np.array([120.0, 100.0, 200.0]), 4.0)], STEP)
+    assert not waits(piece, [(colour, 9.0)], STEP)
+    assert not waits(piece, [], STEP)
