@@ -567,7 +567,7 @@ def _cut_ends_alike(
 ) -> bool:
     """Whether the free ends ``a`` (end ``i``) and ``b`` (end ``j``), at most
     :data:`CUT_GAP_RADII` apart, are both cut (the foreground stops right ahead of each,
-    :func:`.appearance.stops_ahead`) and look like one cable's
+    :func:`.appearance.cut_square`) and look like one cable's
     (:func:`.appearance.ends_alike`: both of a known, agreeing colour and of one width).
 
     Two pieces of one cable hidden by an object of the background's own colour show no

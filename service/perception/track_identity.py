@@ -124,13 +124,20 @@ def _candidate(chains, chain_index, pieces, run, image, step) -> list[Candidate]
     ]
 
 
+# A new cable's candidate is looked for this many gates from where it was last frame: a
+# cable coming in fast moves more than one gate a frame while its visible stretch grows.
+CONFIRM_GATES = 4.0
+
+
 def confirm(new: list[Candidate], previous: list[Candidate], gate: float) -> list[Candidate]:
-    """``new`` with their hit counts: one more than the previous candidate they overlap."""
+    """``new`` with their hit counts: one more than the previous candidate they overlap
+    within :data:`CONFIRM_GATES` times ``gate`` (px) of its cable's edge."""
+    reach = CONFIRM_GATES * gate
     confirmed = []
     for candidate in new:
         hits = 1
         for old in previous:
-            if _overlap(candidate.joints, old.joints, gate + old.radius) >= 0.5:
+            if _overlap(candidate.joints, old.joints, reach + old.radius) >= 0.5:
                 hits = max(hits, old.hits + 1)
         confirmed.append(
             Candidate(candidate.joints, candidate.tips, candidate.radius, candidate.colour, hits)

@@ -299,7 +299,7 @@ def advance(
     used = claimed | _near_tracks(pieces, tracks)
     found = unclaimed_stretches(chains, pieces, used, image, colours)
     gate = max([_gate_base(c.radius, step) for c in found], default=0.0)
-    candidates = confirm(found, list(state.candidates), 4.0 * gate)
+    candidates = confirm(found, list(state.candidates), gate)
     seeding = state.frame == 0 and not state.tracks
     ready = [c for c in candidates if seeding or c.hits >= params.confirm_frames]
     waiting = [c for c in candidates if not (seeding or c.hits >= params.confirm_frames)]
