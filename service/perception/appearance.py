@@ -20,6 +20,11 @@ the skeleton meets a blob or a junction): it has no radius of cable clear of the
 at both its ends. Nor has an end whose colour differs from that of its own piece further
 in: an occluder segmented with the cable, not much wider than it, that the piece runs
 into.
+
+For gaps, :func:`gap_hidden` tells whether something the image shows lies over one;
+:func:`cut_square` whether an end stops straight across the cable, as where an object's
+border cuts it (rather than in a cable's own round tip); :func:`ends_alike` whether two
+ends agree in colour and width.
 """
 
 from __future__ import annotations
@@ -274,3 +279,98 @@ def gap_hidden(
     ) and all(
         mostly_unlike(curve[middle] + side * radius * normals[middle]) for side in (-1.0, 0.0, 1.0)
     )
+
+
+# An end is cut when the foreground stops within this many radii ahead of it (a
+# cable's end, or the border of something lying over it), rather than running on.
+CUT_AHEAD_RADII = 2.0
+# A cut's front is read this share of the half width to either side of the centre; it is
+# straight when the middle bulges past the sides by at most CUT_BULGE_SHARE half widths
+# (a round tip bulges by 0.29 there, a straight cut by nothing, at any slant).
+CUT_PROBE_SHARE = 0.7
+CUT_BULGE_SHARE = 0.15
+# The cross-section is read this many half widths behind the end; a cable's there is
+# within this range of its piece's typical half width.
+CUT_BEHIND_RADII = 1.5
+CUT_WIDTH_RANGE = (0.6, 1.5)
+# Two ends are alike in width when the narrower piece is at least this share of the wider.
+WIDTH_AGREEMENT = 0.8
+
+
+def _front(mask: np.ndarray, start: np.ndarray, direction: np.ndarray, count: int) -> float:
+    """Arc (px, 0.5 px steps) from ``start`` along ``direction`` to the first point off
+    ``mask``; NaN when the start is off it, or the mask runs on past ``count`` steps or
+    the picture's edge."""
+    height, width = mask.shape
+    points = start[None, :] + (0.5 * np.arange(count))[:, None] * direction[None, :]
+    cols = np.rint(points[:, 0]).astype(np.int64)
+    rows = np.rint(points[:, 1]).astype(np.int64)
+    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
+    if not inside[0] or not mask[rows[0], cols[0]]:
+        return np.nan
+    on = np.ones(count, bool)
+    on[inside] = mask[rows[inside], cols[inside]]
+    off = np.flatnonzero(~on)
+    if len(off) == 0 or not inside[off[0]]:
+        return np.nan
+    return 0.5 * float(off[0])
+
+
+def cut_square(
+    mask: np.ndarray, position: np.ndarray, direction: np.ndarray, half_width: float
+) -> bool:
+    """Whether a chain end (``position``, outward unit ``direction``) of a cable of
+    ``half_width`` px stops as a cut straight across its width: the foreground ends
+    within :data:`CUT_AHEAD_RADII` half widths ahead of the end, and along lines
+    :data:`CUT_PROBE_SHARE` of the half width to either side of the centre it ends in
+    line with the centre (the middle bulging past the sides by at most
+    :data:`CUT_BULGE_SHARE` of the half width), as where an object's border crosses the
+    cable, and unlike a cable's own rounded or tapering tip. False when the march
+    starts off the mask, runs on or leaves the picture first."""
+    direction = np.asarray(direction, np.float64)
+    normal = np.array([-direction[1], direction[0]])
+    count = int(np.ceil(2.0 * (CUT_AHEAD_RADII + 2.0) * half_width)) + 1
+
+    # The cable's own cross-section behind the end: its centre and half width there
+    # (the end's fitted position may lie off the centreline on a bend).
+    def cross_section(point):
+        sides = [_front(mask, point, side * normal, count) for side in (1.0, -1.0)]
+        if np.isnan(sides).any():
+            return None, 0.0
+        local = 0.5 * (sides[0] + sides[1])
+        return point + 0.5 * (sides[0] - sides[1]) * normal, local
+
+    behind = np.asarray(position, np.float64) - CUT_BEHIND_RADII * half_width * direction
+    centre, local = cross_section(behind)
+    if centre is None:
+        return False
+    ahead = _front(mask, centre, direction, count)
+    if np.isnan(ahead) or ahead > (CUT_AHEAD_RADII + CUT_BEHIND_RADII) * half_width:
+        return False
+    # Read the front from a cross-section just behind it: on a bend, lines from further
+    # back would leave through the cable's side before they reach the cut.
+    centre, local = cross_section(centre + max(ahead - local, 0.0) * direction)
+    if centre is None:
+        return False
+    if not CUT_WIDTH_RANGE[0] * half_width <= local <= CUT_WIDTH_RANGE[1] * half_width:
+        return False
+    fronts = [
+        _front(mask, centre + share * local * normal, direction, count)
+        for share in (-CUT_PROBE_SHARE, 0.0, CUT_PROBE_SHARE)
+    ]
+    if np.isnan(fronts).any():
+        return False
+    return bool(fronts[1] - 0.5 * (fronts[0] + fronts[2]) <= CUT_BULGE_SHARE * local)
+
+
+def ends_alike(colours: EndColours, first: int, second: int, widths: tuple[float, float]) -> bool:
+    """Whether chain ends ``first`` and ``second`` look like two ends of one cable: both
+    have a colour of their own and those agree (no :func:`colour_penalty`), and their
+    pieces' half widths (``widths``, px; 0 when unknown) agree within
+    :data:`WIDTH_AGREEMENT`."""
+    if not (colours.known[first] and colours.known[second]):
+        return False
+    if colour_penalty(colours, np.array([first]), np.array([second]))[0] > 0:
+        return False
+    narrow, wide = sorted(float(width) for width in widths)
+    return narrow > 0 and narrow >= WIDTH_AGREEMENT * wide

@@ -31,7 +31,14 @@ import numpy as np
 
 from schemas import DetectParams, GapCurve
 from service.perception import _merging_kernels
-from service.perception.appearance import EndColours, colour_penalty, end_colours, gap_hidden
+from service.perception.appearance import (
+    EndColours,
+    colour_penalty,
+    cut_square,
+    end_colours,
+    ends_alike,
+    gap_hidden,
+)
 from service.perception.deadline import Deadline, check
 from service.perception.geometry import arc_lengths, end_fit, fit_where_skipped, polyline_length
 from service.perception.touching import TouchingSplit, split_touching_strands
@@ -56,7 +63,8 @@ NARROW_END_JOINTS = 4
 class ChainEnd:
     """One end of a chain piece: where it is and which way it points (outwards).
 
-    ``skip`` is the arc length at the tip its fit left out (a cut end's hook).
+    ``skip`` is the arc length at the tip its fit left out (a cut end's hook); ``width``
+    its piece's typical half width (px; 0 when not measured).
     """
 
     piece: int
@@ -65,6 +73,7 @@ class ChainEnd:
     direction: np.ndarray
     curvature: float = 0.0
     skip: float = 0.0
+    width: float = 0.0
 
 
 @dataclass
@@ -125,12 +134,15 @@ def chain_ends(
         piece_full = full_width
         if medians is not None and len(points) >= 3:
             piece_full = max(full_width, FULL_WIDTH_FRACTION * float(medians[index]))
+        piece_width = float(medians[index]) if medians is not None else 0.0
         for at_start in (True, False):
             end_skip = skip
             if distance is not None:
                 end_skip = max(skip, _narrow_end_length(points, at_start, distance, piece_full))
             position, direction, curvature = end_fit(points, at_start, span, end_skip)
-            ends.append(ChainEnd(index, at_start, position, direction, curvature, end_skip))
+            ends.append(
+                ChainEnd(index, at_start, position, direction, curvature, end_skip, piece_width)
+            )
     return ends
 
 
@@ -368,7 +380,8 @@ def choose_joins(
     clearly cheapest partner are joined up to a looser limit, unless either is
     ``at_border``: across a short gap (:data:`MUTUAL_GAP_RADII`), or a longer one
     that ``hidden_gap(i, j)`` says something in the image hides
-    (:func:`.appearance.gap_hidden`). A join never closes a chain on itself.
+    (:func:`.appearance.gap_hidden`, or, up to :data:`CUT_GAP_RADII`, two ends cut
+    square and alike: :func:`_cut_ends_alike`). A join never closes a chain on itself.
     ``deadline`` (optional) is checked while the joins are made.
 
     The evidence of the image, when given: ``colours`` (:func:`.appearance.end_colours`)
@@ -534,6 +547,45 @@ def _mutual_best(
         if all(rival - cost >= MUTUAL_MARGIN * threshold for rival in rivals):
             pairs.append((cost, i, j))
     return sorted(pairs)
+
+
+# A gap over open background longer than MUTUAL_GAP_RADII, up to this many radii (the
+# longest stretch the issue's occluders hide), is still joined by the mutual rule when
+# both ends are cut and alike (:func:`_cut_ends_alike`): an object of the background's
+# own colour hides a cable without showing itself.
+CUT_GAP_RADII = 15.0
+
+
+def _cut_ends_alike(
+    a: ChainEnd,
+    b: ChainEnd,
+    i: int,
+    j: int,
+    mask: np.ndarray,
+    colours: EndColours | None,
+    radius: float,
+) -> bool:
+    """Whether the free ends ``a`` (end ``i``) and ``b`` (end ``j``), at most
+    :data:`CUT_GAP_RADII` apart, are both cut (the foreground stops right ahead of each,
+    :func:`.appearance.cut_square`) and look like one cable's
+    (:func:`.appearance.ends_alike`: both of a known, agreeing colour and of one width).
+
+    Two pieces of one cable hidden by an object of the background's own colour show no
+    object over the gap, but they face each other (each the other's clearly cheapest
+    partner), are cut where the object's border crosses them, and agree in colour and
+    width. A cable's end inside a blob of the foreground (a piece of a pattern
+    segmented with the cables) is not cut; two cables of different colour or width are
+    not one.
+    """
+    if colours is None:
+        return False
+    if float(np.hypot(*(a.position - b.position))) > CUT_GAP_RADII * radius:
+        return False
+    if not ends_alike(colours, i, j, (a.width, b.width)):
+        return False
+    return cut_square(mask, a.position, a.direction, a.width) and cut_square(
+        mask, b.position, b.direction, b.width
+    )
 
 
 # Pieces shared by two strands (a shallow crossing) are at most this many radii long.
@@ -856,7 +908,9 @@ def merge_chains(
             curve = gap_curve(
                 a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
             )
-            return gap_hidden(image, mask, curve, (a, b), radius)
+            if gap_hidden(image, mask, curve, (a, b), radius):
+                return True
+            return _cut_ends_alike(a, b, i, j, mask, colours, radius)
 
     joins = choose_joins(
         ends,

@@ -112,7 +112,12 @@ def split_touching_strands(
         if {labels[end] for end in ends} & handled:
             continue
         # Per end, its junction's two other strands, left one first.
-        sides = [_end_kind(end, index, labels, members, positions, directions) for end in ends]
+        sides = [
+            _end_kind(
+                end, index, labels, members, positions, directions, pieces, float(widths[index])
+            )
+            for end in ends
+        ]
         if None in sides:
             continue
         for other in (other for side in sides for other in side):
@@ -143,22 +148,47 @@ def split_touching_strands(
     return result
 
 
-def _end_kind(end, index, labels, members, positions, directions):
+def _end_kind(end, index, labels, members, positions, directions, pieces, reach):
     """What one end of piece ``index`` meets: the two other strands of a three-way
-    junction, left one first; or None (anything else)."""
+    junction, left one first; or None (anything else).
+
+    The sides are read from where the other strands' ends lie; where that does not
+    tell (both on one side of the line, as the two ends of the bulb a doubled-back
+    cable turns round through, which thinning starts together at the junction), from
+    the points ``reach`` (the stretch's half width) along them, clear of the junction.
+    """
     label = labels[end]
     others = [member for member in members[label] if member // 2 != index]
     if len(members[label]) != 3 or len(others) != 2:
         return None
     heading = -directions[end] if end % 2 == 0 else directions[end]
-    offsets = [
-        float(heading[0] * (positions[other, 1] - positions[end, 1]))
-        - float(heading[1] * (positions[other, 0] - positions[end, 0]))
-        for other in others
-    ]
+    offsets = _side_offsets(heading, positions[end], [positions[other] for other in others])
     if offsets[0] * offsets[1] >= 0:
-        return None
+        offsets = _side_offsets(
+            heading, positions[end], [_point_in(pieces, other, reach) for other in others]
+        )
+        if offsets[0] * offsets[1] >= 0:
+            return None
     return others if offsets[0] < 0 else others[::-1]
+
+
+def _side_offsets(heading, origin, points) -> list[float]:
+    """Signed offsets of ``points`` from the line through ``origin`` along ``heading``
+    (negative: on its left)."""
+    return [
+        float(heading[0] * (point[1] - origin[1])) - float(heading[1] * (point[0] - origin[0]))
+        for point in points
+    ]
+
+
+def _point_in(pieces, end, reach: float) -> np.ndarray:
+    """The point ``reach`` along piece ``end // 2`` from that end (at most half the piece)."""
+    points = np.asarray(pieces[end // 2], np.float64)
+    if end % 2:
+        points = points[::-1]
+    along = arc_lengths(points)
+    at = min(reach, 0.5 * float(along[-1]))
+    return points_along(points, along, np.array([at]))[0]
 
 
 def _narrowest(points: np.ndarray, distance: np.ndarray, half_width: float) -> float:

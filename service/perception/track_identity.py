@@ -39,6 +39,9 @@ LEFT_GATE = 5.0
 (or 4 radii) from the joints of the track seen last, on average ..."""
 LEFT_OVERLAP = 3
 """... over at least this many joints."""
+NEAR_END_RATIO = 0.5
+"""A free end back in view is the track's end last seen nearest it when that one is at
+most this share as far as the other (else the end seen last)."""
 MAX_JOIN_GAP = 10.0
 """A candidate continues a track only from within this many segments of its end ..."""
 MAX_JOIN_TURN = math.radians(40.0)
@@ -121,13 +124,20 @@ def _candidate(chains, chain_index, pieces, run, image, step) -> list[Candidate]
     ]
 
 
+# A new cable's candidate is looked for this many gates from where it was last frame: a
+# cable coming in fast moves more than one gate a frame while its visible stretch grows.
+CONFIRM_GATES = 4.0
+
+
 def confirm(new: list[Candidate], previous: list[Candidate], gate: float) -> list[Candidate]:
-    """``new`` with their hit counts: one more than the previous candidate they overlap."""
+    """``new`` with their hit counts: one more than the previous candidate they overlap
+    within :data:`CONFIRM_GATES` times ``gate`` (px) of its cable's edge."""
+    reach = CONFIRM_GATES * gate
     confirmed = []
     for candidate in new:
         hits = 1
         for old in previous:
-            if _overlap(candidate.joints, old.joints, gate + old.radius) >= 0.5:
+            if _overlap(candidate.joints, old.joints, reach + old.radius) >= 0.5:
                 hits = max(hits, old.hits + 1)
         confirmed.append(
             Candidate(candidate.joints, candidate.tips, candidate.radius, candidate.colour, hits)
@@ -202,6 +212,21 @@ def continuation(
                 best = Continuation(index, end, anchor, walked[1:], tip)
                 best_gap = gap
     return best
+
+
+def waits(candidate: Candidate, young: list[tuple[np.ndarray | None, float]], step: float) -> bool:
+    """Whether a confirmed candidate should wait before it starts a track: it is not a
+    whole cable (at most one free end) and a track just begun or come back, alike in
+    colour and width (``young``: their ``(colour, radius)``), has an open end, its cable
+    going on out of view. They may be two pieces of one cable coming in (broadside over
+    an edge, say) that the next frames show joined; the wait lasts until that track is
+    steady (``tracking.STEADY_FRAMES``), then the candidate goes on as any other."""
+    if all(candidate.tips):
+        return False
+    return any(
+        similarity(candidate, colour, radius, math.inf, (False, False), step) is not None
+        for colour, radius in young
+    )
 
 
 def _alike(candidate: Candidate, tracks, step: float):
@@ -279,9 +304,11 @@ def orientation(
     A candidate without a free end may show any stretch of the cable: it is laid along
     the track at every offset, and the best fit counts.
     When the shape cannot tell (a nearly straight cable): with one free end in view,
-    that end is the track's end seen last (a cable comes back through an edge with the
-    end that left last; ties go by distance); otherwise the pairing of the ends that
-    puts them nearest where they were last seen.
+    that end is the track's end last seen clearly nearest it (:data:`NEAR_END_RATIO`:
+    a cable that left broadside comes back with its ends where they were), else the
+    end seen last (a cable that left along itself, through an edge, comes back with
+    the end that left last); otherwise the pairing of the ends that puts them nearest
+    where they were last seen.
     """
     if candidate.tips[0] != candidate.tips[1] and track_tips[0] != track_tips[1]:
         return candidate.tips[0] == track_tips[0]
@@ -299,7 +326,12 @@ def orientation(
     head, tail = ends_last_seen
     if candidate.tips[0] != candidate.tips[1]:
         tip = first if candidate.tips[0] else last
-        if abs(ends_seen_s[0] - ends_seen_s[1]) > 1e-6:
+        to_head, to_tail = float(np.linalg.norm(tip - head)), float(np.linalg.norm(tip - tail))
+        if min(to_head, to_tail) <= NEAR_END_RATIO * max(to_head, to_tail):
+            # Back where one end was last seen, far from the other (a cable that left
+            # broadside, its ends apart): it is that end.
+            head_is_tip = to_head < to_tail
+        elif abs(ends_seen_s[0] - ends_seen_s[1]) > 1e-6:
             head_is_tip = ends_seen_s[0] > ends_seen_s[1]
         else:
             head_is_tip = np.linalg.norm(tip - head) <= np.linalg.norm(tip - tail)
@@ -483,29 +515,34 @@ def _overlap(points: np.ndarray, polyline: np.ndarray, gate: float) -> float:
 
 
 OTHER_END_TURN = 0.5
-"""A candidate is a track's other end coming into view when turning the track's stretch
-out of view about its outermost seen joint by at most this much (radians) ..."""
+"""A candidate is more of a track seen in part, come into view elsewhere, when turning
+the track's stretch out of view about its outermost seen joint by at most this much
+(radians) ..."""
 OTHER_END_FIT = 2.0
-"""... lays that stretch's end joints within this many segments of it, on average."""
+"""... lays that stretch's joints within this many segments of it, on average."""
 
 
 @dataclass(frozen=True)
 class OtherEnd:
-    """A candidate that is the far end of a track seen in part (its stretch out of view).
+    """A candidate that is more of a track seen in part (its stretch out of view): its far
+    end, or a stretch of it with no free end.
 
     Attributes
     ----------
     track : int
     end : int
-        The track's end the candidate's free end is.
+        The track's end beyond whose outermost seen joint the candidate lies.
     joints : (N, 2) ndarray
-        The track's joints, its stretch beyond the outermost seen joint at ``end`` turned
-        (and bent, towards the end) onto the candidate.
+        The track's joints, its stretch beyond that joint turned (and bent, towards the
+        candidate) onto the candidate.
+    tip : bool
+        Whether the candidate shows that end (its free end).
     """
 
     track: int
     end: int
     joints: np.ndarray
+    tip: bool = True
 
 
 def other_end(
@@ -513,52 +550,79 @@ def other_end(
     tracks: list[tuple[np.ndarray, np.ndarray, float, np.ndarray | None]],
     step: float,
 ) -> OtherEnd | None:
-    """The track whose other end the candidate is, if one is: a cable seen in part (out of
-    view beyond one end) whose far end comes into view elsewhere, across the picture.
+    """The track the candidate is more of, if one is: a cable seen in part (out of view
+    beyond one end) whose far end, or another stretch, comes into view elsewhere (across
+    the picture, or as a cable comes in broadside over an edge, in pieces).
 
     The track's stretch beyond its outermost seen joint keeps the shape it had (out of
-    view nothing measures it), but turned a little about that joint it must lay its end
-    on the candidate's free end and the joints next to it on the candidate (within
-    :data:`OTHER_END_TURN` and :data:`OTHER_END_FIT`); the candidate must show exactly
-    one free end and look like the track (colour, width). ``tracks`` are ``(joints,
-    seen, radius, colour)`` of the tracks seen this frame.
+    view nothing measures it), but turned a little about that joint it must lay its
+    joints on the candidate's (within :data:`OTHER_END_TURN` and
+    :data:`OTHER_END_FIT`): a candidate with exactly one free end from the track's end
+    inwards, one with none either way round at the offset along the stretch that fits
+    best (turning about the seen joint fixes how far out it lies). It must look like
+    the track (colour, width). ``tracks`` are ``(joints, seen, radius, colour)`` of the
+    tracks seen this frame.
     """
-    if candidate.tips[0] == candidate.tips[1]:
+    if candidate.tips[0] and candidate.tips[1]:
         return None
-    from_tip = candidate.joints if candidate.tips[0] else candidate.joints[::-1]
-    m = len(from_tip)
+    tip = candidate.tips[0] or candidate.tips[1]
+    if tip:
+        ways = [candidate.joints if candidate.tips[0] else candidate.joints[::-1]]
+    else:
+        ways = [candidate.joints, candidate.joints[::-1]]
+    m = len(candidate.joints)
     best, best_fit = None, OTHER_END_FIT * step
     for index, joints, seen_at in _alike(candidate, tracks, step):
         n = len(joints)
         for end in (0, 1):
             anchor = int(seen_at[0] if end == 0 else seen_at[-1])
             beyond = anchor if end == 0 else n - 1 - anchor
-            if beyond < m + 2:
+            if beyond < m + (2 if tip else 1):
                 continue
-            # Track joints from the end inwards, paired with the candidate's from its tip.
-            order = np.arange(m) if end == 0 else n - 1 - np.arange(m)
+            # Joints out from the anchor (``reach`` of them) paired with the candidate's:
+            # from the track's end inwards with the candidate's free end, or at every
+            # offset out along the stretch.
+            firsts = np.array([beyond - m + 1]) if tip else np.arange(1, beyond - m + 2)
+            reach = firsts[:, None] + np.arange(m)[None, :]
+            if tip:
+                reach = reach[:, ::-1]
+            numbers = anchor - reach if end == 0 else anchor + reach
             pivot = joints[anchor]
-            q = joints[order] - pivot
-            c = from_tip - pivot
-            cross = float(np.sum(q[:, 0] * c[:, 1] - q[:, 1] * c[:, 0]))
-            dot = float(np.sum(q * c))
-            angle = math.atan2(cross, dot)
-            if abs(angle) > OTHER_END_TURN:
-                continue
-            cos, sin = math.cos(angle), math.sin(angle)
-            rotation = np.array([[cos, -sin], [sin, cos]])
-            turned = q @ rotation.T
-            misfit = float(np.mean(np.linalg.norm(turned - c, axis=1)))
-            if misfit >= best_fit:
-                continue
-            # The stretch beyond the anchor turned, then bent towards the end so that
-            # its end joints lie on the candidate.
-            stretch = np.arange(anchor) if end == 0 else np.arange(anchor + 1, n)
-            new = joints.copy()
-            new[stretch] = (joints[stretch] - pivot) @ rotation.T + pivot
-            shift = np.mean(c - turned, axis=0)
-            ramp = np.abs(stretch - anchor) / float(beyond)
-            new[stretch] += ramp[:, None] * shift[None, :]
-            new[order] = from_tip
-            best, best_fit = OtherEnd(index, end, new), misfit
+            q = joints[numbers] - pivot  # (offsets, m, 2)
+            for seen in ways:
+                c = seen - pivot
+                cross = np.sum(q[..., 0] * c[:, 1] - q[..., 1] * c[:, 0], axis=1)
+                dot = np.sum(q[..., 0] * c[:, 0] + q[..., 1] * c[:, 1], axis=1)
+                angles = np.arctan2(cross, dot)
+                cos, sin = np.cos(angles)[:, None], np.sin(angles)[:, None]
+                turned = np.stack(
+                    [cos * q[..., 0] - sin * q[..., 1], sin * q[..., 0] + cos * q[..., 1]],
+                    axis=2,
+                )
+                misfits = np.mean(np.linalg.norm(turned - c[None], axis=2), axis=1)
+                misfits[np.abs(angles) > OTHER_END_TURN] = np.inf
+                k = int(np.argmin(misfits))
+                if misfits[k] >= best_fit:
+                    continue
+                laid = _turned_onto(joints, anchor, end, float(angles[k]), numbers[k], seen)
+                best, best_fit = OtherEnd(index, end, laid, tip), float(misfits[k])
     return best
+
+
+def _turned_onto(joints, anchor, end, angle, numbers, seen) -> np.ndarray:
+    """The track's joints, its stretch beyond ``anchor`` turned by ``angle`` about it,
+    then bent so that joints ``numbers`` lie on ``seen``: the shift they need grows from
+    nothing at the anchor to the whole at the farthest of them, and the joints beyond
+    take it whole."""
+    pivot = joints[anchor]
+    cos, sin = math.cos(angle), math.sin(angle)
+    rotation = np.array([[cos, -sin], [sin, cos]])
+    stretch = np.arange(anchor) if end == 0 else np.arange(anchor + 1, len(joints))
+    new = joints.copy()
+    new[stretch] = (joints[stretch] - pivot) @ rotation.T + pivot
+    shift = np.mean(seen - new[numbers], axis=0)
+    farthest = float(np.max(np.abs(numbers - anchor)))
+    ramp = np.minimum(np.abs(stretch - anchor) / farthest, 1.0)
+    new[stretch] += ramp[:, None] * shift[None, :]
+    new[numbers] = seen
+    return new

@@ -41,6 +41,7 @@ from schemas import Crossing, Detection, DetectParams, Track, TrackingStatus, Tr
 from service.perception import _tracking_kernels
 from service.perception.crossings import detect_crossings, find_intersections
 from service.perception.errors import InvalidInputError
+from service.perception.geometry import distances_to_polyline
 from service.perception.pipeline import detect_full
 from service.perception.segmentation import as_bgr
 from service.perception.segmenter import Segmenter
@@ -57,6 +58,7 @@ from service.perception.track_identity import (
     revived_joints,
     similarity,
     unclaimed_stretches,
+    waits,
     where_it_left,
 )
 from service.perception.track_matching import Chains, Piece, detection_pieces, fit_pieces
@@ -300,7 +302,7 @@ def advance(
     candidates = confirm(found, list(state.candidates), gate)
     seeding = state.frame == 0 and not state.tracks
     ready = [c for c in candidates if seeding or c.hits >= params.confirm_frames]
-    waiting = tuple(c for c in candidates if not (seeding or c.hits >= params.confirm_frames))
+    waiting = [c for c in candidates if not (seeding or c.hits >= params.confirm_frames)]
 
     remembered = [
         (track, gone_s) for track, gone_s in state.remembered if now - gone_s <= params.memory_s
@@ -320,6 +322,10 @@ def advance(
         )
         if reached is not None:
             tracks = _reached(tracks, reached, now, step)
+            continue
+        young = [(t.colour, t.radius) for t in tracks if _young(t) and not seeding]
+        if waits(candidate, young, step):
+            waiting.append(candidate)
             continue
         revived, tracks, remembered = _recognise(candidate, tracks, remembered, step, now, frame)
         if revived is None:
@@ -361,7 +367,7 @@ def advance(
         time_s=now,
         tracks=tuple(kept),
         remembered=tuple(remembered),
-        candidates=waiting,
+        candidates=tuple(waiting),
         next_id=next_id,
         frames_lost_total=state.frames_lost_total + frames_lost,
     )
@@ -572,6 +578,11 @@ def _moved(
     )
 
 
+def _young(track: TrackRecord) -> bool:
+    """Seen, just begun or come back (not steady yet), and its cable goes on out of view."""
+    return track.unseen == 0 and track.steady < STEADY_FRAMES and not all(track.tips)
+
+
 def _moving_tips(track: TrackRecord) -> tuple[bool, bool]:
     """Per end: a free end seen in the last frame, the track's velocity not known yet."""
     if track.steady >= STEADY_FRAMES or track.free_end_points is None:
@@ -699,14 +710,15 @@ def _extended(track: TrackRecord, joined: Continuation, now: float) -> TrackReco
 
 
 def _reached(tracks: list[TrackRecord], reached: OtherEnd, now: float, step: float):
-    """The tracks with one's other end come into view laid on it (:func:`other_end`)."""
+    """The tracks with one laid on more of its cable come into view (:func:`other_end`)."""
     live = [t for t in tracks if t.unseen == 0]
     track = live[reached.track]
     joints = exact_chain(reached.joints, step)
     ends_seen = list(track.ends_seen_s)
-    ends_seen[reached.end] = now
     tips = list(track.tips)
-    tips[reached.end] = True
+    if reached.tip:
+        ends_seen[reached.end] = now
+        tips[reached.end] = True
     new = replace(
         track,
         joints=joints,
@@ -782,6 +794,7 @@ def _recognise(
         unseen=0,
         steady=0,
         free_end_points=free_end_points,
+        seen=distances_to_polyline(joints, candidate.joints) <= 0.5 * step,  # laid on it
         last_seen=None,
     )
     return revived, tracks, remembered

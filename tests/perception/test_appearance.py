@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from service.perception import appearance
+from service.perception.appearance import EndColours
 from service.perception.merging import ChainEnd
 from tests.perception.references import appearance as reference
 
@@ -136,3 +137,54 @@ def test_a_gap_whose_ends_lie_on_open_paper_is_not_hidden():
     disappear under it right at its ends."""
     image, mask, curve, ends = gap_scene((60, 140, 60), box=(105, 155))
     assert appearance.gap_hidden(image, mask, curve, ends, 3.5) is False
+
+
+def _cable_end_mask(tip: str, slant_degrees: float = 0.0, half_width: int = 6):
+    """A horizontal cable of ``half_width`` from x = 10 ending near x = 80: cut square
+    across its width (``tip="cut"``, the cut's line turned by ``slant_degrees``) or
+    with a cable's own round tip (``"round"``)."""
+    mask = np.zeros((100, 160), np.uint8)
+    cv2.rectangle(
+        mask, (10, 50 - half_width), (80 if tip == "round" else 100, 50 + half_width), 1, -1
+    )
+    if tip == "round":
+        cv2.circle(mask, (80, 50), half_width, 1, -1)
+    else:
+        # Cut along a line through (80, 50) turned from the vertical by the slant.
+        rows, cols = np.mgrid[0:100, 0:160]
+        slope = np.tan(np.radians(slant_degrees))
+        mask[cols > 80 + slope * (rows - 50)] = 0
+    return mask > 0
+
+
+@pytest.mark.parametrize(
+    ("tip", "slant", "square"),
+    [
+        ("cut", 0.0, True),
+        ("cut", 35.0, True),
+        ("cut", -35.0, True),
+        ("round", 0.0, False),
+    ],
+)
+def test_a_cut_across_the_width_is_square_and_a_round_tip_is_not(tip, slant, square):
+    mask = _cable_end_mask(tip, slant)
+    position, direction = np.array([78.0, 50.0]), np.array([1.0, 0.0])
+    assert appearance.cut_square(mask, position, direction, 6.5) is square
+
+
+def test_an_end_whose_foreground_runs_on_is_not_cut():
+    mask = _cable_end_mask("cut")
+    mask[30:70, 70:130] = True  # the piece runs into a blob of the foreground
+    assert not appearance.cut_square(mask, np.array([60.0, 50.0]), np.array([1.0, 0.0]), 6.5)
+
+
+def test_ends_alike_need_known_agreeing_colours_and_one_width():
+    colours = EndColours(
+        np.array([[50.0, 60.0, 40.0], [52.0, 58.0, 41.0], [50.0, -40.0, 30.0], [np.nan] * 3]),
+        np.array([1.0, 1.0, 1.0, np.nan]),
+    )
+    assert appearance.ends_alike(colours, 0, 1, (6.0, 5.5))
+    assert not appearance.ends_alike(colours, 0, 1, (6.0, 4.0))  # a thinner cable
+    assert not appearance.ends_alike(colours, 0, 2, (6.0, 6.0))  # another colour
+    assert not appearance.ends_alike(colours, 0, 3, (6.0, 6.0))  # colour unknown
+    assert not appearance.ends_alike(colours, 0, 1, (6.0, 0.0))  # width unknown

@@ -25,6 +25,7 @@ from service.perception.merging import (
     join_cost,
     merge_chains,
 )
+from service.perception.touching import split_touching_strands
 from service.synthetic.families import make_family_scene
 from tests.perception.references import merging as reference
 from tests.perception.test_appearance import gap_scene
@@ -430,7 +431,10 @@ def test_cables_touching_side_by_side_keep_their_sides_along_a_long_stretch():
     assert errors[-1] < 6.0
 
 
-@pytest.mark.parametrize(("family", "seed"), [("doubled_back", 105), ("side_by_side", 103)])
+@pytest.mark.parametrize(
+    ("family", "seed"),
+    [("doubled_back", 105), ("doubled_back", 4015), ("doubled_back", 4029), ("side_by_side", 103)],
+)
 def test_touching_strands_of_generated_scenes_come_out_whole(family, seed):
     """Scenes (tuning seeds) where strands touch along a stretch: a cable doubled back
     on itself round a bend that leaves a small hole, and two cables side by side. Each
@@ -438,6 +442,43 @@ def test_touching_strands_of_generated_scenes_come_out_whole(family, seed):
     stretch left the strands' outer edges uncovered)."""
     score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
+
+
+def test_a_doubled_back_stretch_takes_its_bulbs_sides_from_clear_of_the_junction():
+    """A cable doubled back round a bulb: thinning draws one line down the touching
+    stretch (piece 0), parting at x = 100 into two strands (pieces 1, 2) and ending at
+    x = 300 in the bulb (piece 3), whose two ends start together there, so where they
+    lie says nothing of their sides. Read clear of the junction, the bulb's end that
+    leaves upwards continues the upper strand. (Before, the stretch was left whole and
+    one strand came out as a bridge along it, 1-2 half widths off the cable.)"""
+    sweep = np.linspace(np.pi, 3 * np.pi, 80)
+    bulb = np.array([322.0, 100.0]) + 22.0 * np.column_stack([np.cos(sweep), np.sin(sweep)])
+    pieces = [
+        np.column_stack([np.linspace(100, 300, 41), np.full(41, 100.0)]),
+        np.array([[20.0, 40.0], [60.0, 70.0], [100.0, 100.0]]),
+        np.array([[20.0, 160.0], [60.0, 130.0], [100.0, 100.0]]),
+        bulb,
+    ]
+    upper = [(20, 40), (100, 95.5), (300, 95.5), *map(tuple, bulb[:40])]
+    lower = [*map(tuple, bulb[40:]), (300, 104.5), (100, 104.5), (20, 160)]
+    distance = cv2.distanceTransform(
+        _touching_strands_mask(upper, lower).astype(np.uint8), cv2.DIST_L2, 5
+    )
+    positions = np.array([points[index] for points in pieces for index in (0, -1)])
+    directions = np.array(
+        [points[index] - points[inner] for points in pieces for index, inner in ((0, 1), (-1, -2))]
+    )
+    directions /= np.hypot(directions[:, 0], directions[:, 1])[:, None]
+    split = split_touching_strands(
+        pieces, positions, directions, [0, 1, -1, 0, -1, 0, 1, 1], distance
+    )
+    assert split.split == [0]
+    partner = {end: other for pair in split.pairs for end, other in (pair, pair[::-1])}
+    # The upper strand's end (3) meets one copy of the stretch; that copy's far end
+    # meets the bulb's start (6), which leaves upwards.
+    copy = partner[3] // 2
+    assert split.pieces[copy][:, 1].mean() < 100.0
+    assert partner[2 * copy + 1] == 6
 
 
 def test_strands_that_cross_at_a_shallow_angle_are_not_taken_as_side_by_side():
@@ -515,3 +556,41 @@ def test_a_hidden_bend_is_bridged_from_where_the_end_fits_begin():
     assert trims.tolist() == [0.0, 5.0, 5.0, 0.0]
     extrapolated = error(np.array([ends[1].position, ends[2].position]))
     assert (error(np.array([inner[1].position, inner[2].position])) < extrapolated).all()
+
+
+def _cut_cable_scene(tips: str, second_half_width: int = 5):
+    """A dark red cable along y = 60 on grey paper, seen from x 10 to 90 and from 150 to
+    230: a 60 px gap (12 radii of 5 px), its ends cut square or round."""
+    rng = np.random.default_rng(4)
+    image = np.clip(rng.normal(150, 3, (120, 240, 3)), 0, 255).astype(np.uint8)
+    mask = np.zeros((120, 240), np.uint8)
+    for (first, last), half in (((10, 90), 5), ((150, 230), second_half_width)):
+        cv2.rectangle(mask, (first, 60 - half), (last, 60 + half), 1, -1)
+        if tips == "round":
+            tip = last if first == 10 else first
+            cv2.rectangle(mask, (tip - half, 60 - half), (tip + half, 60 + half), 0, -1)
+            cv2.circle(mask, (tip - half if first == 10 else tip + half, 60), half, 1, -1)
+    image[mask > 0] = (40, 30, 150)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    pieces = [
+        np.column_stack([np.linspace(15, 85, 15), np.full(15, 60.0)]),
+        np.column_stack([np.linspace(155, 225, 15), np.full(15, 60.0)]),
+    ]
+    return image, mask > 0, distance, pieces
+
+
+@pytest.mark.parametrize(
+    ("tips", "second_half_width", "chains"),
+    [("cut", 5, 1), ("round", 5, 2), ("cut", 3, 2)],
+)
+def test_two_ends_cut_square_and_alike_join_across_a_gap_over_open_paper(
+    tips, second_half_width, chains
+):
+    """An object of the paper's own colour hides 12 radii of a cable: nothing shows over
+    the gap, but both ends are cut straight across the cable, face each other and agree
+    in colour and width, and are each other's only partner a little over the threshold.
+    Two cables' own round tips, or two cables of different widths, are not joined."""
+    image, mask, distance, pieces = _cut_cable_scene(tips, second_half_width)
+    params = DetectParams(merge_cost_threshold=0.2)  # the gap alone costs 0.24
+    result = merge_chains(pieces, params, 5.0, distance=distance, image=image, mask=mask)
+    assert len(result.paths) == chains

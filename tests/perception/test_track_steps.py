@@ -18,6 +18,7 @@ from service.perception.track_identity import (
     orientation,
     other_end,
     revived_joints,
+    waits,
     where_it_left,
 )
 from service.perception.track_matching import Chains, Fit, Piece, fit_pieces
@@ -379,3 +380,66 @@ def test_the_far_end_of_a_cable_seen_in_part_is_its_track_s_other_end():
     assert other_end(both, [(kept, seen, 4.0, colour)], STEP) is None
     other = Candidate(truth[34:].copy(), (False, True), 4.0, np.array([120.0, 100.0, 200.0]))
     assert other_end(other, [(kept, seen, 4.0, colour)], STEP) is None
+
+
+def test_a_stretch_with_no_free_end_out_along_a_track_seen_in_part_is_more_of_it():
+    # A cable of 40 joints coming in broadside over the picture's edge, in pieces: its
+    # joints 0-9 seen (its track's out-of-view stretch kept in a shape turned 0.12 rad
+    # about joint 9), and elsewhere joints 20-31 with no free end, either way round.
+    truth = curved(40, turn=0.01)
+    kept = truth.copy()
+    kept[10:] = turned(truth[10:] - truth[9], 0.12, truth[9])
+    seen = np.arange(40) <= 9
+    colour = np.array([120.0, 150.0, 150.0])
+    for joints in (truth[20:32], truth[20:32][::-1]):
+        shown = Candidate(joints.copy(), (False, False), 4.0, colour)
+        reached = other_end(shown, [(kept, seen, 4.0, colour)], STEP)
+        assert reached is not None and (reached.track, reached.end, reached.tip) == (0, 1, False)
+        np.testing.assert_allclose(reached.joints[20:32], truth[20:32], atol=1e-6)
+        np.testing.assert_allclose(reached.joints[:10], kept[:10])
+        # Between, and beyond it to the cable's end: turned back, within a segment.
+        assert np.linalg.norm(reached.joints[10:] - truth[10:], axis=1).max() < STEP
+    # The same stretch moved away from where the track could lie, or of another colour.
+    far = Candidate(truth[20:32] + np.array([0.0, 120.0]), (False, False), 4.0, colour)
+    assert other_end(far, [(kept, seen, 4.0, colour)], STEP) is None
+    red = Candidate(truth[20:32].copy(), (False, False), 4.0, np.array([120.0, 100.0, 200.0]))
+    assert other_end(red, [(kept, seen, 4.0, colour)], STEP) is None
+
+
+def test_a_free_end_back_where_one_end_was_last_seen_is_that_end():
+    # A straight cable (the shape cannot tell) that left broadside: its first end was
+    # seen last (a frame later), but its free end comes back at the far side, where the
+    # last end went out.
+    old = straight(0.0, 30)
+    ends = (old[0], old[-1])
+    shown = Candidate(straight(250.0, 6)[::-1].copy(), (True, False), 4.0, None)
+    assert not orientation(shown, old, (True, True), ends, (1.0, 0.97))
+    # Back midway between where both ends were: the end seen last.
+    middle = Candidate(straight(140.0, 6)[::-1].copy(), (True, False), 4.0, None)
+    assert orientation(middle, old, (True, True), ends, (1.0, 0.97))
+
+
+def test_a_cable_coming_in_fast_becomes_a_track_in_its_second_frame():
+    # Nothing in the first frame; then a cable moving 25 px a frame across itself (a
+    # new cable's speed is not known: it is looked for as far as a track just begun).
+    tracker = Tracker()
+    counts = []
+    for shift in (None, 0, 25, 50):
+        image = np.zeros((200, 300, 3), np.uint8)
+        if shift is not None:
+            _ = cv2.line(image, (40 + shift, 20), (60 + shift, 180), (0, 200, 255), 9)
+        counts.append(len(tracker.update(image).chains))
+    assert counts == [0, 0, 1, 1]
+
+
+def test_a_piece_waits_while_a_track_of_its_look_just_begun_goes_on_out_of_view():
+    colour = np.array([120.0, 150.0, 150.0])
+    piece = Candidate(straight(0.0, 8), (False, False), 4.0, colour)
+    young = [(colour, 4.0)]
+    assert waits(piece, young, STEP)
+    assert waits(replace(piece, tips=(True, False)), young, STEP)
+    # A whole cable in view is a cable of its own; so is one of another colour or width.
+    assert not waits(replace(piece, tips=(True, True)), young, STEP)
+    assert not waits(piece, [(np.array([120.0, 100.0, 200.0]), 4.0)], STEP)
+    assert not waits(piece, [(colour, 9.0)], STEP)
+    assert not waits(piece, [], STEP)
