@@ -18,6 +18,13 @@ SLIDE_KEPT = 0.9
 """Share of the slide along the cable carried in from the last frame that, with no free
 end in view, the shape may keep up (frame after frame, so a slide no free end measures
 dies away unless the shape keeps showing it)."""
+SHAPE_LAG = 15
+"""Frames between the looks at whether a cable's shape in view keeps (see
+:func:`shape_window`)."""
+CONGRUENT_RMS = 0.125
+"""Root-mean-square misfit (in segment lengths) within which the shape in view is the
+shape :data:`SHAPE_LAG` frames before, moved as a whole (detection noise is a few
+hundredths of a segment; a travelling bend changes the shape by several tenths)."""
 RIDGE = 0.02
 """How strongly the rigid motion fitted to a cable's cross-cable displacements is kept
 small (relative to the data): enough to leave a straight cable's slide at zero."""
@@ -129,6 +136,47 @@ def _slide_bounded(fitted, normal_matrix, tangent, turned, use, carried, carried
     # that changes the slide at least cost.
     direction = np.linalg.solve(normal_matrix, slide_row)
     return fitted + direction * ((target - slide) / max(float(slide_row @ direction), 1e-12))
+
+
+def shape_window(window, first_joint, joints, seen, step, frame):
+    """The track's shape window ``(frame, first_joint, joints, travelling)`` carried on
+    to this frame (``window`` None: the first).
+
+    Every :data:`SHAPE_LAG` frames the seen joints are laid on the joints of the window
+    (by joint number, shifted along the track by up to 4 segments) by the best rigid
+    motion: a cable that moved as a whole (drifting along itself, say) keeps its shape,
+    and so its material-fixed bends, while bends travelling along it change the shape.
+    ``travelling`` says the shape did not keep, so that a slide along the cable the
+    two-frame rigid fit finds is not believed (see :func:`motion`'s ``carried``).
+    """
+    if window is not None and frame - window[0] < SHAPE_LAG:
+        return window
+    travelling = False if window is None else window[3]
+    if window is not None:
+        misfit = _shape_misfit(window[1], window[2], first_joint, joints, seen)
+        travelling = travelling if misfit is None else misfit > CONGRUENT_RMS * step
+    return (frame, first_joint, joints, travelling)
+
+
+def _shape_misfit(then_first, then_joints, first_joint, joints, seen):
+    """Least RMS misfit (px) of the seen joints to the joints then, over shifts along
+    the track, after the best rigid motion (None: too few joints in common)."""
+    numbers = first_joint + np.flatnonzero(seen) - then_first
+    best = None
+    along = np.arange(len(then_joints))
+    for shift in np.arange(-4.0, 4.001, 0.1):
+        at = numbers + shift
+        keep = (at >= 0) & (at <= len(then_joints) - 1)
+        if np.count_nonzero(keep) < 8:
+            continue
+        then = np.column_stack([np.interp(at[keep], along, then_joints[:, i]) for i in (0, 1)])
+        now = joints[seen][keep]
+        then, now = then - then.mean(axis=0), now - now.mean(axis=0)
+        u, _, vt = np.linalg.svd(then.T @ now)
+        rotation = u @ np.diag([1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+        misfit = float(np.sqrt(((then @ rotation - now) ** 2).sum(axis=1).mean()))
+        best = misfit if best is None else min(best, misfit)
+    return best
 
 
 def smooth_along(values: np.ndarray) -> np.ndarray:
