@@ -160,23 +160,29 @@ def shape_window(window, first_joint, joints, seen, step, frame):
 
 def _shape_misfit(then_first, then_joints, first_joint, joints, seen):
     """Least RMS misfit (px) of the seen joints to the joints then, over shifts along
-    the track, after the best rigid motion (None: too few joints in common)."""
-    numbers = first_joint + np.flatnonzero(seen) - then_first
-    best = None
-    along = np.arange(len(then_joints))
-    for shift in np.arange(-4.0, 4.001, 0.1):
-        at = numbers + shift
-        keep = (at >= 0) & (at <= len(then_joints) - 1)
-        if np.count_nonzero(keep) < 8:
-            continue
-        then = np.column_stack([np.interp(at[keep], along, then_joints[:, i]) for i in (0, 1)])
-        now = joints[seen][keep]
-        then, now = then - then.mean(axis=0), now - now.mean(axis=0)
-        u, _, vt = np.linalg.svd(then.T @ now)
-        rotation = u @ np.diag([1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
-        misfit = float(np.sqrt(((then @ rotation - now) ** 2).sum(axis=1).mean()))
-        best = misfit if best is None else min(best, misfit)
-    return best
+    the track, after the best rigid motion (None: too few joints in common). All the
+    shifts at once: the joints kept at a shift weigh, the rest are nil."""
+    if len(then_joints) < 2:
+        return None
+    shifts = np.arange(-4.0, 4.001, 0.1)[:, None]
+    at = (first_joint + np.flatnonzero(seen) - then_first)[None, :] + shifts
+    keep = (at >= 0) & (at <= len(then_joints) - 1)
+    counts = np.count_nonzero(keep, axis=1)
+    if counts.max() < 8:
+        return None
+    below = np.clip(np.floor(at).astype(int), 0, len(then_joints) - 2)
+    share = np.clip(at - below, 0.0, 1.0)[..., None]
+    then = (1.0 - share) * then_joints[below] + share * then_joints[below + 1]
+    now = np.broadcast_to(joints[seen], then.shape)
+    weight = keep[..., None] / np.maximum(counts, 1)[:, None, None]
+    then = (then - (then * weight).sum(axis=1, keepdims=True)) * keep[..., None]
+    now = (now - (now * weight).sum(axis=1, keepdims=True)) * keep[..., None]
+    u, _, vt = np.linalg.svd(then.transpose(0, 2, 1) @ now)
+    flip = np.ones((len(u), 2))
+    flip[:, 1] = np.sign(np.linalg.det(u @ vt))
+    rotation = (u * flip[:, None, :]) @ vt
+    misfit = np.sqrt((((then @ rotation - now) ** 2).sum(axis=(1, 2))) / np.maximum(counts, 1))
+    return float(misfit[counts >= 8].min())
 
 
 def smooth_along(values: np.ndarray) -> np.ndarray:
