@@ -63,7 +63,7 @@ from service.perception.track_identity import (
 )
 from service.perception.track_matching import Chains, Piece, detection_pieces, fit_pieces
 from service.perception.track_merging import Bridge, Join, bridges, joins
-from service.perception.track_motion import motion, tangents
+from service.perception.track_motion import motion, shape_window, tangents
 from service.perception.track_update import Observation, exact_chain, observe, register
 
 VELOCITY_SMOOTHING = 0.5
@@ -138,6 +138,7 @@ class TrackRecord:
     unseen: int = 0
     steady: int = 0  # frames seen in a row since it began or came back (its velocity known)
     seen: np.ndarray | None = None  # (N,) bool: joints seen in the last frame it was seen
+    shape: tuple | None = None  # track_motion.shape_window: does its shape in view keep?
     free_end_points: np.ndarray | None = None  # (2, 2): free ends seen last frame (NaN: not)
     length_known: bool = False  # both free ends once seen at once, as far apart as its ends
     last_seen: tuple[np.ndarray, np.ndarray] | None = None  # (joint numbers, points) seen last
@@ -520,10 +521,9 @@ def _moved(
             np.repeat(track.velocity[-1:], len(tail), axis=0),
         ]
     )
-    use = covered.copy()
-    use[: len(head)] = False
-    if len(tail):
-        use[-len(tail) :] = False
+    shape = shape_window(track.shape, track.first_joint - len(head), joints, covered, step, frame)
+    at = np.arange(len(covered))  # the joints grown this frame were not measured
+    use = covered & (at >= len(head)) & (at < len(covered) - len(tail))
     if np.count_nonzero(use) >= 3:
         # A free end seen in this frame and the last is a material point found again:
         # its whole motion is seen, along the cable too.
@@ -539,7 +539,8 @@ def _moved(
         seen_at = np.flatnonzero(covered)
         beyond = np.ones(len(covered), bool)
         beyond[seen_at[0] : seen_at[-1] + 1] = False
-        measured = motion(previous, joints, use, pinned, tangent, beyond) / dt
+        carried = velocity * dt if shape[3] else None  # bends travel: no slide from shape
+        measured = motion(previous, joints, use, pinned, tangent, beyond, carried) / dt
         # A slide moves each joint back along the track (lower joint numbers) by its size.
         measured -= (observation.slide / dt) * tangent
         velocity = VELOCITY_SMOOTHING * measured + (1.0 - VELOCITY_SMOOTHING) * velocity
@@ -575,6 +576,7 @@ def _moved(
         free_end_points=observation.free_end_points,
         length_known=track.length_known or observation.length_known,
         last_seen=(np.flatnonzero(covered), joints[covered]),
+        shape=shape,
     )
 
 
