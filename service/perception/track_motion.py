@@ -9,6 +9,7 @@ cross-cable remainder smoothed along the cable.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -138,9 +139,18 @@ def _slide_bounded(fitted, normal_matrix, tangent, turned, use, carried, carried
     return fitted + direction * ((target - slide) / max(float(slide_row @ direction), 1e-12))
 
 
-def shape_window(window, first_joint, joints, seen, step, frame):
-    """The track's shape window ``(frame, first_joint, joints, travelling)`` carried on
-    to this frame (``window`` None: the first).
+class ShapeWindow(NamedTuple):
+    """A track's shape as last looked at (:func:`shape_window`)."""
+
+    frame: int
+    first_joint: int  # the track's joint number of ``joints[0]`` then
+    joints: np.ndarray
+    travelling: bool  # the shape did not keep at the last look: bends travel along it
+
+
+def shape_window(window, first_joint, joints, seen, step, frame) -> ShapeWindow:
+    """The track's :class:`ShapeWindow` carried on to this frame (``window`` None: the
+    first).
 
     Every :data:`SHAPE_LAG` frames the seen joints are laid on the joints of the window
     (by joint number, shifted along the track by up to 4 segments) by the best rigid
@@ -149,13 +159,13 @@ def shape_window(window, first_joint, joints, seen, step, frame):
     ``travelling`` says the shape did not keep, so that a slide along the cable the
     two-frame rigid fit finds is not believed (see :func:`motion`'s ``carried``).
     """
-    if window is not None and frame - window[0] < SHAPE_LAG:
+    if window is not None and frame - window.frame < SHAPE_LAG:
         return window
-    travelling = False if window is None else window[3]
+    travelling = False if window is None else window.travelling
     if window is not None:
-        misfit = _shape_misfit(window[1], window[2], first_joint, joints, seen)
+        misfit = _shape_misfit(window.first_joint, window.joints, first_joint, joints, seen)
         travelling = travelling if misfit is None else misfit > CONGRUENT_RMS * step
-    return (frame, first_joint, joints, travelling)
+    return ShapeWindow(frame, first_joint, joints, travelling)
 
 
 def _shape_misfit(then_first, then_joints, first_joint, joints, seen):

@@ -63,7 +63,7 @@ from service.perception.track_identity import (
 )
 from service.perception.track_matching import Chains, Piece, detection_pieces, fit_pieces
 from service.perception.track_merging import Bridge, Join, bridges, joins
-from service.perception.track_motion import motion, shape_window, tangents
+from service.perception.track_motion import ShapeWindow, motion, shape_window, tangents
 from service.perception.track_update import Observation, exact_chain, observe, register
 
 VELOCITY_SMOOTHING = 0.5
@@ -138,7 +138,7 @@ class TrackRecord:
     unseen: int = 0
     steady: int = 0  # frames seen in a row since it began or came back (its velocity known)
     seen: np.ndarray | None = None  # (N,) bool: joints seen in the last frame it was seen
-    shape: tuple | None = None  # track_motion.shape_window: does its shape in view keep?
+    shape: ShapeWindow | None = None  # does its shape in view keep (shape_window)?
     free_end_points: np.ndarray | None = None  # (2, 2): free ends seen last frame (NaN: not)
     length_known: bool = False  # both free ends once seen at once, as far apart as its ends
     last_seen: tuple[np.ndarray, np.ndarray] | None = None  # (joint numbers, points) seen last
@@ -539,7 +539,7 @@ def _moved(
         seen_at = np.flatnonzero(covered)
         beyond = np.ones(len(covered), bool)
         beyond[seen_at[0] : seen_at[-1] + 1] = False
-        carried = velocity * dt if shape[3] else None  # bends travel: no slide from shape
+        carried = velocity * dt if shape.travelling else None  # bends travel: no slide from shape
         measured = motion(previous, joints, use, pinned, tangent, beyond, carried) / dt
         # A slide moves each joint back along the track (lower joint numbers) by its size.
         measured -= (observation.slide / dt) * tangent

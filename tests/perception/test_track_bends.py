@@ -149,12 +149,12 @@ def test_the_shape_window_tells_travelling_bends_from_a_cable_moved_whole():
     seen[20:57] = True
     then = centreline(0)[::10][:75]
     window = shape_window(None, 0, then, seen, step, frame=0)
-    assert window[3] is False
+    assert window.travelling is False
     travelled = centreline(SHAPE_LAG)[::10][:75]
-    assert shape_window(window, 0, travelled, seen, step, SHAPE_LAG)[3] is True
+    assert shape_window(window, 0, travelled, seen, step, SHAPE_LAG).travelling is True
     angle = 0.05
     turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
     moved = centreline(0)[13::10][:75] @ turn.T + np.array([4.0, -3.0])
-    assert shape_window(window, 0, moved, seen, step, SHAPE_LAG)[3] is False
+    assert shape_window(window, 0, moved, seen, step, SHAPE_LAG).travelling is False
     # Between looks the window is carried on unchanged.
     assert shape_window(window, 0, travelled, seen, step, SHAPE_LAG - 1) is window
