@@ -334,7 +334,7 @@ def orientation(
         elif abs(ends_seen_s[0] - ends_seen_s[1]) > 1e-6:
             head_is_tip = ends_seen_s[0] > ends_seen_s[1]
         else:
-            head_is_tip = np.linalg.norm(tip - head) <= np.linalg.norm(tip - tail)
+            head_is_tip = to_head <= to_tail
         return head_is_tip == candidate.tips[0]
     straight = np.linalg.norm(first - head) + np.linalg.norm(last - tail)
     crossed = np.linalg.norm(first - tail) + np.linalg.norm(last - head)
