@@ -97,9 +97,12 @@ LEVEL_RATIO = float(np.sqrt(2.0))
 END_PROBE = 2.0
 """A seed ends a line when no seed lies near the point this far ahead on its line (level
 px): half its segment's length."""
-END_WIDTH = 1.0
-"""Ahead of a line's end only its core is judged: within this far of the line (level px),
-half of the narrowest cable a level is made for."""
+END_WIDTH = REACH
+"""Ahead of a line's end the cable is judged as wide as beside its seeds (level px): a
+cable keeps its width up to its end, where the line's ratio fell because its segment ran
+past the end, not because the cable narrowed. (Judged within half the narrowest cable's
+width, 1 px, the end's cap was left out at its sides and the chain ended short of the
+cable: segmentation pass 7.)"""
 MIN_LEVEL_SIDE = 2 * BACKGROUND_WINDOW
 """A level must hold two background windows across its shorter side."""
 JND = 2.3
@@ -731,8 +734,9 @@ def _extent(lab8: np.ndarray, lines: SeedLines, seeds: np.ndarray) -> np.ndarray
     A pixel counts when any seed within reach says so, not only the nearest: where two
     cables of different colours cross, the lower one's pixels beside the upper one's seeds
     are still judged by the lower one's own seeds. Where a line of seeds ends, its last
-    seeds also judge the core of the line ahead of them, out to the length of their
-    segment: there the segment ran past the cable's end and its ratio fell.
+    seeds also judge the line ahead of them at its full width (:data:`END_WIDTH`), out to
+    the length of their segment: there the segment ran past the cable's end and its ratio
+    fell.
     """
     height = lab8.shape[0]
     grid_h, grid_w = seeds.shape

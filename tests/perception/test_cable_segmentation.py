@@ -527,3 +527,18 @@ def test_the_shadow_under_a_cable_stays_out_of_the_mask_after_jpeg():
     assert mask[100:109, 40:320].all()
     # At most the rim row the blur shares with the cable.
     assert not mask[110:113, 40:320].any()
+
+
+def test_a_cables_end_is_found_at_its_full_width():
+    """Ahead of a line's last seeds the cable keeps its width up to its end (segmentation
+    pass 7): the end's whole cap is judged, not only its core, so a chain's end lies where
+    the cable ends (an occluder's border, a free end) and not short of it."""
+    paper = np.full((240, 400, 3), 225, np.uint8)
+    truth = np.zeros((240, 400), np.uint8)
+    cv2.line(paper, (40, 120), (300, 120), (200, 150, 60), 12)  # light blue, ends at x = 300
+    cv2.line(truth, (40, 120), (300, 120), 1, 12)
+    mask = segment_cables(cv2.GaussianBlur(paper, (0, 0), 0.7))
+    end = truth[:, 290:].astype(bool)
+    # The core only (END_WIDTH 1.0) left 19 of the end's 193 px out; the full reach, 4.
+    assert np.count_nonzero(end & ~mask[:, 290:]) <= 0.05 * np.count_nonzero(end)
+    assert not mask[:, 312:].any()
