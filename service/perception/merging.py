@@ -369,6 +369,7 @@ def choose_joins(
     picture: tuple[int, int] | None = None,
     preset: list[tuple[int, int]] | None = None,
     hidden_gap: Callable[[int, int], bool] | None = None,
+    runs_out: np.ndarray | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
@@ -389,7 +390,11 @@ def choose_joins(
     join; ends marked ``leaving`` (cables leaving the picture) are never joined across a
     gap; and with ``picture`` ((height, width)) no gap is bridged by a curve that runs
     outside the picture. The last two do not apply when ``expected_count`` asks for
-    joins past the threshold.
+    joins past the threshold. With ``runs_out`` (the ends whose cable runs on along
+    their direction to the border, a part of ``leaving``), an end that is only
+    ``at_border`` (near the picture's edge, but its cable stops short of it) may still
+    be joined across a gap that ``hidden_gap`` says something hides: an object lying
+    at the picture's edge, not the edge, cuts that cable (:func:`_border_pairs_hidden`).
 
     Returns
     -------
@@ -447,8 +452,14 @@ def choose_joins(
     )
     if colours is not None and len(costs):
         costs = costs + params.colour_weight * colour_penalty(colours, pairs[:, 0], pairs[:, 1])
+    border_ok = np.zeros(len(ends), bool)
     if leaving is not None and params.expected_count is None and len(costs):
         keep = ~(leaving[pairs[:, 0]] | leaving[pairs[:, 1]])
+        if runs_out is not None and at_border is not None and hidden_gap is not None:
+            hidden = _border_pairs_hidden(pairs, costs, keep, runs_out, at_border, params)
+            for index in hidden.tolist():
+                keep[index] = hidden_gap(*pairs[index].tolist())
+                border_ok[pairs[index]] |= keep[index]
         pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
     if picture is not None and params.expected_count is None and len(costs):
         keep = _bridges_inside(ends, pairs, costs, picture, params)
@@ -473,7 +484,7 @@ def choose_joins(
         # limit; when two free ends have no other plausible partner, nothing else can
         # explain either of them, and they are joined up to a looser limit.
         # Ends at the edge of the picture are cables leaving it, never gaps.
-        excluded = used if at_border is None else used | at_border
+        excluded = used if at_border is None else used | (at_border & ~border_ok)
         close = distances <= MUTUAL_GAP_RADII * radius
         if hidden_gap is not None and len(costs):
             # A longer gap only where the image shows something lying over it; looked
@@ -492,6 +503,17 @@ def choose_joins(
         for cost, i, j in _mutual_best(near, excluded, params.merge_cost_threshold):
             try_join(i, j, cost)
     return joins
+
+
+def _border_pairs_hidden(pairs, costs, keep, runs_out, at_border, params) -> np.ndarray:
+    """Indices of the candidate joins left out only for an end :func:`choose_joins` found
+    ``at_border`` whose cable does not run on to the border (not ``runs_out``), within
+    the mutual limit: an object lying at the picture's edge may have cut it there."""
+    first, second = pairs[:, 0], pairs[:, 1]
+    near_edge = at_border[first] | at_border[second]
+    runs = runs_out[first] | runs_out[second]
+    limit = MUTUAL_COST_FACTOR * params.merge_cost_threshold
+    return np.flatnonzero(~keep & near_edge & ~runs & (costs <= limit))
 
 
 def _bridges_inside(ends, pairs, costs, picture, params) -> np.ndarray:
@@ -583,8 +605,8 @@ def _cut_ends_alike(
         return False
     if not ends_alike(colours, i, j, (a.width, b.width)):
         return False
-    return cut_square(mask, a.position, a.direction, a.width) and cut_square(
-        mask, b.position, b.direction, b.width
+    return cut_square(mask, a.position, a.direction, a.width, a.skip) and cut_square(
+        mask, b.position, b.direction, b.width, b.skip
     )
 
 
@@ -862,9 +884,9 @@ def merge_chains(
             | (positions[:, 0] > width - 1 - margin)
             | (positions[:, 1] > height - 1 - margin)
         )
-    leaving = None
+    leaving = runs_out = None
     if mask is not None and ends:
-        leaving = _merging_kernels.runs_to_border(
+        leaving = runs_out = _merging_kernels.runs_to_border(
             np.ascontiguousarray(mask, np.bool_),
             np.array([end.position for end in ends], np.float64),
             np.array([end.direction for end in ends], np.float64),
@@ -893,6 +915,7 @@ def merge_chains(
         from_ends = np.repeat(np.array(touching.origin), 2) * 2 + np.tile([0, 1], len(pieces))
         at_border = None if at_border is None else at_border[from_ends]
         leaving = None if leaving is None else leaving[from_ends]
+        runs_out = None if runs_out is None else runs_out[from_ends]
     junction_of_end, dropped = absorb_shared_pieces(pieces, touching.junction_of_end, radius)
     colours = None
     if image is not None and params.colour_weight > 0:
@@ -925,6 +948,7 @@ def merge_chains(
         picture,
         touching.pairs,
         hidden_gap,
+        runs_out,
     )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.

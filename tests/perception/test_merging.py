@@ -594,3 +594,54 @@ def test_two_ends_cut_square_and_alike_join_across_a_gap_over_open_paper(
     params = DetectParams(merge_cost_threshold=0.2)  # the gap alone costs 0.24
     result = merge_chains(pieces, params, 5.0, distance=distance, image=image, mask=mask)
     assert len(result.paths) == chains
+
+
+def _ends_by_the_top_edge():
+    """A piece of cable lying along the picture's top edge (y = 5, radius 5) from its
+    right edge to x = 300, where an object cuts it; the cable comes out again at
+    (240, 9), heading on to the left: ends 1 and 2 face each other across 12 radii."""
+    return [
+        ChainEnd(0, True, np.array([318.0, 5.0]), np.array([1.0, 0.0])),
+        ChainEnd(0, False, np.array([300.0, 5.0]), np.array([-1.0, 0.0])),
+        ChainEnd(1, True, np.array([240.0, 9.0]), np.array([1.0, -0.06])),
+        ChainEnd(1, False, np.array([150.0, 20.0]), np.array([-1.0, 0.1])),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("hidden", "runs_out", "joined"),
+    [
+        (True, [True, False, False, False], True),  # an object at the edge cut it
+        (False, [True, False, False, False], False),  # nothing shows over the gap
+        (True, [True, True, False, False], False),  # the cable runs on out of the picture
+        (True, None, False),  # not told which ends run out: every end by the edge leaves
+    ],
+)
+def test_an_end_by_the_edge_is_joined_only_under_an_object(hidden, runs_out, joined):
+    """An end near the picture's edge whose cable stops short of it (not ``runs_out``)
+    is not a cable leaving the picture when the image shows an object over the gap."""
+    ends = _ends_by_the_top_edge()
+    at_border = np.array([True, True, False, False])
+    leaving = at_border | (runs_out if runs_out is not None else False)
+    joins = choose_joins(
+        ends,
+        2,
+        DetectParams(),
+        5.0,
+        at_border=at_border,
+        leaving=leaving,
+        hidden_gap=lambda i, j: hidden,
+        runs_out=None if runs_out is None else np.array(runs_out),
+    )
+    assert [(i, j) for i, j, _ in joins] == ([(1, 2)] if joined else [])
+
+
+@pytest.mark.parametrize(
+    ("family", "seed"), [("edge", 8025), ("occluded", 8011), ("occluded", 8027)]
+)
+def test_cables_cut_by_objects_at_a_slant_or_at_the_edge_come_out_whole(family, seed):
+    """Tuning scenes: a cable cut at a slant by objects of the background's own colour
+    (its ends' cut read from where their fits begin), and one lying along the picture's
+    top edge into an object there (not a cable leaving the picture). One chain each."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
