@@ -705,9 +705,7 @@ def assemble_paths(
     bridged by :func:`gap_curve` of the given ``curve`` shape. ``trims[e]`` (optional)
     is the arc length left out of end ``e``'s piece at that end, where its bridge
     starts further in."""
-    partner = np.full(len(ends), -1)
-    for i, j, _ in joins:
-        partner[i], partner[j] = j, i
+    partner = _partners(len(ends), joins)
     if trims is not None:
         pieces = _trimmed(pieces, trims)
     visited = np.zeros(len(pieces), bool)
@@ -741,6 +739,14 @@ def assemble_paths(
             entry = next_entry
         paths.append(MergedPath(np.concatenate(vertices), np.concatenate(filled), pieces=order))
     return paths
+
+
+def _partners(count: int, joins: list[tuple[int, int, float]]) -> np.ndarray:
+    """The end each of ``count`` ends is joined to, or -1."""
+    partner = np.full(count, -1)
+    for i, j, _ in joins:
+        partner[i], partner[j] = j, i
+    return partner
 
 
 def _trimmed(pieces: list[np.ndarray], trims: np.ndarray) -> list[np.ndarray]:
@@ -807,9 +813,7 @@ def ends_through_short_pieces(
     the other, so both of its ends point along the line between those two ends. The
     joins themselves, and their costs, are left as they were.
     """
-    partner = np.full(len(ends), -1)
-    for i, j, _ in joins:
-        partner[i], partner[j] = j, i
+    partner = _partners(len(ends), joins)
     adjusted = list(ends)
     for piece, points in enumerate(pieces):
         before, after = partner[2 * piece], partner[2 * piece + 1]
@@ -823,6 +827,46 @@ def ends_through_short_pieces(
         start, end = ends[2 * piece], ends[2 * piece + 1]
         adjusted[2 * piece] = ChainEnd(start.piece, start.at_start, start.position, -axis)
         adjusted[2 * piece + 1] = ChainEnd(end.piece, end.at_start, end.position, axis)
+    return adjusted
+
+
+def ends_of_short_pieces_from_partners(
+    pieces: list[np.ndarray],
+    ends: list[ChainEnd],
+    joins: list[tuple[int, int, float]],
+    shorter_than: float,
+    junction_of_end: list[int],
+) -> list[ChainEnd]:
+    """Ends for bridging, with a short piece joined at one end only arriving as its
+    partner's bend goes on.
+
+    A piece shorter than the end-fit span seen beside an occluder (between it and the
+    picture's edge, or a free tip) has too little cable to fit a direction: thinning
+    bends it toward the cuts' corners, 10-30 degrees off. Its partner across the gap,
+    a longer piece, has a good end. The bridge then arrives at the short piece as a
+    circle leaving the partner's end along its direction would: along the partner's
+    direction reflected in the chord between the two ends. Only gaps (ends in no
+    junction); the joins themselves are left as they were.
+    """
+    partner = _partners(len(ends), joins)
+    adjusted = list(ends)
+    for i, j, _ in joins:
+        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
+            continue
+        short = [polyline_length(pieces[ends[k].piece]) < shorter_than for k in (i, j)]
+        if short[0] == short[1]:
+            continue
+        near, far = (i, j) if short[0] else (j, i)
+        if partner[near ^ 1] >= 0:  # joined at both ends: ends_through_short_pieces
+            continue
+        chord = ends[near].position - ends[far].position
+        length = float(np.hypot(*chord))
+        if length < 1e-9:
+            continue
+        chord = chord / length
+        leaving = ends[far].direction
+        arriving = 2.0 * float(leaving @ chord) * chord - leaving
+        adjusted[near] = replace(ends[near], direction=-arriving)
     return adjusted
 
 
@@ -953,6 +997,9 @@ def merge_chains(
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
     inner_ends, trims = bridge_from_the_fits(pieces, ends, joins, span, junction_of_end)
+    inner_ends = ends_of_short_pieces_from_partners(
+        pieces, inner_ends, joins, span, junction_of_end
+    )
     bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span)
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
