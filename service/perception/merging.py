@@ -39,8 +39,14 @@ from service.perception.appearance import (
     ends_alike,
     gap_hidden,
 )
+from service.perception.bridge_ends import (
+    bridge_from_the_fits,
+    ends_of_short_pieces_from_partners,
+    ends_through_short_pieces,
+    partners,
+)
 from service.perception.deadline import Deadline, check
-from service.perception.geometry import arc_lengths, end_fit, fit_where_skipped, polyline_length
+from service.perception.geometry import arc_lengths, end_fit, polyline_length
 from service.perception.touching import TouchingSplit, split_touching_strands
 
 # An end whose cable runs on along its direction, within this many radii plus
@@ -705,7 +711,7 @@ def assemble_paths(
     bridged by :func:`gap_curve` of the given ``curve`` shape. ``trims[e]`` (optional)
     is the arc length left out of end ``e``'s piece at that end, where its bridge
     starts further in."""
-    partner = _partners(len(ends), joins)
+    partner = partners(len(ends), joins)
     if trims is not None:
         pieces = _trimmed(pieces, trims)
     visited = np.zeros(len(pieces), bool)
@@ -741,14 +747,6 @@ def assemble_paths(
     return paths
 
 
-def _partners(count: int, joins: list[tuple[int, int, float]]) -> np.ndarray:
-    """The end each of ``count`` ends is joined to, or -1."""
-    partner = np.full(count, -1)
-    for i, j, _ in joins:
-        partner[i], partner[j] = j, i
-    return partner
-
-
 def _trimmed(pieces: list[np.ndarray], trims: np.ndarray) -> list[np.ndarray]:
     """The pieces less the joints within ``trims[2 k]`` of piece ``k``'s start and
     ``trims[2 k + 1]`` of its end (at least two joints kept)."""
@@ -762,112 +760,6 @@ def _trimmed(pieces: list[np.ndarray], trims: np.ndarray) -> list[np.ndarray]:
         keep = (along >= head) & (along <= along[-1] - tail)
         result.append(points[keep] if keep.sum() >= 2 else points)
     return result
-
-
-def bridge_from_the_fits(
-    pieces: list[np.ndarray],
-    ends: list[ChainEnd],
-    joins: list[tuple[int, int, float]],
-    span: float,
-    junction_of_end: list[int],
-) -> tuple[list[ChainEnd], np.ndarray]:
-    """Ends to bridge gaps from: where each end's fit begins, not extrapolated to the tip.
-
-    An end's position and direction are its fit's extrapolation over the tip it left
-    out (:attr:`ChainEnd.skip`, a cut end's hook); across a gap on a bend that
-    extrapolation turns the bridge off the cable. A gap's bridge (ends in no junction)
-    starts instead where the fitted stretch begins, with the fit's own tangent there,
-    and the piece's joints before that are left out of the path (not for pieces shorter
-    than the fit's ``span``: :func:`ends_through_short_pieces`). Returns the ends and
-    the arc lengths to trim per end (for :func:`assemble_paths`).
-    """
-    adjusted = list(ends)
-    trims = np.zeros(len(ends))
-    for i, j, _ in joins:
-        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
-            continue
-        for k in (i, j):
-            end = ends[k]
-            # Pieces shorter than the fit's span are crossed along their partners' line.
-            if end.skip <= 0 or polyline_length(pieces[end.piece]) < span:
-                continue
-            inner = fit_where_skipped(pieces[end.piece], end.at_start, span, end.skip)
-            if inner is not None:
-                adjusted[k] = replace(end, position=inner[0], direction=inner[1])
-                trims[k] = end.skip
-    return adjusted, trims
-
-
-def ends_through_short_pieces(
-    pieces: list[np.ndarray],
-    ends: list[ChainEnd],
-    joins: list[tuple[int, int, float]],
-    shorter_than: float,
-) -> list[ChainEnd]:
-    """Ends for bridging, with short pieces taken along the line between their partners.
-
-    A piece shorter than the end-fit span (say a stretch of cable seen between two
-    occluders, cut at a slant at both ends) shows where the cable is, but its own end
-    directions are poor: thinning bends both of its ends toward the cuts' corners.
-    When it is joined at both ends, the cable runs through it from one partner end to
-    the other, so both of its ends point along the line between those two ends. The
-    joins themselves, and their costs, are left as they were.
-    """
-    partner = _partners(len(ends), joins)
-    adjusted = list(ends)
-    for piece, points in enumerate(pieces):
-        before, after = partner[2 * piece], partner[2 * piece + 1]
-        if before < 0 or after < 0 or polyline_length(points) >= shorter_than:
-            continue
-        axis = ends[after].position - ends[before].position
-        length = float(np.hypot(*axis))
-        if length < 1e-9:
-            continue
-        axis = axis / length
-        start, end = ends[2 * piece], ends[2 * piece + 1]
-        adjusted[2 * piece] = ChainEnd(start.piece, start.at_start, start.position, -axis)
-        adjusted[2 * piece + 1] = ChainEnd(end.piece, end.at_start, end.position, axis)
-    return adjusted
-
-
-def ends_of_short_pieces_from_partners(
-    pieces: list[np.ndarray],
-    ends: list[ChainEnd],
-    joins: list[tuple[int, int, float]],
-    shorter_than: float,
-    junction_of_end: list[int],
-) -> list[ChainEnd]:
-    """Ends for bridging, with a short piece joined at one end only arriving as its
-    partner's bend goes on.
-
-    A piece shorter than the end-fit span seen beside an occluder (between it and the
-    picture's edge, or a free tip) has too little cable to fit a direction: thinning
-    bends it toward the cuts' corners, 10-30 degrees off. Its partner across the gap,
-    a longer piece, has a good end. The bridge then arrives at the short piece as a
-    circle leaving the partner's end along its direction would: along the partner's
-    direction reflected in the chord between the two ends. Only gaps (ends in no
-    junction); the joins themselves are left as they were.
-    """
-    partner = _partners(len(ends), joins)
-    adjusted = list(ends)
-    for i, j, _ in joins:
-        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
-            continue
-        short = [polyline_length(pieces[ends[k].piece]) < shorter_than for k in (i, j)]
-        if short[0] == short[1]:
-            continue
-        near, far = (i, j) if short[0] else (j, i)
-        if partner[near ^ 1] >= 0:  # joined at both ends: ends_through_short_pieces
-            continue
-        chord = ends[near].position - ends[far].position
-        length = float(np.hypot(*chord))
-        if length < 1e-9:
-            continue
-        chord = chord / length
-        leaving = ends[far].direction
-        arriving = 2.0 * float(leaving @ chord) * chord - leaving
-        adjusted[near] = replace(ends[near], direction=-arriving)
-    return adjusted
 
 
 def merge_chains(

@@ -12,16 +12,18 @@ from schemas import DetectParams
 from service.evaluation.synthetic_eval import evaluate_scene
 from service.perception import _merging_kernels, detect
 from service.perception.appearance import EndColours
+from service.perception.bridge_ends import (
+    bridge_from_the_fits,
+    ends_of_short_pieces_from_partners,
+    ends_through_short_pieces,
+)
 from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.geometry import resample
 from service.perception.merging import (
     ChainEnd,
     assemble_paths,
-    bridge_from_the_fits,
     chain_ends,
     choose_joins,
-    ends_of_short_pieces_from_partners,
-    ends_through_short_pieces,
     gap_curve,
     join_cost,
     merge_chains,
