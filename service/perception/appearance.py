@@ -293,6 +293,9 @@ CUT_BULGE_SHARE = 0.15
 # within this range of its piece's typical half width.
 CUT_BEHIND_RADII = 1.5
 CUT_WIDTH_RANGE = (0.6, 1.5)
+# Where the cross-section just behind the front is narrower (a steeply slanted cut),
+# it is read again this share of a half width further back each time.
+CUT_STEP_BACK_SHARE = 0.5
 # Two ends are alike in width when the narrower piece is at least this share of the wider.
 WIDTH_AGREEMENT = 0.8
 
@@ -317,7 +320,11 @@ def _front(mask: np.ndarray, start: np.ndarray, direction: np.ndarray, count: in
 
 
 def cut_square(
-    mask: np.ndarray, position: np.ndarray, direction: np.ndarray, half_width: float
+    mask: np.ndarray,
+    position: np.ndarray,
+    direction: np.ndarray,
+    half_width: float,
+    skip: float = 0.0,
 ) -> bool:
     """Whether a chain end (``position``, outward unit ``direction``) of a cable of
     ``half_width`` px stops as a cut straight across its width: the foreground ends
@@ -326,10 +333,14 @@ def cut_square(
     line with the centre (the middle bulging past the sides by at most
     :data:`CUT_BULGE_SHARE` of the half width), as where an object's border crosses the
     cable, and unlike a cable's own rounded or tapering tip. False when the march
-    starts off the mask, runs on or leaves the picture first."""
+    starts off the mask, runs on or leaves the picture first.
+
+    The cable's cross-section is first read :data:`CUT_BEHIND_RADII` half widths
+    behind the end, or ``skip`` px (the tip the end's fit left out, a cut's hook) where
+    that is further: closer in, a cut at a slant has already taken one side off."""
     direction = np.asarray(direction, np.float64)
     normal = np.array([-direction[1], direction[0]])
-    count = int(np.ceil(2.0 * (CUT_AHEAD_RADII + 2.0) * half_width)) + 1
+    count = int(np.ceil(2.0 * ((CUT_AHEAD_RADII + 2.0) * half_width + float(skip)))) + 1
 
     # The cable's own cross-section behind the end: its centre and half width there
     # (the end's fitted position may lie off the centreline on a bend).
@@ -340,18 +351,28 @@ def cut_square(
         local = 0.5 * (sides[0] + sides[1])
         return point + 0.5 * (sides[0] - sides[1]) * normal, local
 
-    behind = np.asarray(position, np.float64) - CUT_BEHIND_RADII * half_width * direction
+    back_from_end = max(CUT_BEHIND_RADII * half_width, float(skip))
+    behind = np.asarray(position, np.float64) - back_from_end * direction
     centre, local = cross_section(behind)
     if centre is None:
         return False
     ahead = _front(mask, centre, direction, count)
-    if np.isnan(ahead) or ahead > (CUT_AHEAD_RADII + CUT_BEHIND_RADII) * half_width:
+    if np.isnan(ahead) or ahead > CUT_AHEAD_RADII * half_width + back_from_end:
         return False
     # Read the front from a cross-section just behind it: on a bend, lines from further
-    # back would leave through the cable's side before they reach the cut.
-    centre, local = cross_section(centre + max(ahead - local, 0.0) * direction)
-    if centre is None:
-        return False
+    # back would leave through the cable's side before they reach the cut. A cut at a
+    # steep slant (or along an object's round rim) takes one side of the cable off
+    # up to a few half widths before the middle: where the cross-section there is
+    # narrower than the cable, it is read further back, half a half width at a time,
+    # up to where the march began.
+    start, back = centre, local
+    while True:
+        centre, local = cross_section(start + max(ahead - back, 0.0) * direction)
+        if centre is None:
+            return False
+        if local >= CUT_WIDTH_RANGE[0] * half_width or back >= ahead:
+            break
+        back += CUT_STEP_BACK_SHARE * half_width
     if not CUT_WIDTH_RANGE[0] * half_width <= local <= CUT_WIDTH_RANGE[1] * half_width:
         return False
     fronts = [

@@ -39,8 +39,14 @@ from service.perception.appearance import (
     ends_alike,
     gap_hidden,
 )
+from service.perception.bridge_ends import (
+    bridge_from_the_fits,
+    ends_of_short_pieces_from_partners,
+    ends_through_short_pieces,
+    partners,
+)
 from service.perception.deadline import Deadline, check
-from service.perception.geometry import arc_lengths, end_fit, fit_where_skipped, polyline_length
+from service.perception.geometry import arc_lengths, end_fit, polyline_length
 from service.perception.touching import TouchingSplit, split_touching_strands
 
 # An end whose cable runs on along its direction, within this many radii plus
@@ -369,6 +375,7 @@ def choose_joins(
     picture: tuple[int, int] | None = None,
     preset: list[tuple[int, int]] | None = None,
     hidden_gap: Callable[[int, int], bool] | None = None,
+    runs_out: np.ndarray | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
@@ -389,7 +396,11 @@ def choose_joins(
     join; ends marked ``leaving`` (cables leaving the picture) are never joined across a
     gap; and with ``picture`` ((height, width)) no gap is bridged by a curve that runs
     outside the picture. The last two do not apply when ``expected_count`` asks for
-    joins past the threshold.
+    joins past the threshold. With ``runs_out`` (the ends whose cable runs on along
+    their direction to the border, a part of ``leaving``), an end that is only
+    ``at_border`` (near the picture's edge, but its cable stops short of it) may still
+    be joined across a gap that ``hidden_gap`` says something hides: an object lying
+    at the picture's edge, not the edge, cuts that cable (:func:`_border_pairs_hidden`).
 
     Returns
     -------
@@ -447,8 +458,14 @@ def choose_joins(
     )
     if colours is not None and len(costs):
         costs = costs + params.colour_weight * colour_penalty(colours, pairs[:, 0], pairs[:, 1])
+    border_ok = np.zeros(len(ends), bool)
     if leaving is not None and params.expected_count is None and len(costs):
         keep = ~(leaving[pairs[:, 0]] | leaving[pairs[:, 1]])
+        if runs_out is not None and at_border is not None and hidden_gap is not None:
+            hidden = _border_pairs_hidden(pairs, costs, keep, runs_out, at_border, params)
+            for index in hidden.tolist():
+                keep[index] = hidden_gap(*pairs[index].tolist())
+                border_ok[pairs[index]] |= keep[index]
         pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
     if picture is not None and params.expected_count is None and len(costs):
         keep = _bridges_inside(ends, pairs, costs, picture, params)
@@ -473,7 +490,7 @@ def choose_joins(
         # limit; when two free ends have no other plausible partner, nothing else can
         # explain either of them, and they are joined up to a looser limit.
         # Ends at the edge of the picture are cables leaving it, never gaps.
-        excluded = used if at_border is None else used | at_border
+        excluded = used if at_border is None else used | (at_border & ~border_ok)
         close = distances <= MUTUAL_GAP_RADII * radius
         if hidden_gap is not None and len(costs):
             # A longer gap only where the image shows something lying over it; looked
@@ -492,6 +509,17 @@ def choose_joins(
         for cost, i, j in _mutual_best(near, excluded, params.merge_cost_threshold):
             try_join(i, j, cost)
     return joins
+
+
+def _border_pairs_hidden(pairs, costs, keep, runs_out, at_border, params) -> np.ndarray:
+    """Indices of the candidate joins left out only for an end :func:`choose_joins` found
+    ``at_border`` whose cable does not run on to the border (not ``runs_out``), within
+    the mutual limit: an object lying at the picture's edge may have cut it there."""
+    first, second = pairs[:, 0], pairs[:, 1]
+    near_edge = at_border[first] | at_border[second]
+    runs = runs_out[first] | runs_out[second]
+    limit = MUTUAL_COST_FACTOR * params.merge_cost_threshold
+    return np.flatnonzero(~keep & near_edge & ~runs & (costs <= limit))
 
 
 def _bridges_inside(ends, pairs, costs, picture, params) -> np.ndarray:
@@ -583,8 +611,8 @@ def _cut_ends_alike(
         return False
     if not ends_alike(colours, i, j, (a.width, b.width)):
         return False
-    return cut_square(mask, a.position, a.direction, a.width) and cut_square(
-        mask, b.position, b.direction, b.width
+    return cut_square(mask, a.position, a.direction, a.width, a.skip) and cut_square(
+        mask, b.position, b.direction, b.width, b.skip
     )
 
 
@@ -683,9 +711,7 @@ def assemble_paths(
     bridged by :func:`gap_curve` of the given ``curve`` shape. ``trims[e]`` (optional)
     is the arc length left out of end ``e``'s piece at that end, where its bridge
     starts further in."""
-    partner = np.full(len(ends), -1)
-    for i, j, _ in joins:
-        partner[i], partner[j] = j, i
+    partner = partners(len(ends), joins)
     if trims is not None:
         pieces = _trimmed(pieces, trims)
     visited = np.zeros(len(pieces), bool)
@@ -734,74 +760,6 @@ def _trimmed(pieces: list[np.ndarray], trims: np.ndarray) -> list[np.ndarray]:
         keep = (along >= head) & (along <= along[-1] - tail)
         result.append(points[keep] if keep.sum() >= 2 else points)
     return result
-
-
-def bridge_from_the_fits(
-    pieces: list[np.ndarray],
-    ends: list[ChainEnd],
-    joins: list[tuple[int, int, float]],
-    span: float,
-    junction_of_end: list[int],
-) -> tuple[list[ChainEnd], np.ndarray]:
-    """Ends to bridge gaps from: where each end's fit begins, not extrapolated to the tip.
-
-    An end's position and direction are its fit's extrapolation over the tip it left
-    out (:attr:`ChainEnd.skip`, a cut end's hook); across a gap on a bend that
-    extrapolation turns the bridge off the cable. A gap's bridge (ends in no junction)
-    starts instead where the fitted stretch begins, with the fit's own tangent there,
-    and the piece's joints before that are left out of the path (not for pieces shorter
-    than the fit's ``span``: :func:`ends_through_short_pieces`). Returns the ends and
-    the arc lengths to trim per end (for :func:`assemble_paths`).
-    """
-    adjusted = list(ends)
-    trims = np.zeros(len(ends))
-    for i, j, _ in joins:
-        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
-            continue
-        for k in (i, j):
-            end = ends[k]
-            # Pieces shorter than the fit's span are crossed along their partners' line.
-            if end.skip <= 0 or polyline_length(pieces[end.piece]) < span:
-                continue
-            inner = fit_where_skipped(pieces[end.piece], end.at_start, span, end.skip)
-            if inner is not None:
-                adjusted[k] = replace(end, position=inner[0], direction=inner[1])
-                trims[k] = end.skip
-    return adjusted, trims
-
-
-def ends_through_short_pieces(
-    pieces: list[np.ndarray],
-    ends: list[ChainEnd],
-    joins: list[tuple[int, int, float]],
-    shorter_than: float,
-) -> list[ChainEnd]:
-    """Ends for bridging, with short pieces taken along the line between their partners.
-
-    A piece shorter than the end-fit span (say a stretch of cable seen between two
-    occluders, cut at a slant at both ends) shows where the cable is, but its own end
-    directions are poor: thinning bends both of its ends toward the cuts' corners.
-    When it is joined at both ends, the cable runs through it from one partner end to
-    the other, so both of its ends point along the line between those two ends. The
-    joins themselves, and their costs, are left as they were.
-    """
-    partner = np.full(len(ends), -1)
-    for i, j, _ in joins:
-        partner[i], partner[j] = j, i
-    adjusted = list(ends)
-    for piece, points in enumerate(pieces):
-        before, after = partner[2 * piece], partner[2 * piece + 1]
-        if before < 0 or after < 0 or polyline_length(points) >= shorter_than:
-            continue
-        axis = ends[after].position - ends[before].position
-        length = float(np.hypot(*axis))
-        if length < 1e-9:
-            continue
-        axis = axis / length
-        start, end = ends[2 * piece], ends[2 * piece + 1]
-        adjusted[2 * piece] = ChainEnd(start.piece, start.at_start, start.position, -axis)
-        adjusted[2 * piece + 1] = ChainEnd(end.piece, end.at_start, end.position, axis)
-    return adjusted
 
 
 def merge_chains(
@@ -862,9 +820,9 @@ def merge_chains(
             | (positions[:, 0] > width - 1 - margin)
             | (positions[:, 1] > height - 1 - margin)
         )
-    leaving = None
+    leaving = runs_out = None
     if mask is not None and ends:
-        leaving = _merging_kernels.runs_to_border(
+        leaving = runs_out = _merging_kernels.runs_to_border(
             np.ascontiguousarray(mask, np.bool_),
             np.array([end.position for end in ends], np.float64),
             np.array([end.direction for end in ends], np.float64),
@@ -893,6 +851,7 @@ def merge_chains(
         from_ends = np.repeat(np.array(touching.origin), 2) * 2 + np.tile([0, 1], len(pieces))
         at_border = None if at_border is None else at_border[from_ends]
         leaving = None if leaving is None else leaving[from_ends]
+        runs_out = None if runs_out is None else runs_out[from_ends]
     junction_of_end, dropped = absorb_shared_pieces(pieces, touching.junction_of_end, radius)
     colours = None
     if image is not None and params.colour_weight > 0:
@@ -925,10 +884,14 @@ def merge_chains(
         picture,
         touching.pairs,
         hidden_gap,
+        runs_out,
     )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
     inner_ends, trims = bridge_from_the_fits(pieces, ends, joins, span, junction_of_end)
+    inner_ends = ends_of_short_pieces_from_partners(
+        pieces, inner_ends, joins, span, junction_of_end
+    )
     bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span)
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims)
     paths = [p for p in assembled if p.pieces[0] not in dropped]

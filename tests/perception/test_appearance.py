@@ -7,6 +7,7 @@ import pytest
 from service.perception import appearance
 from service.perception.appearance import EndColours
 from service.perception.merging import ChainEnd
+from service.synthetic.families import make_family_scene
 from tests.perception.references import appearance as reference
 
 
@@ -188,3 +189,36 @@ def test_ends_alike_need_known_agreeing_colours_and_one_width():
     assert not appearance.ends_alike(colours, 0, 2, (6.0, 6.0))  # another colour
     assert not appearance.ends_alike(colours, 0, 3, (6.0, 6.0))  # colour unknown
     assert not appearance.ends_alike(colours, 0, 1, (6.0, 0.0))  # width unknown
+
+
+@pytest.mark.parametrize(
+    ("seed", "position", "direction", "half_width", "skip"),
+    [
+        (8011, [365.01, 546.08], [0.999, -0.037], 7.99, 22.48),
+        (8027, [294.0, 614.0], [0.196, 0.981], 7.0, 20.4),
+    ],
+)
+def test_a_cut_is_read_from_behind_the_tip_its_end_fit_left_out(
+    seed, position, direction, half_width, skip
+):
+    """Ends of `occluded` tuning scenes cut by an object of the background's colour at
+    a slant: the end's fit left out a hooked tip of ``skip`` px, and its position is
+    extrapolated past the cut, where one side of the cable is already gone 1.5 half
+    widths behind it. Read from where the fit begins, the cut is square."""
+    mask = make_family_scene("occluded", seed).mask
+    position, direction = np.array(position), np.array(direction)
+    assert not appearance.cut_square(mask, position, direction, half_width)
+    assert appearance.cut_square(mask, position, direction, half_width, skip)
+
+
+@pytest.mark.parametrize("slant", [0.0, 35.0, 55.0, -55.0])
+def test_reading_further_back_keeps_a_round_tip_round_and_a_cut_cut(slant):
+    """Reading further back (a long skipped tip, or a cross-section narrowed by a slanted
+    cut) does not make a cable's own round tip look cut."""
+    mask = _cable_end_mask("round")
+    for skip in (0.0, 10.0, 20.0):
+        assert not appearance.cut_square(
+            mask, np.array([78.0, 50.0]), np.array([1.0, 0.0]), 6.5, skip
+        )
+    cut = _cable_end_mask("cut", slant)
+    assert appearance.cut_square(cut, np.array([78.0, 50.0]), np.array([1.0, 0.0]), 6.5, 10.0)

@@ -1,0 +1,136 @@
+"""Where merging's bridges start: the chain ends a gap's curve is drawn between.
+
+The joins are chosen from the ends as their fits extrapolate them to the tips
+(:func:`.merging.chain_ends`); the curves across gaps are drawn from ends that say
+better where the cable is at the gap: where each end's fit begins
+(:func:`bridge_from_the_fits`), along the line through a short piece joined on both
+sides (:func:`ends_through_short_pieces`), or, for a short piece joined at one end, as
+its longer partner's bend goes on (:func:`ends_of_short_pieces_from_partners`). Ends are
+:class:`.merging.ChainEnd` values (changed with :func:`dataclasses.replace`); the joins
+and their costs are never changed here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from service.perception.geometry import fit_where_skipped, polyline_length
+
+# An end put along a line through a short piece carries no fit of its own.
+_UNFITTED = {"curvature": 0.0, "skip": 0.0, "width": 0.0}
+
+
+def partners(count: int, joins: list[tuple[int, int, float]]) -> np.ndarray:
+    """The end each of ``count`` ends is joined to, or -1."""
+    partner = np.full(count, -1)
+    for i, j, _ in joins:
+        partner[i], partner[j] = j, i
+    return partner
+
+
+def bridge_from_the_fits(
+    pieces: list[np.ndarray],
+    ends: list,
+    joins: list[tuple[int, int, float]],
+    span: float,
+    junction_of_end: list[int],
+) -> tuple[list, np.ndarray]:
+    """Ends to bridge gaps from: where each end's fit begins, not extrapolated to the tip.
+
+    An end's position and direction are its fit's extrapolation over the tip it left
+    out (:attr:`ChainEnd.skip`, a cut end's hook); across a gap on a bend that
+    extrapolation turns the bridge off the cable. A gap's bridge (ends in no junction)
+    starts instead where the fitted stretch begins, with the fit's own tangent there,
+    and the piece's joints before that are left out of the path (not for pieces shorter
+    than the fit's ``span``: :func:`ends_through_short_pieces`). Returns the ends and
+    the arc lengths to trim per end (for :func:`assemble_paths`).
+    """
+    adjusted = list(ends)
+    trims = np.zeros(len(ends))
+    for i, j, _ in joins:
+        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
+            continue
+        for k in (i, j):
+            end = ends[k]
+            # Pieces shorter than the fit's span are crossed along their partners' line.
+            if end.skip <= 0 or polyline_length(pieces[end.piece]) < span:
+                continue
+            inner = fit_where_skipped(pieces[end.piece], end.at_start, span, end.skip)
+            if inner is not None:
+                adjusted[k] = replace(end, position=inner[0], direction=inner[1])
+                trims[k] = end.skip
+    return adjusted, trims
+
+
+def ends_through_short_pieces(
+    pieces: list[np.ndarray],
+    ends: list,
+    joins: list[tuple[int, int, float]],
+    shorter_than: float,
+) -> list:
+    """Ends for bridging, with short pieces taken along the line between their partners.
+
+    A piece shorter than the end-fit span (say a stretch of cable seen between two
+    occluders, cut at a slant at both ends) shows where the cable is, but its own end
+    directions are poor: thinning bends both of its ends toward the cuts' corners.
+    When it is joined at both ends, the cable runs through it from one partner end to
+    the other, so both of its ends point along the line between those two ends. The
+    joins themselves, and their costs, are left as they were.
+    """
+    partner = partners(len(ends), joins)
+    adjusted = list(ends)
+    for piece, points in enumerate(pieces):
+        before, after = partner[2 * piece], partner[2 * piece + 1]
+        if before < 0 or after < 0 or polyline_length(points) >= shorter_than:
+            continue
+        axis = ends[after].position - ends[before].position
+        length = float(np.hypot(*axis))
+        if length < 1e-9:
+            continue
+        axis = axis / length
+        start, end = ends[2 * piece], ends[2 * piece + 1]
+        adjusted[2 * piece] = replace(start, direction=-axis, **_UNFITTED)
+        adjusted[2 * piece + 1] = replace(end, direction=axis, **_UNFITTED)
+    return adjusted
+
+
+def ends_of_short_pieces_from_partners(
+    pieces: list[np.ndarray],
+    ends: list,
+    joins: list[tuple[int, int, float]],
+    shorter_than: float,
+    junction_of_end: list[int],
+) -> list:
+    """Ends for bridging, with a short piece joined at one end only arriving as its
+    partner's bend goes on.
+
+    A piece shorter than the end-fit span seen beside an occluder (between it and the
+    picture's edge, or a free tip) has too little cable to fit a direction: thinning
+    bends it toward the cuts' corners, 10-30 degrees off. Its partner across the gap,
+    a longer piece, has a good end. The bridge then arrives at the short piece as a
+    circle leaving the partner's end along its direction would: along the partner's
+    direction reflected in the chord between the two ends. Only gaps (ends in no
+    junction); the joins themselves are left as they were.
+    """
+    partner = partners(len(ends), joins)
+    adjusted = list(ends)
+    for i, j, _ in joins:
+        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
+            continue
+        short = [polyline_length(pieces[ends[k].piece]) < shorter_than for k in (i, j)]
+        if short[0] == short[1]:
+            continue
+        near, far = (i, j) if short[0] else (j, i)
+        if partner[near ^ 1] >= 0:  # joined at both ends: ends_through_short_pieces
+            continue
+        chord = ends[near].position - ends[far].position
+        length = float(np.hypot(*chord))
+        if length < 1e-9:
+            continue
+        chord = chord / length
+        leaving = ends[far].direction
+        arriving = 2.0 * float(leaving @ chord) * chord - leaving
+        adjusted[near] = replace(ends[near], direction=-arriving)
+    return adjusted
