@@ -60,7 +60,13 @@ from service.perception.track_identity import (
     waits,
     where_it_left,
 )
-from service.perception.track_matching import Chains, Piece, detection_pieces, fit_pieces
+from service.perception.track_matching import (
+    Chains,
+    Piece,
+    cut_at_met_ends,
+    detection_pieces,
+    fit_pieces,
+)
 from service.perception.track_merging import Bridge, Join, bridges, joins
 from service.perception.track_motion import ShapeWindow, motion, shape_window, tangents
 from service.perception.track_update import Observation, exact_chain, observe, register
@@ -257,8 +263,10 @@ def advance(
 
     predicted = [_predicted(track, dt) for track in state.tracks]
     chains = Chains.of(detection, image)
-    pieces = detection_pieces(chains)
     gates = np.array([_gate(track, step, dt) for track in state.tracks])
+    pieces = cut_at_met_ends(
+        detection_pieces(chains), predicted, [t.tips for t in state.tracks], gates, step
+    )
     # A piece of a colour unlike a track's is another cable's (where the detection
     # joined two cables at a crossing, say).
     colours = [chains.colour(piece.chain, piece.first, piece.last) for piece in pieces]
