@@ -368,3 +368,106 @@ def clear_of_edge(point, radius: float, width: int, height: int) -> bool:
     margin = radius + EDGE_MARGIN
     x, y = float(point[0]), float(point[1])
     return margin <= x <= width - 1 - margin and margin <= y <= height - 1 - margin
+
+
+MET_ENDS_JOINTS = 3
+"""Joints a piece must lie along each of two tracks before it is cut between them."""
+MET_ENDS_REACH = 2.0
+"""How near (joints along the track) a piece's last joint on a track lies to its free end."""
+MET_ENDS_NEAR = 10.0
+"""Segments between two tracks' free ends under which pieces are looked at (what a track
+sees of its cable may stop short of its end near another cable: a crowded stretch)."""
+
+
+def cut_at_met_ends(
+    pieces: list[Piece],
+    tracks: list[np.ndarray],
+    tips: list[tuple[bool, bool]],
+    gates: np.ndarray,
+    step: float,
+) -> list[Piece]:
+    """Pieces cut where they run from one track's free end on along another's free end.
+
+    Two cables whose free ends touch can come out of the detection as one chain, with no
+    gap or crossing to cut it at. A cable does not go on beyond its free end: a piece
+    that lies along one track up to that track's free end and then along another track
+    from that one's free end is two cables, and is cut there (each half fits its own
+    track; neither track grows onto the other's cable). Tracks are as predicted
+    (``step`` apart), ``tips`` their ends seen as free, ``gates`` as for
+    :func:`fit_pieces`; ``step`` the segment length.
+    """
+    ends = [
+        (t, end, track[0] if end == 0 else track[-1])
+        for t, (track, free) in enumerate(zip(tracks, tips, strict=True))
+        for end in (0, 1)
+        if free[end] and len(track) >= MET_ENDS_JOINTS
+    ]
+    near = any(
+        a[0] != b[0] and np.hypot(*(a[2] - b[2])) <= MET_ENDS_NEAR * step
+        for i, a in enumerate(ends)
+        for b in ends[i + 1 :]
+    )
+    if not near:  # no two free ends of two tracks near each other: the usual frame
+        return pieces
+    counts = np.array([len(t) for t in tracks], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    result = []
+    for piece in pieces:
+        halves = _met_ends_cut(piece, tracks, tips, gates, counts, starts)
+        result.extend([piece] if halves is None else halves)
+    return result
+
+
+def _met_ends_cut(piece, tracks, tips, gates, counts, starts):
+    """The two halves of ``piece`` (see :func:`cut_at_met_ends`), or None."""
+    joints = piece.joints
+    if len(joints) < 2 * MET_ENDS_JOINTS:
+        return None
+    points, directions, _ = _samples(joints)
+    points, directions = points[0::2], directions[0::2]  # the joints
+    distance, arc, cosine = _tracking_kernels.nearest_on_polylines(
+        np.ascontiguousarray(points),
+        np.ascontiguousarray(directions),
+        np.ascontiguousarray(np.concatenate(tracks)),
+        starts,
+        counts,
+        np.ascontiguousarray(gates, dtype=np.float64),
+    )
+    distance = np.where(np.abs(cosine) >= MIN_COSINE, distance, np.inf)
+    on = np.where(np.isfinite(distance.min(axis=1)), np.argmin(distance, axis=1), -1)
+    labelled = np.flatnonzero(on >= 0)
+    if len(labelled) < 2 * MET_ENDS_JOINTS:
+        return None
+    first, second = int(on[labelled[0]]), int(on[labelled[-1]])
+    if first == second:
+        return None
+    # Labels run first ... first, then second ... second along the piece (once).
+    change = int(np.flatnonzero(on[labelled] != first)[0])
+    if np.any(on[labelled[change:]] != second) or change < MET_ENDS_JOINTS:
+        return None
+    if len(labelled) - change < MET_ENDS_JOINTS:
+        return None
+    last_on_first, first_on_second = int(labelled[change - 1]), int(labelled[change])
+    for track, at in ((first, last_on_first), (second, first_on_second)):
+        foot = arc[at, track]
+        at_first, at_last = foot <= MET_ENDS_REACH, foot >= counts[track] - 1 - MET_ENDS_REACH
+        if not ((at_first and tips[track][0]) or (at_last and tips[track][1])):
+            return None
+    return [
+        Piece(
+            piece.chain,
+            piece.first,
+            joints[: last_on_first + 1],
+            (piece.tips[0], False),
+            piece.radius,
+            piece.arcs[: last_on_first + 1],
+        ),
+        Piece(
+            piece.chain,
+            piece.first + first_on_second,
+            joints[first_on_second:],
+            (False, piece.tips[1]),
+            piece.radius,
+            piece.arcs[first_on_second:] - piece.arcs[first_on_second],
+        ),
+    ]

@@ -21,7 +21,7 @@ from service.perception.track_identity import (
     waits,
     where_it_left,
 )
-from service.perception.track_matching import Chains, Fit, Piece, fit_pieces
+from service.perception.track_matching import Chains, Fit, Piece, cut_at_met_ends, fit_pieces
 from service.perception.track_merging import joins
 from service.perception.track_motion import motion
 from service.perception.track_update import Observation, observe, register
@@ -443,3 +443,46 @@ def test_a_piece_waits_while_a_track_of_its_look_just_begun_goes_on_out_of_view(
     assert not waits(piece, [(np.array([120.0, 100.0, 200.0]), 4.0)], STEP)
     assert not waits(piece, [(colour, 9.0)], STEP)
     assert not waits(piece, [], STEP)
+
+
+def test_a_piece_running_from_one_track_s_free_end_onto_another_s_is_cut_there():
+    # Two tracks end to end on one line, their free ends 1 segment apart (x = 200, 210):
+    # the detection holds both cables in one chain.
+    left, right = straight(0.0, 21)[::-1].copy(), straight(210.0, 20)
+    chain = straight(0.0, 40)
+    piece = piece_of(0, chain, 0, 39)
+    gates = np.array([10.0, 10.0])
+    halves = cut_at_met_ends([piece], [left, right], [(True, False), (True, False)], gates, STEP)
+    # Each half holds the joints that lie beside its track (the ones at x = 200 and 210
+    # lie on no track's side: the segment between them belongs to neither).
+    assert [(h.first, len(h.joints)) for h in halves] == [(0, 20), (22, 18)]
+    assert [h.tips for h in halves] == [(False, False), (False, False)]
+    fits = fit_pieces(halves, [left, right], gates, STEP)
+    assert [fit.track for fit in fits] == [0, 1]
+    # Ends that are not free (one cable held by two tracks, to be joined) stay one piece.
+    for tips in ([(False, False), (True, False)], [(True, False), (False, False)]):
+        assert cut_at_met_ends([piece], [left, right], tips, gates, STEP) == [piece]
+
+
+def two_cables(shift, width=640, height=360):
+    """One colour: a cable from the left edge to a free end, pulled right along itself,
+    and one from the top edge down to a free end, pulled down; the ends meet at a corner."""
+    image = np.full((height, width, 3), 40, np.uint8)
+    cv2.line(image, (-50, 200), (min(200 + shift, 326), 200), (0, 200, 255), 9)
+    cv2.line(image, (330, -50), (330, min(60 + shift, 196)), (0, 200, 255), 9)
+    return image
+
+
+def test_two_cables_whose_free_ends_meet_keep_their_own_tracks():
+    # Where the ends meet the detection joins the two cables into one L-shaped chain;
+    # each track keeps its own cable (before, the first took the whole chain and grew
+    # round the corner, and the second was lost).
+    tracker = Tracker()
+    first = tracker.update(two_cables(0)).chains
+    assert [chain.ends for chain in first] == [("tip", "open"), ("tip", "open")]
+    for frame in range(1, 36):
+        tracks = tracker.update(two_cables(6 * frame), timestamp_s=frame / 30).chains
+        assert [chain.id for chain in tracks] == [0, 1]
+        horizontal, vertical = (np.asarray(chain.points) for chain in tracks)
+        assert np.ptp(horizontal[:, 1]) < 5.0 and np.ptp(vertical[:, 0]) < 5.0
+        assert tracks[0].unseen == 0 and tracks[1].unseen == 0
