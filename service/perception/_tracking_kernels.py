@@ -428,3 +428,33 @@ def chord_walk(points, arcs, start, sign, step, limit):
         out[count, 1] = cy
         count += 1
     return out[:count]
+
+
+@njit(cache=True, nogil=True)
+def window_medians(values, width):
+    """Per window of ``width`` consecutive rows of ``values`` (N, C) float64, the median
+    of each column over the rows that are not NaN (NaN where none is): ``np.nanmedian``
+    over each window, the mean of the two middle values of an even count."""
+    n_rows, n_columns = values.shape
+    n_windows = max(n_rows - width + 1, 0)
+    out = np.empty((n_windows, n_columns))
+    ordered = np.empty(width)
+    for window in range(n_windows):
+        for column in range(n_columns):
+            count = 0
+            for row in range(window, window + width):
+                value = values[row, column]
+                if value != value:
+                    continue  # NaN
+                # Insertion into the sorted values so far.
+                at = count
+                while at > 0 and ordered[at - 1] > value:
+                    ordered[at] = ordered[at - 1]
+                    at -= 1
+                ordered[at] = value
+                count += 1
+            if count == 0:
+                out[window, column] = np.nan
+            else:
+                out[window, column] = 0.5 * (ordered[(count - 1) // 2] + ordered[count // 2])
+    return out

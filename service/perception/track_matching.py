@@ -331,15 +331,8 @@ def _colour_breaks(
 def _window_medians(values: np.ndarray, width: int) -> np.ndarray:
     """Per window of ``width`` consecutive rows, the median of each column over the rows
     that are not NaN (NaN where none is): ``np.nanmedian`` over small windows, without
-    its per-call cost."""
-    windows = np.lib.stride_tricks.sliding_window_view(values, width, axis=0)
-    ordered = np.sort(windows, axis=2)  # NaNs last
-    count = (~np.isnan(windows)).sum(axis=2, keepdims=True)
-    low = np.take_along_axis(ordered, np.maximum((count - 1) // 2, 0), axis=2)
-    high = np.take_along_axis(ordered, count // 2, axis=2)
-    median = 0.5 * (low + high)[..., 0]
-    median[count[..., 0] == 0] = np.nan
-    return median
+    its per-call cost (a compiled loop)."""
+    return _tracking_kernels.window_medians(np.ascontiguousarray(values, dtype=np.float64), width)
 
 
 def lab_under(image: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

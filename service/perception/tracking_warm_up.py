@@ -46,6 +46,7 @@ def warm_up_tracking() -> None:
     )
     _tracking_kernels.near_any_segment(line, np.full(4, 2.0), line[:-1].copy(), line[1:].copy())
     _tracking_kernels.constrain_chain(line, np.ones(4), 10.0, np.zeros(4), 2, 1)
+    _tracking_kernels.window_medians(np.vstack((line, other)) * 1.0, 3)
     if not kernels_cached(TRACKING):
         # numba's cache directory, as the pipeline's warm-up finds it (one for the package).
         cache = getattr(_tracking_kernels.nearest_on_polylines, "_cache", None)
