@@ -258,8 +258,25 @@ def split_where_leaving_together(
     result = list(pieces)
     origin = list(range(len(pieces)))
     reach = 2.0 * radius
-    for index, points in enumerate(pieces):
-        points = np.asarray(points, np.float64)
+    if not pieces:
+        return result, origin
+    # Only pieces with an inner joint within the margin are looked at (one pass over
+    # every joint: most pieces have none).
+    joints = np.concatenate([np.asarray(points, np.float64) for points in pieces])
+    near = (
+        np.minimum(
+            np.minimum(joints[:, 0], joints[:, 1]),
+            np.minimum(width - 1 - joints[:, 0], height - 1 - joints[:, 1]),
+        )
+        <= margin
+    )
+    starts = np.cumsum([0] + [len(points) for points in pieces])
+    near[starts[:-1]] = False
+    near[starts[1:] - 1] = False
+    counts = np.add.reduceat(near.astype(np.int64), starts[:-1]) if len(joints) else []
+    for index in np.flatnonzero(np.asarray(counts) > 0):
+        index = int(index)
+        points = np.asarray(pieces[index], np.float64)
         if len(points) < 3:
             continue
         gaps = np.stack(
