@@ -380,6 +380,7 @@ def choose_joins(
     preset: list[tuple[int, int]] | None = None,
     hidden_gap: Callable[[int, int], bool] | None = None,
     runs_out: np.ndarray | None = None,
+    open_gap: Callable[[int, int], bool] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
@@ -405,6 +406,9 @@ def choose_joins(
     ``at_border`` (near the picture's edge, but its cable stops short of it) may still
     be joined across a gap that ``hidden_gap`` says something hides: an object lying
     at the picture's edge, not the edge, cuts that cable (:func:`_border_pairs_hidden`).
+    With ``open_gap``, a join across more than :data:`OPEN_GAP_RADII` (the ends' chord)
+    is left out, however cheap, when ``open_gap(i, j)`` says its bridge runs that far
+    over open background that nothing in the image hides (:func:`_open_gap_too_long`).
 
     Returns
     -------
@@ -416,13 +420,16 @@ def choose_joins(
     chains_left = piece_count
     joins = []
 
-    def try_join(i: int, j: int, cost: float) -> bool:
-        nonlocal chains_left
+    def _could_join(i: int, j: int) -> bool:
         if used[i] or used[j]:
             return False
-        piece_i, piece_j = ends[i].piece, ends[j].piece
-        if components.find(piece_i) == components.find(piece_j):
+        return components.find(ends[i].piece) != components.find(ends[j].piece)
+
+    def try_join(i: int, j: int, cost: float) -> bool:
+        nonlocal chains_left
+        if not _could_join(i, j):
             return False
+        piece_i, piece_j = ends[i].piece, ends[j].piece
         components.union(piece_i, piece_j)
         used[i] = used[j] = True
         chains_left -= 1
@@ -481,6 +488,9 @@ def choose_joins(
     greedy = len(costs)
     if params.expected_count is None:  # the loop would stop at the first dearer join
         greedy = int(np.searchsorted(costs, params.merge_cost_threshold, side="right"))
+    too_open = np.zeros(greedy, bool)
+    if open_gap is not None and params.expected_count is None:
+        too_open = _beyond_hiding(ends, pairs[:greedy], distances[:greedy], radius)
     for index, (cost, i, j) in enumerate(
         zip(costs[:greedy].tolist(), *pairs[:greedy].T.tolist(), strict=True)
     ):
@@ -488,6 +498,10 @@ def choose_joins(
             check(deadline, "merging")
         if params.expected_count is not None and chains_left <= params.expected_count:
             break
+        if too_open[index] and _could_join(i, j) and open_gap(i, j):
+            # Longer than anything of the background's own colour hides, over open
+            # background: nothing explains the gap.
+            continue
         try_join(i, j, cost)
     if params.expected_count is None:
         # A cable bending out of sight under an occluder costs a little more than the
@@ -618,6 +632,42 @@ def _cut_ends_alike(
     return cut_square(mask, a.position, a.direction, a.width, a.skip) and cut_square(
         mask, b.position, b.direction, b.width, b.skip
     )
+
+
+# No bridge runs over more than this many radii of open background, however cheap its
+# geometry: an object of the background's own colour shows nothing, but the issue's
+# occluders hide at most 15 radii of a cable; crossing one at a slant (a rectangle 15
+# radii long and up to 8 wide: a diagonal of 17) with each piece's skeleton stopping up
+# to 2 radii short of the object's border (thinning rounds a cut end) leaves 21, and 4
+# more radii (2 to each side) stand for the ends' fits. A longer gap is bridged only
+# where the image shows something lying over it (:func:`.appearance.gap_hidden`) or
+# along the foreground (a doubled-back cable's touching strands).
+OPEN_GAP_RADII = 25.0
+
+
+def _beyond_hiding(ends, pairs, distances, radius) -> np.ndarray:
+    """Which candidate joins span more than :data:`OPEN_GAP_RADII` of the larger of the
+    picture's typical radius and the two pieces' own half widths (a thick cable's hidden
+    stretch is longer in pixels)."""
+    if not len(distances):
+        return np.zeros(0, bool)
+    widths = np.array([end.width for end in ends], np.float64)
+    own = 0.5 * (widths[pairs[:, 0]] + widths[pairs[:, 1]])
+    return distances > OPEN_GAP_RADII * np.maximum(radius, own)
+
+
+def _open_gap_too_long(curve, mask, limit, hidden) -> bool:
+    """Whether a gap's ``curve`` ((x, y) samples about 1 px apart) runs over more than
+    ``limit`` px of background (off ``mask``, inside the picture) and ``hidden()`` (the
+    image's evidence, called only then) finds nothing lying over it. A bridge along the
+    foreground (a doubled-back cable's touching strands, another cable) is not open."""
+    height, width = mask.shape
+    cols = np.rint(curve[:, 0]).astype(np.int64)
+    rows = np.rint(curve[:, 1]).astype(np.int64)
+    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
+    steps = np.hypot(*np.diff(curve, axis=0).T)
+    off = inside[1:] & ~mask[rows[1:].clip(0, height - 1), cols[1:].clip(0, width - 1)]
+    return float(steps[off].sum()) > limit and not hidden()
 
 
 # Pieces shared by two strands (a shallow crossing) are at most this many radii long.
@@ -879,6 +929,17 @@ def merge_chains(
                 return True
             return _cut_ends_alike(a, b, i, j, mask, colours, radius)
 
+    open_gap = None
+    if hidden_gap is not None:
+
+        def open_gap(i: int, j: int) -> bool:
+            a, b = ends[i], ends[j]
+            curve = gap_curve(
+                a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
+            )
+            limit = OPEN_GAP_RADII * max(radius, 0.5 * (a.width + b.width))
+            return _open_gap_too_long(curve, mask, limit, lambda: hidden_gap(i, j))
+
     joins = choose_joins(
         ends,
         len(pieces),
@@ -893,6 +954,7 @@ def merge_chains(
         touching.pairs,
         hidden_gap,
         runs_out,
+        open_gap,
     )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.

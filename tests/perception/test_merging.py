@@ -512,6 +512,46 @@ def test_two_ends_facing_each_other_across_a_long_gap_join_only_under_an_object(
     assert counts == [1, 2, 2]
 
 
+@pytest.mark.parametrize(
+    ("box", "second_start", "chains"),
+    [
+        ((60, 140, 60), 180, 1),  # 100 px (29 radii) under a green box: joined
+        (None, 180, 2),  # the same over open paper: longer than anything hides
+        ((200, 200, 200), 180, 2),  # a box of the paper's colour shows nothing
+        (None, 140, 1),  # 60 px (17 radii): an object of the paper's colour could hide it
+        ("foreground", 180, 1),  # the bridge runs along the foreground (touching strands)
+    ],
+)
+def test_a_cheap_join_across_open_paper_needs_a_gap_something_could_hide(box, second_start, chains):
+    """Two pieces facing each other, well under the threshold (the gap alone costs 0.4
+    at 100 px): over open background a gap is bridged only as far as an object of the
+    background's own colour could hide a cable (``OPEN_GAP_RADII``); a longer one only
+    where the image shows an object lying over it (ariadne ``simple/00013``: two red
+    cables' tips 29 radii apart on plain paper). A bridge along the foreground is not
+    over open background."""
+    pieces = [
+        np.column_stack([np.linspace(10, 80, 15), np.full(15, 50.0)]),
+        np.column_stack([np.linspace(second_start, second_start + 70, 15), np.full(15, 50.0)]),
+    ]
+    image, mask, _, _ = gap_scene(None if box == "foreground" else box)
+    if box == "foreground":
+        mask[47:54, 80:180] = True
+        image[mask] = (40, 40, 60)
+    if second_start != 180:  # the second cable seen from second_start on, not from 180
+        paper = image[10, 10].copy()
+        image[mask & (np.arange(260) >= 180)] = paper
+        mask[:, 180:] = False
+        cable = np.zeros(mask.shape, np.uint8)
+        cv2.line(cable, (second_start, 50), (second_start + 70, 50), 1, 7)
+        mask |= cable > 0
+        image[cable > 0] = (40, 40, 60)
+    result = merge_chains(pieces, DetectParams(), 3.5, image=image, mask=mask)
+    assert result.joins == [] or result.joins[0].cost < DetectParams().merge_cost_threshold
+    assert len(result.paths) == chains
+    # Without the image there is no evidence either way: joined as before.
+    assert len(merge_chains(pieces, DetectParams(), 3.5).paths) == 1
+
+
 @pytest.mark.parametrize(("family", "seed"), [("occluded", 118), ("many", 119)])
 def test_cables_under_long_occluders_of_generated_scenes_are_bridged(family, seed):
     """Tuning scenes where a cable bends under an occluder 18-19 radii across: its two
