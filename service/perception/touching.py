@@ -218,7 +218,12 @@ def _offset_strands(points: np.ndarray, half_width: float) -> tuple[np.ndarray, 
 
 
 def split_where_leaving_together(
-    pieces: list[np.ndarray], mask: np.ndarray, radius: float, margin: float, slack: float
+    pieces: list[np.ndarray],
+    mask: np.ndarray,
+    radius: float,
+    margin: float,
+    slack: float,
+    min_length: float = 0.0,
 ) -> tuple[list[np.ndarray], list[int]]:
     """Cut the pieces where two strands leave the picture touching (ariadne simple/00012).
 
@@ -246,6 +251,9 @@ def split_where_leaving_together(
     slack : float
         How far short of the border the mask may stop and still leave the picture (the
         merging's ``BORDER_MARGIN_PX``: masks often leave out the outermost pixels).
+    min_length : float
+        Both parts must be at least this long (the merging's end-fit span: a strand
+        whose end direction can be fitted, not a scrap of clutter).
 
     Returns
     -------
@@ -293,7 +301,7 @@ def split_where_leaving_together(
             ),
             None,
         )
-        if at is None:
+        if at is None or min(along[at], along[-1] - along[at]) < min_length:
             continue
         result[index] = points[: at + 1]
         result.append(points[at:])
