@@ -47,7 +47,11 @@ from service.perception.bridge_ends import (
 )
 from service.perception.deadline import Deadline, check
 from service.perception.geometry import arc_lengths, end_fit, polyline_length
-from service.perception.touching import TouchingSplit, split_touching_strands
+from service.perception.touching import (
+    TouchingSplit,
+    split_touching_strands,
+    split_where_leaving_together,
+)
 
 # An end whose cable runs on along its direction, within this many radii plus
 # BORDER_REACH_PX, to the picture's border (or within BORDER_MARGIN_PX of it) is a cable
@@ -857,6 +861,10 @@ def merge_chains(
     # The distance transform counts to the nearest background pixel centre, half a
     # pixel beyond the border: the full half width is radius + 0.5.
     full_width = FULL_WIDTH_FRACTION * (radius + 0.5)
+    if mask is not None and pieces:
+        pieces, _ = split_where_leaving_together(
+            pieces, mask, radius, radius + BORDER_MARGIN_PX, BORDER_MARGIN_PX, span
+        )
     ends = chain_ends(pieces, span, skip=radius, distance=distance, full_width=full_width)
     check(deadline, "merging")
     at_border = None

@@ -215,3 +215,135 @@ def _offset_strands(points: np.ndarray, half_width: float) -> tuple[np.ndarray, 
     left = np.column_stack([tangents[:, 1], -tangents[:, 0]])
     shift = 0.5 * max(half_width - 0.5, 0.0)
     return points + shift * left, points - shift * left
+
+
+def split_where_leaving_together(
+    pieces: list[np.ndarray],
+    mask: np.ndarray,
+    radius: float,
+    margin: float,
+    slack: float,
+    min_length: float = 0.0,
+) -> tuple[list[np.ndarray], list[int]]:
+    """Cut the pieces where two strands leave the picture touching (ariadne simple/00012).
+
+    Two cables that touch where they leave the picture (or one cable leaving and coming
+    back) make a mask shaped as a V whose point the border cuts off: thinning draws one
+    line round its point, with no junction. Such a line comes within the picture's
+    border ``margin`` of it at a joint inside the piece, the mask runs on from that joint
+    to the border (the strands leave there), and the line on both sides of that joint
+    heads into the picture, away from the border, turning at that joint by more than the
+    stretches on either side of it turn together (a corner): a cable running along the
+    border, or one bending round close to it (mbest S2/img13, a loop the border clips),
+    does not, its bending changing smoothly along it. Each such piece is cut at that
+    joint into two pieces, each ending at the border.
+
+    Parameters
+    ----------
+    pieces : list of ndarray
+        ``(K, 2)`` joints (x, y).
+    mask : ndarray of bool
+        The foreground.
+    radius : float
+        The cable's half width.
+    margin : float
+        How close to the border an end is at it (the merging's ``radius + BORDER_MARGIN_PX``).
+    slack : float
+        How far short of the border the mask may stop and still leave the picture (the
+        merging's ``BORDER_MARGIN_PX``: masks often leave out the outermost pixels).
+    min_length : float
+        Both parts must be at least this long (the merging's end-fit span: a strand
+        whose end direction can be fitted, not a scrap of clutter).
+
+    Returns
+    -------
+    pieces : list of ndarray
+        The input pieces, a cut one replaced by its first part, the second parts appended.
+    origin : list of int
+        The input piece each piece comes from.
+    """
+    height, width = mask.shape[:2]
+    result = list(pieces)
+    origin = list(range(len(pieces)))
+    reach = 2.0 * radius
+    if not pieces:
+        return result, origin
+    # Only pieces with an inner joint within the margin are looked at (one pass over
+    # every joint: most pieces have none).
+    joints = np.concatenate([np.asarray(points, np.float64) for points in pieces])
+    near = (
+        np.minimum(
+            np.minimum(joints[:, 0], joints[:, 1]),
+            np.minimum(width - 1 - joints[:, 0], height - 1 - joints[:, 1]),
+        )
+        <= margin
+    )
+    starts = np.cumsum([0] + [len(points) for points in pieces])
+    near[starts[:-1]] = False
+    near[starts[1:] - 1] = False
+    counts = np.add.reduceat(near.astype(np.int64), starts[:-1]) if len(joints) else []
+    for index in np.flatnonzero(np.asarray(counts) > 0):
+        index = int(index)
+        points = np.asarray(pieces[index], np.float64)
+        if len(points) < 3:
+            continue
+        gaps = np.stack(
+            [points[:, 0], points[:, 1], width - 1 - points[:, 0], height - 1 - points[:, 1]],
+            axis=1,
+        )
+        nearest = gaps.min(axis=1)
+        along = arc_lengths(points)
+        at = next(
+            (
+                int(at)
+                for at in np.argsort(nearest[1:-1], kind="stable") + 1
+                if nearest[at] <= margin and _leave_together(points, along, at, mask, reach, slack)
+            ),
+            None,
+        )
+        if at is None or min(along[at], along[-1] - along[at]) < min_length:
+            continue
+        result[index] = points[: at + 1]
+        result.append(points[at:])
+        origin.append(index)
+    return result, origin
+
+
+def _leave_together(points, along, at, mask, reach, slack) -> bool:
+    """Whether two strands leave the picture at joint ``at`` (:func:`split_where_leaving_together`):
+    the mask runs from it to the nearest border, and the line ``reach`` before and after
+    it lies further into the picture, and turns there at a corner, not a bend."""
+    height, width = mask.shape[:2]
+    gaps = (points[at, 0], points[at, 1], width - 1 - points[at, 0], height - 1 - points[at, 1])
+    side = int(np.argmin(gaps))
+    inward = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]][side])
+    steps = np.arange(0.0, max(gaps[side] - slack, 0.0) + 1e-9, 1.0)
+    xs = np.clip(np.rint(points[at, 0] - steps * inward[0]).astype(int), 0, width - 1)
+    ys = np.clip(np.rint(points[at, 1] - steps * inward[1]).astype(int), 0, height - 1)
+    if not mask[ys, xs].all():
+        return False
+    if along[at] < reach or along[-1] - along[at] < reach:
+        return False
+    before, after = points_along(points, along, np.array([along[at] - reach, along[at] + reach]))
+    if min(float((before - points[at]) @ inward), float((after - points[at]) @ inward)) <= 0:
+        return False
+    # A corner, not a bend: a cable's bending changes smoothly along it, so it turns at
+    # the joint no more than the stretches either side of it turn together; two
+    # strands meeting at the border turn there far more than along either (ariadne
+    # simple/00012: 55 degrees against 35 and 0; mbest S2/img13, a loop the border
+    # clips: 12.9 against 4.7 and 6.5).
+    reach = max(reach, float(np.diff(along)[max(at - 1, 0) : at + 1].max()))
+    if along[at] < 2 * reach or along[-1] - along[at] < 2 * reach:
+        return False
+    marks = points_along(points, along, along[at] + reach * np.arange(-2.0, 2.5, 1.0))
+    turns = [_turn(marks[k], marks[k + 1], marks[k + 2]) for k in range(3)]
+    # Joints lie on the pixel grid: each step's direction is known to about a pixel
+    # in ``reach``, so the corner must stand out by more than two such errors.
+    return turns[1] > turns[0] + turns[2] + 2.0 * float(np.arctan(1.0 / reach))
+
+
+def _turn(before: np.ndarray, at: np.ndarray, after: np.ndarray) -> float:
+    """The angle (radians) between the steps ``before`` to ``at`` and ``at`` to ``after``."""
+    arriving, leaving = at - before, after - at
+    cosine = float(arriving @ leaving) / max(float(np.hypot(*arriving) * np.hypot(*leaving)), 1e-9)
+    return float(np.arccos(np.clip(cosine, -1.0, 1.0)))

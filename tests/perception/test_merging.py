@@ -753,3 +753,22 @@ def test_bridges_to_short_pieces_beside_occluders_follow_the_cable(family, seed)
     tolerances off the hidden stretch from the short piece's poor direction."""
     score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
+
+
+def test_two_cables_touching_as_they_leave_the_picture_come_out_as_two_chains():
+    """Two straight cables 9 px wide leave the picture at its left edge at one point, at
+    right angles: the mask is a V the border cuts, and thinning draws one line round its
+    point with no junction. Each cable must come out as its own chain (ariadne
+    simple/00012); a cable bending round close to the border must stay one."""
+    first = [(100, 0), (0, 100)]
+    second = [(0, 100), (100, 200)]
+    detection = detect(None, mask=_touching_strands_mask(first, second, shape=(200, 300)))
+    chains = [np.asarray(chain.points, np.float64) for chain in detection.chains]
+    assert len(chains) == 2
+    for cable in (first, second):
+        assert min(_strand_error(chain, cable) for chain in chains) < 6.0
+    # One cable round a wide bend whose outer side the border clips.
+    mask = np.zeros((200, 300), np.uint8)
+    cv2.ellipse(mask, (60, 100), (62, 70), 0, 90, 270, 1, 9)
+    detection = detect(None, mask=mask > 0)
+    assert len(detection.chains) == 1
