@@ -645,15 +645,19 @@ def _cut_ends_alike(
 OPEN_GAP_RADII = 25.0
 
 
+def _open_gap_limit(radius, first_width, second_width):
+    """The longest open gap (px) a join may bridge: :data:`OPEN_GAP_RADII` of the larger
+    of the picture's typical radius and the two pieces' own half widths (a thick cable's
+    hidden stretch is longer in pixels). Scalars or arrays of widths."""
+    return OPEN_GAP_RADII * np.maximum(radius, 0.5 * (first_width + second_width))
+
+
 def _beyond_hiding(ends, pairs, distances, radius) -> np.ndarray:
-    """Which candidate joins span more than :data:`OPEN_GAP_RADII` of the larger of the
-    picture's typical radius and the two pieces' own half widths (a thick cable's hidden
-    stretch is longer in pixels)."""
+    """Which candidate joins' ends lie further apart than :func:`_open_gap_limit`."""
     if not len(distances):
         return np.zeros(0, bool)
     widths = np.array([end.width for end in ends], np.float64)
-    own = 0.5 * (widths[pairs[:, 0]] + widths[pairs[:, 1]])
-    return distances > OPEN_GAP_RADII * np.maximum(radius, own)
+    return distances > _open_gap_limit(radius, widths[pairs[:, 0]], widths[pairs[:, 1]])
 
 
 def _open_gap_too_long(curve, mask, limit, hidden) -> bool:
@@ -937,7 +941,7 @@ def merge_chains(
             curve = gap_curve(
                 a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
             )
-            limit = OPEN_GAP_RADII * max(radius, 0.5 * (a.width + b.width))
+            limit = float(_open_gap_limit(radius, a.width, b.width))
             return _open_gap_too_long(curve, mask, limit, lambda: hidden_gap(i, j))
 
     joins = choose_joins(

@@ -271,13 +271,11 @@ def split_where_leaving_together(
     # Only pieces with an inner joint within the margin are looked at (one pass over
     # every joint: most pieces have none).
     joints = np.concatenate([np.asarray(points, np.float64) for points in pieces])
-    near = (
-        np.minimum(
-            np.minimum(joints[:, 0], joints[:, 1]),
-            np.minimum(width - 1 - joints[:, 0], height - 1 - joints[:, 1]),
-        )
-        <= margin
+    to_border = np.minimum(
+        np.minimum(joints[:, 0], joints[:, 1]),
+        np.minimum(width - 1 - joints[:, 0], height - 1 - joints[:, 1]),
     )
+    near = to_border <= margin
     starts = np.cumsum([0] + [len(points) for points in pieces])
     near[starts[:-1]] = False
     near[starts[1:] - 1] = False
@@ -287,11 +285,7 @@ def split_where_leaving_together(
         points = np.asarray(pieces[index], np.float64)
         if len(points) < 3:
             continue
-        gaps = np.stack(
-            [points[:, 0], points[:, 1], width - 1 - points[:, 0], height - 1 - points[:, 1]],
-            axis=1,
-        )
-        nearest = gaps.min(axis=1)
+        nearest = to_border[starts[index] : starts[index + 1]]
         along = arc_lengths(points)
         at = next(
             (
