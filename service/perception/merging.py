@@ -47,11 +47,13 @@ from service.perception.bridge_ends import (
 )
 from service.perception.deadline import Deadline, check
 from service.perception.geometry import arc_lengths, end_fit, polyline_length
+from service.perception.pairing import cheapest_pairing
 from service.perception.touching import (
     TouchingSplit,
     split_touching_strands,
     split_where_leaving_together,
 )
+from service.perception.turn_joins import turn_joins
 
 # An end whose cable runs on along its direction, within this many radii plus
 # BORDER_REACH_PX, to the picture's border (or within BORDER_MARGIN_PX of it) is a cable
@@ -328,36 +330,6 @@ def _best_matching(
         for (a, b), extra in zip(pairs, colour_costs, strict=True)
     }
     return cheapest_pairing(members, costs, params.merge_cost_threshold)
-
-
-def cheapest_pairing(
-    members: list[int], costs: dict[tuple[int, int], float], unpaired_penalty: float
-) -> list[tuple[int, int, float]]:
-    """The pairs of ``members`` of least total cost, each end left unpaired costing
-    ``unpaired_penalty``; ``costs[a, b]`` (``a`` before ``b`` in ``members``) holds every
-    pair allowed. Exact, by trying every pairing (exponential: for a dozen ends or so).
-    """
-    memo: dict[tuple[int, ...], tuple[float, tuple]] = {}
-
-    def solve(remaining: tuple[int, ...]) -> tuple[float, tuple]:
-        if not remaining:
-            return 0.0, ()
-        if remaining in memo:
-            return memo[remaining]
-        first, rest = remaining[0], remaining[1:]
-        best_cost, rest_pairs = solve(rest)
-        best = (best_cost + unpaired_penalty, rest_pairs)
-        for index, other in enumerate(rest):
-            cost = costs.get((first, other))
-            if cost is None:
-                continue
-            sub_cost, sub_pairs = solve(rest[:index] + rest[index + 1 :])
-            if cost + sub_cost < best[0]:
-                best = (cost + sub_cost, ((first, other, cost), *sub_pairs))
-        memo[remaining] = best
-        return best
-
-    return list(solve(tuple(members))[1])
 
 
 # Junctions with more ends than this are paired greedily (the matching is exponential).
@@ -960,6 +932,25 @@ def merge_chains(
         runs_out,
         open_gap,
     )
+    if hidden_gap is not None and params.expected_count is None and ends:
+        # Sharp turns under an object, on the image's evidence (:mod:`.turn_joins`).
+        mutual = MUTUAL_COST_FACTOR * params.merge_cost_threshold
+        joins = joins + turn_joins(
+            ends,
+            joins,
+            ~leaving & ~np.isin([end.piece for end in ends], sorted(dropped)),
+            radius,
+            colours,
+            lambda i, j: (
+                join_cost(ends[i], ends[j], params, radius)
+                + params.colour_weight * float(colour_penalty(colours, [i], [j])[0])
+            ),
+            lambda i, j, curve: gap_hidden(image, mask, curve, (ends[i], ends[j]), radius),
+            lambda i, j: float(_open_gap_limit(radius, ends[i].width, ends[j].width)),
+            mutual,
+            mutual,
+            MAX_JUNCTION_ENDS,
+        )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
     inner_ends, trims = bridge_from_the_fits(pieces, ends, joins, span, junction_of_end)

@@ -1,0 +1,97 @@
+"""Joins where a cable turns sharply out of sight (service/perception/turn_joins.py)."""
+
+import cv2
+import numpy as np
+import pytest
+
+from schemas import DetectParams
+from service.perception.merging import merge_chains
+from service.perception.pairing import cheapest_pairing
+from service.perception.turn_joins import natural_turn
+
+PAPER = (235, 235, 235)
+RED = (40, 40, 200)
+BLUE = (200, 60, 40)
+BOX = (60, 140, 60)
+
+
+def _u_turn(box: bool, second_colour=RED, apart: int = 40):
+    """Two strands 190 -> 80 px down the picture, ``apart`` px side by side, joined by a
+    U-turn above y = 80; with ``box``, an object lies over the turn."""
+    image = np.full((220, 260, 3), PAPER, np.uint8)
+    left, right = 100, 100 + apart
+    cable = np.zeros(image.shape[:2], np.uint8)
+    cv2.line(cable, (left, 190), (left, 80), 1, 7)
+    cv2.line(cable, (right, 190), (right, 80), 1, 7)
+    cv2.ellipse(cable, ((left + right) // 2, 80), (apart // 2, apart // 2), 0, 180, 360, 1, 7)
+    image[cable > 0] = RED
+    image[(cable > 0) & (np.arange(260)[None, :] > (left + right) // 2)] = second_colour
+    mask = cable > 0
+    if box:
+        cv2.rectangle(image, (left - 25, 30), (right + 25, 84), BOX, -1)
+        mask[30:85, left - 25 : right + 26] = False
+    else:
+        # Both cables end where the box's border would have cut them.
+        mask[:85] = False
+        image[:85][cable[:85] > 0] = PAPER
+    pieces = [
+        np.column_stack([np.full(20, float(x)), np.linspace(190, 86, 20)]) for x in (left, right)
+    ]
+    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    return pieces, image, mask, distance
+
+
+def _chains(box, **kwargs):
+    pieces, image, mask, distance = _u_turn(box, **kwargs)
+    result = merge_chains(pieces, DetectParams(), 3.5, distance=distance, image=image, mask=mask)
+    return len(result.paths)
+
+
+def test_a_u_turn_under_an_object_is_joined():
+    assert _chains(box=True) == 1
+
+
+def test_two_cables_ending_side_by_side_on_open_background_are_not_joined():
+    assert _chains(box=False) == 2
+
+
+def test_a_u_turn_of_two_colours_is_not_joined():
+    assert _chains(box=True, second_colour=BLUE) == 2
+
+
+def test_a_u_turn_tighter_than_a_cable_bends_is_not_joined():
+    # 12 px apart: a bend of 6 px radius, under the 3 radii (10.5 px) a cable takes.
+    assert _chains(box=True, apart=12) == 2
+
+
+def _bend(curve):
+    """The tightest bend radius along a curve (from three points 5 samples apart)."""
+    first, middle, last = curve[:-10], curve[5:-5], curve[10:]
+    sides = [np.hypot(*(p - q).T) for p, q in ((first, middle), (middle, last), (first, last))]
+    u, w = middle - first, last - first
+    twice_area = np.abs(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0])
+    return float(np.min(sides[0] * sides[1] * sides[2] / np.maximum(2 * twice_area, 1e-9)))
+
+
+def test_natural_turns_keep_to_the_bend_limit():
+    up, down, right = np.array([0.0, -1.0]), np.array([0.0, 1.0]), np.array([1.0, 0.0])
+    # A U-turn 40 px across (staggered, or either way round): a half circle of radius 20.
+    for start, end in (([100, 80], [140, 80]), ([100, 80], [140, 60]), ([140, 80], [100, 80])):
+        curve = natural_turn(start, up, end, down, 10.0)
+        assert curve[0] == pytest.approx(start) and curve[-1] == pytest.approx(end)
+        assert _bend(curve) == pytest.approx(20, rel=0.05)
+        assert np.hypot(*np.diff(curve, axis=0).T).max() < 1.5
+    # Narrower than the limit allows; a quarter turn takes the tightest arc it may.
+    assert natural_turn([100, 80], up, [112, 80], down, 10.0) is None
+    quarter = natural_turn([0, 50], up, [30, 0], right, 10.0)
+    assert _bend(quarter) == pytest.approx(10, rel=0.05)
+    assert quarter[0] == pytest.approx([0, 50]) and quarter[-1] == pytest.approx([30, 0])
+    # A turn away from the other end, and no turn at all, have no natural turn.
+    assert natural_turn([0, 30], up, [30, 0], -right, 10.0) is None
+    assert natural_turn([0, 0], right, [50, 0], right, 10.0) is None
+
+
+def test_cheapest_pairing_leaves_an_end_free_when_pairing_costs_more():
+    costs = {(0, 1): 0.5, (1, 2): 0.2}
+    assert cheapest_pairing([0, 1, 2], costs, 0.3) == [(1, 2, 0.2)]
+    assert cheapest_pairing([0, 1], {(0, 1): 0.7}, 0.3) == []
