@@ -27,6 +27,7 @@ import numpy as np
 from service.perception import _geometry_kernels
 from service.perception.track_identity import COLOUR_TOLERANCE, RADIUS_TOLERANCE, colour_distance
 from service.perception.track_matching import Chains, Fit, Piece
+from service.perception.track_update import bends_too_sharply
 
 MAX_GAP_SEGMENTS = 8.0
 """Chain arc (in segments) between the two pieces beyond which they are not joined."""
@@ -112,12 +113,36 @@ def joins(
                 younger_anchor,
                 step,
             )
-            if laid is None:
+            if laid is None or _too_sharp(
+                tracks,
+                (older, younger),
+                (older_end, younger_end),
+                (older_anchor, younger_anchor),
+                step,
+            ):
                 continue
             tip = tracks[younger].tips[1 - younger_end]
             found.append(Join(older, younger, older_end, older_anchor, laid, younger_end, tip))
             used |= {first.track, second.track}
     return found
+
+
+def _too_sharp(tracks, pair, ends, anchors, step: float) -> bool:
+    """Whether a cable going on from the older track's outermost seen joint at its end
+    into the younger's at its end (the way the join lays it) turns by more than a cable
+    can (:func:`~service.perception.track_update.bends_too_sharply`): a V where the
+    detection joined two cables."""
+    parts = []
+    for index, end, anchor, towards in zip(pair, ends, anchors, (True, False), strict=True):
+        joints = tracks[index].joints
+        part = (
+            joints[anchor : anchor + 3][::-1]
+            if end == 0
+            else joints[max(anchor - 2, 0) : anchor + 1]
+        )
+        parts.append(part if towards else part[::-1])
+    radius = min(tracks[pair[0]].radius, tracks[pair[1]].radius)
+    return bends_too_sharply(np.vstack(parts), radius, step)
 
 
 def _anchor(track, end: int) -> int:

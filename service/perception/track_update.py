@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from service.perception import _tracking_kernels
+from service.perception import _geometry_kernels, _tracking_kernels
 from service.perception.geometry import distances_to_polyline, points_along, rigid_fit
 from service.perception.track_matching import Chains, Fit, Piece, clear_of_edge
 
@@ -181,6 +181,10 @@ def observe(
             )
             if tips[end] and (len(points) < TIP_GROWTH or moving_tips[end]):
                 points = np.empty((0, 2))  # a tip seen a little further out: not more cable
+            elif tips[end] and bends_too_sharply(
+                _junction(joints, end, points), piece.radius, step
+            ):
+                points = np.empty((0, 2))  # past its free end, round a corner: another cable
             if len(points) and not length_known:
                 new_tips[end] = reached_tip
         growth.append(points)
@@ -206,6 +210,36 @@ def observe(
         free_end_points=slide.points,
         length_known=slide.exact,
     )
+
+
+def bends_too_sharply(line: np.ndarray, radius: float, step: float) -> bool:
+    """Whether a polyline, laid again with joints ``step`` apart, turns at one of them by
+    more than a cable of ``radius`` can: a chain of segments ``step`` long inscribed in a
+    circle of the tightest bend (``MIN_BEND_RADII`` radii) turns by
+    ``2 asin(step / 2 r)`` at each joint (as :func:`register` bends one at most).
+
+    Where a track would go on across a junction (growth past a free end, a join), a turn
+    sharper than that is no cable's: the detection joined two cables there (a V where two
+    meet at the picture's edge, say).
+    """
+    line = np.asarray(line, dtype=np.float64)
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(line, axis=0), axis=1) > 1e-9])
+    walked, _ = _geometry_kernels.resample_kernel(np.ascontiguousarray(line[keep]), float(step))
+    segments = np.diff(walked, axis=0)
+    lengths = np.linalg.norm(segments, axis=1)
+    segments = segments[lengths > 0.5 * step]  # a short last one has no direction to go by
+    if len(segments) < 2:
+        return False
+    units = segments / np.linalg.norm(segments, axis=1)[:, None]
+    turns = np.arccos(np.clip(np.sum(units[:-1] * units[1:], axis=1), -1.0, 1.0))
+    tightest = MIN_BEND_RADII * max(radius, 1.0)
+    return bool(np.any(turns > 2.0 * math.asin(min(1.0, step / (2.0 * tightest))) + 1e-6))
+
+
+def _junction(joints: np.ndarray, end: int, growth: np.ndarray) -> np.ndarray:
+    """The track's last joints at ``end`` and the first grown beyond it, in that order."""
+    body = joints[2::-1] if end == 0 else joints[-3:]
+    return np.vstack([body, growth[:3]])
 
 
 def _laid(placed, shift: float, n: int, step: float):

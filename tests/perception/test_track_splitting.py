@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -10,8 +11,10 @@ import pytest
 from service.perception import warm_up
 from service.perception.geometry import arc_lengths
 from service.perception.track_identity import Candidate
-from service.perception.track_matching import Fit, Piece
+from service.perception.track_matching import Chains, Fit, Piece
+from service.perception.track_merging import joins
 from service.perception.track_splitting import Seam, split_tracks, track_seams
+from service.perception.track_update import bends_too_sharply
 from service.perception.tracking import _started
 
 STEP = 10.0
@@ -109,3 +112,46 @@ def test_a_track_grown_past_its_free_end_gives_back_the_id_joined_on_beyond():
     track = record(0, FUSED, (True, True), seams=(grown, joined))
     parts, next_id = split_tracks([track], 3, confirm_frames=2, frame=80)
     assert sorted(t.id for t in parts) == [0, 2] and next_id == 3
+
+
+def test_a_turn_sharper_than_a_cable_bends_is_refused():
+    # A V: 12 px across where a cable of radius 4 (tightest bend 10 px) needs 20 for a
+    # U-turn; a circle's arc of that bend radius is not refused.
+    assert bends_too_sharply(np.vstack([A[-3:], [[106.0, 2.0]], B[:3]]), 4.0, STEP)
+    angles = np.arange(4) * 2.0 * math.asin(STEP / 20.0)  # half a circle of radius 10
+    arc = 10.0 * np.column_stack([np.sin(angles), 1.0 - np.cos(angles)])
+    assert not bends_too_sharply(arc, 4.0, STEP)
+
+
+def test_two_tracks_are_not_joined_round_a_v():
+    # One chain runs up A, round a V at the edge and down B; a track holds each cable.
+    apex = np.array([[106.0, 2.0]])
+    for younger_joints, joined in ((B, False), (vertical(100.0, 0.0, -190.0, 20), True)):
+        chain = (
+            np.vstack([A, apex, younger_joints]) if not joined else np.vstack([A, younger_joints])
+        )
+        older = record(0, A, (True, False))
+        younger = record(1, younger_joints, (False, True), born=5)
+        start = len(A) + (0 if joined else 1)
+        pieces = [piece_of(chain, 0, 17), piece_of(chain, start + 2, start + 19)]
+        fits = [Fit(0, 1, 0.0, 0.1, 1.0), Fit(1, 1, 2 * STEP, 0.1, 1.0)]
+        found = joins([older, younger], pieces, fits, chains_of([chain]))
+        assert len(found) == (1 if joined else 0)
+
+
+def piece_of(joints, first, last):
+    part = joints[first : last + 1]
+    return Piece(0, first, part, (False, False), 4.0, arc_lengths(part))
+
+
+def chains_of(joints_list):
+    return Chains(
+        joints=joints_list,
+        arcs=[arc_lengths(points) for points in joints_list],
+        radii=[4.0] * len(joints_list),
+        inferred=[np.zeros(len(points) - 1, bool) for points in joints_list],
+        width=640,
+        height=480,
+        step=STEP,
+        colour_breaks=[np.zeros(len(points) - 1, bool) for points in joints_list],
+    )
