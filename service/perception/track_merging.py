@@ -27,7 +27,7 @@ import numpy as np
 from service.perception import _geometry_kernels
 from service.perception.track_identity import COLOUR_TOLERANCE, RADIUS_TOLERANCE, colour_distance
 from service.perception.track_matching import Chains, Fit, Piece
-from service.perception.track_update import bends_too_sharply
+from service.perception.track_update import turns_too_sharply
 
 MAX_GAP_SEGMENTS = 8.0
 """Chain arc (in segments) between the two pieces beyond which they are not joined."""
@@ -114,11 +114,7 @@ def joins(
                 step,
             )
             if laid is None or _too_sharp(
-                tracks,
-                (older, younger),
-                (older_end, younger_end),
-                (older_anchor, younger_anchor),
-                step,
+                tracks, (older, younger), (older_end, younger_end), (older_anchor, younger_anchor)
             ):
                 continue
             tip = tracks[younger].tips[1 - younger_end]
@@ -127,22 +123,21 @@ def joins(
     return found
 
 
-def _too_sharp(tracks, pair, ends, anchors, step: float) -> bool:
-    """Whether a cable going on from the older track's outermost seen joint at its end
-    into the younger's at its end (the way the join lays it) turns by more than a cable
-    can (:func:`~service.perception.track_update.bends_too_sharply`): a V where the
-    detection joined two cables."""
+def _too_sharp(tracks, pair, ends, anchors) -> bool:
+    """Whether a cable cannot go on from the older track's outermost seen joint at its
+    end into the younger's at its end
+    (:func:`~service.perception.track_update.turns_too_sharply`)."""
     parts = []
-    for index, end, anchor, towards in zip(pair, ends, anchors, (True, False), strict=True):
+    for index, end, anchor in zip(pair, ends, anchors, strict=True):
         joints = tracks[index].joints
-        part = (
+        # In order towards the junction.
+        parts.append(
             joints[anchor : anchor + 3][::-1]
             if end == 0
             else joints[max(anchor - 2, 0) : anchor + 1]
         )
-        parts.append(part if towards else part[::-1])
     radius = min(tracks[pair[0]].radius, tracks[pair[1]].radius)
-    return bends_too_sharply(np.vstack(parts), radius, step)
+    return turns_too_sharply(parts[0], parts[1][::-1], radius)
 
 
 def _anchor(track, end: int) -> int:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from service.perception import _geometry_kernels, _tracking_kernels
+from service.perception import _tracking_kernels
 from service.perception.geometry import distances_to_polyline, points_along, rigid_fit
 from service.perception.track_matching import Chains, Fit, Piece, clear_of_edge
 
@@ -181,9 +181,7 @@ def observe(
             )
             if tips[end] and (len(points) < TIP_GROWTH or moving_tips[end]):
                 points = np.empty((0, 2))  # a tip seen a little further out: not more cable
-            elif tips[end] and bends_too_sharply(
-                _junction(joints, end, points), piece.radius, step
-            ):
+            elif tips[end] and turns_too_sharply(*_junction(joints, end, points), piece.radius):
                 points = np.empty((0, 2))  # past its free end, round a corner: another cable
             if len(points) and not length_known:
                 new_tips[end] = reached_tip
@@ -212,34 +210,48 @@ def observe(
     )
 
 
-def bends_too_sharply(line: np.ndarray, radius: float, step: float) -> bool:
-    """Whether a polyline, laid again with joints ``step`` apart, turns at one of them by
-    more than a cable of ``radius`` can: a chain of segments ``step`` long inscribed in a
-    circle of the tightest bend (``MIN_BEND_RADII`` radii) turns by
-    ``2 asin(step / 2 r)`` at each joint (as :func:`register` bends one at most).
+def turns_too_sharply(before: np.ndarray, after: np.ndarray, radius: float) -> bool:
+    """Whether a cable of ``radius`` cannot run from the end of ``before`` (joints in
+    order, ending at a junction) on to the start of ``after`` (joints in order from it).
 
-    Where a track would go on across a junction (growth past a free end, a join), a turn
-    sharper than that is no cable's: the detection joined two cables there (a V where two
-    meet at the picture's edge, say).
+    The cable leaves ``before``'s last segment heading ``u`` and reaches ``after``'s first
+    heading ``v``, turned by ``theta``. A curve whose bend radius is nowhere below ``r``
+    and which turns one way by ``theta`` moves sideways (across ``u``) by at least
+    ``r (1 - cos theta)``, whatever its length: the integral of ``sin`` of its heading
+    over arc, ``r dphi`` at least per ``dphi`` of turn. That is 2 ``r`` for a U-turn and
+    nothing for a straight gap. With ``r`` the tightest bend a cable makes
+    (``MIN_BEND_RADII`` radii, the bend :func:`register` allows), less the cable's
+    radius for the noise of its centreline, a junction closer sideways than that is no
+    cable's: the detection joined two cables there (a V where two meet at the picture's
+    edge, say).
+
+    Examples
+    --------
+    >>> up = np.array([[0.0, 20.0], [0.0, 10.0], [0.0, 0.0]])
+    >>> impossible_v = up[::-1] + [12.0, 0.0]  # back down 12 px to the side
+    >>> turns_too_sharply(up, impossible_v, 4.0)
+    True
+    >>> turns_too_sharply(up, up - [0.0, 40.0], 4.0)  # on across a gap
+    False
     """
-    line = np.asarray(line, dtype=np.float64)
-    keep = np.concatenate([[True], np.linalg.norm(np.diff(line, axis=0), axis=1) > 1e-9])
-    walked, _ = _geometry_kernels.resample_kernel(np.ascontiguousarray(line[keep]), float(step))
-    segments = np.diff(walked, axis=0)
-    lengths = np.linalg.norm(segments, axis=1)
-    segments = segments[lengths > 0.5 * step]  # a short last one has no direction to go by
-    if len(segments) < 2:
+    if len(before) < 2 or len(after) < 2:
         return False
-    units = segments / np.linalg.norm(segments, axis=1)[:, None]
-    turns = np.arccos(np.clip(np.sum(units[:-1] * units[1:], axis=1), -1.0, 1.0))
-    tightest = MIN_BEND_RADII * max(radius, 1.0)
-    return bool(np.any(turns > 2.0 * math.asin(min(1.0, step / (2.0 * tightest))) + 1e-6))
+    heading_in = before[-1] - before[-2]
+    heading_out = after[1] - after[0]
+    norms = float(np.linalg.norm(heading_in)), float(np.linalg.norm(heading_out))
+    if min(norms) < 1e-9:
+        return False
+    heading_in, heading_out = heading_in / norms[0], heading_out / norms[1]
+    cos_theta = float(np.clip(heading_in @ heading_out, -1.0, 1.0))
+    # Measured between the segments' middles, where their directions are the cable's.
+    gap = 0.5 * (after[0] + after[1]) - 0.5 * (before[-1] + before[-2])
+    sideways = abs(float(heading_in[0] * gap[1] - heading_in[1] * gap[0]))
+    return sideways < MIN_BEND_RADII * radius * (1.0 - cos_theta) - radius
 
 
-def _junction(joints: np.ndarray, end: int, growth: np.ndarray) -> np.ndarray:
-    """The track's last joints at ``end`` and the first grown beyond it, in that order."""
-    body = joints[2::-1] if end == 0 else joints[-3:]
-    return np.vstack([body, growth[:3]])
+def _junction(joints: np.ndarray, end: int, growth: np.ndarray):
+    """The track's last joints towards ``end``, and the first grown beyond it."""
+    return (joints[2::-1] if end == 0 else joints[-3:]), growth[:3]
 
 
 def _laid(placed, shift: float, n: int, step: float):

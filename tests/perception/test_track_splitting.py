@@ -14,7 +14,7 @@ from service.perception.track_identity import Candidate
 from service.perception.track_matching import Chains, Fit, Piece
 from service.perception.track_merging import joins
 from service.perception.track_splitting import Seam, split_tracks, track_seams
-from service.perception.track_update import bends_too_sharply
+from service.perception.track_update import turns_too_sharply
 from service.perception.tracking import _started
 
 STEP = 10.0
@@ -114,13 +114,17 @@ def test_a_track_grown_past_its_free_end_gives_back_the_id_joined_on_beyond():
     assert sorted(t.id for t in parts) == [0, 2] and next_id == 3
 
 
-def test_a_turn_sharper_than_a_cable_bends_is_refused():
-    # A V: 12 px across where a cable of radius 4 (tightest bend 10 px) needs 20 for a
-    # U-turn; a circle's arc of that bend radius is not refused.
-    assert bends_too_sharply(np.vstack([A[-3:], [[106.0, 2.0]], B[:3]]), 4.0, STEP)
-    angles = np.arange(4) * 2.0 * math.asin(STEP / 20.0)  # half a circle of radius 10
+def test_a_junction_no_cable_could_turn_through_is_refused():
+    # Up A, then back down B 12 px to the side: a U-turn needs 2 r = 20 px for a cable of
+    # radius 4 (tightest bend 10 px).
+    assert turns_too_sharply(A[-3:], B[:3], 4.0)
+    # Half a circle of that bend radius, in joints 10 px apart, is a cable's.
+    angles = np.arange(4) * 2.0 * math.asin(STEP / 20.0)
     arc = 10.0 * np.column_stack([np.sin(angles), 1.0 - np.cos(angles)])
-    assert not bends_too_sharply(arc, 4.0, STEP)
+    assert not turns_too_sharply(arc[:2], arc[2:], 4.0)
+    # Straight on across a gap, or round a wide bend, too.
+    assert not turns_too_sharply(A[-3:], vertical(100.0, -40.0, -60.0, 3), 4.0)
+    assert not turns_too_sharply(A[-3:], np.array([[140.0, -30.0], [150.0, -30.0]]), 4.0)
 
 
 def test_two_tracks_are_not_joined_round_a_v():
