@@ -56,6 +56,8 @@ class Seam:
         When the seam was made.
     apart : int
         Frames in a row its two parts fitted two separate chains.
+    from_seam : bool
+        Whether the track joined on was numbered from its end at the seam.
     """
 
     number: int
@@ -64,6 +66,7 @@ class Seam:
     born: int
     made_s: float
     apart: int = 0
+    from_seam: bool = False
 
 
 @dataclass(frozen=True)
@@ -178,7 +181,8 @@ def split_tracks(tracks: list, next_id: int, confirm_frames: int, frame: int) ->
 
     ``tracks`` are the tracker's records (``dataclasses.replace`` makes the parts): the
     older part keeps the record's id, the newer one takes the id it had before it was
-    joined on when no track holds that id now, otherwise ``next_id``.
+    joined on when no track holds that id now (numbered from the same end as then),
+    otherwise ``next_id`` (numbered from its far end).
     """
     result = []
     for track in tracks:
@@ -194,16 +198,33 @@ def split_tracks(tracks: list, next_id: int, confirm_frames: int, frame: int) ->
         held = {t.id for t in tracks} | {t.id for t in result}
         before = [seam, *(s for s in track.seams if _within(s, track, newer))]
         known = [s for s in before if s.revive is not None and s.revive not in held]
-        if known:
-            revived = max(known, key=lambda s: s.made_s)
+        revived = max(known, key=lambda s: s.made_s) if known else None
+        if revived is not None:
             new_id, born = revived.revive, revived.born
         else:
             new_id, born = next_id, frame
             next_id += 1
         kept_seams = tuple(s for s in track.seams if s is not seam and _within(s, track, older))
         result.append(_part(track, older, seam.side, track.id, track.born, kept_seams, True))
-        result.append(_part(track, newer, seam.side, new_id, born, (), False))
+        part = _part(track, newer, seam.side, new_id, born, (), False)
+        # Numbered as it was: from its far end, or from its end towards the seam.
+        result.append(_reversed(part) if revived is not None and revived.from_seam else part)
     return result, next_id
+
+
+def _reversed(track):
+    """The track numbered from its other end."""
+    free = None if track.free_end_points is None else track.free_end_points[::-1].copy()
+    return replace(
+        track,
+        joints=np.ascontiguousarray(track.joints[::-1]),
+        velocity=np.ascontiguousarray(track.velocity[::-1]),
+        tips=(track.tips[1], track.tips[0]),
+        ends_seen_s=(track.ends_seen_s[1], track.ends_seen_s[0]),
+        ends_last=track.ends_last[::-1].copy(),
+        seen=None if track.seen is None else track.seen[::-1],
+        free_end_points=free,
+    )
 
 
 def _within(seam: Seam, track, part: slice) -> bool:

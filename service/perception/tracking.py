@@ -661,7 +661,14 @@ def _joined(tracks: list[TrackRecord], found: list[Join], now: float) -> list[Tr
         # Joints are never dropped (a track's joints keep their numbers, and the first
         # is 0 or below): hidden ones beyond the younger track's far end keep their shape.
         younger = result[join.younger]
-        seam = Seam(older.first_joint + join.anchor, join.end, younger.id, younger.born, now)
+        seam = Seam(
+            older.first_joint + join.anchor,
+            join.end,
+            younger.id,
+            younger.born,
+            now,
+            from_seam=join.younger_end == 0,
+        )
         extended = _extended(older, joined, now)
         result[join.older] = replace(extended, seams=(*extended.seams, seam))
     retired = {join.younger for join in found}

@@ -98,6 +98,12 @@ def test_a_seam_apart_for_the_confirmation_frames_splits_the_track_and_gives_the
     # track it was before the join, and keeps when it began.
     np.testing.assert_allclose(newer.joints, B[::-1])
     assert newer.tips == (True, False) and newer.born == 3
+    # A track that was numbered from its end at the seam is numbered so again.
+    from_seam = replace(fused, seams=(replace(SEAM, apart=2, from_seam=True),))
+    parts, _ = split_tracks([from_seam, other], 7, confirm_frames=2, frame=80)
+    again = next(t for t in parts if t.id == 5)
+    np.testing.assert_allclose(again.joints, B)
+    assert again.tips == (False, True)
     # When its old id is taken meanwhile, the newer part gets a new one.
     taken = record(5, vertical(400.0, 50.0, 250.0, 21), (True, True))
     parts, next_id = split_tracks([due, taken], 7, confirm_frames=2, frame=80)
