@@ -38,6 +38,8 @@ import numpy as np
 from scipy.ndimage import map_coordinates
 from skimage.morphology import skeletonize
 
+from service.perception.cable_segmentation import cielab_from_lab8
+
 REACH = 12.0
 """The profile runs this far (px) either way from the labelled centre line."""
 STEP = 0.5
@@ -193,9 +195,7 @@ def normal_samples(
     if image_bgr.shape[:2] != labels.shape or labels.shape != mask.shape:
         raise ValueError("image, labels and mask must be of one size")
     height, width = labels.shape
-    lab = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2Lab).astype(np.float32)
-    lab[..., 0] *= 100.0 / 255.0
-    lab[..., 1:] -= 128.0
+    lab = cielab_from_lab8(cv2.cvtColor(image_bgr, cv2.COLOR_BGR2Lab))
     ignore = np.zeros(labels.shape, bool) if ignore is None else ignore
     near_ignored = cv2.distanceTransform((~ignore).view(np.uint8), cv2.DIST_L2, 3)
     offsets = np.arange(-REACH, REACH + STEP / 2, STEP)

@@ -618,11 +618,28 @@ def side_surfaces(shape: tuple[int, int], levels: list[Level], lines: SeedLines)
             # the kernels' line sides.
             y = np.clip(rows + sign * np.round(SIDE_SURFACE_DISTANCE * cos_t[pick]), 0, level_h - 1)
             x = np.clip(cols - sign * np.round(SIDE_SURFACE_DISTANCE * sin_t[pick]), 0, level_w - 1)
-            found = level.wide8[y.astype(np.int64), x.astype(np.int64)].astype(np.float32)
-            found[:, 0] *= 100.0 / 255.0
-            found[:, 1:] -= 128.0
-            surfaces[pick, side] = found
+            found = level.wide8[y.astype(np.int64), x.astype(np.int64)]
+            surfaces[pick, side] = cielab_from_lab8(found)
     return surfaces
+
+
+def cielab_from_lab8(lab8: np.ndarray) -> np.ndarray:
+    """CIELAB (L 0-100, a and b signed) from OpenCV's 8-bit Lab (all three 0-255).
+
+    Parameters
+    ----------
+    lab8 : ndarray of uint8
+        ``(..., 3)`` as ``cv2.cvtColor(bgr_uint8, cv2.COLOR_BGR2Lab)`` gives it.
+
+    Returns
+    -------
+    ndarray of float32
+        ``(..., 3)``.
+    """
+    lab = lab8.astype(np.float32)
+    lab[..., 0] *= 100.0 / 255.0
+    lab[..., 1:] -= 128.0
+    return lab
 
 
 def of_a_side_surface(colours: np.ndarray, surfaces: np.ndarray) -> np.ndarray:
