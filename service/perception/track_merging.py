@@ -27,6 +27,7 @@ import numpy as np
 from service.perception import _geometry_kernels
 from service.perception.track_identity import COLOUR_TOLERANCE, RADIUS_TOLERANCE, colour_distance
 from service.perception.track_matching import Chains, Fit, Piece
+from service.perception.track_update import turns_too_sharply
 
 MAX_GAP_SEGMENTS = 8.0
 """Chain arc (in segments) between the two pieces beyond which they are not joined."""
@@ -112,12 +113,31 @@ def joins(
                 younger_anchor,
                 step,
             )
-            if laid is None:
+            if laid is None or _too_sharp(
+                tracks, (older, younger), (older_end, younger_end), (older_anchor, younger_anchor)
+            ):
                 continue
             tip = tracks[younger].tips[1 - younger_end]
             found.append(Join(older, younger, older_end, older_anchor, laid, younger_end, tip))
             used |= {first.track, second.track}
     return found
+
+
+def _too_sharp(tracks, pair, ends, anchors) -> bool:
+    """Whether a cable cannot go on from the older track's outermost seen joint at its
+    end into the younger's at its end
+    (:func:`~service.perception.track_update.turns_too_sharply`)."""
+    parts = []
+    for index, end, anchor in zip(pair, ends, anchors, strict=True):
+        joints = tracks[index].joints
+        # In order towards the junction.
+        parts.append(
+            joints[anchor : anchor + 3][::-1]
+            if end == 0
+            else joints[max(anchor - 2, 0) : anchor + 1]
+        )
+    radius = min(tracks[pair[0]].radius, tracks[pair[1]].radius)
+    return turns_too_sharply(parts[0], parts[1][::-1], radius)
 
 
 def _anchor(track, end: int) -> int:

@@ -181,6 +181,8 @@ def observe(
             )
             if tips[end] and (len(points) < TIP_GROWTH or moving_tips[end]):
                 points = np.empty((0, 2))  # a tip seen a little further out: not more cable
+            elif tips[end] and turns_too_sharply(*_junction(joints, end, points), piece.radius):
+                points = np.empty((0, 2))  # past its free end, round a corner: another cable
             if len(points) and not length_known:
                 new_tips[end] = reached_tip
         growth.append(points)
@@ -206,6 +208,50 @@ def observe(
         free_end_points=slide.points,
         length_known=slide.exact,
     )
+
+
+def turns_too_sharply(before: np.ndarray, after: np.ndarray, radius: float) -> bool:
+    """Whether a cable of ``radius`` cannot run from the end of ``before`` (joints in
+    order, ending at a junction) on to the start of ``after`` (joints in order from it).
+
+    The cable leaves ``before``'s last segment heading ``u`` and reaches ``after``'s first
+    heading ``v``, turned by ``theta``. A curve whose bend radius is nowhere below ``r``
+    and which turns one way by ``theta`` moves sideways (across ``u``) by at least
+    ``r (1 - cos theta)``, whatever its length: the integral of ``sin`` of its heading
+    over arc, ``r dphi`` at least per ``dphi`` of turn. That is 2 ``r`` for a U-turn and
+    nothing for a straight gap. With ``r`` the tightest bend a cable makes
+    (``MIN_BEND_RADII`` radii, the bend :func:`register` allows), less the cable's
+    radius for the noise of its centreline, a junction closer sideways than that is no
+    cable's: the detection joined two cables there (a V where two meet at the picture's
+    edge, say).
+
+    Examples
+    --------
+    >>> up = np.array([[0.0, 20.0], [0.0, 10.0], [0.0, 0.0]])
+    >>> impossible_v = up[::-1] + [12.0, 0.0]  # back down 12 px to the side
+    >>> turns_too_sharply(up, impossible_v, 4.0)
+    True
+    >>> turns_too_sharply(up, up - [0.0, 40.0], 4.0)  # on across a gap
+    False
+    """
+    if len(before) < 2 or len(after) < 2:
+        return False
+    heading_in = before[-1] - before[-2]
+    heading_out = after[1] - after[0]
+    norms = float(np.linalg.norm(heading_in)), float(np.linalg.norm(heading_out))
+    if min(norms) < 1e-9:
+        return False
+    heading_in, heading_out = heading_in / norms[0], heading_out / norms[1]
+    cos_theta = float(np.clip(heading_in @ heading_out, -1.0, 1.0))
+    # Measured between the segments' middles, where their directions are the cable's.
+    gap = 0.5 * (after[0] + after[1]) - 0.5 * (before[-1] + before[-2])
+    sideways = abs(float(heading_in[0] * gap[1] - heading_in[1] * gap[0]))
+    return sideways < MIN_BEND_RADII * radius * (1.0 - cos_theta) - radius
+
+
+def _junction(joints: np.ndarray, end: int, growth: np.ndarray):
+    """The track's last joints towards ``end``, and the first grown beyond it."""
+    return (joints[2::-1] if end == 0 else joints[-3:]), growth[:3]
 
 
 def _laid(placed, shift: float, n: int, step: float):

@@ -69,6 +69,7 @@ from service.perception.track_matching import (
 )
 from service.perception.track_merging import Bridge, Join, bridges, joins
 from service.perception.track_motion import ShapeWindow, motion, shape_window, tangents
+from service.perception.track_splitting import Seam, split_tracks, track_seams
 from service.perception.track_update import Observation, exact_chain, observe, register
 
 VELOCITY_SMOOTHING = 0.5
@@ -147,6 +148,7 @@ class TrackRecord:
     free_end_points: np.ndarray | None = None  # (2, 2): free ends seen last frame (NaN: not)
     length_known: bool = False  # both free ends once seen at once, as far apart as its ends
     last_seen: tuple[np.ndarray, np.ndarray] | None = None  # (joint numbers, points) seen last
+    seams: tuple[Seam, ...] = ()  # where it was joined on one frame's evidence (track_splitting)
 
     @property
     def length(self) -> float:
@@ -297,11 +299,23 @@ def advance(
             track.length_known,
         )
         seen_colour = chains.colour_of([piece for piece, _ in fitted])
-        tracks.append(
-            _moved(track, predicted[index], observation, step, dt, now, frame, seen_colour)
+        moved = _moved(track, predicted[index], observation, step, dt, now, frame, seen_colour)
+        seams = track_seams(
+            track.seams, track.first_joint, len(track.joints), fitted, step, now, params.memory_s
         )
+        # Grown past a free end it had seen: the cable may go on there, or the detection
+        # joined another cable to it.
+        ends = (track.first_joint, track.first_joint + len(track.joints) - 1)
+        grown = (observation.head_growth, observation.tail_growth)
+        seams += tuple(
+            Seam(ends[end], end, None, frame, now)
+            for end in (0, 1)
+            if track.tips[end] and len(grown[end])
+        )
+        tracks.append(replace(moved, seams=seams) if seams or track.seams else moved)
     tracks = _joined(tracks, joins(tracks, pieces, fits, chains), now)
     tracks = _bridged(tracks, bridges(tracks, step, set()), now)
+    tracks, next_id = split_tracks(tracks, state.next_id, params.confirm_frames, frame)
 
     # Pieces near a track (held by it, or passed over as it grew) start nothing new.
     used = claimed | _near_tracks(pieces, tracks)
@@ -315,7 +329,6 @@ def advance(
     remembered = [
         (track, gone_s) for track, gone_s in state.remembered if now - gone_s <= params.memory_s
     ]
-    next_id = state.next_id
     for candidate in sorted(ready, key=lambda c: -c.length):
         joined = continuation(
             candidate, [(t.joints, _seen_mask(t), t.radius, t.colour) for t in tracks], step
@@ -647,7 +660,17 @@ def _joined(tracks: list[TrackRecord], found: list[Join], now: float) -> list[Tr
         joined = Continuation(join.older, join.end, join.anchor, join.joints, join.tip)
         # Joints are never dropped (a track's joints keep their numbers, and the first
         # is 0 or below): hidden ones beyond the younger track's far end keep their shape.
-        result[join.older] = _extended(older, joined, now)
+        younger = result[join.younger]
+        seam = Seam(
+            older.first_joint + join.anchor,
+            join.end,
+            younger.id,
+            younger.born,
+            now,
+            from_seam=join.younger_end == 0,
+        )
+        extended = _extended(older, joined, now)
+        result[join.older] = replace(extended, seams=(*extended.seams, seam))
     retired = {join.younger for join in found}
     return [track for index, track in enumerate(result) if index not in retired]
 
