@@ -183,6 +183,7 @@ def build(force: bool = False, quiet: bool = False) -> Path | None:
         "cpu": _aot.cpu_description(),
         "groups": sorted(KERNEL_SETS),
         "exports": manifest_exports,
+        "constants": _kernel_constants(),
         "kept_jit": kept,
         "seconds": round(time.perf_counter() - started, 1),
     }
@@ -192,6 +193,21 @@ def build(force: bool = False, quiet: bool = False) -> Path | None:
     _remove_older_libraries(manifest_path.parent, library)
     say(f"build_kernels: {manifest_path.parent / library} ({manifest['seconds']} s)")
     return manifest_path
+
+
+def _kernel_constants() -> dict[str, dict[str, int | float | bool]]:
+    """Per kernel module, its plain numeric constants (upper-case module names bound to an
+    ``int``, ``float`` or ``bool``): the stand-ins hold them, so that a step module that
+    imports one (``from ._merging_kernels import MIN_BEND_RADII``) does not import numba."""
+    constants: dict[str, dict[str, int | float | bool]] = {}
+    for path in _aot.KERNEL_SOURCES:
+        module = import_module(f"service.perception.{path.stem}")
+        constants[path.stem] = {
+            name: value
+            for name, value in vars(module).items()
+            if name.isupper() and type(value) in (int, float, bool)
+        }
+    return constants
 
 
 def _remove_older_libraries(directory: Path, keep: str) -> None:

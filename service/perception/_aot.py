@@ -50,8 +50,9 @@ ENVIRONMENT = "DLO_KERNELS"
 MODULE_NAME = "dlo_kernels_aot"
 """The extension module's own name (its ``PyInit_`` function)."""
 MANIFEST_NAME = "dlo-kernels-aot.json"
-FORMAT = 1
-"""The manifest's layout; a manifest of another layout is stale."""
+FORMAT = 2
+"""The manifest's layout (2: with the kernel modules' constants); a manifest of another layout
+is stale."""
 
 FALLBACKS: dict[str, int] = {}
 """``"module.kernel"`` -> how many calls went to numba because the compiled module had no
@@ -206,7 +207,11 @@ def install(package: types.ModuleType) -> str:
         # must never import a stand-in's kernels (see jit_module).
         stand_ins = {
             path.stem: _stand_in(
-                package.__name__, path.stem, manifest["exports"].get(path.stem, {}), library
+                package.__name__,
+                path.stem,
+                manifest["exports"].get(path.stem, {}),
+                library,
+                manifest.get("constants", {}).get(path.stem, {}),
             )
             for path in KERNEL_SOURCES
         }
@@ -259,9 +264,14 @@ def jit_module(stem: str) -> types.ModuleType:
 
 
 def _stand_in(
-    package: str, stem: str, exports: dict[str, list[dict[str, Any]]], library: types.ModuleType
+    package: str,
+    stem: str,
+    exports: dict[str, list[dict[str, Any]]],
+    library: types.ModuleType,
+    constants: dict[str, Any] | None = None,
 ) -> types.ModuleType:
-    """A module named like kernel module ``stem`` whose exported kernels call ``library``."""
+    """A module named like kernel module ``stem`` whose exported kernels call ``library``,
+    holding the module's plain numeric ``constants`` as recorded at build time."""
     module = types.ModuleType(f"{package}.{stem}", f"{stem}, compiled ahead of time.")
     module.__file__ = str(PACKAGE_DIR / f"{stem}.py")
     module.__package__ = package
@@ -275,6 +285,8 @@ def _stand_in(
         return value
 
     module.__getattr__ = __getattr__  # type: ignore[method-assign]
+    for name, value in (constants or {}).items():
+        setattr(module, name, value)
     for name, signatures in exports.items():
         setattr(module, name, _checked_kernel(stem, name, signatures, library))
     return module
