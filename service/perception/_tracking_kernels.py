@@ -9,6 +9,7 @@ import numpy as np
 from numba import njit
 
 from service.perception._geometry_kernels import circle_exit
+from service.perception._shared_kernels import pairwise_sum
 
 
 @njit(cache=True, nogil=True)
@@ -458,3 +459,119 @@ def window_medians(values, width):
             else:
                 out[window, column] = 0.5 * (ordered[(count - 1) // 2] + ordered[count // 2])
     return out
+
+
+@njit(cache=True, nogil=True)
+def rigid_sums(source, target):
+    """What the least-squares rotation taking ``source`` onto ``target`` (paired (N, 2)
+    float64 points, N >= 1) is made of: ``[source mean x, y, target mean x, y, sum of
+    the centred pairs' cross products, sum of their dot products]``, each as NumPy
+    computes it in :func:`service.perception.geometry.rigid_fit` (the same bits)."""
+    n = len(source)
+    sx = sy = tx = ty = 0.0
+    for i in range(n):
+        sx += source[i, 0]
+        sy += source[i, 1]
+        tx += target[i, 0]
+        ty += target[i, 1]
+    sx /= n
+    sy /= n
+    tx /= n
+    ty /= n
+    cross = np.empty(n)
+    dots = np.empty(2 * n)
+    for i in range(n):
+        a0 = source[i, 0] - sx
+        a1 = source[i, 1] - sy
+        b0 = target[i, 0] - tx
+        b1 = target[i, 1] - ty
+        cross[i] = a0 * b1 - a1 * b0
+        dots[2 * i] = a0 * b0
+        dots[2 * i + 1] = a1 * b1
+    out = np.empty(6)
+    out[0] = sx
+    out[1] = sy
+    out[2] = tx
+    out[3] = ty
+    out[4] = 0.0 + pairwise_sum(cross, 0, n)
+    out[5] = 0.0 + pairwise_sum(dots, 0, 2 * n)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def motion_design(previous, current, use, tangent):
+    """The cross-cable least-squares problem of
+    :func:`service.perception.track_motion.motion`, as it computes it with NumPy (the
+    same bits): per joint the normal, the displacement across the cable and the arm
+    turned a right angle about the used joints' centre; the used joints' design rows
+    ``[normal x, normal y, turned . normal]`` and values; and the arms' RMS (at least 1).
+    """
+    n = len(previous)
+    normal = np.empty((n, 2))
+    across = np.empty(n)
+    count = 0
+    cx = cy = 0.0
+    for i in range(n):
+        normal[i, 0] = -tangent[i, 1]
+        normal[i, 1] = tangent[i, 0]
+        across[i] = (current[i, 0] - previous[i, 0]) * normal[i, 0] + (
+            current[i, 1] - previous[i, 1]
+        ) * normal[i, 1]
+        if use[i]:
+            cx += previous[i, 0]
+            cy += previous[i, 1]
+            count += 1
+    cx /= count
+    cy /= count
+    turned = np.empty((n, 2))
+    rows = np.empty((count, 3))
+    values = np.empty(count)
+    arm_sq = np.empty(count)
+    k = 0
+    for i in range(n):
+        ax = previous[i, 0] - cx
+        ay = previous[i, 1] - cy
+        turned[i, 0] = -ay
+        turned[i, 1] = ax
+        if use[i]:
+            rows[k, 0] = normal[i, 0]
+            rows[k, 1] = normal[i, 1]
+            rows[k, 2] = turned[i, 0] * normal[i, 0] + turned[i, 1] * normal[i, 1]
+            values[k] = across[i]
+            arm_sq[k] = ax * ax + ay * ay
+            k += 1
+    scale = max(np.sqrt((0.0 + pairwise_sum(arm_sq, 0, count)) / count), 1.0)
+    return normal, across, turned, rows, values, scale
+
+
+@njit(cache=True, nogil=True)
+def motion_result(fitted, turned, across, normal, rigid_only, weights):
+    """Each joint's displacement from the rigid motion ``fitted`` (``tx, ty, rotation``)
+    and the cross-cable remainder smoothed along the cable with ``weights`` (five, two
+    neighbours each side, the ends repeated); the joints in ``rigid_only`` get the rigid
+    motion alone: the end of :func:`service.perception.track_motion.motion`, the same
+    bits as its NumPy."""
+    n = len(turned)
+    rigid = np.empty((n, 2))
+    remainder = np.empty(n)
+    for i in range(n):
+        rigid[i, 0] = fitted[0] + fitted[2] * turned[i, 0]
+        rigid[i, 1] = fitted[1] + fitted[2] * turned[i, 1]
+        remainder[i] = across[i] - (rigid[i, 0] * normal[i, 0] + rigid[i, 1] * normal[i, 1])
+    smoothed = remainder.copy()
+    if n >= 3:
+        for i in range(n):
+            total = 0.0
+            for j in range(5):
+                at = min(max(i + j - 2, 0), n - 1)
+                total = total + weights[j] * remainder[at]
+            smoothed[i] = total
+    result = np.empty((n, 2))
+    for i in range(n):
+        if rigid_only[i]:
+            result[i, 0] = rigid[i, 0]
+            result[i, 1] = rigid[i, 1]
+        else:
+            result[i, 0] = rigid[i, 0] + smoothed[i] * normal[i, 0]
+            result[i, 1] = rigid[i, 1] + smoothed[i] * normal[i, 1]
+    return result

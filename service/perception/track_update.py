@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from service.perception import _tracking_kernels
-from service.perception.geometry import distances_to_polyline, points_along, rigid_fit
+from service.perception.geometry import distances_to_polyline, points_along
 from service.perception.track_matching import Chains, Fit, Piece, clear_of_edge
 
 TIP_WINDOW = 5.0
@@ -513,8 +513,14 @@ def _rigid(source: np.ndarray, target: np.ndarray, points: np.ndarray) -> np.nda
         return None
     if len(source) == 1:
         return points + (target.mean(axis=0) - source.mean(axis=0))
-    source_mean, rotation, target_mean = rigid_fit(source, target)
-    return (points - source_mean) @ rotation.T + target_mean
+    # geometry.rigid_fit's sums in one compiled loop (the same bits).
+    sums = _tracking_kernels.rigid_sums(
+        np.ascontiguousarray(source, dtype=np.float64),
+        np.ascontiguousarray(target, dtype=np.float64),
+    )
+    angle = math.atan2(float(sums[4]), float(sums[5]))
+    c, s = math.cos(angle), math.sin(angle)
+    return (points - sums[:2]) @ np.array([[c, -s], [s, c]]).T + sums[2:4]
 
 
 def _uncovered_runs(covered: np.ndarray) -> list[tuple[int, int]]:
