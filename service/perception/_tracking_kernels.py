@@ -575,3 +575,70 @@ def motion_result(fitted, turned, across, normal, rigid_only, weights):
             result[i, 0] = rigid[i, 0] + smoothed[i] * normal[i, 0]
             result[i, 1] = rigid[i, 1] + smoothed[i] * normal[i, 1]
     return result
+
+
+@njit(cache=True, nogil=True)
+def piece_samples(joints):
+    """A piece's joints (N >= 2, float64) and segment midpoints in order, their unit
+    directions (a joint's: the mean of its segments', normalised; an end's: its
+    segment's), and their arcs in joint units: what
+    :func:`service.perception.track_matching._samples` computed with NumPy, the same
+    bits."""
+    n = len(joints)
+    points = np.empty((2 * n - 1, 2))
+    directions = np.empty((2 * n - 1, 2))
+    arc = np.empty(2 * n - 1)
+    arc[0] = 0.0
+    total = 0.0
+    for k in range(n):
+        points[2 * k, 0] = joints[k, 0]
+        points[2 * k, 1] = joints[k, 1]
+    for k in range(n - 1):
+        points[2 * k + 1, 0] = 0.5 * (joints[k, 0] + joints[k + 1, 0])
+        points[2 * k + 1, 1] = 0.5 * (joints[k, 1] + joints[k + 1, 1])
+        dx = joints[k + 1, 0] - joints[k, 0]
+        dy = joints[k + 1, 1] - joints[k, 1]
+        length = np.sqrt(dx * dx + dy * dy)
+        size = max(length, 1e-12)
+        directions[2 * k + 1, 0] = dx / size
+        directions[2 * k + 1, 1] = dy / size
+        half = length / 2.0
+        total += half
+        arc[2 * k + 1] = total
+        total += half
+        arc[2 * k + 2] = total
+    directions[0, 0] = directions[1, 0]
+    directions[0, 1] = directions[1, 1]
+    directions[2 * n - 2, 0] = directions[2 * n - 3, 0]
+    directions[2 * n - 2, 1] = directions[2 * n - 3, 1]
+    for k in range(1, n - 1):
+        ix = directions[2 * k - 1, 0] + directions[2 * k + 1, 0]
+        iy = directions[2 * k - 1, 1] + directions[2 * k + 1, 1]
+        size = max(np.sqrt(ix * ix + iy * iy), 1e-12)
+        directions[2 * k, 0] = ix / size
+        directions[2 * k, 1] = iy / size
+    return points, directions, arc
+
+
+@njit(cache=True, nogil=True)
+def farthest_from_polyline(points, polyline):
+    """The largest of the points' distances (px) from a polyline of two vertices or more
+    (each point's nearest segment): ``geometry.distances_to_polyline(points,
+    polyline).max()``, the same bits, without its (points, segments) arrays."""
+    farthest = -np.inf
+    for i in range(len(points)):
+        nearest = np.inf
+        for k in range(len(polyline) - 1):
+            ax = polyline[k, 0]
+            ay = polyline[k, 1]
+            abx = polyline[k + 1, 0] - ax
+            aby = polyline[k + 1, 1] - ay
+            apx = points[i, 0] - ax
+            apy = points[i, 1] - ay
+            t = (apx * abx + apy * aby) / max(abx * abx + aby * aby, 1e-12)
+            t = min(max(t, 0.0), 1.0)
+            gx = apx - t * abx
+            gy = apy - t * aby
+            nearest = min(nearest, np.sqrt(gx * gx + gy * gy))
+        farthest = max(farthest, nearest)
+    return farthest

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from service.perception import _tracking_kernels
-from service.perception.geometry import distances_to_polyline, points_along
+from service.perception.geometry import points_along
 from service.perception.track_matching import Chains, Fit, Piece, clear_of_edge
 
 TIP_WINDOW = 5.0
@@ -333,8 +333,11 @@ def _chain_tips(joints, placed, chains):
     found: list[list[tuple[float, float, float]]] = [[], []]
     # The track, straight on beyond its ends as far as an end may have slid.
     heads = joints[[0, -1]] - joints[[1, -2]]
-    heads *= tolerance / np.maximum(np.linalg.norm(heads, axis=1), 1e-12)[:, None]
-    extended = np.vstack([joints[:1] + heads[:1], joints, joints[-1:] + heads[1:]])
+    heads *= tolerance / np.maximum(np.sqrt((heads * heads).sum(axis=1)), 1e-12)[:, None]
+    extended = np.empty((len(joints) + 2, 2))
+    extended[0] = joints[0] + heads[0]
+    extended[1:-1] = joints
+    extended[-1] = joints[-1] + heads[1]
     for piece, sign, offset, _ in placed:
         index = piece.chain
         arcs = chains.arcs[index]
@@ -357,7 +360,7 @@ def _chain_tips(joints, placed, chains):
                 continue
             beyond = points[stretch.start : stretch.stop + 1]
             reach = radius + 0.5 * step
-            if distances_to_polyline(beyond, extended).max() > reach:
+            if _tracking_kernels.farthest_from_polyline(beyond, extended) > reach:
                 continue
             found[end].append((s_tip, *points[chain_end]))
     return found
@@ -572,9 +575,9 @@ def _slide_limit(joints, placed, step) -> float:
     for _, sign, offset, arcs in placed:
         lo, hi = sorted((offset, sign * float(arcs[-1]) + offset))
         seen |= (track_arc >= lo) & (track_arc <= hi)
-    steps = np.diff(joints, axis=0)
+    steps = joints[1:] - joints[:-1]
     angles = np.arctan2(steps[:, 1], steps[:, 0])
-    turns = np.abs((np.diff(angles) + math.pi) % (2.0 * math.pi) - math.pi)
+    turns = np.abs((angles[1:] - angles[:-1] + math.pi) % (2.0 * math.pi) - math.pi)
     inner = seen[1:-1] & seen[:-2] & seen[2:]
     bent = float(turns[inner].sum()) / BENT_TURN
     if bent >= 1.0:

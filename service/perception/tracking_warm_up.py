@@ -48,6 +48,8 @@ def warm_up_tracking() -> None:
     _tracking_kernels.constrain_chain(line, np.ones(4), 10.0, np.zeros(4), 2, 1)
     _tracking_kernels.window_medians(np.vstack((line, other)) * 1.0, 3)
     _tracking_kernels.rigid_sums(line, line + 1.0)
+    _tracking_kernels.piece_samples(line)
+    _tracking_kernels.farthest_from_polyline(other, line)
     flags = np.ones(4, bool)
     normal, across, turned, _, _, _ = _tracking_kernels.motion_design(
         line, line + 1.0, flags, directions

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from service.perception.geometry import rigid_fit
+from service.perception import _tracking_kernels as kernels
+from service.perception.geometry import distances_to_polyline, rigid_fit
 from service.perception.track_motion import motion, tangents
 from service.perception.track_update import _rigid
 from service.perception.tracking_warm_up import warm_up_tracking
@@ -54,3 +55,26 @@ def test_motion_is_numpys_to_the_bit(seed):
     tangent = tangents(current)
     expected = reference.motion_numpy(previous, current, use, pinned, tangent, rigid_only)
     assert np.array_equal(motion(previous, current, use, pinned, tangent, rigid_only), expected)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_piece_samples_are_numpys_to_the_bit(seed):
+    rng = np.random.default_rng(200 + seed)
+    for n in (2, 3, 4, 17, 120):
+        joints = wavy_chain(rng, n)
+        joints[n // 2] = joints[n // 2 - 1]  # a segment of no length
+        for got, expected in zip(
+            kernels.piece_samples(joints), reference.piece_samples(joints), strict=True
+        ):
+            assert np.array_equal(got, expected)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_farthest_from_polyline_is_numpys_to_the_bit(seed):
+    rng = np.random.default_rng(300 + seed)
+    for n in (2, 3, 30):
+        polyline = wavy_chain(rng, n)
+        polyline[1] = polyline[0]  # a segment of no length
+        points = polyline[: int(rng.integers(1, n + 1))] + rng.normal(0, 6, (1, 2))
+        expected = distances_to_polyline(points, polyline).max()
+        assert kernels.farthest_from_polyline(points, polyline) == expected

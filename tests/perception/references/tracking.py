@@ -184,3 +184,23 @@ def motion_numpy(previous, current, use, pinned, tangent, rigid_only):
     result = rigid + remainder[:, None] * normal
     result[rigid_only] = rigid[rigid_only]
     return result
+
+
+def piece_samples(joints):
+    """track_matching._samples as written in NumPy before its kernel."""
+    n = len(joints)
+    points = np.empty((2 * n - 1, 2))
+    points[0::2] = joints
+    points[1::2] = 0.5 * (joints[:-1] + joints[1:])
+    steps = np.diff(joints, axis=0)
+    lengths = np.linalg.norm(steps, axis=1)
+    unit = steps / np.maximum(lengths, 1e-12)[:, None]
+    directions = np.empty_like(points)
+    directions[1::2] = unit
+    directions[0] = unit[0]
+    directions[-1] = unit[-1]
+    if n > 2:
+        inner = unit[:-1] + unit[1:]
+        directions[2:-1:2] = inner / np.maximum(np.linalg.norm(inner, axis=1), 1e-12)[:, None]
+    arc = np.concatenate([[0.0], np.cumsum(np.repeat(lengths / 2.0, 2))])
+    return points, directions, arc
