@@ -642,3 +642,25 @@ def farthest_from_polyline(points, polyline):
             nearest = min(nearest, np.sqrt(gx * gx + gy * gy))
         farthest = max(farthest, nearest)
     return farthest
+
+
+@njit(cache=True, nogil=True)
+def unit_tangents(joints):
+    """Unit tangents at the joints (N >= 2, float64): central differences, one-sided at
+    the ends; :func:`service.perception.track_motion.tangents`, the same bits."""
+    n = len(joints)
+    tangent = np.empty((n, 2))
+    for i in range(n):
+        if i == 0:
+            tx = joints[1, 0] - joints[0, 0]
+            ty = joints[1, 1] - joints[0, 1]
+        elif i == n - 1:
+            tx = joints[n - 1, 0] - joints[n - 2, 0]
+            ty = joints[n - 1, 1] - joints[n - 2, 1]
+        else:
+            tx = (joints[i + 1, 0] - joints[i - 1, 0]) / 2.0
+            ty = (joints[i + 1, 1] - joints[i - 1, 1]) / 2.0
+        size = max(np.sqrt(tx * tx + ty * ty), 1e-12)
+        tangent[i, 0] = tx / size
+        tangent[i, 1] = ty / size
+    return tangent

@@ -35,14 +35,9 @@ small (relative to the data): enough to leave a straight cable's slide at zero."
 
 def tangents(joints: np.ndarray) -> np.ndarray:
     """Unit tangents at the joints (central differences, one-sided at the ends)."""
-    tangent = np.empty_like(joints)
     if len(joints) < 2:
         return np.zeros_like(joints)
-    tangent[0] = joints[1] - joints[0]
-    tangent[-1] = joints[-1] - joints[-2]
-    tangent[1:-1] = (joints[2:] - joints[:-2]) / 2.0
-    length = np.sqrt(tangent[:, 0] ** 2 + tangent[:, 1] ** 2)
-    return tangent / np.maximum(length, 1e-12)[:, None]
+    return _tracking_kernels.unit_tangents(_contiguous(joints))
 
 
 def motion(

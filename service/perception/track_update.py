@@ -557,7 +557,8 @@ def _one_offset_per_chain(placed, chains):
         weights = np.array([placed[i][3][-1] for i in members])
         centre = along_chain[np.argmax(weights)]
         agree = np.abs(along_chain - centre) <= CHAIN_AGREEMENT * chains.step
-        common = float(np.average(along_chain[agree], weights=weights[agree]))
+        kept = weights[agree]  # np.average's sums, without its per-call cost
+        common = float((along_chain[agree] * kept).sum() / kept.sum())
         for i, keep in zip(members, agree, strict=True):
             if keep:
                 piece, _, _, arcs = placed[i]

@@ -49,6 +49,7 @@ def warm_up_tracking() -> None:
     _tracking_kernels.window_medians(np.vstack((line, other)) * 1.0, 3)
     _tracking_kernels.rigid_sums(line, line + 1.0)
     _tracking_kernels.piece_samples(line)
+    _tracking_kernels.unit_tangents(line)
     _tracking_kernels.farthest_from_polyline(other, line)
     flags = np.ones(4, bool)
     normal, across, turned, _, _, _ = _tracking_kernels.motion_design(

@@ -78,3 +78,13 @@ def test_farthest_from_polyline_is_numpys_to_the_bit(seed):
         points = polyline[: int(rng.integers(1, n + 1))] + rng.normal(0, 6, (1, 2))
         expected = distances_to_polyline(points, polyline).max()
         assert kernels.farthest_from_polyline(points, polyline) == expected
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_tangents_are_numpys_to_the_bit(seed):
+    rng = np.random.default_rng(400 + seed)
+    for n in (2, 3, 50):
+        joints = wavy_chain(rng, n)
+        joints[-1] = joints[-2]  # a segment of no length
+        assert np.array_equal(tangents(joints), reference.unit_tangents(joints))
+    assert tangents(np.zeros((1, 2))).shape == (1, 2)

@@ -204,3 +204,13 @@ def piece_samples(joints):
         directions[2:-1:2] = inner / np.maximum(np.linalg.norm(inner, axis=1), 1e-12)[:, None]
     arc = np.concatenate([[0.0], np.cumsum(np.repeat(lengths / 2.0, 2))])
     return points, directions, arc
+
+
+def unit_tangents(joints):
+    """track_motion.tangents as written in NumPy before its kernel."""
+    tangent = np.empty_like(joints)
+    tangent[0] = joints[1] - joints[0]
+    tangent[-1] = joints[-1] - joints[-2]
+    tangent[1:-1] = (joints[2:] - joints[:-2]) / 2.0
+    length = np.sqrt(tangent[:, 0] ** 2 + tangent[:, 1] ** 2)
+    return tangent / np.maximum(length, 1e-12)[:, None]
