@@ -267,7 +267,7 @@ def _samples(joints: np.ndarray):
 def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     """(first joint, last joint) of each run of True segments."""
     padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
-    edges = np.diff(padded)
+    edges = padded[1:] - padded[:-1]
     begins = np.flatnonzero(edges == 1)
     ends = np.flatnonzero(edges == -1)
     return [(int(b), int(e)) for b, e in zip(begins, ends, strict=True)]

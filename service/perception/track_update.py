@@ -528,7 +528,8 @@ def _rigid(source: np.ndarray, target: np.ndarray, points: np.ndarray) -> np.nda
 
 def _uncovered_runs(covered: np.ndarray) -> list[tuple[int, int]]:
     padded = np.concatenate([[True], covered, [True]])
-    edges = np.diff(padded.astype(np.int8))
+    steps = padded.astype(np.int8)
+    edges = steps[1:] - steps[:-1]
     begins = np.flatnonzero(edges == -1)
     ends = np.flatnonzero(edges == 1) - 1
     return [(int(b), int(e)) for b, e in zip(begins, ends, strict=True)]
