@@ -9,6 +9,7 @@ import numpy as np
 from numba import njit
 
 from service.perception._geometry_kernels import circle_exit
+from service.perception._shared_kernels import pairwise_sum
 
 
 @njit(cache=True, nogil=True)
@@ -458,3 +459,208 @@ def window_medians(values, width):
             else:
                 out[window, column] = 0.5 * (ordered[(count - 1) // 2] + ordered[count // 2])
     return out
+
+
+@njit(cache=True, nogil=True)
+def rigid_sums(source, target):
+    """What the least-squares rotation taking ``source`` onto ``target`` (paired (N, 2)
+    float64 points, N >= 1) is made of: ``[source mean x, y, target mean x, y, sum of
+    the centred pairs' cross products, sum of their dot products]``, each as NumPy
+    computes it in :func:`service.perception.geometry.rigid_fit` (the same bits)."""
+    n = len(source)
+    sx = sy = tx = ty = 0.0
+    for i in range(n):
+        sx += source[i, 0]
+        sy += source[i, 1]
+        tx += target[i, 0]
+        ty += target[i, 1]
+    sx /= n
+    sy /= n
+    tx /= n
+    ty /= n
+    cross = np.empty(n)
+    dots = np.empty(2 * n)
+    for i in range(n):
+        a0 = source[i, 0] - sx
+        a1 = source[i, 1] - sy
+        b0 = target[i, 0] - tx
+        b1 = target[i, 1] - ty
+        cross[i] = a0 * b1 - a1 * b0
+        dots[2 * i] = a0 * b0
+        dots[2 * i + 1] = a1 * b1
+    out = np.empty(6)
+    out[0] = sx
+    out[1] = sy
+    out[2] = tx
+    out[3] = ty
+    out[4] = 0.0 + pairwise_sum(cross, 0, n)
+    out[5] = 0.0 + pairwise_sum(dots, 0, 2 * n)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def motion_design(previous, current, use, tangent):
+    """The cross-cable least-squares problem of
+    :func:`service.perception.track_motion.motion`, as it computes it with NumPy (the
+    same bits): per joint the normal, the displacement across the cable and the arm
+    turned a right angle about the used joints' centre; the used joints' design rows
+    ``[normal x, normal y, turned . normal]`` and values; and the arms' RMS (at least 1).
+    """
+    n = len(previous)
+    normal = np.empty((n, 2))
+    across = np.empty(n)
+    count = 0
+    cx = cy = 0.0
+    for i in range(n):
+        normal[i, 0] = -tangent[i, 1]
+        normal[i, 1] = tangent[i, 0]
+        across[i] = (current[i, 0] - previous[i, 0]) * normal[i, 0] + (
+            current[i, 1] - previous[i, 1]
+        ) * normal[i, 1]
+        if use[i]:
+            cx += previous[i, 0]
+            cy += previous[i, 1]
+            count += 1
+    cx /= count
+    cy /= count
+    turned = np.empty((n, 2))
+    rows = np.empty((count, 3))
+    values = np.empty(count)
+    arm_sq = np.empty(count)
+    k = 0
+    for i in range(n):
+        ax = previous[i, 0] - cx
+        ay = previous[i, 1] - cy
+        turned[i, 0] = -ay
+        turned[i, 1] = ax
+        if use[i]:
+            rows[k, 0] = normal[i, 0]
+            rows[k, 1] = normal[i, 1]
+            rows[k, 2] = turned[i, 0] * normal[i, 0] + turned[i, 1] * normal[i, 1]
+            values[k] = across[i]
+            arm_sq[k] = ax * ax + ay * ay
+            k += 1
+    scale = max(np.sqrt((0.0 + pairwise_sum(arm_sq, 0, count)) / count), 1.0)
+    return normal, across, turned, rows, values, scale
+
+
+@njit(cache=True, nogil=True)
+def motion_result(fitted, turned, across, normal, rigid_only, weights):
+    """Each joint's displacement from the rigid motion ``fitted`` (``tx, ty, rotation``)
+    and the cross-cable remainder smoothed along the cable with ``weights`` (five, two
+    neighbours each side, the ends repeated); the joints in ``rigid_only`` get the rigid
+    motion alone: the end of :func:`service.perception.track_motion.motion`, the same
+    bits as its NumPy."""
+    n = len(turned)
+    rigid = np.empty((n, 2))
+    remainder = np.empty(n)
+    for i in range(n):
+        rigid[i, 0] = fitted[0] + fitted[2] * turned[i, 0]
+        rigid[i, 1] = fitted[1] + fitted[2] * turned[i, 1]
+        remainder[i] = across[i] - (rigid[i, 0] * normal[i, 0] + rigid[i, 1] * normal[i, 1])
+    smoothed = remainder.copy()
+    if n >= 3:
+        for i in range(n):
+            total = 0.0
+            for j in range(5):
+                at = min(max(i + j - 2, 0), n - 1)
+                total = total + weights[j] * remainder[at]
+            smoothed[i] = total
+    result = np.empty((n, 2))
+    for i in range(n):
+        if rigid_only[i]:
+            result[i, 0] = rigid[i, 0]
+            result[i, 1] = rigid[i, 1]
+        else:
+            result[i, 0] = rigid[i, 0] + smoothed[i] * normal[i, 0]
+            result[i, 1] = rigid[i, 1] + smoothed[i] * normal[i, 1]
+    return result
+
+
+@njit(cache=True, nogil=True)
+def piece_samples(joints):
+    """A piece's joints (N >= 2, float64) and segment midpoints in order, their unit
+    directions (a joint's: the mean of its segments', normalised; an end's: its
+    segment's), and their arcs in joint units: what
+    :func:`service.perception.track_matching._samples` computed with NumPy, the same
+    bits."""
+    n = len(joints)
+    points = np.empty((2 * n - 1, 2))
+    directions = np.empty((2 * n - 1, 2))
+    arc = np.empty(2 * n - 1)
+    arc[0] = 0.0
+    total = 0.0
+    for k in range(n):
+        points[2 * k, 0] = joints[k, 0]
+        points[2 * k, 1] = joints[k, 1]
+    for k in range(n - 1):
+        points[2 * k + 1, 0] = 0.5 * (joints[k, 0] + joints[k + 1, 0])
+        points[2 * k + 1, 1] = 0.5 * (joints[k, 1] + joints[k + 1, 1])
+        dx = joints[k + 1, 0] - joints[k, 0]
+        dy = joints[k + 1, 1] - joints[k, 1]
+        length = np.sqrt(dx * dx + dy * dy)
+        size = max(length, 1e-12)
+        directions[2 * k + 1, 0] = dx / size
+        directions[2 * k + 1, 1] = dy / size
+        half = length / 2.0
+        total += half
+        arc[2 * k + 1] = total
+        total += half
+        arc[2 * k + 2] = total
+    directions[0, 0] = directions[1, 0]
+    directions[0, 1] = directions[1, 1]
+    directions[2 * n - 2, 0] = directions[2 * n - 3, 0]
+    directions[2 * n - 2, 1] = directions[2 * n - 3, 1]
+    for k in range(1, n - 1):
+        ix = directions[2 * k - 1, 0] + directions[2 * k + 1, 0]
+        iy = directions[2 * k - 1, 1] + directions[2 * k + 1, 1]
+        size = max(np.sqrt(ix * ix + iy * iy), 1e-12)
+        directions[2 * k, 0] = ix / size
+        directions[2 * k, 1] = iy / size
+    return points, directions, arc
+
+
+@njit(cache=True, nogil=True)
+def farthest_from_polyline(points, polyline):
+    """The largest of the points' distances (px) from a polyline of two vertices or more
+    (each point's nearest segment): ``geometry.distances_to_polyline(points,
+    polyline).max()``, the same bits, without its (points, segments) arrays."""
+    farthest = -np.inf
+    for i in range(len(points)):
+        nearest = np.inf
+        for k in range(len(polyline) - 1):
+            ax = polyline[k, 0]
+            ay = polyline[k, 1]
+            abx = polyline[k + 1, 0] - ax
+            aby = polyline[k + 1, 1] - ay
+            apx = points[i, 0] - ax
+            apy = points[i, 1] - ay
+            t = (apx * abx + apy * aby) / max(abx * abx + aby * aby, 1e-12)
+            t = min(max(t, 0.0), 1.0)
+            gx = apx - t * abx
+            gy = apy - t * aby
+            nearest = min(nearest, np.sqrt(gx * gx + gy * gy))
+        farthest = max(farthest, nearest)
+    return farthest
+
+
+@njit(cache=True, nogil=True)
+def unit_tangents(joints):
+    """Unit tangents at the joints (N >= 2, float64): central differences, one-sided at
+    the ends; :func:`service.perception.track_motion.tangents`, the same bits."""
+    n = len(joints)
+    tangent = np.empty((n, 2))
+    for i in range(n):
+        if i == 0:
+            tx = joints[1, 0] - joints[0, 0]
+            ty = joints[1, 1] - joints[0, 1]
+        elif i == n - 1:
+            tx = joints[n - 1, 0] - joints[n - 2, 0]
+            ty = joints[n - 1, 1] - joints[n - 2, 1]
+        else:
+            tx = (joints[i + 1, 0] - joints[i - 1, 0]) / 2.0
+            ty = (joints[i + 1, 1] - joints[i - 1, 1]) / 2.0
+        size = max(np.sqrt(tx * tx + ty * ty), 1e-12)
+        tangent[i, 0] = tx / size
+        tangent[i, 1] = ty / size
+    return tangent

@@ -261,28 +261,13 @@ def fit_pieces(
 
 def _samples(joints: np.ndarray):
     """Joints and segment midpoints, their unit directions, and their arcs (joint units)."""
-    n = len(joints)
-    points = np.empty((2 * n - 1, 2))
-    points[0::2] = joints
-    points[1::2] = 0.5 * (joints[:-1] + joints[1:])
-    steps = np.diff(joints, axis=0)
-    lengths = np.linalg.norm(steps, axis=1)
-    unit = steps / np.maximum(lengths, 1e-12)[:, None]
-    directions = np.empty_like(points)
-    directions[1::2] = unit
-    directions[0] = unit[0]
-    directions[-1] = unit[-1]
-    if n > 2:
-        inner = unit[:-1] + unit[1:]
-        directions[2:-1:2] = inner / np.maximum(np.linalg.norm(inner, axis=1), 1e-12)[:, None]
-    arc = np.concatenate([[0.0], np.cumsum(np.repeat(lengths / 2.0, 2))])
-    return points, directions, arc
+    return _tracking_kernels.piece_samples(np.ascontiguousarray(joints, dtype=np.float64))
 
 
 def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     """(first joint, last joint) of each run of True segments."""
     padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
-    edges = np.diff(padded)
+    edges = padded[1:] - padded[:-1]
     begins = np.flatnonzero(edges == 1)
     ends = np.flatnonzero(edges == -1)
     return [(int(b), int(e)) for b, e in zip(begins, ends, strict=True)]

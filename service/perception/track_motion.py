@@ -13,6 +13,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from service.perception import _tracking_kernels
+
 VELOCITY_KERNEL = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
 """Weights of a joint's velocity and its neighbours' (two each side)."""
 SLIDE_KEPT = 0.9
@@ -33,14 +35,9 @@ small (relative to the data): enough to leave a straight cable's slide at zero."
 
 def tangents(joints: np.ndarray) -> np.ndarray:
     """Unit tangents at the joints (central differences, one-sided at the ends)."""
-    tangent = np.empty_like(joints)
     if len(joints) < 2:
         return np.zeros_like(joints)
-    tangent[0] = joints[1] - joints[0]
-    tangent[-1] = joints[-1] - joints[-2]
-    tangent[1:-1] = (joints[2:] - joints[:-2]) / 2.0
-    length = np.sqrt(tangent[:, 0] ** 2 + tangent[:, 1] ** 2)
-    return tangent / np.maximum(length, 1e-12)[:, None]
+    return _tracking_kernels.unit_tangents(_contiguous(joints))
 
 
 def motion(
@@ -73,17 +70,15 @@ def motion(
     moves with the cable as a whole and keeps its shape.
     """
     tangent = tangents(current) if tangent is None else tangent
-    normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
-    across = ((current - previous) * normal).sum(axis=1)
-    centre = previous[use].mean(axis=0)
-    arm = previous - centre
-    turned = np.column_stack([-arm[:, 1], arm[:, 0]])
-    design = np.column_stack([normal, (turned * normal).sum(axis=1)])
-    count = np.count_nonzero(use)
-    scale = max(float(np.sqrt((arm[use] ** 2).sum(axis=1).mean())), 1.0)
-    ridge = RIDGE * count * np.diag([1.0, 1.0, scale * scale])
-    rows = design[use]
-    values = across[use]
+    # The elementwise work and the sums in one compiled loop each side of the solve
+    # (the same bits as NumPy's), the products of matrices in NumPy (its BLAS).
+    normal, across, turned, rows, values, scale = _tracking_kernels.motion_design(
+        _contiguous(previous), _contiguous(current), _flags(use), _contiguous(tangent)
+    )
+    count = len(values)
+    ridge = np.zeros((3, 3))
+    ridge[0, 0] = ridge[1, 1] = RIDGE * count * 1.0
+    ridge[2, 2] = RIDGE * count * (scale * scale)
     if len(pinned):
         weight = math.sqrt(count / (2.0 * len(pinned)))
         ends = np.array([joint for joint, _ in pinned])
@@ -101,13 +96,18 @@ def motion(
         fitted = _slide_bounded(
             fitted, normal_matrix, tangent, turned, use, carried, tangents(previous)
         )
-    translation_x, translation_y, rotation = fitted
-    rigid = np.array([translation_x, translation_y]) + rotation * turned
-    remainder = across - (rigid * normal).sum(axis=1)
-    result = rigid + smooth_along(remainder)[:, None] * normal
-    if rigid_only is not None:
-        result[rigid_only] = rigid[rigid_only]
-    return result
+    only = np.zeros(len(turned), bool) if rigid_only is None else _flags(rigid_only)
+    return _tracking_kernels.motion_result(
+        _contiguous(fitted), turned, across, normal, only, VELOCITY_KERNEL
+    )
+
+
+def _contiguous(values: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=np.float64)
+
+
+def _flags(values: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=bool)
 
 
 def _slide_bounded(fitted, normal_matrix, tangent, turned, use, carried, carried_tangent):

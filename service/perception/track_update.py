@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from service.perception import _tracking_kernels
-from service.perception.geometry import distances_to_polyline, points_along, rigid_fit
+from service.perception.geometry import points_along
 from service.perception.track_matching import Chains, Fit, Piece, clear_of_edge
 
 TIP_WINDOW = 5.0
@@ -379,8 +379,11 @@ def _chain_tips(joints, placed, chains):
     found: list[list[tuple[float, float, float]]] = [[], []]
     # The track, straight on beyond its ends as far as an end may have slid.
     heads = joints[[0, -1]] - joints[[1, -2]]
-    heads *= tolerance / np.maximum(np.linalg.norm(heads, axis=1), 1e-12)[:, None]
-    extended = np.vstack([joints[:1] + heads[:1], joints, joints[-1:] + heads[1:]])
+    heads *= tolerance / np.maximum(np.sqrt((heads * heads).sum(axis=1)), 1e-12)[:, None]
+    extended = np.empty((len(joints) + 2, 2))
+    extended[0] = joints[0] + heads[0]
+    extended[1:-1] = joints
+    extended[-1] = joints[-1] + heads[1]
     for piece, sign, offset, _ in placed:
         index = piece.chain
         arcs = chains.arcs[index]
@@ -403,7 +406,7 @@ def _chain_tips(joints, placed, chains):
                 continue
             beyond = points[stretch.start : stretch.stop + 1]
             reach = radius + 0.5 * step
-            if distances_to_polyline(beyond, extended).max() > reach:
+            if _tracking_kernels.farthest_from_polyline(beyond, extended) > reach:
                 continue
             found[end].append((s_tip, *points[chain_end]))
     return found
@@ -559,13 +562,20 @@ def _rigid(source: np.ndarray, target: np.ndarray, points: np.ndarray) -> np.nda
         return None
     if len(source) == 1:
         return points + (target.mean(axis=0) - source.mean(axis=0))
-    source_mean, rotation, target_mean = rigid_fit(source, target)
-    return (points - source_mean) @ rotation.T + target_mean
+    # geometry.rigid_fit's sums in one compiled loop (the same bits).
+    sums = _tracking_kernels.rigid_sums(
+        np.ascontiguousarray(source, dtype=np.float64),
+        np.ascontiguousarray(target, dtype=np.float64),
+    )
+    angle = math.atan2(float(sums[4]), float(sums[5]))
+    c, s = math.cos(angle), math.sin(angle)
+    return (points - sums[:2]) @ np.array([[c, -s], [s, c]]).T + sums[2:4]
 
 
 def _uncovered_runs(covered: np.ndarray) -> list[tuple[int, int]]:
     padded = np.concatenate([[True], covered, [True]])
-    edges = np.diff(padded.astype(np.int8))
+    steps = padded.astype(np.int8)
+    edges = steps[1:] - steps[:-1]
     begins = np.flatnonzero(edges == -1)
     ends = np.flatnonzero(edges == 1) - 1
     return [(int(b), int(e)) for b, e in zip(begins, ends, strict=True)]
@@ -594,7 +604,8 @@ def _one_offset_per_chain(placed, chains):
         weights = np.array([placed[i][3][-1] for i in members])
         centre = along_chain[np.argmax(weights)]
         agree = np.abs(along_chain - centre) <= CHAIN_AGREEMENT * chains.step
-        common = float(np.average(along_chain[agree], weights=weights[agree]))
+        kept = weights[agree]  # np.average's sums, without its per-call cost
+        common = float((along_chain[agree] * kept).sum() / kept.sum())
         for i, keep in zip(members, agree, strict=True):
             if keep:
                 piece, _, _, arcs = placed[i]
@@ -612,9 +623,9 @@ def _slide_limit(joints, placed, step) -> float:
     for _, sign, offset, arcs in placed:
         lo, hi = sorted((offset, sign * float(arcs[-1]) + offset))
         seen |= (track_arc >= lo) & (track_arc <= hi)
-    steps = np.diff(joints, axis=0)
+    steps = joints[1:] - joints[:-1]
     angles = np.arctan2(steps[:, 1], steps[:, 0])
-    turns = np.abs((np.diff(angles) + math.pi) % (2.0 * math.pi) - math.pi)
+    turns = np.abs((angles[1:] - angles[:-1] + math.pi) % (2.0 * math.pi) - math.pi)
     inner = seen[1:-1] & seen[:-2] & seen[2:]
     bent = float(turns[inner].sum()) / BENT_TURN
     if bent >= 1.0:

@@ -494,7 +494,8 @@ def _gate(track: TrackRecord, step: float, dt: float) -> float:
     base = _gate_base(track.radius, step)
     if track.steady < STEADY_FRAMES:  # just begun or back: its speed is not known yet
         return 4.0 * base
-    speed = float(np.max(np.linalg.norm(track.velocity, axis=1))) if len(track.velocity) else 0.0
+    velocity = track.velocity  # np.linalg.norm's sums, without its per-call cost
+    speed = float(np.sqrt((velocity * velocity).sum(axis=1)).max()) if len(velocity) else 0.0
     return min(base + 0.5 * speed * dt + 2.0 * track.unseen, 4.0 * base)
 
 
@@ -526,21 +527,22 @@ def _moved(
     """The track registered onto what the frame shows of it (growth included);
     ``seen_colour``: the colour of the pieces of the detection that show it."""
     head, tail = observation.head_growth[::-1], observation.tail_growth
-    targets = np.vstack([head, observation.targets, tail])
-    covered = np.concatenate(
-        [np.ones(len(head), bool), observation.covered, np.ones(len(tail), bool)]
-    )
-    before = np.vstack([head, predicted, tail])
-    grown = replace(observation, targets=targets, covered=covered)
-    previous = np.vstack([head, track.joints, tail])
+    covered, before, grown = observation.covered, predicted, observation
+    previous, velocity = track.joints, track.velocity
+    if len(head) or len(tail):  # grown this frame (arrays are never changed: else shared)
+        targets = np.vstack([head, observation.targets, tail])
+        covered = np.concatenate([np.ones(len(head), bool), covered, np.ones(len(tail), bool)])
+        before = np.vstack([head, predicted, tail])
+        grown = replace(observation, targets=targets, covered=covered)
+        previous = np.vstack([head, track.joints, tail])
+        velocity = np.vstack(
+            [
+                np.repeat(track.velocity[:1], len(head), axis=0),
+                track.velocity,
+                np.repeat(track.velocity[-1:], len(tail), axis=0),
+            ]
+        )
     joints = register(before, grown, step, track.radius, previous)
-    velocity = np.vstack(
-        [
-            np.repeat(track.velocity[:1], len(head), axis=0),
-            track.velocity,
-            np.repeat(track.velocity[-1:], len(tail), axis=0),
-        ]
-    )
     shape = shape_window(track.shape, track.first_joint - len(head), joints, covered, step, frame)
     at = np.arange(len(covered))  # the joints grown this frame were not measured
     use = covered & (at >= len(head)) & (at < len(covered) - len(tail))

@@ -47,6 +47,15 @@ def warm_up_tracking() -> None:
     _tracking_kernels.near_any_segment(line, np.full(4, 2.0), line[:-1].copy(), line[1:].copy())
     _tracking_kernels.constrain_chain(line, np.ones(4), 10.0, np.zeros(4), 2, 1)
     _tracking_kernels.window_medians(np.vstack((line, other)) * 1.0, 3)
+    _tracking_kernels.rigid_sums(line, line + 1.0)
+    _tracking_kernels.piece_samples(line)
+    _tracking_kernels.unit_tangents(line)
+    _tracking_kernels.farthest_from_polyline(other, line)
+    flags = np.ones(4, bool)
+    normal, across, turned, _, _, _ = _tracking_kernels.motion_design(
+        line, line + 1.0, flags, directions
+    )
+    _tracking_kernels.motion_result(np.zeros(3), turned, across, normal, ~flags, np.ones(5) / 5.0)
     if not kernels_cached(TRACKING):
         # numba's cache directory, as the pipeline's warm-up finds it (one for the package).
         cache = getattr(_tracking_kernels.nearest_on_polylines, "_cache", None)

@@ -148,3 +148,69 @@ def chord_walk(points, arcs, start, sign, step, limit):
         u = 0.5 * (lo + hi)
         out.append(_at(points, arcs, u))
     return np.array(out)
+
+
+def motion_numpy(previous, current, use, pinned, tangent, rigid_only):
+    """track_motion.motion as written in NumPy before its kernels (no carried slide):
+    the kernels must give its bits exactly."""
+    normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
+    across = ((current - previous) * normal).sum(axis=1)
+    centre = previous[use].mean(axis=0)
+    arm = previous - centre
+    turned = np.column_stack([-arm[:, 1], arm[:, 0]])
+    design = np.column_stack([normal, (turned * normal).sum(axis=1)])
+    count = np.count_nonzero(use)
+    scale = max(float(np.sqrt((arm[use] ** 2).sum(axis=1).mean())), 1.0)
+    ridge = 0.02 * count * np.diag([1.0, 1.0, scale * scale])
+    rows = design[use]
+    values = across[use]
+    if len(pinned):
+        weight = math.sqrt(count / (2.0 * len(pinned)))
+        extra_rows, extra_values = [], []
+        for joint, displacement in pinned:
+            extra_rows += [[weight, 0.0, weight * turned[joint, 0]]]
+            extra_rows += [[0.0, weight, weight * turned[joint, 1]]]
+            extra_values += [weight * displacement[0], weight * displacement[1]]
+        rows = np.vstack([rows, extra_rows])
+        values = np.concatenate([values, extra_values])
+    fitted = np.linalg.solve(rows.T @ rows + ridge, rows.T @ values)
+    translation_x, translation_y, rotation = fitted
+    rigid = np.array([translation_x, translation_y]) + rotation * turned
+    remainder = across - (rigid * normal).sum(axis=1)
+    kernel = np.array([1.0, 2.0, 3.0, 2.0, 1.0]) / 9.0
+    if len(remainder) >= 3:
+        padded = np.concatenate([remainder[:1]] * 2 + [remainder] + [remainder[-1:]] * 2)
+        remainder = sum(kernel[i] * padded[i : i + len(remainder)] for i in range(5))
+    result = rigid + remainder[:, None] * normal
+    result[rigid_only] = rigid[rigid_only]
+    return result
+
+
+def piece_samples(joints):
+    """track_matching._samples as written in NumPy before its kernel."""
+    n = len(joints)
+    points = np.empty((2 * n - 1, 2))
+    points[0::2] = joints
+    points[1::2] = 0.5 * (joints[:-1] + joints[1:])
+    steps = np.diff(joints, axis=0)
+    lengths = np.linalg.norm(steps, axis=1)
+    unit = steps / np.maximum(lengths, 1e-12)[:, None]
+    directions = np.empty_like(points)
+    directions[1::2] = unit
+    directions[0] = unit[0]
+    directions[-1] = unit[-1]
+    if n > 2:
+        inner = unit[:-1] + unit[1:]
+        directions[2:-1:2] = inner / np.maximum(np.linalg.norm(inner, axis=1), 1e-12)[:, None]
+    arc = np.concatenate([[0.0], np.cumsum(np.repeat(lengths / 2.0, 2))])
+    return points, directions, arc
+
+
+def unit_tangents(joints):
+    """track_motion.tangents as written in NumPy before its kernel."""
+    tangent = np.empty_like(joints)
+    tangent[0] = joints[1] - joints[0]
+    tangent[-1] = joints[-1] - joints[-2]
+    tangent[1:-1] = (joints[2:] - joints[:-2]) / 2.0
+    length = np.sqrt(tangent[:, 0] ** 2 + tangent[:, 1] ** 2)
+    return tangent / np.maximum(length, 1e-12)[:, None]
