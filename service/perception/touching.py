@@ -230,13 +230,15 @@ def split_where_leaving_together(
     Two cables that touch where they leave the picture (or one cable leaving and coming
     back) make a mask shaped as a V whose point the border cuts off: thinning draws one
     line round its point, with no junction. Such a line comes within the picture's
-    border ``margin`` of it at a joint inside the piece, the mask runs on from that joint
-    to the border (the strands leave there), and the line on both sides of that joint
-    heads into the picture, away from the border, turning at that joint by more than the
-    stretches on either side of it turn together (a corner): a cable running along the
-    border, or one bending round close to it (mbest S2/img13, a loop the border clips),
-    does not, its bending changing smoothly along it. Each such piece is cut at that
-    joint into two pieces, each ending at the border.
+    border ``margin`` of it at a joint inside the piece, nearest the border of the joints
+    about it; the mask runs on from that joint to the border (the strands leave there);
+    the line on both sides of that joint heads into the picture, away from the border
+    (two marks out by at least the cable's half width: not along it); and it turns
+    there, at that joint or over it and the next, by far more than the stretches on
+    either side turn (a corner, :func:`_is_corner`): a cable running along the border, or
+    one bending round close to it (mbest S2/img13, a loop the border clips), does not,
+    its bending changing smoothly along it. Each such piece is cut at that joint into
+    two pieces, each ending at the border.
 
     Parameters
     ----------
@@ -265,34 +267,40 @@ def split_where_leaving_together(
     height, width = mask.shape[:2]
     result = list(pieces)
     origin = list(range(len(pieces)))
-    reach = 2.0 * radius
     if not pieces:
         return result, origin
-    # Only pieces with an inner joint within the margin are looked at (one pass over
-    # every joint: most pieces have none).
+    # One pass over every joint: the inner joints within the margin that lie nearest
+    # the border of the line about them (the joints either side no nearer it), where a
+    # V's point would be. Most pictures have none, and nothing more is done.
     joints = np.concatenate([np.asarray(points, np.float64) for points in pieces])
-    to_border = np.minimum(
-        np.minimum(joints[:, 0], joints[:, 1]),
-        np.minimum(width - 1 - joints[:, 0], height - 1 - joints[:, 1]),
-    )
-    near = to_border <= margin
+    xs, ys = joints[:, 0], joints[:, 1]
+    to_border = np.minimum(np.minimum(xs, ys), np.minimum(width - 1 - xs, height - 1 - ys))
     starts = np.cumsum([0] + [len(points) for points in pieces])
+    near = to_border <= margin
     near[starts[:-1]] = False
     near[starts[1:] - 1] = False
-    counts = np.add.reduceat(near.astype(np.int64), starts[:-1]) if len(joints) else []
-    for index in np.flatnonzero(np.asarray(counts) > 0):
-        index = int(index)
+    candidates = np.flatnonzero(near)
+    if not len(candidates):
+        return result, origin
+    gaps = np.column_stack([xs, ys, width - 1 - xs, height - 1 - ys])[candidates]
+    inward = _INWARD[gaps.argmin(axis=1)]
+    offsets = [
+        np.einsum("ij,ij->i", joints[candidates + step] - joints[candidates], inward)
+        for step in (-1, 1)
+    ]
+    lowest = (np.minimum(*offsets) >= 0) & (np.maximum(*offsets) > 0)
+    candidates = candidates[lowest]
+    if not len(candidates):
+        return result, origin
+    owners = np.searchsorted(starts, candidates, side="right") - 1
+    reach = 2.0 * radius
+    for index in sorted(set(owners.tolist())):
         points = np.asarray(pieces[index], np.float64)
-        if len(points) < 3:
-            continue
-        nearest = to_border[starts[index] : starts[index + 1]]
+        own = candidates[owners == index]
+        own = own[np.argsort(to_border[own], kind="stable")] - starts[index]
         along = arc_lengths(points)
         at = next(
-            (
-                int(at)
-                for at in np.argsort(nearest[1:-1], kind="stable") + 1
-                if nearest[at] <= margin and _leave_together(points, along, at, mask, reach, slack)
-            ),
+            (int(at) for at in own if _leave_together(points, along, int(at), mask, reach, slack)),
             None,
         )
         if at is None or min(along[at], along[-1] - along[at]) < min_length:
@@ -303,14 +311,19 @@ def split_where_leaving_together(
     return result, origin
 
 
+# The direction into the picture from its left, top, right and bottom border.
+_INWARD = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
+
+
 def _leave_together(points, along, at, mask, reach, slack) -> bool:
     """Whether two strands leave the picture at joint ``at`` (:func:`split_where_leaving_together`):
-    the mask runs from it to the nearest border, and the line ``reach`` before and after
-    it lies further into the picture, and turns there at a corner, not a bend."""
+    the mask runs from it to the nearest border, the line ``reach`` before and after it
+    lies further into the picture (two marks out, by the cable's half width), and it
+    turns there at a corner, not a bend."""
     height, width = mask.shape[:2]
     gaps = (points[at, 0], points[at, 1], width - 1 - points[at, 0], height - 1 - points[at, 1])
     side = int(np.argmin(gaps))
-    inward = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]][side])
+    inward = _INWARD[side]
     steps = np.arange(0.0, max(gaps[side] - slack, 0.0) + 1e-9, 1.0)
     xs = np.clip(np.rint(points[at, 0] - steps * inward[0]).astype(int), 0, width - 1)
     ys = np.clip(np.rint(points[at, 1] - steps * inward[1]).astype(int), 0, height - 1)
@@ -321,23 +334,60 @@ def _leave_together(points, along, at, mask, reach, slack) -> bool:
     before, after = points_along(points, along, np.array([along[at] - reach, along[at] + reach]))
     if min(float((before - points[at]) @ inward), float((after - points[at]) @ inward)) <= 0:
         return False
-    # A corner, not a bend: a cable's bending changes smoothly along it, so it turns at
-    # the joint no more than the stretches either side of it turn together; two
-    # strands meeting at the border turn there far more than along either (ariadne
-    # simple/00012: 55 degrees against 35 and 0; mbest S2/img13, a loop the border
-    # clips: 12.9 against 4.7 and 6.5).
+    half_width = 0.5 * reach
     reach = max(reach, float(np.diff(along)[max(at - 1, 0) : at + 1].max()))
     if along[at] < 2 * reach or along[-1] - along[at] < 2 * reach:
         return False
-    marks = points_along(points, along, along[at] + reach * np.arange(-2.0, 2.5, 1.0))
-    turns = [_turn(marks[k], marks[k + 1], marks[k + 2]) for k in range(3)]
-    # Joints lie on the pixel grid: each step's direction is known to about a pixel
-    # in ``reach``, so the corner must stand out by more than two such errors.
-    return turns[1] > turns[0] + turns[2] + 2.0 * float(np.arctan(1.0 / reach))
+    # Both strands rise away from the border: two marks out, each lies a cable's half
+    # width further in than the joint (a V's arms), not running along the border.
+    ends = points_along(points, along, along[at] + np.array([-2.0, 2.0]) * reach)
+    if float(((ends - points[at]) @ inward).min()) < half_width:
+        return False
+    return _is_corner(points, along, at, reach)
 
 
-def _turn(before: np.ndarray, at: np.ndarray, after: np.ndarray) -> float:
-    """The angle (radians) between the steps ``before`` to ``at`` and ``at`` to ``after``."""
+def _is_corner(points, along, at, reach) -> bool:
+    """Whether the line turns at joint ``at`` at a corner, not a bend, seen at marks
+    ``reach`` apart (at least a joint step).
+
+    A cable's bending changes smoothly along it, so it turns at a mark no more than the
+    stretches either side of that mark turn together; two strands meeting at the
+    border turn there far more than along either (ariadne simple/00012: 55 degrees
+    against 35 and 0; mbest S2/img13, a loop the border clips: 12.9 against 4.7 and
+    6.5). Thinning rounds the V's cut-off point over about the cable's width, which
+    ``reach`` is no less than, so the corner's turn falls at one mark or is spread over
+    two adjacent ones (tracking video 440004 frames 72-74: 55.5 and 51.2 degrees at the
+    joint and the next, 17.0 and 0.7 beyond). Over two marks (a stretch twice as long)
+    the corner must turn by more than twice what the marks either side of the two turn
+    together (the same ratio of bending along it as at one mark: twice the mean about).
+    Joints lie on the pixel grid: each step's direction is known to about a pixel in
+    ``reach``, so the corner must stand out by more than two such errors.
+    """
+    noise = 2.0 * float(np.arctan(1.0 / reach))
+    ks = [k for k in range(-3, 4) if 0.0 <= along[at] + k * reach <= along[-1]]
+    marks = dict(
+        zip(ks, points_along(points, along, along[at] + reach * np.array(ks, float)), strict=True)
+    )
+    turns = {k: _signed_turn(marks[k - 1], marks[k], marks[k + 1]) for k in ks[1:-1]}
+    for first, count in _CORNER_WINDOWS:
+        flanks = first - 1, first + count
+        if not all(k in turns for k in flanks):
+            continue
+        corner = abs(sum(turns[k] for k in range(first, first + count)))
+        if corner > count * sum(abs(turns[k]) for k in flanks) + noise:
+            return True
+    return False
+
+
+# The stretches of ``count`` marks from mark ``first`` (0: the joint) over which a
+# corner's turn may fall. Not three marks: a cable doubled back round a bend of 3 cable
+# radii (the loops family's tightest) turns by about 150 degrees over three marks.
+_CORNER_WINDOWS = ((0, 1), (0, 2), (-1, 2))
+
+
+def _signed_turn(before: np.ndarray, at: np.ndarray, after: np.ndarray) -> float:
+    """The angle (radians, counter-clockwise in x, y positive) from the step ``before``
+    to ``at`` to the step ``at`` to ``after``."""
     arriving, leaving = at - before, after - at
-    cosine = float(arriving @ leaving) / max(float(np.hypot(*arriving) * np.hypot(*leaving)), 1e-9)
-    return float(np.arccos(np.clip(cosine, -1.0, 1.0)))
+    cross = float(arriving[0] * leaving[1] - arriving[1] * leaving[0])
+    return float(np.arctan2(cross, float(arriving @ leaving)))

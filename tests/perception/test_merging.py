@@ -28,7 +28,7 @@ from service.perception.merging import (
     join_cost,
     merge_chains,
 )
-from service.perception.touching import split_touching_strands
+from service.perception.touching import split_touching_strands, split_where_leaving_together
 from service.synthetic.families import make_family_scene
 from tests.perception.references import merging as reference
 from tests.perception.test_appearance import gap_scene
@@ -772,3 +772,82 @@ def test_two_cables_touching_as_they_leave_the_picture_come_out_as_two_chains():
     cv2.ellipse(mask, (60, 100), (62, 70), 0, 90, 270, 1, 9)
     detection = detect(None, mask=mask > 0)
     assert len(detection.chains) == 1
+
+
+def _crossing_at_the_top_mask(apex_y, half_angle, thickness=9, shape=(200, 300)):
+    """Two straight cables ``thickness`` px wide crossing at ``(150, apex_y)``, each
+    ``half_angle`` degrees from the vertical, drawn on from beyond the top border; and
+    each cable's part in the picture (from the top border down)."""
+    apex = np.array([150.0, apex_y])
+    mask = np.zeros(shape, np.uint8)
+    cables = []
+    for side in (-1.0, 1.0):
+        heading = np.array([side * np.sin(np.radians(half_angle)), np.cos(np.radians(half_angle))])
+        top = apex + (-apex_y / heading[1]) * heading
+        far = (shape[0] - 1 - apex_y) / heading[1], (shape[1] - 1 - apex[0]) / abs(heading[0])
+        bottom = apex + min(far) * heading
+        cables.append([tuple(top), tuple(bottom)])
+        drawn = [top - 30.0 * heading, bottom]
+        cv2.line(mask, *[tuple(round(16 * v) for v in p) for p in drawn], 1, thickness, 8, 4)
+    return mask > 0, cables
+
+
+@pytest.mark.parametrize(("apex_y", "half_angle"), [(-6, 35), (-4, 45), (-2, 55), (0, 60)])
+def test_a_v_whose_turn_thinning_spreads_over_two_joints_is_cut_at_the_border(apex_y, half_angle):
+    """Two cables crossing at or just beyond the top border meet it as a V, and thinning
+    rounds the V's cut-off point so that its turn falls on two joints, not one
+    (tracking video 440004 frames 72-74): each cable must come out as its own chain."""
+    mask, cables = _crossing_at_the_top_mask(apex_y, half_angle)
+    chains = [np.asarray(chain.points, np.float64) for chain in detect(None, mask=mask).chains]
+    assert len(chains) == 2
+    for cable in cables:
+        assert min(_strand_error(chain, cable) for chain in chains) < 6.0
+
+
+@pytest.mark.parametrize(("apex_y", "half_angle"), [(16, 30), (24, 45), (24, 20)])
+def test_a_crossing_near_the_border_is_not_cut_into_a_v(apex_y, half_angle):
+    """Two cables crossing a few cable widths inside the top border: each must come out
+    as one chain through the crossing, to the border."""
+    mask, cables = _crossing_at_the_top_mask(apex_y, half_angle)
+    chains = [np.asarray(chain.points, np.float64) for chain in detect(None, mask=mask).chains]
+    assert len(chains) == 2
+    for cable in cables:
+        assert min(_strand_error(chain, cable) for chain in chains) < 6.0
+
+
+def test_a_tight_hairpin_touching_the_border_stays_one_chain():
+    """A cable doubled back round a bend of 3 cable radii (the loops family's tightest)
+    whose outer side touches the top border: a bend, however tight, is no corner."""
+    mask = np.zeros((200, 300), np.uint8)
+    cv2.ellipse(mask, (150, 18), (14, 14), 0, 180, 360, 1, 9)
+    for x in (136, 164):
+        cv2.line(mask, (x, 18), (x, 199), 1, 9)
+    assert len(detect(None, mask=mask > 0).chains) == 1
+
+
+@pytest.mark.slow
+def test_two_cables_crossing_through_the_top_border_in_video_440004_stay_apart():
+    """Tracking video 440004, frames 72-74: two near-white cables cross just beyond the
+    top border, and their V's turn falls on two joints. The detection must keep the
+    three cables three chains (it joined two round the V, and the tracker made one
+    track of them)."""
+    from service.perception import detect_full
+    from service.synthetic.videos import make_video
+
+    video = make_video(440004)
+    for index in (72, 73, 74):
+        frame = video.frame(index)
+        assert len(detect_full(frame.image, DetectParams(), None).detection.chains) == 3
+
+
+def test_a_cable_kinked_slightly_along_the_border_is_not_cut():
+    """A cable running along the top border, 4-18 px from it, with a kink of 16 degrees
+    at its joint nearest the border (as mbest S2/img4's along the left border, there
+    spread over two joints): its line never rises a half width from the border within
+    two marks of the kink, so it is no V of two cables leaving the picture."""
+    xs = np.arange(0.0, 201.0, 10.0)
+    piece = np.column_stack([xs, 4.0 + np.abs(xs - 100.0) * np.tan(np.radians(8.0))])
+    mask = np.zeros((100, 300), np.uint8)
+    cv2.polylines(mask, [np.rint(piece).astype(np.int32)], False, 1, 9)
+    pieces, origin = split_where_leaving_together([piece], mask > 0, 4.5, 6.5, 2.0, 40.0)
+    assert len(pieces) == 1 and origin == [0]
