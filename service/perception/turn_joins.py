@@ -30,6 +30,9 @@ from service.perception._merging_kernels import MIN_BEND_RADII
 from service.perception.appearance import EndColours, ends_alike
 from service.perception.pairing import cheapest_pairing
 
+NEAR_U_TURN = 0.75 * np.pi
+"""Turns sharper than this (radians) may have gone either way round (:func:`natural_turn`)."""
+
 
 def natural_turn(
     start: np.ndarray,
@@ -85,10 +88,6 @@ def natural_turn(
     parts.append(leave_arc + np.outer(np.arange(0.0, last, step), arriving))
     parts.append(np.asarray(end, np.float64)[None])
     return np.concatenate(parts)
-
-
-# Turns sharper than this (radians) may have gone either way round.
-NEAR_U_TURN = 0.75 * np.pi
 
 
 def _arc_shape(offset, leaving, arriving, turn, min_radius):
