@@ -139,7 +139,9 @@ def skeletonize(mask: np.ndarray) -> np.ndarray:
     top, bottom, left, right = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
     # One pixel of background round the box, so the kernel needs no bounds checks.
     padded = np.zeros((bottom - top + 2, right - left + 2), np.uint8)
-    padded[1:-1, 1:-1] = mask[top:bottom, left:right] != 0
+    box = mask[top:bottom, left:right]
+    # A boolean mask is copied as it is (True is 1): no comparison over the box.
+    padded[1:-1, 1:-1] = box if mask.dtype == np.bool_ else box != 0
     _skeleton_kernels.thin_padded(padded, _THIN_FIRST, _THIN_SECOND, _THIN_STAIRCASE)
     skeleton[top:bottom, left:right] = padded[1:-1, 1:-1].view(np.bool_)
     return skeleton
@@ -163,7 +165,8 @@ def remove_spurs(skeleton: np.ndarray, spur_length: float, passes: int = 2) -> n
     for _ in range(passes):
         if not _skeleton_kernels.remove_spurs_inplace(skeleton, float(spur_length), _BRANCH_COUNT):
             break
-        skeleton = as_uint8(skeletonize(skeleton))
+        # Thinned again as the boolean it is (0/1), which skeletonize copies as it is.
+        skeleton = as_uint8(skeletonize(skeleton.view(np.bool_)))
     return skeleton.view(np.bool_)
 
 
