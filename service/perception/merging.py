@@ -47,7 +47,7 @@ from service.perception.bridge_ends import (
 )
 from service.perception.deadline import Deadline, check
 from service.perception.geometry import arc_lengths, end_fit, polyline_length
-from service.perception.pairing import cheapest_pairing
+from service.perception.pairing import Components, cheapest_pairing
 from service.perception.touching import (
     TouchingSplit,
     split_touching_strands,
@@ -282,22 +282,6 @@ def gap_curve(
     )
 
 
-class _Components:
-    """Union-find over pieces, so a join never closes a chain on itself."""
-
-    def __init__(self, count: int):
-        self.parent = list(range(count))
-
-    def find(self, item: int) -> int:
-        while self.parent[item] != item:
-            self.parent[item] = self.parent[self.parent[item]]
-            item = self.parent[item]
-        return item
-
-    def union(self, a: int, b: int) -> None:
-        self.parent[self.find(a)] = self.find(b)
-
-
 def _best_matching(
     members: list[int],
     ends: list[ChainEnd],
@@ -387,7 +371,7 @@ def choose_joins(
     list of (int, int, float)
         Joined end indices and their cost, in the order they were made.
     """
-    components = _Components(piece_count)
+    components = Components(piece_count)
     used = np.zeros(len(ends), bool)
     chains_left = piece_count
     joins = []

@@ -8,6 +8,23 @@ together, so that one early bad join cannot force later ones.
 from __future__ import annotations
 
 
+class Components:
+    """Union-find over ``count`` items (pieces, ends): which are linked, directly or
+    through others, so that a join never closes a chain on itself."""
+
+    def __init__(self, count: int):
+        self.parent = list(range(count))
+
+    def find(self, item: int) -> int:
+        while self.parent[item] != item:
+            self.parent[item] = self.parent[self.parent[item]]
+            item = self.parent[item]
+        return item
+
+    def union(self, a: int, b: int) -> None:
+        self.parent[self.find(a)] = self.find(b)
+
+
 def cheapest_pairing(
     members: list[int], costs: dict[tuple[int, int], float], unpaired_penalty: float
 ) -> list[tuple[int, int, float]]:

@@ -216,6 +216,21 @@ class Bridge:
     tip: bool
 
 
+def ends_face(point_a, outward_a, point_b, outward_b) -> bool:
+    """Whether two ends (points, unit directions out of their tracks) face each other
+    across a straight gap: each end's direction and the gap line up to within
+    :data:`MAX_BRIDGE_TURN`."""
+    limit = math.cos(MAX_BRIDGE_TURN)
+    if float(outward_a @ -outward_b) < limit:
+        return False
+    gap = point_b - point_a
+    length = float(np.linalg.norm(gap))
+    if length < 1e-9:
+        return True
+    gap = gap / length
+    return float(outward_a @ gap) >= limit and float(outward_b @ -gap) >= limit
+
+
 def bridges(tracks, step: float, taken: set[int]) -> list[Bridge]:
     """Joins of tracks whose open ends face each other across a short, straight gap.
 
@@ -241,7 +256,6 @@ def bridges(tracks, step: float, taken: set[int]) -> list[Bridge]:
             outward = body[0] - body[span] if end == 0 else body[-1] - body[-1 - span]
             outward = outward / max(float(np.linalg.norm(outward)), 1e-12)
             ends.append((index, end, anchor, track.joints[anchor], outward))
-    limit = math.cos(MAX_BRIDGE_TURN)
     found: list[Bridge] = []
     used: set[int] = set()
     pairs = []
@@ -249,13 +263,8 @@ def bridges(tracks, step: float, taken: set[int]) -> list[Bridge]:
         for b, end_b, anchor_b, point_b, out_b in ends[i + 1 :]:
             if a == b:
                 continue
-            gap = point_b - point_a
-            length = float(np.linalg.norm(gap))
-            if length > MAX_BRIDGE_SEGMENTS * step or float(out_a @ -out_b) < limit:
-                continue
-            if length > 1e-9 and (
-                float(out_a @ (gap / length)) < limit or float(out_b @ (-gap / length)) < limit
-            ):
+            length = float(np.linalg.norm(point_b - point_a))
+            if length > MAX_BRIDGE_SEGMENTS * step or not ends_face(point_a, out_a, point_b, out_b):
                 continue
             first, second = tracks[a], tracks[b]
             if colour_distance(first.colour, second.colour) > COLOUR_TOLERANCE:

@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from service.perception.track_matching import Fit, Piece
-from service.perception.track_merging import MAX_BRIDGE_TURN
+from service.perception.track_merging import ends_face
 
 MIN_PART_SEGMENTS = 3.0
 """Segments of a track each of two chains must hold, on its own side of a seam, for the
@@ -80,17 +80,8 @@ class _End:
 
 def _face(a: _End, b: _End) -> bool:
     """Whether two parts' ends face each other across a straight gap, as the tracker
-    joins parts without a chain between them (``track_merging.bridges``): each end's
-    direction and the gap line up to within :data:`MAX_BRIDGE_TURN`."""
-    limit = math.cos(MAX_BRIDGE_TURN)
-    if float(a.outward @ -b.outward) < limit:
-        return False
-    gap = b.point - a.point
-    length = float(np.linalg.norm(gap))
-    if length < 1e-9:
-        return True
-    gap = gap / length
-    return float(a.outward @ gap) >= limit and float(b.outward @ -gap) >= limit
+    joins parts without a chain between them (``track_merging.bridges``)."""
+    return ends_face(a.point, a.outward, b.point, b.outward)
 
 
 def track_seams(

@@ -28,7 +28,7 @@ import numpy as np
 
 from service.perception._merging_kernels import MIN_BEND_RADII
 from service.perception.appearance import EndColours, ends_alike
-from service.perception.pairing import cheapest_pairing
+from service.perception.pairing import Components, cheapest_pairing
 
 NEAR_U_TURN = 0.75 * np.pi
 """Turns sharper than this (radians) may have gone either way round (:func:`natural_turn`)."""
@@ -189,7 +189,7 @@ def turn_joins(
     for a_pos, i in enumerate(members):
         for b_pos in range(a_pos + 1, len(members)):
             j = members[b_pos]
-            if component[ends[i].piece] == component[ends[j].piece]:
+            if component.find(ends[i].piece) == component.find(ends[j].piece):
                 continue
             distance = float(np.hypot(*(positions[a_pos] - positions[b_pos])))
             if distance > reach(i, j):
@@ -222,27 +222,20 @@ def turn_joins(
     return sorted(made, key=lambda item: item[2])
 
 
-def _components(ends: list, joins: list[tuple[int, int, float]]) -> dict[int, int]:
-    """Each piece's chain (a label shared by the pieces the joins link)."""
-    label = {end.piece: end.piece for end in ends}
-
-    def find(piece: int) -> int:
-        while label[piece] != piece:
-            label[piece] = label[label[piece]]
-            piece = label[piece]
-        return piece
-
+def _components(ends: list, joins: list[tuple[int, int, float]]) -> Components:
+    """The pieces' chains: pieces the joins link share a root."""
+    components = Components(max((end.piece for end in ends), default=-1) + 1)
     for i, j, _ in joins:
-        label[find(ends[i].piece)] = find(ends[j].piece)
-    return {piece: find(piece) for piece in label}
+        components.union(ends[i].piece, ends[j].piece)
+    return components
 
 
 def _groups(pairs: list[tuple[int, int]]) -> list[set[int]]:
     """The ends linked, directly or through others, by ``pairs``."""
-    groups: list[set[int]] = []
+    linked = Components(max((max(pair) for pair in pairs), default=-1) + 1)
     for i, j in pairs:
-        touched = [group for group in groups if i in group or j in group]
-        merged = {i, j}.union(*touched)
-        groups = [group for group in groups if not any(group is t for t in touched)]
-        groups.append(merged)
-    return groups
+        linked.union(i, j)
+    groups: dict[int, set[int]] = {}
+    for pair in pairs:
+        groups.setdefault(linked.find(pair[0]), set()).update(pair)
+    return list(groups.values())

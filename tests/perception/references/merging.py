@@ -7,6 +7,7 @@ import numpy as np
 from service.perception import _merging_kernels, merging
 from service.perception.appearance import colour_penalty
 from service.perception.geometry import angle_between
+from service.perception.pairing import Components
 
 
 def _arc(start: np.ndarray, heading: np.ndarray, turn: float, radius: float, step: float):
@@ -184,7 +185,7 @@ def choose_joins(
 ):
     """:func:`service.perception.merging.choose_joins` over every pair of ends: a distance
     matrix of all ends and a plain loop over every pair of free ends."""
-    components = merging._Components(piece_count)
+    components = Components(piece_count)
     used = np.zeros(len(ends), bool)
     chains_left = piece_count
     joins = []
