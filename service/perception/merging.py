@@ -69,6 +69,8 @@ BORDER_MARGIN_PX = 2.0
 # at most this many joints at an end are left out of its fit for being narrow.
 FULL_WIDTH_FRACTION = 0.8
 NARROW_END_JOINTS = 4
+# A piece measures its own full width when it has this many joints beyond those.
+MIN_INTERIOR_JOINTS = 3
 
 
 @dataclass(frozen=True)
@@ -128,9 +130,10 @@ def chain_ends(
     The end fit leaves out the last ``skip`` of arc length, and with ``distance`` (the
     mask's distance transform) also every joint at the end where the cable is narrower
     than its full width (``full_width``, or more for a piece whose joints are typically
-    wider): where an occluder cuts a cable at a slant, thinning bends the end toward the
-    cut's far corner over more than one radius, and that stretch would tilt the end's
-    direction.
+    wider, less for a long piece thinner in its middle): where an occluder cuts a cable
+    at a slant, thinning bends the end toward the cut's far corner over more than one
+    radius, and that stretch would tilt the end's direction. For the same reason a short
+    piece's end fit stops short of its other end's narrow tip.
     """
     ends = []
     medians = None
@@ -142,20 +145,57 @@ def chain_ends(
         medians = _merging_kernels.median_distance_per_piece(
             np.ascontiguousarray(distance, np.float32), joints, starts
         )
+    interior = (
+        _interior_medians(pieces, distance) if distance is not None else np.zeros(len(pieces))
+    )
     for index, points in enumerate(pieces):
         piece_full = full_width
         if medians is not None and len(points) >= 3:
             piece_full = max(full_width, FULL_WIDTH_FRACTION * float(medians[index]))
+        if interior[index] > 0:
+            # A cable thinner than the picture's typical one is at its full width
+            # where its own middle is: held to the typical width, its every joint
+            # would look narrow, and a joint widened by a bend or a touching strand
+            # would cut the end's fit short by several joints. (Only ever lower: a
+            # blob the piece runs through widens its middle.)
+            piece_full = min(piece_full, FULL_WIDTH_FRACTION * float(interior[index]))
         piece_width = float(medians[index]) if medians is not None else 0.0
+        skips = [skip, skip]
+        if distance is not None:
+            skips = [
+                max(skip, _narrow_end_length(points, at_start, distance, piece_full))
+                for at_start in (True, False)
+            ]
+        length = polyline_length(points)
         for at_start in (True, False):
-            end_skip = skip
-            if distance is not None:
-                end_skip = max(skip, _narrow_end_length(points, at_start, distance, piece_full))
-            position, direction, curvature = end_fit(points, at_start, span, end_skip)
+            end_skip, far_skip = skips if at_start else skips[::-1]
+            # A short piece's fit stops short of its other end's narrow tip: a cut
+            # there bends toward the cut's corner and would tilt this end.
+            reach = length - end_skip - far_skip
+            end_span = min(span, reach) if far_skip > skip and reach >= 0.5 * span else span
+            position, direction, curvature = end_fit(points, at_start, end_span, end_skip)
             ends.append(
                 ChainEnd(index, at_start, position, direction, curvature, end_skip, piece_width)
             )
     return ends
+
+
+def _interior_medians(pieces: list[np.ndarray], distance: np.ndarray) -> np.ndarray:
+    """Per piece, the median distance transform at its joints away from both ends (more
+    than :data:`NARROW_END_JOINTS` in), where no cut end narrows it; 0 for a piece with
+    fewer than :data:`MIN_INTERIOR_JOINTS` such joints."""
+    result = np.zeros(len(pieces))
+    long = [
+        k for k, p in enumerate(pieces) if len(p) >= 2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS
+    ]
+    if long:
+        middles = [pieces[k][NARROW_END_JOINTS:-NARROW_END_JOINTS] for k in long]
+        starts = np.cumsum([0] + [len(points) for points in middles]).astype(np.int64)
+        joints = np.ascontiguousarray(np.concatenate(middles), dtype=np.float64)
+        result[long] = _merging_kernels.median_distance_per_piece(
+            np.ascontiguousarray(distance, np.float32), joints, starts
+        )
+    return result
 
 
 def _narrow_end_length(points, at_start, distance, full_width, limit=NARROW_END_JOINTS):

@@ -137,6 +137,35 @@ def test_end_directions_leave_out_a_cut_end_where_the_cable_narrows():
     assert abs(adaptive.direction[1]) < 0.02 and adaptive.direction[0] > 0.99
 
 
+def test_a_thin_cable_is_held_to_its_own_width_not_the_pictures():
+    # A cable of half width 3 in a picture whose cables are typically 4.5: one joint
+    # widened (a bend, a touching strand) must not make the joints before it a cut end.
+    piece = np.array([[10.0 + 10 * k, 50.0] for k in range(15)])
+    distance = np.zeros((100, 200), np.float32)
+    distance[47:54, :] = 3.0
+    distance[50, 40] = 4.2
+    radius = 4.5
+    ends = chain_ends(
+        [piece], span=40.0, skip=radius, distance=distance, full_width=0.8 * (radius + 0.5)
+    )
+    assert [end.skip for end in ends] == [radius, radius]
+
+
+def test_a_short_pieces_end_fit_stops_short_of_its_other_ends_cut():
+    # A 38 px piece along y = 50 whose far end bends into a slanted cut's corner: the
+    # near end's fit leaves that hook out and keeps the cable's axis.
+    piece = np.array([[x, 50.0] for x in range(20, 51, 5)] + [[55.0, 53.0], [58.0, 57.0]])
+    mask = np.zeros((100, 100), np.uint8)
+    cv2.line(mask, (0, 50), (53, 50), 1, 13)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    radius = 6.0
+    near = chain_ends(
+        [piece], span=40.0, skip=radius, distance=distance, full_width=0.8 * (radius + 0.5)
+    )[0]
+    np.testing.assert_allclose(near.position, [20.0, 50.0], atol=1e-6)
+    np.testing.assert_allclose(near.direction, [-1.0, 0.0], atol=1e-6)
+
+
 def test_a_short_piece_joined_on_both_sides_is_bridged_along_its_partners_line():
     # A straight cable along y = 50 seen in three pieces: the middle one, between two
     # occluders, is short and its thinned line is tilted (cut at a slant at both ends).
