@@ -61,7 +61,7 @@ def test_a_u_turn_under_an_object_is_joined():
 @pytest.mark.parametrize(("tips", "apart"), [("round", 40), ("cut", 70)])
 def test_two_cables_ending_side_by_side_on_open_background_are_not_joined(tips, apart):
     """Nothing shows over the turn: two cables' own round tips stay two cables, and so
-    do two ends cut square whose turn would hide more cable (24 radii) than an object
+    do two ends cut square whose turn would hide more cable (22 radii) than an object
     of the background's own colour does (``merging.CUT_GAP_RADII``)."""
     assert _chains(box=False, tips=tips, apart=apart) == 2
 
