@@ -836,7 +836,7 @@ def merge_chains(
     # pixel beyond the border: the full half width is radius + 0.5.
     full_width = FULL_WIDTH_FRACTION * (radius + 0.5)
     if mask is not None and pieces:
-        pieces, _ = split_where_leaving_together(
+        pieces = split_where_leaving_together(
             pieces, mask, radius, radius + BORDER_MARGIN_PX, BORDER_MARGIN_PX, span
         )
     ends = chain_ends(pieces, span, skip=radius, distance=distance, full_width=full_width)
