@@ -137,17 +137,21 @@ def chain_ends(
     """
     ends = []
     medians = None
+    interior = np.zeros(len(pieces))
     if distance is not None and pieces:
         # Cables differ in width: a piece's own full width is the typical distance to
-        # the border at its joints.
-        starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
-        joints = np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64)
-        medians = _merging_kernels.median_distance_per_piece(
+        # the border at its joints, and for a long piece also that away from both ends
+        # (more than NARROW_END_JOINTS in), where no cut end narrows it.
+        minimum = 2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS
+        long = [k for k, points in enumerate(pieces) if len(points) >= minimum]
+        middles = [pieces[k][NARROW_END_JOINTS:-NARROW_END_JOINTS] for k in long]
+        parts = list(pieces) + middles
+        starts = np.cumsum([0] + [len(points) for points in parts]).astype(np.int64)
+        joints = np.ascontiguousarray(np.concatenate(parts), dtype=np.float64)
+        values = _merging_kernels.median_distance_per_piece(
             np.ascontiguousarray(distance, np.float32), joints, starts
         )
-    interior = (
-        _interior_medians(pieces, distance) if distance is not None else np.zeros(len(pieces))
-    )
+        medians, interior[long] = values[: len(pieces)], values[len(pieces) :]
     for index, points in enumerate(pieces):
         piece_full = full_width
         if medians is not None and len(points) >= 3:
@@ -178,24 +182,6 @@ def chain_ends(
                 ChainEnd(index, at_start, position, direction, curvature, end_skip, piece_width)
             )
     return ends
-
-
-def _interior_medians(pieces: list[np.ndarray], distance: np.ndarray) -> np.ndarray:
-    """Per piece, the median distance transform at its joints away from both ends (more
-    than :data:`NARROW_END_JOINTS` in), where no cut end narrows it; 0 for a piece with
-    fewer than :data:`MIN_INTERIOR_JOINTS` such joints."""
-    result = np.zeros(len(pieces))
-    long = [
-        k for k, p in enumerate(pieces) if len(p) >= 2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS
-    ]
-    if long:
-        middles = [pieces[k][NARROW_END_JOINTS:-NARROW_END_JOINTS] for k in long]
-        starts = np.cumsum([0] + [len(points) for points in middles]).astype(np.int64)
-        joints = np.ascontiguousarray(np.concatenate(middles), dtype=np.float64)
-        result[long] = _merging_kernels.median_distance_per_piece(
-            np.ascontiguousarray(distance, np.float32), joints, starts
-        )
-    return result
 
 
 def _narrow_end_length(points, at_start, distance, full_width, limit=NARROW_END_JOINTS):
