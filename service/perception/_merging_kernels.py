@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from service.perception._geometry_kernels import end_fit
 from service.perception._shared_kernels import solve_small
 
 # --------------------------------------------------------------------------- end widths
@@ -38,6 +39,114 @@ def median_distance_per_piece(distance, points, starts):
         else:
             medians[k] = (values[middle - 1] + values[middle]) / np.float32(2.0)
     return medians
+
+
+@njit(cache=True, nogil=True)
+def narrow_end_length(points, start, stop, at_start, distance, full_width, limit):
+    """merging._narrow_end_length on piece ``points[start:stop]``: the arc length from
+    the end to the first of its ``limit + 1`` joints nearest the end where ``distance``
+    (float32) reaches ``full_width`` (compared in float32, as NumPy compares a float32
+    with a Python float), else 0."""
+    height, width = distance.shape
+    threshold = np.float32(full_width)
+    length = 0.0
+    previous = start if at_start else stop - 1
+    for k in range(min(stop - start, limit + 1)):
+        index = start + k if at_start else stop - 1 - k
+        if k:
+            length += np.hypot(
+                points[index, 0] - points[previous, 0], points[index, 1] - points[previous, 1]
+            )
+        col = min(max(int(np.rint(points[index, 0])), 0), width - 1)
+        row = min(max(int(np.rint(points[index, 1])), 0), height - 1)
+        if distance[row, col] >= threshold:
+            return length
+        previous = index
+    return 0.0
+
+
+@njit(cache=True, nogil=True)
+def fit_chain_ends(points, starts, distance, full_widths, skip, span, narrow_limit):
+    """merging.chain_ends' fits of both ends of every piece, as geometry.end_fit gives them.
+
+    Piece ``k`` is ``points[starts[k]:starts[k + 1]]`` (two joints or more); its ends are
+    ``2 k`` (at its first joint) and ``2 k + 1``. Each end's fit leaves out ``skip`` of
+    arc length, or more where the cable is narrow (:func:`narrow_end_length` below
+    ``full_widths[k]``, looked at only when ``distance`` is not empty).
+
+    Returns
+    -------
+    positions, directions : ndarray
+        ``(2 K, 2)`` fitted end points and outward unit tangents.
+    curvatures, skips : ndarray
+        ``(2 K,)`` the fits' signed curvatures (0 where too short to fit) and the arc
+        lengths their fits left out.
+    """
+    count = starts.size - 1
+    positions = np.empty((2 * count, 2))
+    directions = np.empty((2 * count, 2))
+    curvatures = np.zeros(2 * count)
+    skips = np.empty(2 * count)
+    for k in range(count):
+        start, stop = starts[k], starts[k + 1]
+        for side in range(2):
+            at_start = side == 0
+            end = 2 * k + side
+            end_skip = skip
+            if distance.shape[0] > 0:
+                narrow = narrow_end_length(
+                    points, start, stop, at_start, distance, full_widths[k], narrow_limit
+                )
+                end_skip = max(skip, narrow)
+            skips[end] = end_skip
+            backwards = points[start:stop] if at_start else points[start:stop][::-1]
+            fitted, x0, y0, dx, dy, last, ddx, ddy = end_fit(backwards, end_skip, span)
+            # As geometry.end_fit: the linear term points inwards; outwards is its opposite.
+            speed = np.hypot(dx, dy)
+            if fitted and speed > 1e-9:
+                curvatures[end] = -(dx * ddy - dy * ddx) / speed**3.0
+                positions[end, 0] = x0
+                positions[end, 1] = y0
+                tangent_x = -dx
+                tangent_y = -dy
+            else:
+                positions[end, 0] = backwards[0, 0]
+                positions[end, 1] = backwards[0, 1]
+                tangent_x = backwards[0, 0] - backwards[last, 0]
+                tangent_y = backwards[0, 1] - backwards[last, 1]
+            norm = np.hypot(tangent_x, tangent_y)
+            if norm > 1e-12:
+                directions[end, 0] = tangent_x / norm
+                directions[end, 1] = tangent_y / norm
+            else:
+                directions[end, 0] = 0.0
+                directions[end, 1] = 0.0
+    return positions, directions, curvatures, skips
+
+
+@njit(cache=True, nogil=True)
+def pair_join_costs(positions, directions, curvatures, first, second, weights, max_gap, radius):
+    """:func:`join_cost` of ends ``first[k]`` and ``second[k]`` for every ``k``."""
+    costs = np.empty(first.size)
+    for k in range(first.size):
+        i = first[k]
+        j = second[k]
+        costs[k] = join_cost(
+            positions[i, 0],
+            positions[i, 1],
+            directions[i, 0],
+            directions[i, 1],
+            curvatures[i],
+            positions[j, 0],
+            positions[j, 1],
+            directions[j, 0],
+            directions[j, 1],
+            curvatures[j],
+            weights,
+            max_gap,
+            radius,
+        )
+    return costs
 
 
 # --------------------------------------------------------------------------- candidate joins
@@ -200,28 +309,15 @@ def candidate_joins(
     pairs = np.empty((count, 2), np.int64)
     _walk_candidates(positions, piece_of_end, free, max_distance, cell, True, pairs)
     distances = np.empty(count)
-    costs = np.empty(count)
     for k in range(count):
         i = pairs[k, 0]
         j = pairs[k, 1]
         distances[k] = np.hypot(
             positions[i, 0] - positions[j, 0], positions[i, 1] - positions[j, 1]
         )
-        costs[k] = join_cost(
-            positions[i, 0],
-            positions[i, 1],
-            directions[i, 0],
-            directions[i, 1],
-            curvatures[i],
-            positions[j, 0],
-            positions[j, 1],
-            directions[j, 0],
-            directions[j, 1],
-            curvatures[j],
-            weights,
-            max_gap,
-            radius,
-        )
+    costs = pair_join_costs(
+        positions, directions, curvatures, pairs[:, 0], pairs[:, 1], weights, max_gap, radius
+    )
     return pairs, distances, costs
 
 

@@ -46,7 +46,7 @@ from service.perception.bridge_ends import (
     partners,
 )
 from service.perception.deadline import Deadline, check
-from service.perception.geometry import arc_lengths, end_fit, polyline_length
+from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
 from service.perception.touching import (
     TouchingSplit,
@@ -132,48 +132,39 @@ def chain_ends(
     cut's far corner over more than one radius, and that stretch would tilt the end's
     direction.
     """
-    ends = []
-    medians = None
-    if distance is not None and pieces:
+    if not pieces:
+        return []
+    starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
+    joints = np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64)
+    widths = np.zeros(len(pieces))
+    full_widths = np.full(len(pieces), float(full_width))
+    narrow_in = np.zeros((0, 0), np.float32)  # empty: no end is left out for being narrow
+    if distance is not None:
+        narrow_in = np.ascontiguousarray(distance, np.float32)
         # Cables differ in width: a piece's own full width is the typical distance to
         # the border at its joints.
-        starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
-        joints = np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64)
-        medians = _merging_kernels.median_distance_per_piece(
-            np.ascontiguousarray(distance, np.float32), joints, starts
+        widths = _merging_kernels.median_distance_per_piece(narrow_in, joints, starts)
+        long_enough = np.diff(starts) >= 3
+        full_widths[long_enough] = np.maximum(
+            full_widths[long_enough], FULL_WIDTH_FRACTION * widths[long_enough]
         )
-    for index, points in enumerate(pieces):
-        piece_full = full_width
-        if medians is not None and len(points) >= 3:
-            piece_full = max(full_width, FULL_WIDTH_FRACTION * float(medians[index]))
-        piece_width = float(medians[index]) if medians is not None else 0.0
-        for at_start in (True, False):
-            end_skip = skip
-            if distance is not None:
-                end_skip = max(skip, _narrow_end_length(points, at_start, distance, piece_full))
-            position, direction, curvature = end_fit(points, at_start, span, end_skip)
-            ends.append(
-                ChainEnd(index, at_start, position, direction, curvature, end_skip, piece_width)
-            )
-    return ends
-
-
-def _narrow_end_length(points, at_start, distance, full_width, limit=NARROW_END_JOINTS):
-    """Arc length from the tip to the first joint where the cable has its full width.
-
-    0 when none of the first ``limit`` joints reaches it (a thin piece throughout).
-    """
-    ordered = points if at_start else points[::-1]
-    height, width = distance.shape
-    length = 0.0
-    for k in range(min(len(ordered), limit + 1)):
-        if k:
-            length += float(np.hypot(*(ordered[k] - ordered[k - 1])))
-        col = min(max(round(float(ordered[k][0])), 0), width - 1)
-        row = min(max(round(float(ordered[k][1])), 0), height - 1)
-        if distance[row, col] >= full_width:
-            return length
-    return 0.0
+    # Both fits of every piece in one compiled loop (geometry.end_fit's, end by end).
+    positions, directions, curvatures, skips = _merging_kernels.fit_chain_ends(
+        joints, starts, narrow_in, full_widths, float(skip), float(span), NARROW_END_JOINTS
+    )
+    curvatures, skips, widths = curvatures.tolist(), skips.tolist(), widths.tolist()
+    return [
+        ChainEnd(
+            end // 2,
+            end % 2 == 0,
+            positions[end].copy(),
+            directions[end].copy(),
+            curvatures[end],
+            skips[end],
+            widths[end // 2],
+        )
+        for end in range(2 * len(pieces))
+    ]
 
 
 def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> float:
@@ -298,21 +289,35 @@ def _best_matching(
     junction thinning bends each strand toward where the strands meet, so the bending
     there is not the cable's, and the gaps are short.
     """
-    straight = {member: replace(ends[member], curvature=0.0) for member in members}
-    pairs = [
-        (a, b)
-        for a_pos, a in enumerate(members)
-        for b in members[a_pos + 1 :]
-        if ends[a].piece != ends[b].piece
+    # Positions in ``members`` of every pair of ends of different pieces.
+    local = [
+        (a_pos, b_pos)
+        for a_pos in range(len(members))
+        for b_pos in range(a_pos + 1, len(members))
+        if ends[members[a_pos]].piece != ends[members[b_pos]].piece
     ]
-    colour_costs = [0.0] * len(pairs)
-    if colours is not None and pairs:
-        first, second = np.array(pairs).T
-        colour_costs = (params.colour_weight * colour_penalty(colours, first, second)).tolist()
-    costs = {
-        (a, b): join_cost(straight[a], straight[b], params, radius) + extra
-        for (a, b), extra in zip(pairs, colour_costs, strict=True)
-    }
+    costs = {}
+    if local:
+        first_local = np.array([a_pos for a_pos, _ in local], np.int64)
+        second_local = np.array([b_pos for _, b_pos in local], np.int64)
+        # Every pair's join_cost in one call, with the ends' curvature set to 0.
+        pair_costs = _merging_kernels.pair_join_costs(
+            np.array([ends[member].position for member in members], np.float64),
+            np.array([ends[member].direction for member in members], np.float64),
+            np.zeros(len(members)),
+            first_local,
+            second_local,
+            np.array([params.distance_weight, params.direction_weight, params.curvature_weight]),
+            float(params.max_gap),
+            float(radius),
+        )
+        if colours is not None:
+            member_ends = np.array(members, np.int64)
+            pair_costs = pair_costs + params.colour_weight * colour_penalty(
+                colours, member_ends[first_local], member_ends[second_local]
+            )
+        pairs = [(members[a_pos], members[b_pos]) for a_pos, b_pos in local]
+        costs = dict(zip(pairs, pair_costs.tolist(), strict=True))
     return cheapest_pairing(members, costs, params.merge_cost_threshold)
 
 

@@ -458,7 +458,8 @@ def warm_up() -> None:
         np.array([[6.0, 0.0], [6.0, 4.0], [6.0, 8.0], [6.0, 12.0]]),
     ]
     ends = chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
-    choose_joins(ends, len(strands), DetectParams(), radius)  # the candidates' grid
+    # The candidates' grid, and a junction's pairing (the strands' first ends meet).
+    choose_joins(ends, len(strands), DetectParams(), radius, junction_of_end=[0, -1, 0, -1])
     # The image's evidence: ends running to the border, the ends' colours (warmed even
     # when a caller's colour_weight is 0).
     colour = DetectParams(colour_weight=0.5)

@@ -190,6 +190,38 @@ def test_gap_curve_kernels_equal_the_references_in_every_shape(seed):
 
 
 @pytest.mark.parametrize("seed", range(3))
+def test_chain_ends_kernel_equals_the_plain_fits_bit_for_bit(seed):
+    # Wandering pieces of 2 to 40 joints over a distance map with narrow and wide places,
+    # with and without the narrow ends left out: every end's fit as geometry.end_fit's.
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((120, 160), np.uint8)
+    for _ in range(6):
+        start, stop = rng.integers(0, 160, 2), rng.integers(0, 120, 2)
+        cv2.line(mask, (int(start[0]), int(stop[0])), (int(start[1]), int(stop[1])), 1, 9)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    pieces = []
+    for _ in range(30):
+        steps = rng.normal(size=(int(rng.integers(2, 40)), 2)) * 3.0 + rng.normal(size=2) * 4.0
+        pieces.append(rng.uniform(0, 150, 2) + np.cumsum(steps, axis=0))
+    for arguments in (
+        {"span": 40.0},
+        {"span": 20.0, "skip": 4.0},
+        {"span": 30.0, "skip": 3.0, "distance": distance, "full_width": 2.8},
+    ):
+        fast, plain = chain_ends(pieces, **arguments), reference.chain_ends(pieces, **arguments)
+        assert len(fast) == len(plain) == 2 * len(pieces)
+        for got, expected in zip(fast, plain, strict=True):
+            assert (got.piece, got.at_start) == (expected.piece, expected.at_start)
+            assert np.array_equal(got.position, expected.position)
+            assert np.array_equal(got.direction, expected.direction)
+            assert (got.curvature, got.skip, got.width) == (
+                expected.curvature,
+                expected.skip,
+                expected.width,
+            )
+
+
+@pytest.mark.parametrize("seed", range(3))
 def test_median_distance_per_piece_equals_numpy(seed):
     rng = np.random.default_rng(seed)
     distance = (rng.random((60, 80)) * 9).astype(np.float32)

@@ -1,13 +1,59 @@
-"""Plain step 6: the gap curves (the natural curve's three shapes and the smooth cubic),
-and the choice of joins costing every pair of chain ends (the code the grid of
+"""Plain step 6: the end fits piece by piece (the code ``_merging_kernels.fit_chain_ends``
+replaced), the gap curves (the natural curve's three shapes and the smooth cubic), and the
+choice of joins costing every pair of chain ends (the code the grid of
 ``_merging_kernels.candidate_joins`` replaced)."""
 
 import numpy as np
 
 from service.perception import _merging_kernels, merging
 from service.perception.appearance import colour_penalty
-from service.perception.geometry import angle_between
+from service.perception.geometry import angle_between, end_fit
 from service.perception.pairing import Components
+
+
+def chain_ends(pieces, span, skip=0.0, distance=None, full_width=0.0):
+    """:func:`service.perception.merging.chain_ends` end by end, through
+    :func:`service.perception.geometry.end_fit`."""
+    ends = []
+    medians = None
+    if distance is not None and pieces:
+        starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
+        joints = np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64)
+        medians = _merging_kernels.median_distance_per_piece(
+            np.ascontiguousarray(distance, np.float32), joints, starts
+        )
+    for index, points in enumerate(pieces):
+        piece_full = full_width
+        if medians is not None and len(points) >= 3:
+            piece_full = max(full_width, merging.FULL_WIDTH_FRACTION * float(medians[index]))
+        piece_width = float(medians[index]) if medians is not None else 0.0
+        for at_start in (True, False):
+            end_skip = skip
+            if distance is not None:
+                end_skip = max(skip, _narrow_end_length(points, at_start, distance, piece_full))
+            position, direction, curvature = end_fit(points, at_start, span, end_skip)
+            ends.append(
+                merging.ChainEnd(
+                    index, at_start, position, direction, curvature, end_skip, piece_width
+                )
+            )
+    return ends
+
+
+def _narrow_end_length(points, at_start, distance, full_width, limit=merging.NARROW_END_JOINTS):
+    """Arc length from the tip to the first joint where the cable has its full width
+    (0 when none of the first ``limit`` joints reaches it)."""
+    ordered = points if at_start else points[::-1]
+    height, width = distance.shape
+    length = 0.0
+    for k in range(min(len(ordered), limit + 1)):
+        if k:
+            length += float(np.hypot(*(ordered[k] - ordered[k - 1])))
+        col = min(max(round(float(ordered[k][0])), 0), width - 1)
+        row = min(max(round(float(ordered[k][1])), 0), height - 1)
+        if distance[row, col] >= full_width:
+            return length
+    return 0.0
 
 
 def _arc(start: np.ndarray, heading: np.ndarray, turn: float, radius: float, step: float):
