@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from service.perception._geometry_kernels import end_fit
+from service.perception._geometry_kernels import outward_fit
 from service.perception._shared_kernels import solve_small
 
 # --------------------------------------------------------------------------- end widths
@@ -85,7 +85,7 @@ def fit_chain_ends(points, starts, distance, full_widths, skip, span, narrow_lim
     count = starts.size - 1
     positions = np.empty((2 * count, 2))
     directions = np.empty((2 * count, 2))
-    curvatures = np.zeros(2 * count)
+    curvatures = np.empty(2 * count)
     skips = np.empty(2 * count)
     for k in range(count):
         start, stop = starts[k], starts[k + 1]
@@ -100,27 +100,12 @@ def fit_chain_ends(points, starts, distance, full_widths, skip, span, narrow_lim
                 end_skip = max(skip, narrow)
             skips[end] = end_skip
             backwards = points[start:stop] if at_start else points[start:stop][::-1]
-            fitted, x0, y0, dx, dy, last, ddx, ddy = end_fit(backwards, end_skip, span)
-            # As geometry.end_fit: the linear term points inwards; outwards is its opposite.
-            speed = np.hypot(dx, dy)
-            if fitted and speed > 1e-9:
-                curvatures[end] = -(dx * ddy - dy * ddx) / speed**3.0
-                positions[end, 0] = x0
-                positions[end, 1] = y0
-                tangent_x = -dx
-                tangent_y = -dy
-            else:
-                positions[end, 0] = backwards[0, 0]
-                positions[end, 1] = backwards[0, 1]
-                tangent_x = backwards[0, 0] - backwards[last, 0]
-                tangent_y = backwards[0, 1] - backwards[last, 1]
-            norm = np.hypot(tangent_x, tangent_y)
-            if norm > 1e-12:
-                directions[end, 0] = tangent_x / norm
-                directions[end, 1] = tangent_y / norm
-            else:
-                directions[end, 0] = 0.0
-                directions[end, 1] = 0.0
+            x, y, dx, dy, curvature = outward_fit(backwards, end_skip, span)
+            positions[end, 0] = x
+            positions[end, 1] = y
+            directions[end, 0] = dx
+            directions[end, 1] = dy
+            curvatures[end] = curvature
     return positions, directions, curvatures, skips
 
 
@@ -147,6 +132,79 @@ def pair_join_costs(positions, directions, curvatures, first, second, weights, m
             radius,
         )
     return costs
+
+
+# --------------------------------------------------------------------------- junctions of ends
+
+
+@njit(cache=True, nogil=True)
+def _in_grown_zones(zones, row, col, reach):
+    """Whether pixel (row, col) lies within ``reach`` (a square's half side) of a zone
+    pixel: on the zones grown by ``cv2.dilate`` with a ``2 reach + 1`` square."""
+    if zones[row, col]:
+        return True
+    height, width = zones.shape
+    for r in range(max(row - reach, 0), min(row + reach + 1, height)):
+        for c in range(max(col - reach, 0), min(col + reach + 1, width)):
+            if zones[r, c]:
+                return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def grown_zone_labels(zones, positions, reach):
+    """merging.junctions_of_ends: the 8-connected piece of the grown zones (see
+    :func:`_in_grown_zones`) each position's pixel lies in, or -1.
+
+    Positions ``(x, y)`` are rounded half to even and clipped to the image. Pieces are
+    numbered from 0 in the order the positions first reach them; only the pieces the
+    positions lie in are filled, one pixel test of the grown zones at a time, never
+    the whole picture.
+    """
+    height, width = zones.shape
+    count = positions.shape[0]
+    rows = np.empty(count, np.int64)
+    cols = np.empty(count, np.int64)
+    for index in range(count):
+        cols[index] = min(max(int(np.rint(positions[index, 0])), 0), width - 1)
+        rows[index] = min(max(int(np.rint(positions[index, 1])), 0), height - 1)
+    # Per pixel: 0 not looked at, 1 off the grown zones, 2 on a piece already filled.
+    state = np.zeros((height, width), np.uint8)
+    labels = np.full(count, -1, np.int64)
+    stack = np.empty(1024, np.int64)
+    pieces = 0
+    for index in range(count):
+        row, col = rows[index], cols[index]
+        if state[row, col] or not _in_grown_zones(zones, row, col, reach):
+            continue  # off the zones, or on a piece filled (and labelled) before
+        state[row, col] = 2
+        stack[0] = row * width + col
+        size = 1
+        while size:
+            size -= 1
+            r = stack[size] // width
+            c = stack[size] - r * width
+            for nr in range(max(r - 1, 0), min(r + 2, height)):
+                for nc in range(max(c - 1, 0), min(c + 2, width)):
+                    if state[nr, nc]:
+                        continue
+                    if not _in_grown_zones(zones, nr, nc, reach):
+                        state[nr, nc] = 1
+                        continue
+                    state[nr, nc] = 2
+                    if size == stack.size:
+                        grown = np.empty(2 * size, np.int64)
+                        grown[:size] = stack
+                        stack = grown
+                    stack[size] = nr * width + nc
+                    size += 1
+        # Every position on this piece not labelled yet is on it (earlier pieces'
+        # positions were labelled when those were filled).
+        for other in range(index, count):
+            if labels[other] < 0 and state[rows[other], cols[other]] == 2:
+                labels[other] = pieces
+        pieces += 1
+    return labels
 
 
 # --------------------------------------------------------------------------- candidate joins

@@ -26,7 +26,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
-import cv2
 import numpy as np
 
 from schemas import DetectParams, GapCurve
@@ -697,26 +696,19 @@ def _ends_of_split_pieces(
 
 
 def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -> list[int]:
-    """The junction zone each end touches (its connected-component label), or -1."""
-    if zones is None or not zones.any():
+    """The junction zone each end touches, or -1: the 8-connected pieces of the zones
+    grown by a ``2 reach + 1`` square (``cv2.dilate``), numbered in the order the ends
+    reach them. Compiled (``_merging_kernels.grown_zone_labels``): only the pieces the
+    ends lie in are filled; the plain version, which grows and labels the zones' box,
+    is the reference in ``tests/perception/references/merging.py``."""
+    if zones is None:
         return [-1] * len(ends)
-    zones_u8 = zones.astype(np.uint8)
-    height, width = zones.shape
-    # Grow and label only the zones' box plus the reach: every grown pixel is inside,
-    # and components keep their raster order, hence their labels.
-    x, y, w, h = cv2.boundingRect(zones_u8)
-    left, top = max(x - reach, 0), max(y - reach, 0)
-    right, bottom = min(x + w + reach, width), min(y + h + reach, height)
-    kernel = np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)
-    grown = cv2.dilate(zones_u8[top:bottom, left:right], kernel)
-    _, labels = cv2.connectedComponents(grown, connectivity=8)
-    result = []
-    for end in ends:
-        col = min(max(round(float(end.position[0])), 0), width - 1) - left
-        row = min(max(round(float(end.position[1])), 0), height - 1) - top
-        inside = 0 <= row < bottom - top and 0 <= col < right - left
-        result.append(int(labels[row, col]) - 1 if inside and labels[row, col] > 0 else -1)
-    return result
+    positions = np.array([end.position for end in ends], np.float64).reshape(-1, 2)
+    zones_u8 = zones.view(np.uint8) if zones.dtype == np.bool_ else zones.astype(np.uint8)
+    labels = _merging_kernels.grown_zone_labels(
+        np.ascontiguousarray(zones_u8), positions, int(reach)
+    )
+    return labels.tolist()
 
 
 def assemble_paths(

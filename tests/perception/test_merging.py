@@ -26,6 +26,7 @@ from service.perception.merging import (
     choose_joins,
     gap_curve,
     join_cost,
+    junctions_of_ends,
     merge_chains,
 )
 from service.perception.touching import split_touching_strands, split_where_leaving_together
@@ -219,6 +220,32 @@ def test_chain_ends_kernel_equals_the_plain_fits_bit_for_bit(seed):
                 expected.skip,
                 expected.width,
             )
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_junctions_of_ends_group_the_ends_as_the_labelled_grown_zones(seed):
+    # Discs and bridges of zones, some close enough to merge once grown, some at the
+    # picture's border; ends on them, beside them, just out of reach and far off.
+    rng = np.random.default_rng(seed)
+    zones = np.zeros((90, 120), np.uint8)
+    for _ in range(int(rng.integers(1, 9))):
+        centre = (int(rng.integers(-5, 125)), int(rng.integers(-5, 95)))
+        cv2.circle(zones, centre, int(rng.integers(1, 9)), 1, -1)
+    if seed % 2:
+        cv2.line(zones, (10, 10), (60, 40), 1, 1)
+    positions = rng.uniform(-3.0, 123.0, (200, 2))
+    ends = [
+        ChainEnd(k // 2, k % 2 == 0, position, np.array([1.0, 0.0]))
+        for k, position in enumerate(positions)
+    ]
+    for reach in (0, 3):
+        fast = junctions_of_ends(ends, zones.view(np.bool_), reach)
+        plain = reference.junctions_of_ends(ends, zones.view(np.bool_), reach)
+        # The same ends in no zone, and the same ends together (labels may be numbered
+        # otherwise: only which ends share a zone counts).
+        assert [label < 0 for label in fast] == [label < 0 for label in plain]
+        assert len(set(zip(fast, plain, strict=True))) == len(set(plain)) == len(set(fast))
+    assert junctions_of_ends(ends, np.zeros((90, 120), bool)) == [-1] * len(ends)
 
 
 @pytest.mark.parametrize("seed", range(3))

@@ -1,7 +1,45 @@
-"""Plain search for the cable's farthest rim ahead of a chain end (end extension)."""
+"""Plain end extension: one end's new tip (the code ``_end_extension_kernels.extended_tip``
+replaced) and the search for the cable's farthest rim ahead of a chain end."""
 
 import cv2
 import numpy as np
+
+from service.perception import end_extension
+from service.perception.geometry import end_direction
+
+
+def extend_end(points, at_start, mask, radius, span):
+    """:func:`service.perception.end_extension.extend_end` step by step in Python."""
+    direction = end_direction(points, at_start, span)
+    tip = points[0] if at_start else points[-1]
+    height, width = mask.shape
+    reach = 0.0
+    limit = 3.0 * radius + 2.0
+    leaves_image = False
+    while reach < limit:
+        probe = tip + (reach + 1.0) * direction
+        col, row = round(probe[0]), round(probe[1])
+        if not (0 <= col < width and 0 <= row < height):
+            leaves_image = True
+            break
+        if not mask[row, col]:
+            break
+        reach += 1.0
+    extension = reach if leaves_image else reach - radius
+    if not leaves_image:
+        far = end_extension.farthest_ahead(
+            tip, direction, mask, end_extension.TIP_SEARCH_RADII * radius + 2.0
+        )
+        if far is not None:
+            offset = far - tip
+            length = float(np.hypot(*offset))
+            if length - radius > extension:
+                direction = offset / length
+                extension = length - radius
+    if extension < 1.0:
+        return points
+    new_tip = tip + extension * direction
+    return np.vstack([new_tip, points]) if at_start else np.vstack([points, new_tip])
 
 
 def farthest_ahead(tip, direction, mask, limit, cos_half_angle, rim):

@@ -1,8 +1,10 @@
 """Plain step 6: the end fits piece by piece (the code ``_merging_kernels.fit_chain_ends``
+replaced), the junction zone of each end (the labelling ``_merging_kernels.grown_zone_labels``
 replaced), the gap curves (the natural curve's three shapes and the smooth cubic), and the
 choice of joins costing every pair of chain ends (the code the grid of
 ``_merging_kernels.candidate_joins`` replaced)."""
 
+import cv2
 import numpy as np
 
 from service.perception import _merging_kernels, merging
@@ -54,6 +56,28 @@ def _narrow_end_length(points, at_start, distance, full_width, limit=merging.NAR
         if distance[row, col] >= full_width:
             return length
     return 0.0
+
+
+def junctions_of_ends(ends, zones, reach=3):
+    """:func:`service.perception.merging.junctions_of_ends` by growing (``cv2.dilate``)
+    and labelling (``cv2.connectedComponents``) the zones' box plus the reach."""
+    if zones is None or not zones.any():
+        return [-1] * len(ends)
+    zones_u8 = zones.astype(np.uint8)
+    height, width = zones.shape
+    x, y, w, h = cv2.boundingRect(zones_u8)
+    left, top = max(x - reach, 0), max(y - reach, 0)
+    right, bottom = min(x + w + reach, width), min(y + h + reach, height)
+    kernel = np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)
+    grown = cv2.dilate(zones_u8[top:bottom, left:right], kernel)
+    _, labels = cv2.connectedComponents(grown, connectivity=8)
+    result = []
+    for end in ends:
+        col = min(max(round(float(end.position[0])), 0), width - 1) - left
+        row = min(max(round(float(end.position[1])), 0), height - 1) - top
+        inside = 0 <= row < bottom - top and 0 <= col < right - left
+        result.append(int(labels[row, col]) - 1 if inside and labels[row, col] > 0 else -1)
+    return result
 
 
 def _arc(start: np.ndarray, heading: np.ndarray, turn: float, radius: float, step: float):
