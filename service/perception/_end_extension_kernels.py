@@ -14,7 +14,13 @@ from service.perception._shared_kernels import ORTHOGONAL_FIRST_DC, ORTHOGONAL_F
 
 @njit(cache=True, nogil=True)
 def farthest_rim_ahead(mask, col, row, tip_x, tip_y, dir_x, dir_y, limit, cos_half_angle, rim):
-    """See end_extension.farthest_ahead: ``(found, x, y)`` of the middle of the farthest rim.
+    """The middle of the mask's farthest rim ahead of the tip: ``(found, x, y)``.
+
+    The rim is the pixels at most ``limit`` px from the tip (``tip_x``, ``tip_y``; its
+    pixel ``row``, ``col``), within the cone of ``cos_half_angle`` round the direction and
+    connected to the tip through the mask near it, that lie within ``rim`` px of the
+    largest such distance. Its middle, not its farthest pixel, so that the corners of a
+    square-cut end do not pull the end sideways.
 
     The 8-connected component of the pixel (``row``, ``col``) is flood-filled within the
     square window of half size ceil(limit) round it, as cv2.connectedComponents on that

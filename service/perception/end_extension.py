@@ -26,37 +26,6 @@ TIP_SEARCH_COS = float(np.cos(np.radians(35.0)))
 FAR_RIM_PX = 2.0
 
 
-def farthest_ahead(
-    tip: np.ndarray,
-    direction: np.ndarray,
-    mask: np.ndarray,
-    limit: float,
-    cos_half_angle: float = TIP_SEARCH_COS,
-) -> np.ndarray | None:
-    """The middle of the mask's farthest rim ahead of ``tip``, or None when there is none.
-
-    The rim is the pixels at most ``limit`` px from ``tip``, within the cone of
-    ``cos_half_angle`` round ``direction`` and connected to the tip through the mask
-    near it, that lie within :data:`FAR_RIM_PX` of the largest such distance. Its middle,
-    not its farthest pixel, so that the corners of a square-cut end do not pull the end
-    sideways. Compiled (``_end_extension_kernels.farthest_rim_ahead``); the plain
-    version is the reference in ``tests/perception/references/end_extension.py``.
-    """
-    found, x, y = _end_extension_kernels.farthest_rim_ahead(
-        as_uint8(mask),
-        round(float(tip[0])),
-        round(float(tip[1])),
-        float(tip[0]),
-        float(tip[1]),
-        float(direction[0]),
-        float(direction[1]),
-        float(limit),
-        float(cos_half_angle),
-        FAR_RIM_PX,
-    )
-    return np.array([x, y]) if found else None
-
-
 def extend_end(
     points: np.ndarray, at_start: bool, mask: np.ndarray, radius: float, span: float
 ) -> np.ndarray:

