@@ -167,18 +167,15 @@ def chain_radius(joints: np.ndarray, mask: np.ndarray, radius: float) -> float:
     sides = _pipeline_kernels.sides_across(
         np.ascontiguousarray(joints, np.float64), np.ascontiguousarray(mask, bool), limit
     )
-    widths = sides.sum(axis=1)
     # A chain runs along its cable's middle: where it lies off the middle third of what
     # the mask spans across it, the span is something else (the other side of a cable
-    # it touches, a strand it crosses, a blob it runs along the edge of).
-    centred = sides.min(axis=1) >= CENTRED_SHARE * widths
-    widths = widths[np.isfinite(widths) & centred]
-    if widths.size == 0:
-        return radius
-    median = float(np.median(widths))
-    near = widths[np.abs(widths - median) <= ACROSS_QUANTISATION_PX]
-    # An even count split far apart has none near its median: the median it is.
-    return max(0.5 * (float(np.mean(near)) if near.size else median), 0.5)
+    # it touches, a strand it crosses, a blob it runs along the edge of). An even count
+    # split far apart has none near its median: the median it is.
+    return float(
+        _pipeline_kernels.radius_from_sides(
+            sides, float(radius), CENTRED_SHARE, ACROSS_QUANTISATION_PX
+        )
+    )
 
 
 def _empty(width, height, params, watch, mask, skeleton) -> DetectionResult:
