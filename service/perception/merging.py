@@ -288,36 +288,52 @@ def _best_matching(
     junction thinning bends each strand toward where the strands meet, so the bending
     there is not the cable's, and the gaps are short.
     """
-    # Positions in ``members`` of every pair of ends of different pieces.
-    local = [
-        (a_pos, b_pos)
-        for a_pos in range(len(members))
-        for b_pos in range(a_pos + 1, len(members))
-        if ends[members[a_pos]].piece != ends[members[b_pos]].piece
+    return _best_matchings([members], ends, params, radius, colours)
+
+
+def _best_matchings(
+    junctions: list[list[int]],
+    ends: list[ChainEnd],
+    params: DetectParams,
+    radius: float,
+    colours: EndColours | None = None,
+) -> list[tuple[int, int, float]]:
+    """:func:`_best_matching` of every junction's ``members`` in turn, their pairs all
+    costed in one kernel call."""
+    # Every pair of ends of different pieces, junction by junction.
+    pairs = [
+        [
+            (a, b)
+            for a_pos, a in enumerate(members)
+            for b in members[a_pos + 1 :]
+            if ends[a].piece != ends[b].piece
+        ]
+        for members in junctions
     ]
-    costs = {}
-    if local:
-        first_local = np.array([a_pos for a_pos, _ in local], np.int64)
-        second_local = np.array([b_pos for _, b_pos in local], np.int64)
-        # Every pair's join_cost in one call, with the ends' curvature set to 0.
-        pair_costs = _merging_kernels.pair_join_costs(
-            np.array([ends[member].position for member in members], np.float64),
-            np.array([ends[member].direction for member in members], np.float64),
-            np.zeros(len(members)),
-            first_local,
-            second_local,
+    flat = [pair for junction_pairs in pairs for pair in junction_pairs]
+    costs = np.zeros(0)
+    if flat:
+        first = np.array([a for a, _ in flat], np.int64)
+        second = np.array([b for _, b in flat], np.int64)
+        # join_cost of every pair, with the ends' curvature set to 0.
+        costs = _merging_kernels.pair_join_costs(
+            np.array([end.position for end in ends], np.float64),
+            np.array([end.direction for end in ends], np.float64),
+            np.zeros(len(ends)),
+            first,
+            second,
             np.array([params.distance_weight, params.direction_weight, params.curvature_weight]),
             float(params.max_gap),
             float(radius),
         )
         if colours is not None:
-            member_ends = np.array(members, np.int64)
-            pair_costs = pair_costs + params.colour_weight * colour_penalty(
-                colours, member_ends[first_local], member_ends[second_local]
-            )
-        pairs = [(members[a_pos], members[b_pos]) for a_pos, b_pos in local]
-        costs = dict(zip(pairs, pair_costs.tolist(), strict=True))
-    return cheapest_pairing(members, costs, params.merge_cost_threshold)
+            costs = costs + params.colour_weight * colour_penalty(colours, first, second)
+    costs_left = iter(costs.tolist())
+    found = []
+    for members, junction_pairs in zip(junctions, pairs, strict=True):
+        junction_costs = {pair: next(costs_left) for pair in junction_pairs}
+        found.extend(cheapest_pairing(members, junction_costs, params.merge_cost_threshold))
+    return found
 
 
 # Junctions with more ends than this are paired greedily (the matching is exponential).
@@ -404,10 +420,8 @@ def choose_joins(
         for index, junction in enumerate(junction_of_end):
             if junction >= 0:
                 groups.setdefault(junction, []).append(index)
-        proposals = []
-        for members in groups.values():
-            if 2 <= len(members) <= MAX_JUNCTION_ENDS:
-                proposals.extend(_best_matching(members, ends, params, radius, colours))
+        paired = [members for members in groups.values() if 2 <= len(members) <= MAX_JUNCTION_ENDS]
+        proposals = _best_matchings(paired, ends, params, radius, colours)
         for i, j, cost in sorted(proposals, key=lambda item: item[2]):
             try_join(i, j, cost)
 
