@@ -156,6 +156,7 @@ def outward_fit(backwards, skip, span):
         tangent_x = -dx
         tangent_y = -dy
     else:
+        last = min(last, backwards.shape[0] - 1)  # a lone point has no direction
         x = backwards[0, 0]
         y = backwards[0, 1]
         tangent_x = backwards[0, 0] - backwards[last, 0]
