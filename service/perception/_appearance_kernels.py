@@ -132,3 +132,23 @@ def colour_medians(lab, bounds, wide, min_samples, margin):
             )
         spread[e] = np.median(distances)
     return colour, spread
+
+
+@njit(cache=True, nogil=True)
+def colour_steps(colour, spread, first, second, tolerance, max_steps, lightness_share):
+    """appearance.colour_penalty for the pairs ``first[k]``, ``second[k]``: the Lab
+    distance (lightness weighted by ``lightness_share``) beyond ``tolerance`` and both
+    ends' ``spread``, in steps of ``tolerance``, clipped to ``[0, max_steps]``; 0 where
+    either colour is unknown (NaN)."""
+    steps = np.empty(first.size)
+    for k in range(first.size):
+        i = first[k]
+        j = second[k]
+        lightness = lightness_share * (colour[i, 0] - colour[j, 0])
+        a = colour[i, 1] - colour[j, 1]
+        b = colour[i, 2] - colour[j, 2]
+        distance = np.sqrt(lightness**2 + a**2 + b**2)
+        allowed = tolerance + spread[i] + spread[j]
+        step = (distance - allowed) / tolerance
+        steps[k] = 0.0 if np.isnan(step) else min(max(step, 0.0), max_steps)
+    return steps

@@ -8,12 +8,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from service.perception._geometry_kernels import outward_fit
 from service.perception._shared_kernels import ORTHOGONAL_FIRST_DC, ORTHOGONAL_FIRST_DR
 
 
 @njit(cache=True, nogil=True)
 def farthest_rim_ahead(mask, col, row, tip_x, tip_y, dir_x, dir_y, limit, cos_half_angle, rim):
-    """See end_extension.farthest_ahead: ``(found, x, y)`` of the middle of the farthest rim.
+    """The middle of the mask's farthest rim ahead of the tip: ``(found, x, y)``.
+
+    The rim is the pixels at most ``limit`` px from the tip (``tip_x``, ``tip_y``; its
+    pixel ``row``, ``col``), within the cone of ``cos_half_angle`` round the direction and
+    connected to the tip through the mask near it, that lie within ``rim`` px of the
+    largest such distance. Its middle, not its farthest pixel, so that the corners of a
+    square-cut end do not pull the end sideways.
 
     The 8-connected component of the pixel (``row``, ``col``) is flood-filled within the
     square window of half size ceil(limit) round it, as cv2.connectedComponents on that
@@ -73,3 +80,61 @@ def farthest_rim_ahead(mask, col, row, tip_x, tip_y, dir_x, dir_y, limit, cos_ha
             sum_y += vy
             n += 1
     return True, tip_x + sum_x / n, tip_y + sum_y / n
+
+
+@njit(cache=True, nogil=True)
+def extended_tip(points, at_start, mask, radius, span, search_limit, cos_half_angle, rim):
+    """end_extension.extend_end's new tip: ``(moved, x, y)``, ``moved`` False when the
+    end would move by less than a pixel.
+
+    The end's direction is geometry.end_direction's (the fit over ``span``); the walk
+    from the tip takes 1 px steps along it while they stay on ``mask`` (``uint8``), up
+    to ``3 radius + 2`` px, each rounded as Python's ``round``; then, unless the walk left
+    the picture, :func:`farthest_rim_ahead` within ``search_limit`` may carry the end
+    further, and the tip comes one radius back inside.
+    """
+    height, width = mask.shape
+    backwards = points if at_start else points[::-1]
+    _, _, dir_x, dir_y, _ = outward_fit(backwards, 0.0, span)
+    tip_x = backwards[0, 0]
+    tip_y = backwards[0, 1]
+    reach = 0.0
+    limit = 3.0 * radius + 2.0
+    leaves_image = False
+    while reach < limit:
+        col = int(np.rint(tip_x + (reach + 1.0) * dir_x))
+        row = int(np.rint(tip_y + (reach + 1.0) * dir_y))
+        if not (0 <= col < width and 0 <= row < height):
+            leaves_image = True
+            break
+        if not mask[row, col]:
+            break
+        reach += 1.0
+    extension = reach if leaves_image else reach - radius
+    if not leaves_image:
+        # A curving end, or one whose tip fork fell to spur removal, leaves the straight
+        # walk through the side of the cap: the farthest pixel of the cable ahead marks
+        # the end better.
+        found, far_x, far_y = farthest_rim_ahead(
+            mask,
+            int(np.rint(tip_x)),
+            int(np.rint(tip_y)),
+            tip_x,
+            tip_y,
+            dir_x,
+            dir_y,
+            search_limit,
+            cos_half_angle,
+            rim,
+        )
+        if found:
+            offset_x = far_x - tip_x
+            offset_y = far_y - tip_y
+            length = np.hypot(offset_x, offset_y)
+            if length - radius > extension:
+                dir_x = offset_x / length
+                dir_y = offset_y / length
+                extension = length - radius
+    if extension < 1.0:
+        return False, 0.0, 0.0
+    return True, tip_x + extension * dir_x, tip_y + extension * dir_y

@@ -137,3 +137,31 @@ def end_fit(backwards, skip, span):
         2.0 * coefficients[2, 0] / (reach * reach),
         2.0 * coefficients[2, 1] / (reach * reach),
     )
+
+
+@njit(cache=True, nogil=True)
+def outward_fit(backwards, skip, span):
+    """geometry.end_fit on a polyline that starts at the end (``backwards``): the end's
+    position ``(x, y)``, its outward unit tangent ``(dx, dy)`` (zero for a polyline of
+    no length) and the signed curvature of the fit (0 when the stretch was too short),
+    bit for bit as the Python code finishes :func:`end_fit`'s coefficients."""
+    fitted, x0, y0, dx, dy, last, ddx, ddy = end_fit(backwards, skip, span)
+    # The linear term points inwards; outwards is its opposite.
+    speed = np.hypot(dx, dy)
+    curvature = 0.0
+    if fitted and speed > 1e-9:
+        curvature = -(dx * ddy - dy * ddx) / speed**3.0
+        x = x0
+        y = y0
+        tangent_x = -dx
+        tangent_y = -dy
+    else:
+        last = min(last, backwards.shape[0] - 1)  # a lone point has no direction
+        x = backwards[0, 0]
+        y = backwards[0, 1]
+        tangent_x = backwards[0, 0] - backwards[last, 0]
+        tangent_y = backwards[0, 1] - backwards[last, 1]
+    norm = np.hypot(tangent_x, tangent_y)
+    if norm > 1e-12:
+        return x, y, tangent_x / norm, tangent_y / norm, curvature
+    return x, y, 0.0, 0.0, curvature

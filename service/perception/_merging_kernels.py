@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from service.perception._geometry_kernels import outward_fit
 from service.perception._shared_kernels import solve_small
 
 # --------------------------------------------------------------------------- end widths
@@ -38,6 +39,180 @@ def median_distance_per_piece(distance, points, starts):
         else:
             medians[k] = (values[middle - 1] + values[middle]) / np.float32(2.0)
     return medians
+
+
+@njit(cache=True, nogil=True)
+def narrow_end_length(points, start, stop, at_start, distance, full_width, limit):
+    """merging._narrow_end_length on piece ``points[start:stop]``: the arc length from
+    the end to the first of its ``limit + 1`` joints nearest the end where ``distance``
+    (float32) reaches ``full_width`` (compared in float32, as NumPy compares a float32
+    with a Python float), else 0."""
+    height, width = distance.shape
+    threshold = np.float32(full_width)
+    length = 0.0
+    previous = start if at_start else stop - 1
+    for k in range(min(stop - start, limit + 1)):
+        index = start + k if at_start else stop - 1 - k
+        if k:
+            length += np.hypot(
+                points[index, 0] - points[previous, 0], points[index, 1] - points[previous, 1]
+            )
+        col = min(max(int(np.rint(points[index, 0])), 0), width - 1)
+        row = min(max(int(np.rint(points[index, 1])), 0), height - 1)
+        if distance[row, col] >= threshold:
+            return length
+        previous = index
+    return 0.0
+
+
+@njit(cache=True, nogil=True)
+def fit_chain_ends(points, starts, lengths, distance, full_widths, skip, span, narrow_limit):
+    """merging.chain_ends' fits of both ends of every piece, as geometry.end_fit gives them.
+
+    Piece ``k`` is ``points[starts[k]:starts[k + 1]]`` (two joints or more); its ends are
+    ``2 k`` (at its first joint) and ``2 k + 1``. Each end's fit leaves out ``skip`` of
+    arc length, or more where the cable is narrow (:func:`narrow_end_length` below
+    ``full_widths[k]``, looked at only when ``distance`` is not empty). A fit spans
+    ``span`` of arc length, or less on a piece (of length ``lengths[k]``) whose other end
+    was left out for being narrow: then it stops short of that end's skip, if at least
+    half of ``span`` is left.
+
+    Returns
+    -------
+    positions, directions : ndarray
+        ``(2 K, 2)`` fitted end points and outward unit tangents.
+    curvatures, skips : ndarray
+        ``(2 K,)`` the fits' signed curvatures (0 where too short to fit) and the arc
+        lengths their fits left out.
+    """
+    count = starts.size - 1
+    positions = np.empty((2 * count, 2))
+    directions = np.empty((2 * count, 2))
+    curvatures = np.empty(2 * count)
+    skips = np.empty(2 * count)
+    for k in range(count):
+        start, stop = starts[k], starts[k + 1]
+        for side in range(2):
+            end_skip = skip
+            if distance.shape[0] > 0:
+                narrow = narrow_end_length(
+                    points, start, stop, side == 0, distance, full_widths[k], narrow_limit
+                )
+                end_skip = max(skip, narrow)
+            skips[2 * k + side] = end_skip
+        for side in range(2):
+            end = 2 * k + side
+            end_skip, far_skip = skips[end], skips[2 * k + 1 - side]
+            reach = lengths[k] - end_skip - far_skip
+            end_span = span
+            if far_skip > skip and reach >= 0.5 * span:
+                end_span = min(span, reach)
+            backwards = points[start:stop] if side == 0 else points[start:stop][::-1]
+            x, y, dx, dy, curvature = outward_fit(backwards, end_skip, end_span)
+            positions[end, 0] = x
+            positions[end, 1] = y
+            directions[end, 0] = dx
+            directions[end, 1] = dy
+            curvatures[end] = curvature
+    return positions, directions, curvatures, skips
+
+
+@njit(cache=True, nogil=True)
+def pair_join_costs(positions, directions, curvatures, first, second, weights, max_gap, radius):
+    """:func:`join_cost` of ends ``first[k]`` and ``second[k]`` for every ``k``."""
+    costs = np.empty(first.size)
+    for k in range(first.size):
+        i = first[k]
+        j = second[k]
+        costs[k] = join_cost(
+            positions[i, 0],
+            positions[i, 1],
+            directions[i, 0],
+            directions[i, 1],
+            curvatures[i],
+            positions[j, 0],
+            positions[j, 1],
+            directions[j, 0],
+            directions[j, 1],
+            curvatures[j],
+            weights,
+            max_gap,
+            radius,
+        )
+    return costs
+
+
+# --------------------------------------------------------------------------- junctions of ends
+
+
+@njit(cache=True, nogil=True)
+def _in_grown_zones(zones, row, col, reach):
+    """Whether pixel (row, col) lies within ``reach`` (a square's half side) of a zone
+    pixel: on the zones grown by ``cv2.dilate`` with a ``2 reach + 1`` square."""
+    if zones[row, col]:
+        return True
+    height, width = zones.shape
+    for r in range(max(row - reach, 0), min(row + reach + 1, height)):
+        for c in range(max(col - reach, 0), min(col + reach + 1, width)):
+            if zones[r, c]:
+                return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def grown_zone_labels(zones, positions, reach):
+    """merging.junctions_of_ends: the 8-connected piece of the grown zones (see
+    :func:`_in_grown_zones`) each position's pixel lies in, or -1.
+
+    Positions ``(x, y)`` are rounded half to even and clipped to the image. Pieces are
+    numbered from 0 in the order the positions first reach them; only the pieces the
+    positions lie in are filled, one pixel test of the grown zones at a time, never
+    the whole picture.
+    """
+    height, width = zones.shape
+    count = positions.shape[0]
+    rows = np.empty(count, np.int64)
+    cols = np.empty(count, np.int64)
+    for index in range(count):
+        cols[index] = min(max(int(np.rint(positions[index, 0])), 0), width - 1)
+        rows[index] = min(max(int(np.rint(positions[index, 1])), 0), height - 1)
+    # Per pixel: 0 not looked at, 1 off the grown zones, 2 on a piece already filled.
+    state = np.zeros((height, width), np.uint8)
+    labels = np.full(count, -1, np.int64)
+    stack = np.empty(1024, np.int64)
+    pieces = 0
+    for index in range(count):
+        row, col = rows[index], cols[index]
+        if state[row, col] or not _in_grown_zones(zones, row, col, reach):
+            continue  # off the zones, or on a piece filled (and labelled) before
+        state[row, col] = 2
+        stack[0] = row * width + col
+        size = 1
+        while size:
+            size -= 1
+            r = stack[size] // width
+            c = stack[size] - r * width
+            for nr in range(max(r - 1, 0), min(r + 2, height)):
+                for nc in range(max(c - 1, 0), min(c + 2, width)):
+                    if state[nr, nc]:
+                        continue
+                    if not _in_grown_zones(zones, nr, nc, reach):
+                        state[nr, nc] = 1
+                        continue
+                    state[nr, nc] = 2
+                    if size == stack.size:
+                        grown = np.empty(2 * size, np.int64)
+                        grown[:size] = stack
+                        stack = grown
+                    stack[size] = nr * width + nc
+                    size += 1
+        # Every position on this piece not labelled yet is on it (earlier pieces'
+        # positions were labelled when those were filled).
+        for other in range(index, count):
+            if labels[other] < 0 and state[rows[other], cols[other]] == 2:
+                labels[other] = pieces
+        pieces += 1
+    return labels
 
 
 # --------------------------------------------------------------------------- candidate joins
@@ -200,28 +375,15 @@ def candidate_joins(
     pairs = np.empty((count, 2), np.int64)
     _walk_candidates(positions, piece_of_end, free, max_distance, cell, True, pairs)
     distances = np.empty(count)
-    costs = np.empty(count)
     for k in range(count):
         i = pairs[k, 0]
         j = pairs[k, 1]
         distances[k] = np.hypot(
             positions[i, 0] - positions[j, 0], positions[i, 1] - positions[j, 1]
         )
-        costs[k] = join_cost(
-            positions[i, 0],
-            positions[i, 1],
-            directions[i, 0],
-            directions[i, 1],
-            curvatures[i],
-            positions[j, 0],
-            positions[j, 1],
-            directions[j, 0],
-            directions[j, 1],
-            curvatures[j],
-            weights,
-            max_gap,
-            radius,
-        )
+    costs = pair_join_costs(
+        positions, directions, curvatures, pairs[:, 0], pairs[:, 1], weights, max_gap, radius
+    )
     return pairs, distances, costs
 
 

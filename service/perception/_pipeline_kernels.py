@@ -109,3 +109,36 @@ def sides_across(joints, mask, limit):
         sides[k, 0] = edge_distance(mask, x, y, nx, ny, limit)
         sides[k, 1] = edge_distance(mask, x, y, -nx, -ny, limit)
     return sides
+
+
+@njit(cache=True, nogil=True)
+def radius_from_sides(sides, radius, centred_share, quantisation):
+    """pipeline.chain_radius from :func:`sides_across`: half the mean of the finite
+    widths (left + right) the chain runs through the middle ``centred_share`` of that lie
+    within ``quantisation`` of their median (the median itself when none does), at least
+    0.5; ``radius`` when there is no such width. Medians and means as NumPy's, bit for bit.
+    """
+    widths = np.empty(sides.shape[0])
+    count = 0
+    for k in range(sides.shape[0]):
+        left = sides[k, 0]
+        right = sides[k, 1]
+        width = left + right
+        if np.isfinite(width) and min(left, right) >= centred_share * width:
+            widths[count] = width
+            count += 1
+    if count == 0:
+        return radius
+    ordered = np.sort(widths[:count])
+    middle = count // 2
+    median = ordered[middle] if count % 2 else (ordered[middle - 1] + ordered[middle]) / 2.0
+    # The widths near the median, in the chain's order (np.mean sums them pairwise).
+    near = np.empty(count)
+    near_count = 0
+    for k in range(count):
+        if abs(widths[k] - median) <= quantisation:
+            near[near_count] = widths[k]
+            near_count += 1
+    if near_count == 0:
+        return max(0.5 * median, 0.5)
+    return max(0.5 * (pairwise_sum(near, 0, near_count) / near_count), 0.5)

@@ -151,10 +151,18 @@ def colour_penalty(colours: EndColours, first: np.ndarray, second: np.ndarray) -
     scatter, then one unit per further :data:`COLOUR_TOLERANCE`, at most
     :data:`MAX_COLOUR_STEPS`; 0 when either end's colour is unknown.
     """
-    distance = _lab_distance(colours.colour[first], colours.colour[second])
-    allowed = COLOUR_TOLERANCE + colours.spread[first] + colours.spread[second]
-    steps = np.clip((distance - allowed) / COLOUR_TOLERANCE, 0.0, MAX_COLOUR_STEPS)
-    return np.where(np.isnan(steps), 0.0, steps)
+    first, second = np.asarray(first), np.asarray(second)
+    # Compiled: merging prices the colours of every candidate join and junction pair.
+    steps = _appearance_kernels.colour_steps(
+        np.ascontiguousarray(colours.colour, np.float64),
+        np.ascontiguousarray(colours.spread, np.float64),
+        np.ascontiguousarray(first, np.int64).ravel(),
+        np.ascontiguousarray(second, np.int64).ravel(),
+        COLOUR_TOLERANCE,
+        MAX_COLOUR_STEPS,
+        LIGHTNESS_SHARE,
+    )
+    return steps.reshape(first.shape)
 
 
 # A gap's hidden stretch is compared with the background beside the two ends' pieces:

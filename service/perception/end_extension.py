@@ -14,7 +14,6 @@ from __future__ import annotations
 import numpy as np
 
 from service.perception import _end_extension_kernels
-from service.perception.geometry import end_direction
 from service.perception.skeleton import as_uint8
 
 # At most this many extensions of a free end, each from where the last one stopped.
@@ -25,37 +24,6 @@ TIP_SEARCH_RADII = 5.0
 TIP_SEARCH_COS = float(np.cos(np.radians(35.0)))
 # The pixels this close (px) to the farthest distance ahead make the cable's far rim.
 FAR_RIM_PX = 2.0
-
-
-def farthest_ahead(
-    tip: np.ndarray,
-    direction: np.ndarray,
-    mask: np.ndarray,
-    limit: float,
-    cos_half_angle: float = TIP_SEARCH_COS,
-) -> np.ndarray | None:
-    """The middle of the mask's farthest rim ahead of ``tip``, or None when there is none.
-
-    The rim is the pixels at most ``limit`` px from ``tip``, within the cone of
-    ``cos_half_angle`` round ``direction`` and connected to the tip through the mask
-    near it, that lie within :data:`FAR_RIM_PX` of the largest such distance. Its middle,
-    not its farthest pixel, so that the corners of a square-cut end do not pull the end
-    sideways. Compiled (``_end_extension_kernels.farthest_rim_ahead``); the plain
-    version is the reference in ``tests/perception/references/end_extension.py``.
-    """
-    found, x, y = _end_extension_kernels.farthest_rim_ahead(
-        as_uint8(mask),
-        round(float(tip[0])),
-        round(float(tip[1])),
-        float(tip[0]),
-        float(tip[1]),
-        float(direction[0]),
-        float(direction[1]),
-        float(limit),
-        float(cos_half_angle),
-        FAR_RIM_PX,
-    )
-    return np.array([x, y]) if found else None
 
 
 def extend_end(
@@ -82,36 +50,21 @@ def extend_end(
         ``points`` with one new vertex at that end, or ``points`` itself when the end
         would move by less than a pixel.
     """
-    direction = end_direction(points, at_start, span)
-    tip = points[0] if at_start else points[-1]
-    height, width = mask.shape
-    reach = 0.0
-    limit = 3.0 * radius + 2.0
-    leaves_image = False
-    while reach < limit:
-        probe = tip + (reach + 1.0) * direction
-        col, row = round(probe[0]), round(probe[1])
-        if not (0 <= col < width and 0 <= row < height):
-            leaves_image = True
-            break
-        if not mask[row, col]:
-            break
-        reach += 1.0
-    extension = reach if leaves_image else reach - radius
-    if not leaves_image:
-        # A curving end, or one whose tip fork fell to spur removal, leaves the straight
-        # walk through the side of the cap: the farthest pixel of the cable ahead marks
-        # the end better.
-        far = farthest_ahead(tip, direction, mask, TIP_SEARCH_RADII * radius + 2.0)
-        if far is not None:
-            offset = far - tip
-            length = float(np.hypot(*offset))
-            if length - radius > extension:
-                direction = offset / length
-                extension = length - radius
-    if extension < 1.0:
+    # Compiled (_end_extension_kernels.extended_tip); the plain version is the reference
+    # in tests/perception/references/end_extension.py.
+    moved, x, y = _end_extension_kernels.extended_tip(
+        np.ascontiguousarray(points, np.float64),
+        bool(at_start),
+        as_uint8(mask),
+        float(radius),
+        float(span),
+        TIP_SEARCH_RADII * radius + 2.0,
+        TIP_SEARCH_COS,
+        FAR_RIM_PX,
+    )
+    if not moved:
         return points
-    new_tip = tip + extension * direction
+    new_tip = np.array([x, y])
     return np.vstack([new_tip, points]) if at_start else np.vstack([points, new_tip])
 
 

@@ -128,18 +128,14 @@ def resample(points: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     # first plain loop took ``disc ** 0.5`` (NumPy's scalar pow, at times 1 ulp off the
     # root), so a joint may move by round-off (about 1e-14 px), never more.
     points_f64 = np.ascontiguousarray(points, np.float64)
-    found, found_edges = _geometry_kernels.resample_kernel(points_f64, step)
-    joints = [points[0], *found[1:]]
-    edges = found_edges.tolist()
-    n = len(points)
-    tail = points[-1]
-    if np.hypot(*(tail - joints[-1])) > 1e-6 * step:
-        joints.append(tail)
-        edges.append(n - 2)
-    if len(joints) == 1:
-        joints.append(tail)
-        edges.append(n - 2)
-    return np.array(joints), np.array(edges)
+    joints, edges = _geometry_kernels.resample_kernel(points_f64, step)
+    tail = points_f64[-1]
+    # The polyline's end is the last joint, unless the last one found is on it already
+    # (a lone first joint never is).
+    if len(joints) == 1 or np.hypot(*(tail - joints[-1])) > 1e-6 * step:
+        joints = np.vstack([joints, tail])
+        edges = np.append(edges, len(points) - 2)
+    return joints, edges
 
 
 def arc_lengths(points: np.ndarray) -> np.ndarray:
@@ -182,4 +178,10 @@ def polyline_length(points: np.ndarray) -> float:
     """Arc length of a polyline."""
     if len(points) < 2:
         return 0.0
-    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+    points = np.asarray(points)
+    steps = points[1:] - points[:-1]
+    if not np.issubdtype(steps.dtype, np.inexact):
+        steps = steps.astype(np.float64)
+    # What np.linalg.norm(steps, axis=1) computes, without its checks (called for
+    # every piece and path of a frame).
+    return float(np.sqrt((steps * steps).sum(axis=1)).sum())

@@ -26,7 +26,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
-import cv2
 import numpy as np
 
 from schemas import DetectParams, GapCurve
@@ -46,7 +45,7 @@ from service.perception.bridge_ends import (
     partners,
 )
 from service.perception.deadline import Deadline, check
-from service.perception.geometry import arc_lengths, end_fit, polyline_length
+from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
 from service.perception.touching import (
     TouchingSplit,
@@ -135,71 +134,59 @@ def chain_ends(
     radius, and that stretch would tilt the end's direction. For the same reason a short
     piece's end fit stops short of its other end's narrow tip.
     """
-    ends = []
-    medians = None
-    interior = np.zeros(len(pieces))
-    if distance is not None and pieces:
+    if not pieces:
+        return []
+    counts = [len(points) for points in pieces]
+    starts = np.cumsum([0, *counts]).astype(np.int64)
+    joints = np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64)
+    widths = np.zeros(len(pieces))
+    full_widths = np.full(len(pieces), float(full_width))
+    narrow_in = np.zeros((0, 0), np.float32)  # empty: no end is left out for being narrow
+    if distance is not None:
+        narrow_in = np.ascontiguousarray(distance, np.float32)
         # Cables differ in width: a piece's own full width is the typical distance to
         # the border at its joints, and for a long piece also that away from both ends
         # (more than NARROW_END_JOINTS in), where no cut end narrows it.
-        minimum = 2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS
-        long = [k for k, points in enumerate(pieces) if len(points) >= minimum]
+        long = np.flatnonzero(np.diff(starts) >= 2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS)
         middles = [pieces[k][NARROW_END_JOINTS:-NARROW_END_JOINTS] for k in long]
-        parts = list(pieces) + middles
-        starts = np.cumsum([0] + [len(points) for points in parts]).astype(np.int64)
-        joints = np.ascontiguousarray(np.concatenate(parts), dtype=np.float64)
+        part_starts = np.cumsum([0, *counts, *(len(points) for points in middles)])
         values = _merging_kernels.median_distance_per_piece(
-            np.ascontiguousarray(distance, np.float32), joints, starts
+            narrow_in,
+            np.ascontiguousarray(np.concatenate([joints, *middles]), dtype=np.float64),
+            part_starts.astype(np.int64),
         )
-        medians, interior[long] = values[: len(pieces)], values[len(pieces) :]
-    for index, points in enumerate(pieces):
-        piece_full = full_width
-        if medians is not None and len(points) >= 3:
-            piece_full = max(full_width, FULL_WIDTH_FRACTION * float(medians[index]))
-        if interior[index] > 0:
-            # A cable thinner than the picture's typical one is at its full width
-            # where its own middle is: held to the typical width, its every joint
-            # would look narrow, and a joint widened by a bend or a touching strand
-            # would cut the end's fit short by several joints. (Only ever lower: a
-            # blob the piece runs through widens its middle.)
-            piece_full = min(piece_full, FULL_WIDTH_FRACTION * float(interior[index]))
-        piece_width = float(medians[index]) if medians is not None else 0.0
-        skips = [skip, skip]
-        if distance is not None:
-            skips = [
-                max(skip, _narrow_end_length(points, at_start, distance, piece_full))
-                for at_start in (True, False)
-            ]
-        length = polyline_length(points)
-        for at_start in (True, False):
-            end_skip, far_skip = skips if at_start else skips[::-1]
-            # A short piece's fit stops short of its other end's narrow tip: a cut
-            # there bends toward the cut's corner and would tilt this end.
-            reach = length - end_skip - far_skip
-            end_span = min(span, reach) if far_skip > skip and reach >= 0.5 * span else span
-            position, direction, curvature = end_fit(points, at_start, end_span, end_skip)
-            ends.append(
-                ChainEnd(index, at_start, position, direction, curvature, end_skip, piece_width)
-            )
-    return ends
-
-
-def _narrow_end_length(points, at_start, distance, full_width, limit=NARROW_END_JOINTS):
-    """Arc length from the tip to the first joint where the cable has its full width.
-
-    0 when none of the first ``limit`` joints reaches it (a thin piece throughout).
-    """
-    ordered = points if at_start else points[::-1]
-    height, width = distance.shape
-    length = 0.0
-    for k in range(min(len(ordered), limit + 1)):
-        if k:
-            length += float(np.hypot(*(ordered[k] - ordered[k - 1])))
-        col = min(max(round(float(ordered[k][0])), 0), width - 1)
-        row = min(max(round(float(ordered[k][1])), 0), height - 1)
-        if distance[row, col] >= full_width:
-            return length
-    return 0.0
+        widths, interior = values[: len(pieces)], values[len(pieces) :]
+        long_enough = np.diff(starts) >= 3
+        full_widths[long_enough] = np.maximum(
+            full_widths[long_enough], FULL_WIDTH_FRACTION * widths[long_enough]
+        )
+        # A cable thinner than the picture's typical one is at its full width where its
+        # own middle is: held to the typical width, its every joint would look narrow,
+        # and a joint widened by a bend or a touching strand would cut the end's fit
+        # short by several joints. (Only ever lower: a blob the piece runs through
+        # widens its middle.)
+        thinner = interior > 0
+        held = long[thinner]
+        full_widths[held] = np.minimum(full_widths[held], FULL_WIDTH_FRACTION * interior[thinner])
+    # Both fits of every piece in one compiled loop (geometry.end_fit's, end by end); a
+    # short piece's fit stops short of its other end's narrow tip (its length is needed).
+    lengths = np.array([polyline_length(points) for points in pieces])
+    positions, directions, curvatures, skips = _merging_kernels.fit_chain_ends(
+        joints, starts, lengths, narrow_in, full_widths, float(skip), float(span), NARROW_END_JOINTS
+    )
+    curvatures, skips, widths = curvatures.tolist(), skips.tolist(), widths.tolist()
+    return [
+        ChainEnd(
+            end // 2,
+            end % 2 == 0,
+            positions[end].copy(),
+            directions[end].copy(),
+            curvatures[end],
+            skips[end],
+            widths[end // 2],
+        )
+        for end in range(2 * len(pieces))
+    ]
 
 
 def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> float:
@@ -324,22 +311,52 @@ def _best_matching(
     junction thinning bends each strand toward where the strands meet, so the bending
     there is not the cable's, and the gaps are short.
     """
-    straight = {member: replace(ends[member], curvature=0.0) for member in members}
+    return _best_matchings([members], ends, params, radius, colours)
+
+
+def _best_matchings(
+    junctions: list[list[int]],
+    ends: list[ChainEnd],
+    params: DetectParams,
+    radius: float,
+    colours: EndColours | None = None,
+) -> list[tuple[int, int, float]]:
+    """:func:`_best_matching` of every junction's ``members`` in turn, their pairs all
+    costed in one kernel call."""
+    # Every pair of ends of different pieces, junction by junction.
     pairs = [
-        (a, b)
-        for a_pos, a in enumerate(members)
-        for b in members[a_pos + 1 :]
-        if ends[a].piece != ends[b].piece
+        [
+            (a, b)
+            for a_pos, a in enumerate(members)
+            for b in members[a_pos + 1 :]
+            if ends[a].piece != ends[b].piece
+        ]
+        for members in junctions
     ]
-    colour_costs = [0.0] * len(pairs)
-    if colours is not None and pairs:
-        first, second = np.array(pairs).T
-        colour_costs = (params.colour_weight * colour_penalty(colours, first, second)).tolist()
-    costs = {
-        (a, b): join_cost(straight[a], straight[b], params, radius) + extra
-        for (a, b), extra in zip(pairs, colour_costs, strict=True)
-    }
-    return cheapest_pairing(members, costs, params.merge_cost_threshold)
+    flat = [pair for junction_pairs in pairs for pair in junction_pairs]
+    costs = np.zeros(0)
+    if flat:
+        first = np.array([a for a, _ in flat], np.int64)
+        second = np.array([b for _, b in flat], np.int64)
+        # join_cost of every pair, with the ends' curvature set to 0.
+        costs = _merging_kernels.pair_join_costs(
+            np.array([end.position for end in ends], np.float64),
+            np.array([end.direction for end in ends], np.float64),
+            np.zeros(len(ends)),
+            first,
+            second,
+            np.array([params.distance_weight, params.direction_weight, params.curvature_weight]),
+            float(params.max_gap),
+            float(radius),
+        )
+        if colours is not None:
+            costs = costs + params.colour_weight * colour_penalty(colours, first, second)
+    costs_left = iter(costs.tolist())
+    found = []
+    for members, junction_pairs in zip(junctions, pairs, strict=True):
+        junction_costs = {pair: next(costs_left) for pair in junction_pairs}
+        found.extend(cheapest_pairing(members, junction_costs, params.merge_cost_threshold))
+    return found
 
 
 # Junctions with more ends than this are paired greedily (the matching is exponential).
@@ -426,10 +443,8 @@ def choose_joins(
         for index, junction in enumerate(junction_of_end):
             if junction >= 0:
                 groups.setdefault(junction, []).append(index)
-        proposals = []
-        for members in groups.values():
-            if 2 <= len(members) <= MAX_JUNCTION_ENDS:
-                proposals.extend(_best_matching(members, ends, params, radius, colours))
+        paired = [members for members in groups.values() if 2 <= len(members) <= MAX_JUNCTION_ENDS]
+        proposals = _best_matchings(paired, ends, params, radius, colours)
         for i, j, cost in sorted(proposals, key=lambda item: item[2]):
             try_join(i, j, cost)
 
@@ -732,26 +747,19 @@ def _ends_of_split_pieces(
 
 
 def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -> list[int]:
-    """The junction zone each end touches (its connected-component label), or -1."""
-    if zones is None or not zones.any():
+    """The junction zone each end touches, or -1: the 8-connected pieces of the zones
+    grown by a ``2 reach + 1`` square (``cv2.dilate``), numbered in the order the ends
+    reach them. Compiled (``_merging_kernels.grown_zone_labels``): only the pieces the
+    ends lie in are filled; the plain version, which grows and labels the zones' box,
+    is the reference in ``tests/perception/references/merging.py``."""
+    if zones is None:
         return [-1] * len(ends)
-    zones_u8 = zones.astype(np.uint8)
-    height, width = zones.shape
-    # Grow and label only the zones' box plus the reach: every grown pixel is inside,
-    # and components keep their raster order, hence their labels.
-    x, y, w, h = cv2.boundingRect(zones_u8)
-    left, top = max(x - reach, 0), max(y - reach, 0)
-    right, bottom = min(x + w + reach, width), min(y + h + reach, height)
-    kernel = np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)
-    grown = cv2.dilate(zones_u8[top:bottom, left:right], kernel)
-    _, labels = cv2.connectedComponents(grown, connectivity=8)
-    result = []
-    for end in ends:
-        col = min(max(round(float(end.position[0])), 0), width - 1) - left
-        row = min(max(round(float(end.position[1])), 0), height - 1) - top
-        inside = 0 <= row < bottom - top and 0 <= col < right - left
-        result.append(int(labels[row, col]) - 1 if inside and labels[row, col] > 0 else -1)
-    return result
+    positions = np.array([end.position for end in ends], np.float64).reshape(-1, 2)
+    zones_u8 = zones.view(np.uint8) if zones.dtype == np.bool_ else zones.astype(np.uint8)
+    labels = _merging_kernels.grown_zone_labels(
+        np.ascontiguousarray(zones_u8), positions, int(reach)
+    )
+    return labels.tolist()
 
 
 def assemble_paths(

@@ -32,7 +32,7 @@ from service.perception.deadline import Deadline, check
 from service.perception.end_extension import extend_ends
 from service.perception.errors import InvalidInputError
 from service.perception.fitting import fit_chains, junction_zones
-from service.perception.geometry import polyline_length, resample
+from service.perception.geometry import fit_where_skipped, polyline_length, resample
 from service.perception.merging import (
     Join,
     MergedPath,
@@ -167,18 +167,15 @@ def chain_radius(joints: np.ndarray, mask: np.ndarray, radius: float) -> float:
     sides = _pipeline_kernels.sides_across(
         np.ascontiguousarray(joints, np.float64), np.ascontiguousarray(mask, bool), limit
     )
-    widths = sides.sum(axis=1)
     # A chain runs along its cable's middle: where it lies off the middle third of what
     # the mask spans across it, the span is something else (the other side of a cable
-    # it touches, a strand it crosses, a blob it runs along the edge of).
-    centred = sides.min(axis=1) >= CENTRED_SHARE * widths
-    widths = widths[np.isfinite(widths) & centred]
-    if widths.size == 0:
-        return radius
-    median = float(np.median(widths))
-    near = widths[np.abs(widths - median) <= ACROSS_QUANTISATION_PX]
-    # An even count split far apart has none near its median: the median it is.
-    return max(0.5 * (float(np.mean(near)) if near.size else median), 0.5)
+    # it touches, a strand it crosses, a blob it runs along the edge of). An even count
+    # split far apart has none near its median: the median it is.
+    return float(
+        _pipeline_kernels.radius_from_sides(
+            sides, float(radius), CENTRED_SHARE, ACROSS_QUANTISATION_PX
+        )
+    )
 
 
 def _empty(width, height, params, watch, mask, skeleton) -> DetectionResult:
@@ -458,7 +455,10 @@ def warm_up() -> None:
         np.array([[6.0, 0.0], [6.0, 4.0], [6.0, 8.0], [6.0, 12.0]]),
     ]
     ends = chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
-    choose_joins(ends, len(strands), DetectParams(), radius)  # the candidates' grid
+    # One end's fit alone, where its skipped tip begins (the bridges from the fits).
+    fit_where_skipped(strands[0], True, 10.0, 1.0)
+    # The candidates' grid, and a junction's pairing (the strands' first ends meet).
+    choose_joins(ends, len(strands), DetectParams(), radius, junction_of_end=[0, -1, 0, -1])
     # The image's evidence: ends running to the border, the ends' colours (warmed even
     # when a caller's colour_weight is 0).
     colour = DetectParams(colour_weight=0.5)

@@ -26,6 +26,7 @@ from service.perception.merging import (
     choose_joins,
     gap_curve,
     join_cost,
+    junctions_of_ends,
     merge_chains,
 )
 from service.perception.touching import split_touching_strands, split_where_leaving_together
@@ -216,6 +217,64 @@ def test_gap_curve_kernels_equal_the_references_in_every_shape(seed):
     assert natural_shapes["straight"] >= 20
     assert natural_shapes["arc"] >= 50
     assert natural_shapes["bezier"] >= 150
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_chain_ends_kernel_equals_the_plain_fits_bit_for_bit(seed):
+    # Wandering pieces of 2 to 40 joints over a distance map with narrow and wide places,
+    # with and without the narrow ends left out: every end's fit as geometry.end_fit's.
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((120, 160), np.uint8)
+    for _ in range(6):
+        start, stop = rng.integers(0, 160, 2), rng.integers(0, 120, 2)
+        cv2.line(mask, (int(start[0]), int(stop[0])), (int(start[1]), int(stop[1])), 1, 9)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    pieces = []
+    for _ in range(30):
+        steps = rng.normal(size=(int(rng.integers(2, 40)), 2)) * 3.0 + rng.normal(size=2) * 4.0
+        pieces.append(rng.uniform(0, 150, 2) + np.cumsum(steps, axis=0))
+    for arguments in (
+        {"span": 40.0},
+        {"span": 20.0, "skip": 4.0},
+        {"span": 30.0, "skip": 3.0, "distance": distance, "full_width": 2.8},
+    ):
+        fast, plain = chain_ends(pieces, **arguments), reference.chain_ends(pieces, **arguments)
+        assert len(fast) == len(plain) == 2 * len(pieces)
+        for got, expected in zip(fast, plain, strict=True):
+            assert (got.piece, got.at_start) == (expected.piece, expected.at_start)
+            assert np.array_equal(got.position, expected.position)
+            assert np.array_equal(got.direction, expected.direction)
+            assert (got.curvature, got.skip, got.width) == (
+                expected.curvature,
+                expected.skip,
+                expected.width,
+            )
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_junctions_of_ends_group_the_ends_as_the_labelled_grown_zones(seed):
+    # Discs and bridges of zones, some close enough to merge once grown, some at the
+    # picture's border; ends on them, beside them, just out of reach and far off.
+    rng = np.random.default_rng(seed)
+    zones = np.zeros((90, 120), np.uint8)
+    for _ in range(int(rng.integers(1, 9))):
+        centre = (int(rng.integers(-5, 125)), int(rng.integers(-5, 95)))
+        cv2.circle(zones, centre, int(rng.integers(1, 9)), 1, -1)
+    if seed % 2:
+        cv2.line(zones, (10, 10), (60, 40), 1, 1)
+    positions = rng.uniform(-3.0, 123.0, (200, 2))
+    ends = [
+        ChainEnd(k // 2, k % 2 == 0, position, np.array([1.0, 0.0]))
+        for k, position in enumerate(positions)
+    ]
+    for reach in (0, 3):
+        fast = junctions_of_ends(ends, zones.view(np.bool_), reach)
+        plain = reference.junctions_of_ends(ends, zones.view(np.bool_), reach)
+        # The same ends in no zone, and the same ends together (labels may be numbered
+        # otherwise: only which ends share a zone counts).
+        assert [label < 0 for label in fast] == [label < 0 for label in plain]
+        assert len(set(zip(fast, plain, strict=True))) == len(set(plain)) == len(set(fast))
+    assert junctions_of_ends(ends, np.zeros((90, 120), bool)) == [-1] * len(ends)
 
 
 @pytest.mark.parametrize("seed", range(3))

@@ -329,6 +329,24 @@ def test_inferred_segments_kernel_equals_the_reference(seed):
 
 
 @pytest.mark.parametrize("seed", range(4))
+def test_radius_from_sides_kernel_equals_the_reference_bit_for_bit(seed):
+    # Widths of many lengths (NumPy's pairwise sums past 8 and 128), off-centre sides,
+    # sides with no edge, and widths on a pixel grid (ties at the median).
+    rng = np.random.default_rng(seed)
+    for _ in range(500):
+        count = int(rng.integers(0, 400))
+        sides = rng.uniform(0.0, 12.0, (count, 2)) * rng.choice([1.0, 0.1], (count, 2))
+        sides[rng.random((count, 2)) < 0.1] = np.nan
+        if rng.random() < 0.5:
+            sides = np.round(sides * 2.0) / 2.0
+        radius = float(rng.uniform(1.0, 6.0))
+        arguments = (sides, radius, 1.0 / 3.0, float(np.sqrt(2.0)))
+        assert _pipeline_kernels.radius_from_sides(*arguments) == reference.radius_from_sides(
+            *arguments
+        )
+
+
+@pytest.mark.parametrize("seed", range(4))
 def test_sides_across_kernel_equals_the_reference(seed):
     rng = np.random.default_rng(seed)
     for _ in range(20):

@@ -1,7 +1,65 @@
-"""Plain search for the cable's farthest rim ahead of a chain end (end extension)."""
+"""Plain end extension: one end's new tip (the code ``_end_extension_kernels.extended_tip``
+replaced, with the compiled rim search it called) and the search for the cable's farthest
+rim ahead of a chain end."""
 
 import cv2
 import numpy as np
+
+from service.perception import _end_extension_kernels, end_extension
+from service.perception.geometry import end_direction
+
+
+def extend_end(points, at_start, mask, radius, span):
+    """:func:`service.perception.end_extension.extend_end` step by step in Python."""
+    direction = end_direction(points, at_start, span)
+    tip = points[0] if at_start else points[-1]
+    height, width = mask.shape
+    reach = 0.0
+    limit = 3.0 * radius + 2.0
+    leaves_image = False
+    while reach < limit:
+        probe = tip + (reach + 1.0) * direction
+        col, row = round(probe[0]), round(probe[1])
+        if not (0 <= col < width and 0 <= row < height):
+            leaves_image = True
+            break
+        if not mask[row, col]:
+            break
+        reach += 1.0
+    extension = reach if leaves_image else reach - radius
+    if not leaves_image:
+        far = compiled_farthest_ahead(
+            tip, direction, mask, end_extension.TIP_SEARCH_RADII * radius + 2.0
+        )
+        if far is not None:
+            offset = far - tip
+            length = float(np.hypot(*offset))
+            if length - radius > extension:
+                direction = offset / length
+                extension = length - radius
+    if extension < 1.0:
+        return points
+    new_tip = tip + extension * direction
+    return np.vstack([new_tip, points]) if at_start else np.vstack([points, new_tip])
+
+
+def compiled_farthest_ahead(tip, direction, mask, limit):
+    """``_end_extension_kernels.farthest_rim_ahead`` as extend_end called it: the middle of
+    the farthest rim, or None (its mean is summed otherwise than :func:`farthest_ahead`'s,
+    so the two agree to about 1e-12 px, not bit for bit)."""
+    found, x, y = _end_extension_kernels.farthest_rim_ahead(
+        np.ascontiguousarray(mask).view(np.uint8),
+        round(float(tip[0])),
+        round(float(tip[1])),
+        float(tip[0]),
+        float(tip[1]),
+        float(direction[0]),
+        float(direction[1]),
+        float(limit),
+        end_extension.TIP_SEARCH_COS,
+        end_extension.FAR_RIM_PX,
+    )
+    return np.array([x, y]) if found else None
 
 
 def farthest_ahead(tip, direction, mask, limit, cos_half_angle, rim):

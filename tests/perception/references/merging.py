@@ -1,13 +1,108 @@
-"""Plain step 6: the gap curves (the natural curve's three shapes and the smooth cubic),
-and the choice of joins costing every pair of chain ends (the code the grid of
+"""Plain step 6: the end fits piece by piece (the code ``_merging_kernels.fit_chain_ends``
+replaced), the junction zone of each end (the labelling ``_merging_kernels.grown_zone_labels``
+replaced), the gap curves (the natural curve's three shapes and the smooth cubic), and the
+choice of joins costing every pair of chain ends (the code the grid of
 ``_merging_kernels.candidate_joins`` replaced)."""
 
+import cv2
 import numpy as np
 
 from service.perception import _merging_kernels, merging
 from service.perception.appearance import colour_penalty
-from service.perception.geometry import angle_between
+from service.perception.geometry import angle_between, end_fit, polyline_length
 from service.perception.pairing import Components
+
+
+def chain_ends(pieces, span, skip=0.0, distance=None, full_width=0.0):
+    """:func:`service.perception.merging.chain_ends` end by end, through
+    :func:`service.perception.geometry.end_fit`."""
+    ends = []
+    medians = None
+    interior = np.zeros(len(pieces))
+    if distance is not None and pieces:
+        # Cables differ in width: a piece's own full width is the typical distance to
+        # the border at its joints, and for a long piece also that away from both ends
+        # (more than merging.NARROW_END_JOINTS in), where no cut end narrows it.
+        minimum = 2 * merging.NARROW_END_JOINTS + merging.MIN_INTERIOR_JOINTS
+        long = [k for k, points in enumerate(pieces) if len(points) >= minimum]
+        middles = [pieces[k][merging.NARROW_END_JOINTS : -merging.NARROW_END_JOINTS] for k in long]
+        parts = list(pieces) + middles
+        starts = np.cumsum([0] + [len(points) for points in parts]).astype(np.int64)
+        joints = np.ascontiguousarray(np.concatenate(parts), dtype=np.float64)
+        values = _merging_kernels.median_distance_per_piece(
+            np.ascontiguousarray(distance, np.float32), joints, starts
+        )
+        medians, interior[long] = values[: len(pieces)], values[len(pieces) :]
+    for index, points in enumerate(pieces):
+        piece_full = full_width
+        if medians is not None and len(points) >= 3:
+            piece_full = max(full_width, merging.FULL_WIDTH_FRACTION * float(medians[index]))
+        if interior[index] > 0:
+            # A cable thinner than the picture's typical one is at its full width
+            # where its own middle is: held to the typical width, its every joint
+            # would look narrow, and a joint widened by a bend or a touching strand
+            # would cut the end's fit short by several joints. (Only ever lower: a
+            # blob the piece runs through widens its middle.)
+            piece_full = min(piece_full, merging.FULL_WIDTH_FRACTION * float(interior[index]))
+        piece_width = float(medians[index]) if medians is not None else 0.0
+        skips = [skip, skip]
+        if distance is not None:
+            skips = [
+                max(skip, _narrow_end_length(points, at_start, distance, piece_full))
+                for at_start in (True, False)
+            ]
+        length = polyline_length(points)
+        for at_start in (True, False):
+            end_skip, far_skip = skips if at_start else skips[::-1]
+            # A short piece's fit stops short of its other end's narrow tip: a cut
+            # there bends toward the cut's corner and would tilt this end.
+            reach = length - end_skip - far_skip
+            end_span = min(span, reach) if far_skip > skip and reach >= 0.5 * span else span
+            position, direction, curvature = end_fit(points, at_start, end_span, end_skip)
+            ends.append(
+                merging.ChainEnd(
+                    index, at_start, position, direction, curvature, end_skip, piece_width
+                )
+            )
+    return ends
+
+
+def _narrow_end_length(points, at_start, distance, full_width, limit=merging.NARROW_END_JOINTS):
+    """Arc length from the tip to the first joint where the cable has its full width
+    (0 when none of the first ``limit`` joints reaches it)."""
+    ordered = points if at_start else points[::-1]
+    height, width = distance.shape
+    length = 0.0
+    for k in range(min(len(ordered), limit + 1)):
+        if k:
+            length += float(np.hypot(*(ordered[k] - ordered[k - 1])))
+        col = min(max(round(float(ordered[k][0])), 0), width - 1)
+        row = min(max(round(float(ordered[k][1])), 0), height - 1)
+        if distance[row, col] >= full_width:
+            return length
+    return 0.0
+
+
+def junctions_of_ends(ends, zones, reach=3):
+    """:func:`service.perception.merging.junctions_of_ends` by growing (``cv2.dilate``)
+    and labelling (``cv2.connectedComponents``) the zones' box plus the reach."""
+    if zones is None or not zones.any():
+        return [-1] * len(ends)
+    zones_u8 = zones.astype(np.uint8)
+    height, width = zones.shape
+    x, y, w, h = cv2.boundingRect(zones_u8)
+    left, top = max(x - reach, 0), max(y - reach, 0)
+    right, bottom = min(x + w + reach, width), min(y + h + reach, height)
+    kernel = np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)
+    grown = cv2.dilate(zones_u8[top:bottom, left:right], kernel)
+    _, labels = cv2.connectedComponents(grown, connectivity=8)
+    result = []
+    for end in ends:
+        col = min(max(round(float(end.position[0])), 0), width - 1) - left
+        row = min(max(round(float(end.position[1])), 0), height - 1) - top
+        inside = 0 <= row < bottom - top and 0 <= col < right - left
+        result.append(int(labels[row, col]) - 1 if inside and labels[row, col] > 0 else -1)
+    return result
 
 
 def _arc(start: np.ndarray, heading: np.ndarray, turn: float, radius: float, step: float):

@@ -1,4 +1,5 @@
-"""Plain per-segment "inferred" flags of a resampled chain, and widths across a chain."""
+"""Plain per-segment "inferred" flags of a resampled chain, widths across a chain, and the
+chain's radius from them."""
 
 import numpy as np
 
@@ -59,3 +60,15 @@ def _edge_distance(mask, point, direction, limit):
         if not mask[cell[1], cell[0]]:
             return t
     return np.nan
+
+
+def radius_from_sides(sides, radius, centred_share, quantisation):
+    """The code ``_pipeline_kernels.radius_from_sides`` replaced in pipeline.chain_radius."""
+    widths = sides.sum(axis=1)
+    centred = sides.min(axis=1) >= centred_share * widths
+    widths = widths[np.isfinite(widths) & centred]
+    if widths.size == 0:
+        return radius
+    median = float(np.median(widths))
+    near = widths[np.abs(widths - median) <= quantisation]
+    return max(0.5 * (float(np.mean(near)) if near.size else median), 0.5)
