@@ -296,6 +296,11 @@ CUT_WIDTH_RANGE = (0.6, 1.5)
 # Where the cross-section just behind the front is narrower (a steeply slanted cut),
 # it is read again this share of a half width further back each time.
 CUT_STEP_BACK_SHARE = 0.5
+# The cut's front is read along the cable's own axis between the two cross-sections
+# when they lie at least this share of a half width apart and that axis turns from the
+# end's fitted direction by less than the angle of CUT_AXIS_COS.
+CUT_AXIS_SHARE = 1.0
+CUT_AXIS_COS = float(np.cos(np.radians(45.0)))
 # Two ends are alike in width when the narrower piece is at least this share of the wider.
 WIDTH_AGREEMENT = 0.8
 
@@ -337,14 +342,17 @@ def cut_square(
 
     The cable's cross-section is first read :data:`CUT_BEHIND_RADII` half widths
     behind the end, or ``skip`` px (the tip the end's fit left out, a cut's hook) where
-    that is further: closer in, a cut at a slant has already taken one side off."""
+    that is further: closer in, a cut at a slant has already taken one side off. The
+    front is read along the cable's own axis between that cross-section and the one
+    just behind the front (:data:`CUT_AXIS_SHARE`, :data:`CUT_AXIS_COS`) rather than the
+    fitted direction, which a bend just before the cut turns off the cable."""
     direction = np.asarray(direction, np.float64)
-    normal = np.array([-direction[1], direction[0]])
     count = int(np.ceil(2.0 * ((CUT_AHEAD_RADII + 2.0) * half_width + float(skip)))) + 1
 
     # The cable's own cross-section behind the end: its centre and half width there
     # (the end's fitted position may lie off the centreline on a bend).
-    def cross_section(point):
+    def cross_section(point, direction=direction):
+        normal = np.array([-direction[1], direction[0]])
         sides = [_front(mask, point, side * normal, count) for side in (1.0, -1.0)]
         if np.isnan(sides).any():
             return None, 0.0
@@ -373,8 +381,19 @@ def cut_square(
         if local >= CUT_WIDTH_RANGE[0] * half_width or back >= ahead:
             break
         back += CUT_STEP_BACK_SHARE * half_width
+    # The fitted direction is extrapolated over the tip; where the cable bends just
+    # before the cut, the lines along it leave through the cable's side. The cable's own
+    # axis there runs from the first cross-section's centre to this one's.
+    axis = centre - start
+    apart = float(np.hypot(*axis))
+    if apart >= CUT_AXIS_SHARE * half_width and float(axis @ direction) > apart * CUT_AXIS_COS:
+        direction = axis / apart
+        centre, local = cross_section(centre, direction)
+        if centre is None:
+            return False
     if not CUT_WIDTH_RANGE[0] * half_width <= local <= CUT_WIDTH_RANGE[1] * half_width:
         return False
+    normal = np.array([-direction[1], direction[0]])
     fronts = [
         _front(mask, centre + share * local * normal, direction, count)
         for share in (-CUT_PROBE_SHARE, 0.0, CUT_PROBE_SHARE)

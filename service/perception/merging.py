@@ -551,11 +551,13 @@ def _mutual_best(
     return sorted(pairs)
 
 
-# A gap over open background longer than MUTUAL_GAP_RADII, up to this many radii (the
-# longest stretch the issue's occluders hide), is still joined by the mutual rule when
-# both ends are cut and alike (:func:`_cut_ends_alike`): an object of the background's
-# own colour hides a cable without showing itself.
-CUT_GAP_RADII = 15.0
+# A gap over open background whose curve is up to this many of the cable's radii long
+# may be joined, by the mutual rule or as a turn (:mod:`.turn_joins`), when both ends
+# are cut and alike (:func:`_cut_ends_alike`): an object of the background's own colour
+# hides a cable without showing itself. The issue's occluders hide at most 15 radii; 2
+# more at each end stand for the ends' fits stopping short of the object's border and
+# the curve running wider than the hidden stretch (as in OPEN_GAP_RADII).
+CUT_GAP_RADII = 19.0
 
 
 def _cut_ends_alike(
@@ -563,14 +565,18 @@ def _cut_ends_alike(
     b: ChainEnd,
     i: int,
     j: int,
+    curve: np.ndarray,
     mask: np.ndarray,
     colours: EndColours | None,
     radius: float,
 ) -> bool:
-    """Whether the free ends ``a`` (end ``i``) and ``b`` (end ``j``), at most
-    :data:`CUT_GAP_RADII` apart, are both cut (the foreground stops right ahead of each,
-    :func:`.appearance.cut_square`) and look like one cable's
+    """Whether the free ends ``a`` (end ``i``) and ``b`` (end ``j``), joined by
+    ``curve`` at most :data:`CUT_GAP_RADII` long (in :func:`_cable_radius`: a thick
+    cable's hidden stretch is longer in pixels), are both cut (the foreground stops
+    right ahead of each, :func:`.appearance.cut_square`) and look like one cable's
     (:func:`.appearance.ends_alike`: both of a known, agreeing colour and of one width).
+    The length is the curve's, not the ends' distance: a turn under an object hides a
+    cable's whole bend between two ends that lie side by side.
 
     Two pieces of one cable hidden by an object of the background's own colour show no
     object over the gap, but they face each other (each the other's clearly cheapest
@@ -581,7 +587,7 @@ def _cut_ends_alike(
     """
     if colours is None:
         return False
-    if float(np.hypot(*(a.position - b.position))) > CUT_GAP_RADII * radius:
+    if polyline_length(curve) > CUT_GAP_RADII * _cable_radius(radius, a.width, b.width):
         return False
     if not ends_alike(colours, i, j, (a.width, b.width)):
         return False
@@ -605,7 +611,15 @@ def _open_gap_limit(radius, first_width, second_width):
     """The longest open gap (px) a join may bridge: :data:`OPEN_GAP_RADII` of the larger
     of the picture's typical radius and the two pieces' own half widths (a thick cable's
     hidden stretch is longer in pixels). Scalars or arrays of widths."""
-    return OPEN_GAP_RADII * np.maximum(radius, 0.5 * (first_width + second_width))
+    return OPEN_GAP_RADII * _cable_radius(radius, first_width, second_width)
+
+
+def _cable_radius(radius, first_width, second_width):
+    """The radius a gap between two pieces is measured in: the larger of the picture's
+    typical ``radius`` and the pieces' mean half width (a thick cable's hidden stretch
+    is longer in pixels, a thin one's no shorter than the picture's typical cable's).
+    Scalars or arrays of widths."""
+    return np.maximum(radius, 0.5 * (first_width + second_width))
 
 
 def _beyond_hiding(ends, pairs, distances, radius) -> np.ndarray:
@@ -838,7 +852,7 @@ def merge_chains(
     # pixel beyond the border: the full half width is radius + 0.5.
     full_width = FULL_WIDTH_FRACTION * (radius + 0.5)
     if mask is not None and pieces:
-        pieces, _ = split_where_leaving_together(
+        pieces = split_where_leaving_together(
             pieces, mask, radius, radius + BORDER_MARGIN_PX, BORDER_MARGIN_PX, span
         )
     ends = chain_ends(pieces, span, skip=radius, distance=distance, full_width=full_width)
@@ -896,14 +910,18 @@ def merge_chains(
     hidden_gap = None
     if image is not None and mask is not None:
 
-        def hidden_gap(i: int, j: int) -> bool:
+        def hidden_gap(i: int, j: int, curve: np.ndarray | None = None) -> bool:
+            # The one test of the image's evidence that something hides a cable between
+            # ends i and j, along ``curve`` (the gap's own curve when None): for the
+            # joins across gaps and for the turns under objects alike.
             a, b = ends[i], ends[j]
-            curve = gap_curve(
-                a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
-            )
+            if curve is None:
+                curve = gap_curve(
+                    a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
+                )
             if gap_hidden(image, mask, curve, (a, b), radius):
                 return True
-            return _cut_ends_alike(a, b, i, j, mask, colours, radius)
+            return _cut_ends_alike(a, b, i, j, curve, mask, colours, radius)
 
     open_gap = None
     if hidden_gap is not None:
@@ -946,7 +964,7 @@ def merge_chains(
                 join_cost(ends[i], ends[j], params, radius)
                 + params.colour_weight * float(colour_penalty(colours, [i], [j])[0])
             ),
-            lambda i, j, curve: gap_hidden(image, mask, curve, (ends[i], ends[j]), radius),
+            hidden_gap,
             lambda i, j: float(_open_gap_limit(radius, ends[i].width, ends[j].width)),
             mutual,
             mutual,

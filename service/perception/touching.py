@@ -224,7 +224,7 @@ def split_where_leaving_together(
     margin: float,
     slack: float,
     min_length: float = 0.0,
-) -> tuple[list[np.ndarray], list[int]]:
+) -> list[np.ndarray]:
     """Cut the pieces where two strands leave the picture touching (ariadne simple/00012).
 
     Two cables that touch where they leave the picture (or one cable leaving and coming
@@ -261,14 +261,11 @@ def split_where_leaving_together(
     -------
     pieces : list of ndarray
         The input pieces, a cut one replaced by its first part, the second parts appended.
-    origin : list of int
-        The input piece each piece comes from.
     """
     height, width = mask.shape[:2]
     result = list(pieces)
-    origin = list(range(len(pieces)))
     if not pieces:
-        return result, origin
+        return result
     # One pass over every joint: the inner joints within the margin that lie nearest
     # the border of the line about them (the joints either side no nearer it), where a
     # V's point would be. Most pictures have none, and nothing more is done.
@@ -281,7 +278,7 @@ def split_where_leaving_together(
     near[starts[1:] - 1] = False
     candidates = np.flatnonzero(near)
     if not len(candidates):
-        return result, origin
+        return result
     gaps = np.column_stack([xs, ys, width - 1 - xs, height - 1 - ys])[candidates]
     inward = _INWARD[gaps.argmin(axis=1)]
     offsets = [
@@ -291,7 +288,7 @@ def split_where_leaving_together(
     lowest = (np.minimum(*offsets) >= 0) & (np.maximum(*offsets) > 0)
     candidates = candidates[lowest]
     if not len(candidates):
-        return result, origin
+        return result
     owners = np.searchsorted(starts, candidates, side="right") - 1
     reach = 2.0 * radius
     for index in sorted(set(owners.tolist())):
@@ -307,8 +304,7 @@ def split_where_leaving_together(
             continue
         result[index] = points[: at + 1]
         result.append(points[at:])
-        origin.append(index)
-    return result, origin
+    return result
 
 
 # The direction into the picture from its left, top, right and bottom border.

@@ -8,14 +8,17 @@ join is made here only on the image's evidence, after every other join
 (:func:`turn_joins`):
 
 - a curve a cable could have taken between the two ends, bending no tighter than
-  :data:`HIDDEN_BEND_RADII` ``[0]`` of its radius, exists, and something the image
-  shows lies over it (``hidden``, the merging step's :func:`.appearance.gap_hidden`):
-  not open background, which is what lies beyond two cables that end, or leave the
-  picture, side by side. The curves tried (:func:`hidden_turn_curves`) are the natural
-  curve (:func:`natural_turn`) and the bulbs a cable doubled back on itself swings
-  out into, turning round by up to :data:`MAX_HIDDEN_TURN` (:func:`bulb_turns`), from
-  the ends' fitted directions and from tilted ones; the join is then bridged along the
-  curve found hidden;
+  :data:`HIDDEN_BEND_RADII` ``[0]`` of its radius, exists, and the image says
+  something hides a cable along it (``hidden``: the merging step's one test of that
+  evidence, as for straight gaps: an object shows over the curve,
+  :func:`.appearance.gap_hidden`, or both ends are cut square and alike and the curve
+  no longer than an object of the background's own colour hides,
+  :func:`.merging._cut_ends_alike`): not open background beyond two round tips, which
+  is what lies beyond two cables that end side by side. The curves tried
+  (:func:`hidden_turn_curves`) are the natural curve (:func:`natural_turn`) and the
+  bulbs a cable doubled back on itself swings out into, turning round by up to
+  :data:`MAX_HIDDEN_TURN` (:func:`bulb_turns`), from the ends' fitted directions and
+  from tilted ones; the join is then bridged along the curve found hidden;
 - the two pieces agree in colour and width (:func:`.appearance.ends_alike`);
 - neither end has a better partner: the turns and every free pair the merging step
   could have joined without evidence are paired together by the cheapest matching,
@@ -410,7 +413,8 @@ def turn_joins(
     cost : callable (i, j) -> float
         The join cost of ends ``i`` and ``j``, colour included.
     hidden : callable (i, j, curve) -> bool
-        Whether something the image shows lies over the curve.
+        Whether the image says something hides a cable along the curve (the same test
+        merging applies to its gaps).
     reach : callable (i, j) -> float
         The longest gap (px) between the two ends that anything hides.
     free_cost : float

@@ -222,3 +222,34 @@ def test_reading_further_back_keeps_a_round_tip_round_and_a_cut_cut(slant):
         )
     cut = _cable_end_mask("cut", slant)
     assert appearance.cut_square(cut, np.array([78.0, 50.0]), np.array([1.0, 0.0]), 6.5, 10.0)
+
+
+def _bent_end_mask(tip: str) -> np.ndarray:
+    """A cable of half width 6 along y = 50 up to x = 70, then bent by 30 degrees
+    (downwards) for 20 px to its end, cut square across the bent stretch or ending in
+    a round tip."""
+    mask = np.zeros((120, 160), np.uint8)
+    bend = np.radians(30.0)
+    corner = np.array([70.0, 50.0])
+    tip_point = corner + 20.0 * np.array([np.cos(bend), np.sin(bend)])
+    cv2.line(mask, (10, 50), (70, 50), 1, 13)
+    cv2.line(mask, (70, 50), tuple(np.rint(tip_point).astype(int).tolist()), 1, 13)
+    rows, cols = np.mgrid[0:120, 0:160]
+    along = (cols - tip_point[0]) * np.cos(bend) + (rows - tip_point[1]) * np.sin(bend)
+    mask[along > 0] = 0
+    if tip == "round":
+        mask[along > -6.0] = 0
+        centre = tip_point - 6.0 * np.array([np.cos(bend), np.sin(bend)])
+        cv2.circle(mask, tuple(np.rint(centre).astype(int).tolist()), 6, 1, -1)
+    return mask > 0
+
+
+@pytest.mark.parametrize(("tip", "square"), [("cut", True), ("round", False)])
+def test_a_cut_just_past_a_bend_is_read_along_the_cable(tip, square):
+    """The end's fitted direction still runs along the stretch before the bend (30
+    degrees off the cable at the cut): read along it, the lines across the cut leave
+    through the cable's side. Read along the cable's own axis, the cut is square and a
+    round tip stays round."""
+    mask = _bent_end_mask(tip)
+    position, direction = np.array([84.0, 56.0]), np.array([1.0, 0.0])
+    assert appearance.cut_square(mask, position, direction, 6.0) is square

@@ -15,9 +15,11 @@ BLUE = (200, 60, 40)
 BOX = (60, 140, 60)
 
 
-def _u_turn(box: bool, second_colour=RED, apart: int = 40):
+def _u_turn(box: bool, second_colour=RED, apart: int = 40, tips: str = "cut"):
     """Two strands 190 -> 80 px down the picture, ``apart`` px side by side, joined by a
-    U-turn above y = 80; with ``box``, an object lies over the turn."""
+    U-turn above y = 80; with ``box``, an object lies over the turn. Without it, the
+    strands end at y = 85, cut square where the box's border would have cut them (or,
+    with ``tips="round"``, in their own round tips) on open paper."""
     image = np.full((220, 260, 3), PAPER, np.uint8)
     left, right = 100, 100 + apart
     cable = np.zeros(image.shape[:2], np.uint8)
@@ -34,6 +36,11 @@ def _u_turn(box: bool, second_colour=RED, apart: int = 40):
         # Both cables end where the box's border would have cut them.
         mask[:85] = False
         image[:85][cable[:85] > 0] = PAPER
+        if tips == "round":
+            for x in (left, right):
+                mask[85:89, x - 4 : x + 5] = False
+                cv2.circle(mask.view(np.uint8), (x, 89), 3, 1, -1)
+            image[:89][(cable[:89] > 0) & ~mask[:89]] = PAPER
     pieces = [
         np.column_stack([np.full(20, float(x)), np.linspace(190, 86, 20)]) for x in (left, right)
     ]
@@ -51,8 +58,20 @@ def test_a_u_turn_under_an_object_is_joined():
     assert _chains(box=True) == 1
 
 
-def test_two_cables_ending_side_by_side_on_open_background_are_not_joined():
-    assert _chains(box=False) == 2
+@pytest.mark.parametrize(("tips", "apart"), [("round", 40), ("cut", 70)])
+def test_two_cables_ending_side_by_side_on_open_background_are_not_joined(tips, apart):
+    """Nothing shows over the turn: two cables' own round tips stay two cables, and so
+    do two ends cut square whose turn would hide more cable (22 radii) than an object
+    of the background's own colour does (``merging.CUT_GAP_RADII``)."""
+    assert _chains(box=False, tips=tips, apart=apart) == 2
+
+
+def test_a_u_turn_under_an_object_of_the_papers_own_colour_is_joined():
+    """Both strands cut square where an object of the paper's colour would cut them, of
+    one colour and width, the turn 12.6 of their radii long: the same evidence as a
+    straight gap's under such an object (``merging._cut_ends_alike``). Two cables cut to
+    length side by side look just the same."""
+    assert _chains(box=False) == 1
 
 
 def test_a_u_turn_of_two_colours_is_not_joined():
