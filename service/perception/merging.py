@@ -768,9 +768,12 @@ def assemble_paths(
     joins: list[tuple[int, int, float]],
     curve: GapCurve | str = GapCurve.smooth,
     trims: np.ndarray | None = None,
+    bridges: dict[tuple[int, int], np.ndarray] | None = None,
 ) -> list[MergedPath]:
     """Walk every group of joined pieces from one free end to the other; each join is
-    bridged by :func:`gap_curve` of the given ``curve`` shape. ``trims[e]`` (optional)
+    bridged by :func:`gap_curve` of the given ``curve`` shape, or by the curve
+    ``bridges[i, j]`` (from end ``i`` to end ``j``) where given: the shape a turn out
+    of sight was found hidden along (:mod:`.turn_joins`). ``trims[e]`` (optional)
     is the arc length left out of end ``e``'s piece at that end, where its bridge
     starts further in."""
     partner = partners(len(ends), joins)
@@ -795,18 +798,31 @@ def assemble_paths(
             next_entry = partner[exit_end]
             if next_entry == -1:
                 break
-            bridge = gap_curve(
-                ends[exit_end].position,
-                ends[exit_end].direction,
-                ends[next_entry].position,
-                -ends[next_entry].direction,
-                shape=curve,
-            )
+            bridge = _given_bridge(bridges, exit_end, next_entry)
+            if bridge is None:
+                bridge = gap_curve(
+                    ends[exit_end].position,
+                    ends[exit_end].direction,
+                    ends[next_entry].position,
+                    -ends[next_entry].direction,
+                    shape=curve,
+                )
             vertices.append(bridge[1:-1])
             filled.append(np.ones(len(bridge) - 1, bool))
             entry = next_entry
         paths.append(MergedPath(np.concatenate(vertices), np.concatenate(filled), pieces=order))
     return paths
+
+
+def _given_bridge(bridges, start: int, end: int) -> np.ndarray | None:
+    """The curve ``bridges`` holds from end ``start`` to end ``end`` (either way)."""
+    if not bridges:
+        return None
+    if (start, end) in bridges:
+        return bridges[start, end]
+    if (end, start) in bridges:
+        return bridges[end, start][::-1]
+    return None
 
 
 def _trimmed(pieces: list[np.ndarray], trims: np.ndarray) -> list[np.ndarray]:
@@ -968,6 +984,7 @@ def merge_chains(
         runs_out,
         open_gap,
     )
+    turn_bridges: dict[tuple[int, int], np.ndarray] = {}
     if hidden_gap is not None and params.expected_count is None and ends:
         # Sharp turns under an object, on the image's evidence (:mod:`.turn_joins`).
         mutual = MUTUAL_COST_FACTOR * params.merge_cost_threshold
@@ -986,6 +1003,7 @@ def merge_chains(
             mutual,
             mutual,
             MAX_JUNCTION_ENDS,
+            turn_bridges,
         )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
@@ -994,7 +1012,7 @@ def merge_chains(
         pieces, inner_ends, joins, span, junction_of_end
     )
     bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span)
-    assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims)
+    assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, turn_bridges)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])

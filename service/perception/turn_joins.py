@@ -7,14 +7,18 @@ leaves exactly that: two ends of one cable that both point into the same object.
 join is made here only on the image's evidence, after every other join
 (:func:`turn_joins`):
 
-- a natural curve between the two ends along their directions, bending no tighter
-  than a cable can (:data:`MIN_BEND_RADII` of its radius, the tightest loops the issue
-  asks for), exists (:func:`natural_turn`), and the image says something hides a cable
-  along it (``hidden``: the merging step's one test of that evidence, as for straight
-  gaps: an object shows over the curve, :func:`.appearance.gap_hidden`, or both ends
-  are cut square and alike and the curve no longer than an object of the background's
-  own colour hides, :func:`.merging._cut_ends_alike`): not open background beyond two
-  round tips, which is what lies beyond two cables that end side by side;
+- a curve a cable could have taken between the two ends, bending no tighter than
+  :data:`HIDDEN_BEND_RADII` ``[0]`` of its radius, exists, and the image says
+  something hides a cable along it (``hidden``: the merging step's one test of that
+  evidence, as for straight gaps: an object shows over the curve,
+  :func:`.appearance.gap_hidden`, or both ends are cut square and alike and the curve
+  no longer than an object of the background's own colour hides,
+  :func:`.merging._cut_ends_alike`): not open background beyond two round tips, which
+  is what lies beyond two cables that end side by side. The curves tried
+  (:func:`hidden_turn_curves`) are the natural curve (:func:`natural_turn`) and the
+  bulbs a cable doubled back on itself swings out into, turning round by up to
+  :data:`MAX_HIDDEN_TURN` (:func:`bulb_turns`), from the ends' fitted directions and
+  from tilted ones; the join is then bridged along the curve found hidden;
 - the two pieces agree in colour and width (:func:`.appearance.ends_alike`);
 - neither end has a better partner: the turns and every free pair the merging step
   could have joined without evidence are paired together by the cheapest matching,
@@ -24,16 +28,43 @@ join is made here only on the image's evidence, after every other join
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from service.perception._merging_kernels import MIN_BEND_RADII
 from service.perception.appearance import EndColours, ends_alike
 from service.perception.pairing import Components, cheapest_pairing
 
 NEAR_U_TURN = 0.75 * np.pi
 """Turns sharper than this (radians) may have gone either way round (:func:`natural_turn`)."""
+HIDDEN_BEND_RADII = (2.0, 2.5, 3.0, 4.0, 5.0)
+"""Bend radii (cable radii) of the turns tried out of sight (:func:`hidden_turn_curves`):
+the first, the tightest a cable takes, bounds every arc; the bulbs take each."""
+MAX_HIDDEN_TURN = np.radians(300.0)
+"""The most a bulb's round arc turns (radians): a cable doubled back on itself swings
+out and round by more than a half turn, but not into a loop that crosses itself."""
+BULB_STEP = np.radians(6.0)
+"""Steps of a bulb's outward swing (radians) tried."""
+BULB_TOLERANCE_RADII = 0.15
+"""A bulb reaches the second end when it passes within this share of its bend radius."""
+DIRECTION_SLACK = np.radians(30.0)
+"""How far (radians) a cut end's fitted direction may be from the cable's where it
+disappears: the end of a piece bending into the turn, and the hook a slanted cut leaves."""
+DIRECTION_TILTS = [(0.0, 0.0)] + [
+    (first * DIRECTION_SLACK, last * DIRECTION_SLACK)
+    for first in (-1.0, 0.0, 1.0)
+    for last in (-1.0, 0.0, 1.0)
+    if first or last
+]
+"""The tilts of the two ends' directions tried."""
+BULB_REACH_RADII = 4.0 * HIDDEN_BEND_RADII[-1]
+"""Ends further apart than this (cable radii) turn round in room enough for a natural
+curve: no bulbs, and no tilts, are tried for them."""
+BULB_MIN_TURN = 0.5 * np.pi
+"""Ends whose fitted directions turn by less than this (radians) are not doubled back:
+no bulbs, and no tilts, are tried for them."""
+MAX_TURN_TRIALS = 8
+"""The most curves (the shortest) tried for one pair of ends."""
 
 
 def natural_turn(
@@ -43,6 +74,7 @@ def natural_turn(
     arriving: np.ndarray,
     min_radius: float,
     step: float = 1.0,
+    turn: float | None = None,
 ) -> np.ndarray | None:
     """The natural curve (Keipour et al.'s gap curve) of a turn no tighter than a cable
     takes: from ``start`` straight along ``leaving``, one arc of radius at least
@@ -58,18 +90,22 @@ def natural_turn(
     ndarray or None
         ``(M, 2)`` samples about ``step`` apart from ``start`` to ``end``; None when no
         such curve exists (an S-shaped gap, a turn away from the other end, a U-turn
-        narrower than twice ``min_radius``) or the ends do not turn.
+        narrower than twice ``min_radius``) or the ends do not turn. Given ``turn``
+        (signed, radians: which way round), only that way is tried.
     """
     leaving = np.asarray(leaving, np.float64)
     arriving = np.asarray(arriving, np.float64)
     start = np.asarray(start, np.float64)
     offset = np.asarray(end, np.float64) - start
-    turn = float(np.arctan2(*_cross_dot(leaving, arriving)))
+    if turn is not None:
+        readings = [turn]
+    else:
+        turn = float(np.arctan2(*_cross_dot(leaving, arriving)))
+        readings = [turn]
+        if abs(turn) > NEAR_U_TURN:
+            readings.append(turn - np.copysign(2 * np.pi, turn))
     if abs(turn) < 1e-6:
         return None
-    readings = [turn]
-    if abs(turn) > NEAR_U_TURN:
-        readings.append(turn - np.copysign(2 * np.pi, turn))
     best = None
     for reading in readings:
         shape = _arc_shape(offset, leaving, arriving, reading, min_radius)
@@ -125,6 +161,219 @@ def _arc_shape(offset, leaving, arriving, turn, min_radius):
     return first + radius * abs(turn) + last, first, radius, last
 
 
+def hidden_turn_curves(
+    start: np.ndarray,
+    leaving: np.ndarray,
+    end: np.ndarray,
+    arriving: np.ndarray,
+    cable_radius: float,
+    step: float = 1.0,
+) -> Iterator[np.ndarray]:
+    """The shapes a cable may have taken between two ends where it turned out of sight,
+    shortest (most compact) first: the join is made when something lies over any one.
+
+    A cable bends no tighter than :data:`HIDDEN_BEND_RADII` ``[0]`` of its radius. Where
+    the two ends lie closer side by side than twice that (a cable doubled back on
+    itself, its strands touching), it cannot turn round in one arc: it swings out into a
+    bulb, bending away from the other strand, round by more than a half turn, and away
+    again (:func:`bulb_turns`). So the candidates are, for each way round the cable may
+    have turned (both near a U-turn, :data:`NEAR_U_TURN`): the natural curve with the
+    tightest arc allowed (:func:`natural_turn`), and a bulb of each bend radius in
+    :data:`HIDDEN_BEND_RADII`, the round arc turning at most :data:`MAX_HIDDEN_TURN`.
+    A cut end's fitted direction is uncertain where the piece already bends into the
+    turn, or a slanted cut leaves a hook, so each is also tried tilted
+    (:data:`DIRECTION_TILTS`). Ends further apart than :data:`BULB_REACH_RADII`, or
+    turning by less than :data:`BULB_MIN_TURN`, get the natural curves alone. At most
+    :data:`MAX_TURN_TRIALS` distinct curves are yielded, lazily: a pair whose first
+    curve is hidden is tested once.
+
+    Parameters
+    ----------
+    start, leaving : array_like (2,)
+        The first end and its direction out of the piece (unit).
+    end, arriving : array_like (2,)
+        The second end and the direction the cable arrives there in (unit, into it).
+    cable_radius : float
+        The cable's half width (px).
+    step : float
+        Sample spacing (px).
+    """
+    apart = float(np.hypot(*(np.asarray(end, np.float64) - np.asarray(start, np.float64))))
+    fitted_turn = abs(float(np.arctan2(*_cross_dot(leaving, arriving))))
+    near = apart <= BULB_REACH_RADII * cable_radius and fitted_turn >= BULB_MIN_TURN
+    curves = []
+    for tilt_first, tilt_last in DIRECTION_TILTS if near else DIRECTION_TILTS[:1]:
+        first = _rotated(leaving, tilt_first)
+        last = _rotated(arriving, tilt_last)
+        turn = float(np.arctan2(*_cross_dot(first, last)))
+        if abs(turn) < 1e-6:
+            continue
+        readings = [turn]
+        if abs(turn) > NEAR_U_TURN:
+            readings.append(turn - np.copysign(2 * np.pi, turn))
+        for reading in readings:
+            tightest = HIDDEN_BEND_RADII[0] * cable_radius
+            curve = natural_turn(start, first, end, last, tightest, step, reading)
+            if curve is not None:
+                curves.append((len(curve), curve))
+            if near:
+                bends = [radii * cable_radius for radii in HIDDEN_BEND_RADII]
+                for length, segments in _bulb_shapes(start, first, end, last, reading, bends):
+                    curves.append((length / step, (first, segments)))
+    seen: list[np.ndarray] = []
+    for _, curve in sorted(curves, key=lambda item: item[0]):
+        if len(seen) == MAX_TURN_TRIALS:
+            return
+        if isinstance(curve, tuple):
+            curve = _trace_to(start, curve[0], end, curve[1], step)
+        if any(len(curve) == len(other) and np.allclose(curve, other, atol=1.0) for other in seen):
+            continue
+        seen.append(curve)
+        yield curve
+
+
+def _rotated(direction: np.ndarray, angle: float) -> np.ndarray:
+    direction = np.asarray(direction, np.float64)
+    cos, sin = np.cos(angle), np.sin(angle)
+    return np.array(
+        [cos * direction[0] - sin * direction[1], sin * direction[0] + cos * direction[1]]
+    )
+
+
+def bulb_turns(
+    start: np.ndarray,
+    leaving: np.ndarray,
+    end: np.ndarray,
+    arriving: np.ndarray,
+    turn: float,
+    bends: list[float],
+    step: float = 1.0,
+) -> list[np.ndarray]:
+    """Turns through a bulb, one for each bend radius in ``bends`` that has one: from
+    ``start`` straight along ``leaving``, an arc of radius ``bend`` away from the turn by
+    ``psi_1``, one of the same radius round by ``|turn| + psi_1 + psi_2``, away again
+    by ``psi_2``, and straight along ``arriving`` to ``end`` (straight stretches of
+    length >= 0, neither longer than the ends are apart plus ``bend``: that would carry
+    the cable past the other end). Of the swings (0 up to what keeps the round arc
+    within :data:`MAX_HIDDEN_TURN`, in steps of :data:`BULB_STEP`) that reach ``end`` to
+    within :data:`BULB_TOLERANCE_RADII` of ``bend``, the shortest curve (the most
+    compact: what fits under the smallest object).
+
+    This is how a cable turns round between two strands closer than twice its tightest
+    bend (the round arc swings out past both; one strand may already have begun its
+    swing where it disappears, so the two swings differ), and, with no swing, a natural
+    curve whose arc has radius ``bend`` exactly (not the tightest, as
+    :func:`natural_turn`).
+
+    Parameters
+    ----------
+    turn : float
+        The signed turn (radians) from ``leaving`` to ``arriving`` the cable makes: which
+        way round it goes.
+    bends : list of float
+        Bend radii (px).
+
+    Returns
+    -------
+    list of ndarray
+        ``(M, 2)`` samples about ``step`` apart from ``start`` to ``end``.
+    """
+    return [
+        _trace_to(start, leaving, end, segments, step)
+        for _, segments in _bulb_shapes(start, leaving, end, arriving, turn, bends)
+    ]
+
+
+def _trace_to(start, leaving, end, segments, step: float) -> np.ndarray:
+    """:func:`_trace` from ``start`` along ``leaving``, ending exactly at ``end``."""
+    curve = _trace(complex(*np.asarray(start, np.float64)), complex(*leaving), segments, step)
+    return np.concatenate([curve, np.asarray(end, np.float64)[None]])
+
+
+def _bulb_shapes(start, leaving, end, arriving, turn: float, bends: list[float]):
+    """The bulbs of :func:`bulb_turns` as (length, segments): straight and circular
+    segments (length, signed curvature) from ``start`` along ``leaving``."""
+    if abs(turn) < 1e-6 or abs(turn) > MAX_HIDDEN_TURN:
+        return []
+    leaving = complex(*np.asarray(leaving, np.float64))
+    arriving = complex(*np.asarray(arriving, np.float64))
+    offset = complex(*np.asarray(end, np.float64)) - complex(*np.asarray(start, np.float64))
+    side = np.sign(turn)
+    swings = np.arange(0.0, MAX_HIDDEN_TURN - abs(turn) + 1e-9, BULB_STEP)
+    first_swing, last_swing = (grid.ravel() for grid in np.meshgrid(swings, swings))
+    keep = first_swing + last_swing <= MAX_HIDDEN_TURN - abs(turn) + 1e-9
+    first_swing, last_swing = first_swing[keep], last_swing[keep]
+    arcs = (
+        (-side, first_swing),
+        (side, abs(turn) + first_swing + last_swing),
+        (-side, last_swing),
+    )
+    # Where the arcs of unit radius take the cable (they scale with the radius).
+    heading = np.full(len(first_swing), leaving)
+    unit_reach = np.zeros(len(first_swing), complex)
+    for sense, angle in arcs:
+        turned = heading * np.exp(1j * sense * angle)
+        unit_reach += (turned - heading) / (1j * sense)
+        heading = turned
+    shapes = []
+    for bend in bends:
+        first, last, miss = _straights(leaving, arriving, offset - bend * unit_reach)
+        reached = np.flatnonzero(
+            (miss <= BULB_TOLERANCE_RADII * bend)
+            & (first <= abs(offset) + bend)
+            & (last <= abs(offset) + bend)
+        )
+        if len(reached) == 0:
+            continue
+        length = first + last + 2.0 * bend * (first_swing + last_swing)
+        pick = reached[np.argmin(length[reached])]
+        segments = [(float(first[pick]), 0.0)]
+        segments += [(bend * float(angle[pick]), sense / bend) for sense, angle in arcs]
+        segments.append((float(last[pick]), 0.0))
+        shapes.append((float(length[pick]) + bend * abs(turn), segments))
+    return shapes
+
+
+def _straights(leaving: complex, arriving: complex, rest: np.ndarray):
+    """Straight lengths ``first`` along ``leaving`` and ``last`` along ``arriving``
+    (both >= 0) that come closest to making up ``rest`` (complex, one per candidate),
+    and how far they miss it."""
+    along_first = np.maximum((rest * np.conj(leaving)).real, 0.0)
+    along_last = np.maximum((rest * np.conj(arriving)).real, 0.0)
+    only_first = np.abs(rest - along_first * leaving)
+    only_last = np.abs(rest - along_last * arriving)
+    first = np.where(only_first <= only_last, along_first, 0.0)
+    last = np.where(only_first <= only_last, 0.0, along_last)
+    miss = np.minimum(only_first, only_last)
+    det = (np.conj(leaving) * arriving).imag
+    if abs(det) > 1e-3:
+        both_first = (np.conj(rest) * arriving).imag / det
+        both_last = (np.conj(leaving) * rest).imag / det
+        exact = (both_first >= 0) & (both_last >= 0)
+        first = np.where(exact, both_first, first)
+        last = np.where(exact, both_last, last)
+        miss = np.where(exact, 0.0, miss)
+    return first, last, miss
+
+
+def _trace(start: complex, heading: complex, segments, step: float) -> np.ndarray:
+    """Samples about ``step`` apart along straight and circular ``segments`` (length,
+    signed curvature) from ``start`` along unit ``heading``: ``(M, 2)`` (x, y)."""
+    parts = []
+    for length, curvature in segments:
+        along = np.arange(0.0, length, step)
+        if curvature == 0.0:
+            points = start + along * heading
+            start = start + length * heading
+        else:
+            points = start + heading * (np.exp(1j * curvature * along) - 1) / (1j * curvature)
+            start = start + heading * (np.exp(1j * curvature * length) - 1) / (1j * curvature)
+            heading = heading * np.exp(1j * curvature * length)
+        parts.append(points)
+    points = np.concatenate(parts) if parts else np.zeros(0, complex)
+    return np.column_stack([points.real, points.imag])
+
+
 def _cross_dot(first: np.ndarray, second: np.ndarray) -> tuple[float, float]:
     return (
         float(first[0] * second[1] - first[1] * second[0]),
@@ -144,6 +393,7 @@ def turn_joins(
     free_cost: float,
     rival_limit: float,
     max_group: int,
+    bridges: dict[tuple[int, int], np.ndarray] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -173,6 +423,9 @@ def turn_joins(
         A free pair up to this cost counts as a rival partner, evidence or not.
     max_group : int
         Groups of ends linked by candidates larger than this are left alone.
+    bridges : dict or None
+        When given, each turn joined ``(i, j)`` gets the curve found hidden, from end
+        ``i`` to end ``j``, to bridge it with.
 
     Returns
     -------
@@ -188,6 +441,7 @@ def turn_joins(
     members = np.flatnonzero(eligible).tolist()
     positions = np.array([ends[k].position for k in members], np.float64).reshape(-1, 2)
     turns: dict[tuple[int, int], float] = {}
+    hidden_curves: dict[tuple[int, int], np.ndarray] = {}
     rivals: dict[tuple[int, int], float] = {}
     for a_pos, i in enumerate(members):
         for b_pos in range(a_pos + 1, len(members)):
@@ -205,11 +459,21 @@ def turn_joins(
                 continue
             cable = 0.5 * (ends[i].width + ends[j].width) or radius
             a, b = ends[i], ends[j]
-            curve = natural_turn(
-                a.position, a.direction, b.position, -b.direction, MIN_BEND_RADII * cable
+            # From where each end's fit begins: over a cut's hook the fit's extrapolation
+            # may leave the cable (the bridge starts there too,
+            # :func:`.bridge_ends.bridge_from_the_fits`).
+            curves = hidden_turn_curves(
+                a.position - a.skip * a.direction,
+                a.direction,
+                b.position - b.skip * b.direction,
+                -b.direction,
+                cable,
             )
-            if curve is not None and hidden(i, j, curve):
-                turns[i, j] = pair_cost
+            for curve in curves:
+                if hidden(i, j, curve):
+                    turns[i, j] = pair_cost
+                    hidden_curves[i, j] = curve
+                    break
     if not turns:
         return []
     made = []
@@ -222,6 +486,8 @@ def turn_joins(
         for i, j, value in cheapest_pairing(sorted(group), costs, free_cost):
             if (i, j) in turns:
                 made.append((i, j, value))
+                if bridges is not None:
+                    bridges[i, j] = hidden_curves[i, j]
     return sorted(made, key=lambda item: item[2])
 
 

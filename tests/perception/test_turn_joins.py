@@ -7,7 +7,7 @@ import pytest
 from schemas import DetectParams
 from service.perception.merging import merge_chains
 from service.perception.pairing import cheapest_pairing
-from service.perception.turn_joins import natural_turn
+from service.perception.turn_joins import bulb_turns, natural_turn
 
 PAPER = (235, 235, 235)
 RED = (40, 40, 200)
@@ -78,9 +78,27 @@ def test_a_u_turn_of_two_colours_is_not_joined():
     assert _chains(box=True, second_colour=BLUE) == 2
 
 
-def test_a_u_turn_tighter_than_a_cable_bends_is_not_joined():
-    # 12 px apart: a bend of 6 px radius, under the 3 radii (10.5 px) a cable takes.
-    assert _chains(box=True, apart=12) == 2
+def test_strands_closer_than_a_cable_bends_are_joined_through_a_bulb_the_object_hides():
+    # 9 px apart (nearly touching): no half circle of 2 radii (7 px) fits between them,
+    # but a cable doubled back swings out into a bulb, and the object hides one.
+    assert _chains(box=True, apart=9) == 1
+
+
+def test_two_cables_ending_close_side_by_side_on_open_background_are_not_joined():
+    # No object: the bulb a turn would take lies over open paper.
+    assert _chains(box=False, apart=9) == 2
+
+
+def test_bulb_turns_reach_the_other_end_round_by_more_than_a_half_turn():
+    up, down = np.array([0.0, -1.0]), np.array([0.0, 1.0])
+    for bend in (7.0, 10.0):
+        for curve in bulb_turns([100, 80], up, [109, 80], down, np.pi, [bend]):
+            assert curve[0] == pytest.approx([100, 80]) and curve[-1] == pytest.approx([109, 80])
+            assert np.hypot(*np.diff(curve, axis=0).T).max() < 1.5
+            assert _bend(curve) == pytest.approx(bend, rel=0.1)
+            # It swings out past both strands.
+            assert curve[:, 0].min() < 100 - 1 and curve[:, 0].max() > 109 + 1
+    assert len(bulb_turns([100, 80], up, [109, 80], down, np.pi, [7.0, 10.0])) == 2
 
 
 def _bend(curve):
