@@ -33,9 +33,7 @@ from service.perception import _merging_kernels
 from service.perception.appearance import (
     EndColours,
     colour_penalty,
-    cut_square,
     end_colours,
-    ends_alike,
     gap_hidden,
 )
 from service.perception.bridge_ends import (
@@ -45,6 +43,12 @@ from service.perception.bridge_ends import (
     partners,
 )
 from service.perception.deadline import Deadline, check
+from service.perception.gap_evidence import (
+    beyond_hiding,
+    cut_ends_alike,
+    open_gap_limit,
+    open_gap_too_long,
+)
 from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
 from service.perception.touching import (
@@ -391,8 +395,9 @@ def choose_joins(
     clearly cheapest partner are joined up to a looser limit, unless either is
     ``at_border``: across a short gap (:data:`MUTUAL_GAP_RADII`), or a longer one
     that ``hidden_gap(i, j)`` says something in the image hides
-    (:func:`.appearance.gap_hidden`, or, up to :data:`CUT_GAP_RADII`, two ends cut
-    square and alike: :func:`_cut_ends_alike`). A join never closes a chain on itself.
+    (:func:`.appearance.gap_hidden`, or, up to :data:`.gap_evidence.CUT_GAP_RADII`, two
+    ends cut square and alike: :func:`.gap_evidence.cut_ends_alike`). A join never closes
+    a chain on itself.
     ``deadline`` (optional) is checked while the joins are made.
 
     The evidence of the image, when given: ``colours`` (:func:`.appearance.end_colours`)
@@ -405,9 +410,10 @@ def choose_joins(
     ``at_border`` (near the picture's edge, but its cable stops short of it) may still
     be joined across a gap that ``hidden_gap`` says something hides: an object lying
     at the picture's edge, not the edge, cuts that cable (:func:`_border_pairs_hidden`).
-    With ``open_gap``, a join across more than :data:`OPEN_GAP_RADII` (the ends' chord)
-    is left out, however cheap, when ``open_gap(i, j)`` says its bridge runs that far
-    over open background that nothing in the image hides (:func:`_open_gap_too_long`).
+    With ``open_gap``, a join across more than :data:`.gap_evidence.OPEN_GAP_RADII` (the
+    ends' chord) is left out, however cheap, when ``open_gap(i, j)`` says its bridge runs
+    that far over open background that nothing in the image hides
+    (:func:`.gap_evidence.open_gap_too_long`).
 
     Returns
     -------
@@ -487,7 +493,7 @@ def choose_joins(
         greedy = int(np.searchsorted(costs, params.merge_cost_threshold, side="right"))
     too_open = np.zeros(greedy, bool)
     if open_gap is not None and params.expected_count is None:
-        too_open = _beyond_hiding(ends, pairs[:greedy], distances[:greedy], radius)
+        too_open = beyond_hiding(ends, pairs[:greedy], distances[:greedy], radius)
     for index, (cost, i, j) in enumerate(
         zip(costs[:greedy].tolist(), *pairs[:greedy].T.tolist(), strict=True)
     ):
@@ -590,99 +596,6 @@ def _mutual_best(
         if all(rival - cost >= MUTUAL_MARGIN * threshold for rival in rivals):
             pairs.append((cost, i, j))
     return sorted(pairs)
-
-
-# A gap over open background whose curve is up to this many of the cable's radii long
-# may be joined, by the mutual rule or as a turn (:mod:`.turn_joins`), when both ends
-# are cut and alike (:func:`_cut_ends_alike`): an object of the background's own colour
-# hides a cable without showing itself. The issue's occluders hide at most 15 radii; 2
-# more at each end stand for the ends' fits stopping short of the object's border and
-# the curve running wider than the hidden stretch (as in OPEN_GAP_RADII).
-CUT_GAP_RADII = 19.0
-
-
-def _cut_ends_alike(
-    a: ChainEnd,
-    b: ChainEnd,
-    i: int,
-    j: int,
-    curve: np.ndarray,
-    mask: np.ndarray,
-    colours: EndColours | None,
-    radius: float,
-) -> bool:
-    """Whether the free ends ``a`` (end ``i``) and ``b`` (end ``j``), joined by
-    ``curve`` at most :data:`CUT_GAP_RADII` long (in :func:`_cable_radius`: a thick
-    cable's hidden stretch is longer in pixels), are both cut (the foreground stops
-    right ahead of each, :func:`.appearance.cut_square`) and look like one cable's
-    (:func:`.appearance.ends_alike`: both of a known, agreeing colour and of one width).
-    The length is the curve's, not the ends' distance: a turn under an object hides a
-    cable's whole bend between two ends that lie side by side.
-
-    Two pieces of one cable hidden by an object of the background's own colour show no
-    object over the gap, but they face each other (each the other's clearly cheapest
-    partner), are cut where the object's border crosses them, and agree in colour and
-    width. A cable's end inside a blob of the foreground (a piece of a pattern
-    segmented with the cables) is not cut; two cables of different colour or width are
-    not one.
-    """
-    if colours is None:
-        return False
-    if polyline_length(curve) > CUT_GAP_RADII * _cable_radius(radius, a.width, b.width):
-        return False
-    if not ends_alike(colours, i, j, (a.width, b.width)):
-        return False
-    return cut_square(mask, a.position, a.direction, a.width, a.skip) and cut_square(
-        mask, b.position, b.direction, b.width, b.skip
-    )
-
-
-# No bridge runs over more than this many radii of open background, however cheap its
-# geometry: an object of the background's own colour shows nothing, but the issue's
-# occluders hide at most 15 radii of a cable; crossing one at a slant (a rectangle 15
-# radii long and up to 8 wide: a diagonal of 17) with each piece's skeleton stopping up
-# to 2 radii short of the object's border (thinning rounds a cut end) leaves 21, and 4
-# more radii (2 to each side) stand for the ends' fits. A longer gap is bridged only
-# where the image shows something lying over it (:func:`.appearance.gap_hidden`) or
-# along the foreground (a doubled-back cable's touching strands).
-OPEN_GAP_RADII = 25.0
-
-
-def _open_gap_limit(radius, first_width, second_width):
-    """The longest open gap (px) a join may bridge: :data:`OPEN_GAP_RADII` of the larger
-    of the picture's typical radius and the two pieces' own half widths (a thick cable's
-    hidden stretch is longer in pixels). Scalars or arrays of widths."""
-    return OPEN_GAP_RADII * _cable_radius(radius, first_width, second_width)
-
-
-def _cable_radius(radius, first_width, second_width):
-    """The radius a gap between two pieces is measured in: the larger of the picture's
-    typical ``radius`` and the pieces' mean half width (a thick cable's hidden stretch
-    is longer in pixels, a thin one's no shorter than the picture's typical cable's).
-    Scalars or arrays of widths."""
-    return np.maximum(radius, 0.5 * (first_width + second_width))
-
-
-def _beyond_hiding(ends, pairs, distances, radius) -> np.ndarray:
-    """Which candidate joins' ends lie further apart than :func:`_open_gap_limit`."""
-    if not len(distances):
-        return np.zeros(0, bool)
-    widths = np.array([end.width for end in ends], np.float64)
-    return distances > _open_gap_limit(radius, widths[pairs[:, 0]], widths[pairs[:, 1]])
-
-
-def _open_gap_too_long(curve, mask, limit, hidden) -> bool:
-    """Whether a gap's ``curve`` ((x, y) samples about 1 px apart) runs over more than
-    ``limit`` px of background (off ``mask``, inside the picture) and ``hidden()`` (the
-    image's evidence, called only then) finds nothing lying over it. A bridge along the
-    foreground (a doubled-back cable's touching strands, another cable) is not open."""
-    height, width = mask.shape
-    cols = np.rint(curve[:, 0]).astype(np.int64)
-    rows = np.rint(curve[:, 1]).astype(np.int64)
-    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
-    steps = np.hypot(*np.diff(curve, axis=0).T)
-    off = inside[1:] & ~mask[rows[1:].clip(0, height - 1), cols[1:].clip(0, width - 1)]
-    return float(steps[off].sum()) > limit and not hidden()
 
 
 # Pieces shared by two strands (a shallow crossing) are at most this many radii long.
@@ -955,7 +868,7 @@ def merge_chains(
                 )
             if gap_hidden(image, mask, curve, (a, b), radius):
                 return True
-            return _cut_ends_alike(a, b, i, j, curve, mask, colours, radius)
+            return cut_ends_alike(a, b, i, j, curve, mask, colours, radius)
 
     open_gap = None
     if hidden_gap is not None:
@@ -965,8 +878,8 @@ def merge_chains(
             curve = gap_curve(
                 a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
             )
-            limit = float(_open_gap_limit(radius, a.width, b.width))
-            return _open_gap_too_long(curve, mask, limit, lambda: hidden_gap(i, j))
+            limit = float(open_gap_limit(radius, a.width, b.width))
+            return open_gap_too_long(curve, mask, limit, lambda: hidden_gap(i, j))
 
     joins = choose_joins(
         ends,
@@ -999,7 +912,7 @@ def merge_chains(
                 + params.colour_weight * float(colour_penalty(colours, [i], [j])[0])
             ),
             hidden_gap,
-            lambda i, j: float(_open_gap_limit(radius, ends[i].width, ends[j].width)),
+            lambda i, j: float(open_gap_limit(radius, ends[i].width, ends[j].width)),
             mutual,
             mutual,
             MAX_JUNCTION_ENDS,

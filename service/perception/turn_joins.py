@@ -13,7 +13,7 @@ join is made here only on the image's evidence, after every other join
   evidence, as for straight gaps: an object shows over the curve,
   :func:`.appearance.gap_hidden`, or both ends are cut square and alike and the curve
   no longer than an object of the background's own colour hides,
-  :func:`.merging._cut_ends_alike`): not open background beyond two round tips, which
+  :func:`.gap_evidence.cut_ends_alike`): not open background beyond two round tips, which
   is what lies beyond two cables that end side by side. The curves tried
   (:func:`hidden_turn_curves`) are the natural curve (:func:`natural_turn`) and the
   bulbs a cable doubled back on itself swings out into, turning round by up to

@@ -62,15 +62,15 @@ def test_a_u_turn_under_an_object_is_joined():
 def test_two_cables_ending_side_by_side_on_open_background_are_not_joined(tips, apart):
     """Nothing shows over the turn: two cables' own round tips stay two cables, and so
     do two ends cut square whose turn would hide more cable (22 radii) than an object
-    of the background's own colour does (``merging.CUT_GAP_RADII``)."""
+    of the background's own colour does (``gap_evidence.CUT_GAP_RADII``)."""
     assert _chains(box=False, tips=tips, apart=apart) == 2
 
 
 def test_a_u_turn_under_an_object_of_the_papers_own_colour_is_joined():
     """Both strands cut square where an object of the paper's colour would cut them, of
     one colour and width, the turn 12.6 of their radii long: the same evidence as a
-    straight gap's under such an object (``merging._cut_ends_alike``). Two cables cut to
-    length side by side look just the same."""
+    straight gap's under such an object (``gap_evidence.cut_ends_alike``). Two cables
+    cut to length side by side look just the same."""
     assert _chains(box=False) == 1
 
 

@@ -1,0 +1,109 @@
+"""What the image says about a gap between two chain ends: can something hide a cable there?
+
+Merging (:mod:`.merging`) and the turn joins (:mod:`.turn_joins`) bridge a gap over open
+background, where nothing the image shows lies over it, only on this evidence: two ends
+cut square and alike within :data:`CUT_GAP_RADII` of curve (an object of the background's
+own colour hides a cable without showing itself), and never over more than
+:data:`OPEN_GAP_RADII` of background unless something is seen over it. Lengths are in
+:func:`cable_radius`. Pure functions of the chain ends, the mask and the ends' colours.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from service.perception.appearance import EndColours, cut_square, ends_alike
+from service.perception.geometry import polyline_length
+
+# A gap over open background whose curve is up to this many of the cable's radii long
+# may be joined, by the mutual rule or as a turn (:mod:`.turn_joins`), when both ends
+# are cut and alike (:func:`cut_ends_alike`): an object of the background's own colour
+# hides a cable without showing itself. The issue's occluders hide at most 15 radii; 2
+# more at each end stand for the ends' fits stopping short of the object's border and
+# the curve running wider than the hidden stretch (as in OPEN_GAP_RADII).
+CUT_GAP_RADII = 19.0
+
+
+def cut_ends_alike(
+    a,
+    b,
+    i: int,
+    j: int,
+    curve: np.ndarray,
+    mask: np.ndarray,
+    colours: EndColours | None,
+    radius: float,
+) -> bool:
+    """Whether the free ends ``a`` (end ``i``) and ``b`` (end ``j``, both
+    :class:`.merging.ChainEnd`), joined by ``curve`` at most :data:`CUT_GAP_RADII` long
+    (in :func:`cable_radius`: a thick cable's hidden stretch is longer in pixels), are
+    both cut (the foreground stops
+    right ahead of each, :func:`.appearance.cut_square`) and look like one cable's
+    (:func:`.appearance.ends_alike`: both of a known, agreeing colour and of one width).
+    The length is the curve's, not the ends' distance: a turn under an object hides a
+    cable's whole bend between two ends that lie side by side.
+
+    Two pieces of one cable hidden by an object of the background's own colour show no
+    object over the gap, but they face each other (each the other's clearly cheapest
+    partner), are cut where the object's border crosses them, and agree in colour and
+    width. A cable's end inside a blob of the foreground (a piece of a pattern
+    segmented with the cables) is not cut; two cables of different colour or width are
+    not one.
+    """
+    if colours is None:
+        return False
+    if polyline_length(curve) > CUT_GAP_RADII * cable_radius(radius, a.width, b.width):
+        return False
+    if not ends_alike(colours, i, j, (a.width, b.width)):
+        return False
+    return cut_square(mask, a.position, a.direction, a.width, a.skip) and cut_square(
+        mask, b.position, b.direction, b.width, b.skip
+    )
+
+
+# No bridge runs over more than this many radii of open background, however cheap its
+# geometry: an object of the background's own colour shows nothing, but the issue's
+# occluders hide at most 15 radii of a cable; crossing one at a slant (a rectangle 15
+# radii long and up to 8 wide: a diagonal of 17) with each piece's skeleton stopping up
+# to 2 radii short of the object's border (thinning rounds a cut end) leaves 21, and 4
+# more radii (2 to each side) stand for the ends' fits. A longer gap is bridged only
+# where the image shows something lying over it (:func:`.appearance.gap_hidden`) or
+# along the foreground (a doubled-back cable's touching strands).
+OPEN_GAP_RADII = 25.0
+
+
+def open_gap_limit(radius, first_width, second_width):
+    """The longest open gap (px) a join may bridge: :data:`OPEN_GAP_RADII` of the larger
+    of the picture's typical radius and the two pieces' own half widths (a thick cable's
+    hidden stretch is longer in pixels). Scalars or arrays of widths."""
+    return OPEN_GAP_RADII * cable_radius(radius, first_width, second_width)
+
+
+def cable_radius(radius, first_width, second_width):
+    """The radius a gap between two pieces is measured in: the larger of the picture's
+    typical ``radius`` and the pieces' mean half width (a thick cable's hidden stretch
+    is longer in pixels, a thin one's no shorter than the picture's typical cable's).
+    Scalars or arrays of widths."""
+    return np.maximum(radius, 0.5 * (first_width + second_width))
+
+
+def beyond_hiding(ends, pairs, distances, radius) -> np.ndarray:
+    """Which candidate joins' ends lie further apart than :func:`open_gap_limit`."""
+    if not len(distances):
+        return np.zeros(0, bool)
+    widths = np.array([end.width for end in ends], np.float64)
+    return distances > open_gap_limit(radius, widths[pairs[:, 0]], widths[pairs[:, 1]])
+
+
+def open_gap_too_long(curve, mask, limit, hidden) -> bool:
+    """Whether a gap's ``curve`` ((x, y) samples about 1 px apart) runs over more than
+    ``limit`` px of background (off ``mask``, inside the picture) and ``hidden()`` (the
+    image's evidence, called only then) finds nothing lying over it. A bridge along the
+    foreground (a doubled-back cable's touching strands, another cable) is not open."""
+    height, width = mask.shape
+    cols = np.rint(curve[:, 0]).astype(np.int64)
+    rows = np.rint(curve[:, 1]).astype(np.int64)
+    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
+    steps = np.hypot(*np.diff(curve, axis=0).T)
+    off = inside[1:] & ~mask[rows[1:].clip(0, height - 1), cols[1:].clip(0, width - 1)]
+    return float(steps[off].sum()) > limit and not hidden()
