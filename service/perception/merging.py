@@ -299,25 +299,6 @@ def gap_curve(
     )
 
 
-def _best_matching(
-    members: list[int],
-    ends: list[ChainEnd],
-    params: DetectParams,
-    radius: float,
-    colours: EndColours | None = None,
-) -> list[tuple[int, int, float]]:
-    """Cheapest way to pair up the ends that meet at one junction.
-
-    Every pairing of the ends is considered (junctions are small: a crossing has four
-    ends, a loop touching a cable four, a triple crossing six), with a penalty for each
-    end left unpaired, since a strand rarely ends inside a junction. Two ends of the
-    same piece are never paired. The ends' curvature is not carried across: inside a
-    junction thinning bends each strand toward where the strands meet, so the bending
-    there is not the cable's, and the gaps are short.
-    """
-    return _best_matchings([members], ends, params, radius, colours)
-
-
 def _best_matchings(
     junctions: list[list[int]],
     ends: list[ChainEnd],
@@ -325,8 +306,16 @@ def _best_matchings(
     radius: float,
     colours: EndColours | None = None,
 ) -> list[tuple[int, int, float]]:
-    """:func:`_best_matching` of every junction's ``members`` in turn, their pairs all
-    costed in one kernel call."""
+    """Cheapest way to pair up the ends that meet at each junction (``junctions``: the
+    ends of each), their pairs all costed in one kernel call.
+
+    Every pairing of a junction's ends is considered (junctions are small: a crossing
+    has four ends, a loop touching a cable four, a triple crossing six), with a penalty
+    for each end left unpaired, since a strand rarely ends inside a junction. Two ends of
+    the same piece are never paired. The ends' curvature is not carried across: inside a
+    junction thinning bends each strand toward where the strands meet, so the bending
+    there is not the cable's, and the gaps are short.
+    """
     # Every pair of ends of different pieces, junction by junction.
     pairs = [
         [
@@ -879,7 +868,7 @@ def merge_chains(
                 a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
             )
             limit = float(open_gap_limit(radius, a.width, b.width))
-            return open_gap_too_long(curve, mask, limit, lambda: hidden_gap(i, j))
+            return open_gap_too_long(curve, mask, limit, lambda: hidden_gap(i, j, curve))
 
     joins = choose_joins(
         ends,

@@ -1,6 +1,6 @@
 """The cheapest pairing of a few chain ends, each end left unpaired at a cost.
 
-Merging pairs the ends that meet at a junction (:func:`.merging._best_matching`) and the
+Merging pairs the ends that meet at a junction (:func:`.merging._best_matchings`) and the
 free ends where a cable turns out of sight (:func:`.turn_joins.turn_joins`) this way:
 together, so that one early bad join cannot force later ones.
 """

@@ -306,7 +306,7 @@ def choose_joins(
         proposals = []
         for members in groups.values():
             if 2 <= len(members) <= merging.MAX_JUNCTION_ENDS:
-                proposals.extend(merging._best_matching(members, ends, params, radius, colours))
+                proposals.extend(merging._best_matchings([members], ends, params, radius, colours))
         for i, j, cost in sorted(proposals, key=lambda item: item[2]):
             try_join(i, j, cost)
 
