@@ -10,6 +10,11 @@ from numba import njit
 
 from service.perception._shared_kernels import solve_small
 
+# The most a fitted stretch may turn (radians) in bend_aware_fit. Over half a turn of a
+# tight loop, a quadratic in arc length puts the end several px off the cable and its
+# direction tens of degrees off.
+END_FIT_MAX_TURNING = np.pi / 2.0
+
 
 @njit(cache=True, nogil=True)
 def circle_exit(ax, ay, bx, by, cx, cy, step_sq):
@@ -165,3 +170,40 @@ def outward_fit(backwards, skip, span):
     if norm > 1e-12:
         return x, y, tangent_x / norm, tangent_y / norm, curvature
     return x, y, 0.0, 0.0, curvature
+
+
+@njit(cache=True, nogil=True)
+def turning_within(backwards, skip, reach):
+    """The signed turning (radians) of a polyline that starts at its end, summed over the
+    vertices whose arc length from the end lies between ``skip`` and ``reach``."""
+    arc = 0.0
+    total = 0.0
+    for i in range(1, backwards.shape[0] - 1):
+        arc += np.hypot(
+            backwards[i, 0] - backwards[i - 1, 0], backwards[i, 1] - backwards[i - 1, 1]
+        )
+        if arc > reach:
+            break
+        if arc < skip:
+            continue
+        ax = backwards[i, 0] - backwards[i - 1, 0]
+        ay = backwards[i, 1] - backwards[i - 1, 1]
+        bx = backwards[i + 1, 0] - backwards[i, 0]
+        by = backwards[i + 1, 1] - backwards[i, 1]
+        total += np.arctan2(ax * by - ay * bx, ax * bx + ay * by)
+    return total
+
+
+@njit(cache=True, nogil=True)
+def bend_aware_fit(backwards, skip, span):
+    """:func:`outward_fit` over a span short enough for the bend it lies on.
+
+    While the polyline (starting at the end) turns by more than ``END_FIT_MAX_TURNING``
+    between ``skip`` and ``skip + span`` the span is halved. On a tight loop that leaves
+    too few joints for the quadratic, and the end is its tip, pointing along the chord
+    to the last joint within the span: the stretch of cable nearest the end, which at a
+    loop's own crossing runs nearly straight into it.
+    """
+    while span > 1.0 and abs(turning_within(backwards, skip, skip + span)) > END_FIT_MAX_TURNING:
+        span *= 0.5
+    return outward_fit(backwards, skip, span)

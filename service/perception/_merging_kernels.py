@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from service.perception._geometry_kernels import outward_fit
+from service.perception._geometry_kernels import bend_aware_fit, outward_fit
 from service.perception._shared_kernels import solve_small
 
 # --------------------------------------------------------------------------- end widths
@@ -66,7 +66,9 @@ def narrow_end_length(points, start, stop, at_start, distance, full_width, limit
 
 
 @njit(cache=True, nogil=True)
-def fit_chain_ends(points, starts, lengths, distance, full_widths, skip, span, narrow_limit):
+def fit_chain_ends(
+    points, starts, lengths, distance, full_widths, skip, span, narrow_limit, bend_aware
+):
     """merging.chain_ends' fits of both ends of every piece, as geometry.end_fit gives them.
 
     Piece ``k`` is ``points[starts[k]:starts[k + 1]]`` (two joints or more); its ends are
@@ -75,7 +77,9 @@ def fit_chain_ends(points, starts, lengths, distance, full_widths, skip, span, n
     ``full_widths[k]``, looked at only when ``distance`` is not empty). A fit spans
     ``span`` of arc length, or less on a piece (of length ``lengths[k]``) whose other end
     was left out for being narrow: then it stops short of that end's skip, if at least
-    half of ``span`` is left.
+    half of ``span`` is left. An end flagged in ``bend_aware`` (an array of one flag per
+    end, or empty for none) is fitted by ``_geometry_kernels.bend_aware_fit``: over a
+    shorter span where the piece bends tightly.
 
     Returns
     -------
@@ -108,7 +112,10 @@ def fit_chain_ends(points, starts, lengths, distance, full_widths, skip, span, n
             if far_skip > skip and reach >= 0.5 * span:
                 end_span = min(span, reach)
             backwards = points[start:stop] if side == 0 else points[start:stop][::-1]
-            x, y, dx, dy, curvature = outward_fit(backwards, end_skip, end_span)
+            if bend_aware.size and bend_aware[end]:
+                x, y, dx, dy, curvature = bend_aware_fit(backwards, end_skip, end_span)
+            else:
+                x, y, dx, dy, curvature = outward_fit(backwards, end_skip, end_span)
             positions[end, 0] = x
             positions[end, 1] = y
             directions[end, 0] = dx

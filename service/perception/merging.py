@@ -127,6 +127,7 @@ def chain_ends(
     skip: float = 0.0,
     distance: np.ndarray | None = None,
     full_width: float = 0.0,
+    bend_aware: np.ndarray | None = None,
 ) -> list[ChainEnd]:
     """Both ends of every piece with their outward directions (piece i: ends 2i, 2i+1).
 
@@ -137,6 +138,10 @@ def chain_ends(
     at a slant, thinning bends the end toward the cut's far corner over more than one
     radius, and that stretch would tilt the end's direction. For the same reason a short
     piece's end fit stops short of its other end's narrow tip.
+
+    The ends flagged in ``bend_aware`` (one flag per end) are fitted over a shorter span
+    where their piece bends tightly (``_geometry_kernels.bend_aware_fit``): see
+    :func:`merge_chains` for which.
     """
     if not pieces:
         return []
@@ -176,7 +181,15 @@ def chain_ends(
     # short piece's fit stops short of its other end's narrow tip (its length is needed).
     lengths = np.array([polyline_length(points) for points in pieces])
     positions, directions, curvatures, skips = _merging_kernels.fit_chain_ends(
-        joints, starts, lengths, narrow_in, full_widths, float(skip), float(span), NARROW_END_JOINTS
+        joints,
+        starts,
+        lengths,
+        narrow_in,
+        full_widths,
+        float(skip),
+        float(span),
+        NARROW_END_JOINTS,
+        np.zeros(0, np.bool_) if bend_aware is None else np.ascontiguousarray(bend_aware, np.bool_),
     )
     curvatures, skips, widths = curvatures.tolist(), skips.tolist(), widths.tolist()
     return [
@@ -648,6 +661,19 @@ def _ends_of_split_pieces(
     return ends
 
 
+def _tips_in_junctions(pieces: list[np.ndarray], zones: np.ndarray | None) -> np.ndarray:
+    """Per end (piece i: ends 2i, 2i+1), whether the piece's tip joint is in a junction
+    zone (as :func:`junctions_of_ends` reaches it)."""
+    if zones is None or not pieces:
+        return np.zeros(2 * len(pieces), bool)
+    tips = [
+        ChainEnd(index, at_start, points[0 if at_start else -1], np.zeros(2))
+        for index, points in enumerate(pieces)
+        for at_start in (True, False)
+    ]
+    return np.array(junctions_of_ends(tips, zones)) >= 0
+
+
 def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -> list[int]:
     """The junction zone each end touches, or -1: the 8-connected pieces of the zones
     grown by a ``2 reach + 1`` square (``cv2.dilate``), numbered in the order the ends
@@ -792,6 +818,21 @@ def merge_chains(
             pieces, mask, radius, radius + BORDER_MARGIN_PX, BORDER_MARGIN_PX, span
         )
     ends = chain_ends(pieces, span, skip=radius, distance=distance, full_width=full_width)
+    at_crossing = _tips_in_junctions(pieces, zones)
+    if at_crossing.any():
+        # An end at a crossing is where the skeleton was cut at the other strand, not a
+        # cut end's hook: its fit may stay near the tip, and on a tight loop it must.
+        # Fitted over the usual span, a quadratic spans half the loop and puts the end
+        # several px off the cable, pointing tens of degrees off, and the crossing's
+        # bridge swings out of the cable.
+        ends = chain_ends(
+            pieces,
+            span,
+            skip=radius,
+            distance=distance,
+            full_width=full_width,
+            bend_aware=at_crossing,
+        )
     check(deadline, "merging")
     at_border = None
     if zones is not None or mask is not None:

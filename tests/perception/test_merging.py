@@ -222,7 +222,8 @@ def test_gap_curve_kernels_equal_the_references_in_every_shape(seed):
 @pytest.mark.parametrize("seed", range(3))
 def test_chain_ends_kernel_equals_the_plain_fits_bit_for_bit(seed):
     # Wandering pieces of 2 to 40 joints over a distance map with narrow and wide places,
-    # with and without the narrow ends left out: every end's fit as geometry.end_fit's.
+    # with and without the narrow ends left out, and with most ends fitted over the span
+    # their bend allows: every end's fit as geometry.end_fit's.
     rng = np.random.default_rng(seed)
     mask = np.zeros((120, 160), np.uint8)
     for _ in range(6):
@@ -233,14 +234,19 @@ def test_chain_ends_kernel_equals_the_plain_fits_bit_for_bit(seed):
     for _ in range(30):
         steps = rng.normal(size=(int(rng.integers(2, 40)), 2)) * 3.0 + rng.normal(size=2) * 4.0
         pieces.append(rng.uniform(0, 150, 2) + np.cumsum(steps, axis=0))
+    flags = rng.random(2 * len(pieces)) < 0.7
+    shortened = 0
     for arguments in (
         {"span": 40.0},
         {"span": 20.0, "skip": 4.0},
         {"span": 30.0, "skip": 3.0, "distance": distance, "full_width": 2.8},
+        {"span": 40.0, "skip": 4.0, "bend_aware": flags},
+        {"span": 30.0, "skip": 3.0, "distance": distance, "full_width": 2.8, "bend_aware": flags},
     ):
         fast, plain = chain_ends(pieces, **arguments), reference.chain_ends(pieces, **arguments)
         assert len(fast) == len(plain) == 2 * len(pieces)
-        for got, expected in zip(fast, plain, strict=True):
+        usual = {key: value for key, value in arguments.items() if key != "bend_aware"}
+        for got, expected, before in zip(fast, plain, chain_ends(pieces, **usual), strict=True):
             assert (got.piece, got.at_start) == (expected.piece, expected.at_start)
             assert np.array_equal(got.position, expected.position)
             assert np.array_equal(got.direction, expected.direction)
@@ -249,6 +255,8 @@ def test_chain_ends_kernel_equals_the_plain_fits_bit_for_bit(seed):
                 expected.skip,
                 expected.width,
             )
+            shortened += not np.array_equal(got.direction, before.direction)
+    assert shortened > 0  # some flagged ends lay on tight bends
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -7,15 +7,16 @@ choice of joins costing every pair of chain ends (the code the grid of
 import cv2
 import numpy as np
 
-from service.perception import _merging_kernels, merging
+from service.perception import _geometry_kernels, _merging_kernels, merging
 from service.perception.appearance import colour_penalty
 from service.perception.geometry import angle_between, end_fit, polyline_length
 from service.perception.pairing import Components
 
 
-def chain_ends(pieces, span, skip=0.0, distance=None, full_width=0.0):
+def chain_ends(pieces, span, skip=0.0, distance=None, full_width=0.0, bend_aware=None):
     """:func:`service.perception.merging.chain_ends` end by end, through
-    :func:`service.perception.geometry.end_fit`."""
+    :func:`service.perception.geometry.end_fit` (over :func:`bend_aware_span` for the
+    ends flagged in ``bend_aware``)."""
     ends = []
     medians = None
     interior = np.zeros(len(pieces))
@@ -58,6 +59,8 @@ def chain_ends(pieces, span, skip=0.0, distance=None, full_width=0.0):
             # there bends toward the cut's corner and would tilt this end.
             reach = length - end_skip - far_skip
             end_span = min(span, reach) if far_skip > skip and reach >= 0.5 * span else span
+            if bend_aware is not None and bend_aware[2 * index + (0 if at_start else 1)]:
+                end_span = bend_aware_span(points, at_start, end_skip, end_span)
             position, direction, curvature = end_fit(points, at_start, end_span, end_skip)
             ends.append(
                 merging.ChainEnd(
@@ -65,6 +68,29 @@ def chain_ends(pieces, span, skip=0.0, distance=None, full_width=0.0):
                 )
             )
     return ends
+
+
+def bend_aware_span(points, at_start, skip, span):
+    """The span ``_geometry_kernels.bend_aware_fit`` fits over: halved while the turns at
+    the joints between ``skip`` and ``skip + span`` of arc length from the end add up to
+    more than ``END_FIT_MAX_TURNING``."""
+    ordered = np.asarray(points if at_start else points[::-1], np.float64)
+    steps = np.diff(ordered, axis=0)
+    arcs = np.concatenate([[0.0], np.cumsum(np.hypot(steps[:, 0], steps[:, 1]))])
+    # The signed turn at each inner joint, from the step before it to the step after.
+    turns = np.arctan2(
+        steps[:-1, 0] * steps[1:, 1] - steps[:-1, 1] * steps[1:, 0],
+        steps[:-1, 0] * steps[1:, 0] + steps[:-1, 1] * steps[1:, 1],
+    )
+    inner = arcs[1:-1]
+
+    def turning(reach):
+        # The kernel stops at the first joint past the reach: the arcs only grow.
+        return abs(float(turns[(inner >= skip) & (inner <= reach)].sum()))
+
+    while span > 1.0 and turning(skip + span) > _geometry_kernels.END_FIT_MAX_TURNING:
+        span *= 0.5
+    return span
 
 
 def _narrow_end_length(points, at_start, distance, full_width, limit=merging.NARROW_END_JOINTS):
