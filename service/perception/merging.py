@@ -68,6 +68,9 @@ END_FIT_SPAN_RADII = 6.0
 # Thinning stops about a radius from the edge of the picture; an end this much
 # further in still counts as at the edge.
 BORDER_MARGIN_PX = 2.0
+# An end near the picture's edge leaves the picture when it points out of it by at least
+# this sine (15 degrees off the edge's own line).
+BORDER_OUT_SINE = 0.26
 # An end joint is narrow (part of a cut end) below this fraction of the full half width;
 # at most this many joints at an end are left out of its fit for being narrow.
 FULL_WIDTH_FRACTION = 0.8
@@ -415,7 +418,8 @@ def choose_joins(
     With ``open_gap``, a join across more than :data:`.gap_evidence.OPEN_GAP_RADII` (the
     ends' chord) is left out, however cheap, when ``open_gap(i, j)`` says its bridge runs
     that far over open background that nothing in the image hides
-    (:func:`.gap_evidence.open_gap_too_long`).
+    (:func:`.gap_evidence.open_gap_too_long`). In the last step, a partner that
+    ``hidden_gap`` does not let an end join across a longer gap is no rival.
 
     Returns
     -------
@@ -517,17 +521,19 @@ def choose_joins(
         close = distances <= MUTUAL_GAP_RADII * radius
         if hidden_gap is not None and len(costs):
             # A longer gap only where the image shows something lying over it; looked
-            # at only for two free ends that are each other's cheapest partner.
+            # at only for two free ends that have no cheaper partner they could be
+            # joined to (a partner over open background that nothing hides is none).
             open_pair = (costs <= MUTUAL_COST_FACTOR * params.merge_cost_threshold) & ~(
                 excluded[pairs[:, 0]] | excluded[pairs[:, 1]]
             )
             cheapest = np.full(len(ends), np.inf)
-            np.minimum.at(cheapest, pairs[open_pair, 0], costs[open_pair])
-            np.minimum.at(cheapest, pairs[open_pair, 1], costs[open_pair])
-            for index in np.flatnonzero(open_pair & ~close).tolist():
+            for index in np.flatnonzero(open_pair).tolist():  # cheapest first
                 i, j = pairs[index].tolist()
-                if costs[index] <= min(cheapest[i], cheapest[j]):
-                    close[index] = hidden_gap(i, j)
+                if costs[index] > min(cheapest[i], cheapest[j]):
+                    continue
+                close[index] = close[index] or hidden_gap(i, j)
+                if close[index]:
+                    cheapest[i] = cheapest[j] = costs[index]
         near = list(zip(costs[close].tolist(), *pairs[close].T.tolist(), strict=True))
         for cost, i, j in _mutual_best(near, excluded, params.merge_cost_threshold):
             try_join(i, j, cost)
@@ -839,12 +845,19 @@ def merge_chains(
         height, width = (zones if zones is not None else mask).shape
         positions = np.array([end.position for end in ends]).reshape(-1, 2)
         margin = radius + BORDER_MARGIN_PX
-        at_border = (
-            (positions[:, 0] < margin)
-            | (positions[:, 1] < margin)
-            | (positions[:, 0] > width - 1 - margin)
-            | (positions[:, 1] > height - 1 - margin)
+        directions = np.array([end.direction for end in ends]).reshape(-1, 2)
+        outwards = np.column_stack(
+            [
+                np.where(positions[:, 0] < margin, -directions[:, 0], -np.inf),
+                np.where(positions[:, 1] < margin, -directions[:, 1], -np.inf),
+                np.where(positions[:, 0] > width - 1 - margin, directions[:, 0], -np.inf),
+                np.where(positions[:, 1] > height - 1 - margin, directions[:, 1], -np.inf),
+            ]
         )
+        # By the edge, an end pointing out of the picture (or of no direction) is a cable
+        # leaving it; one running along the edge or back into the picture (a stub left
+        # beyond an object by the edge) is an end like any other.
+        at_border = outwards.max(axis=1) >= BORDER_OUT_SINE * np.hypot(*directions.T)
     leaving = runs_out = None
     if mask is not None and ends:
         leaving = runs_out = _merging_kernels.runs_to_border(
