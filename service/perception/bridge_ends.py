@@ -106,10 +106,11 @@ def ends_through_short_pieces(
 def _chord_across(points: np.ndarray, axis: np.ndarray, half_width: float) -> np.ndarray:
     """The direction of a short piece joined on both sides: ``axis`` (unit, the line
     between its partners), or the piece's own chord where that turns from ``axis`` by
-    more than its uncertainty (a piece of unknown ``half_width`` keeps ``axis``)."""
+    more than its uncertainty (a piece of unknown ``half_width`` keeps ``axis``, and so
+    does one of two joints: both are its end joints, placed by the cuts)."""
     chord = points[-1] - points[0]
     length = float(np.hypot(*chord))
-    if half_width <= 0 or length < 1e-9:
+    if half_width <= 0 or len(points) < 3 or length < 1e-9:
         return axis
     chord = chord / length
     off = float(np.arccos(np.clip(chord @ axis, -1.0, 1.0)))

@@ -66,3 +66,17 @@ def test_a_short_piece_tilted_within_its_uncertainty_keeps_its_partners_line():
     ends = [replace(end, width=6.0) for end in chain_ends(pieces, 40.0)]
     adjusted = ends_through_short_pieces(pieces, ends, [(1, 2, 0.1), (3, 4, 0.1)], 40.0)
     np.testing.assert_allclose(adjusted[3].direction, [1.0, 0.0], atol=1e-9)
+
+
+def test_a_short_piece_of_two_joints_keeps_its_partners_line():
+    # Both joints of a two-joint piece are its end joints, placed by the cuts: its
+    # chord says nothing of the cable's direction, however far it turns.
+    pieces = [
+        np.array([[0.0, 100.0], [20.0, 100.0], [40.0, 100.0]]),
+        np.array([[55.0, 95.0], [70.0, 68.0]]),
+        np.array([[120.0, 50.0], [140.0, 40.0], [160.0, 30.0]]),
+    ]
+    ends = [replace(end, width=4.0) for end in chain_ends(pieces, 40.0)]
+    adjusted = ends_through_short_pieces(pieces, ends, [(1, 2, 0.1), (3, 4, 0.1)], 40.0)
+    axis = np.array([80.0, -50.0]) / np.hypot(80.0, -50.0)
+    np.testing.assert_allclose(adjusted[3].direction, axis, atol=1e-9)
