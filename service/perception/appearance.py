@@ -297,6 +297,15 @@ CUT_AHEAD_RADII = 2.0
 # (a round tip bulges by 0.29 there, a straight cut by nothing, at any slant).
 CUT_PROBE_SHARE = 0.7
 CUT_BULGE_SHARE = 0.15
+# A cut at a slant reaches further along the cable on one side than on the other, and the
+# line on its far side, running longer, leaves through the cable's side before the cut
+# where the end's direction is a little off or the cable bends (as where it enters a
+# disc's rim at a shallow angle): the middle then seems to bulge. The bulge allowed grows
+# by this share of the difference between the two sides' fronts. A round tip shows that
+# difference only where its circle lies off the centre line, and then bulges more still
+# (by 0.37 half widths for a difference of 0.58, 0.50 for 0.92; the limit there is 0.27
+# and 0.33).
+CUT_SLANT_BULGE_SHARE = 0.2
 # The cross-section is read this many half widths behind the end; a cable's there is
 # within this range of its piece's typical half width.
 CUT_BEHIND_RADII = 1.5
@@ -408,7 +417,9 @@ def cut_square(
     ]
     if np.isnan(fronts).any():
         return False
-    return bool(fronts[1] - 0.5 * (fronts[0] + fronts[2]) <= CUT_BULGE_SHARE * local)
+    slant = abs(fronts[2] - fronts[0])
+    allowed = CUT_BULGE_SHARE * local + CUT_SLANT_BULGE_SHARE * slant
+    return bool(fronts[1] - 0.5 * (fronts[0] + fronts[2]) <= allowed)
 
 
 def ends_alike(colours: EndColours, first: int, second: int, widths: tuple[float, float]) -> bool:

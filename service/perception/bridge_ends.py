@@ -76,7 +76,13 @@ def ends_through_short_pieces(
     occluders, cut at a slant at both ends) shows where the cable is, but its own end
     directions are poor: thinning bends both of its ends toward the cuts' corners.
     When it is joined at both ends, the cable runs through it from one partner end to
-    the other, so both of its ends point along the line between those two ends. The
+    the other, so both of its ends point along the line between those two ends, unless
+    the piece itself runs clearly across that line: the cable bends there (a loop
+    closing under an object, a bend beyond a crossing), and the line between the
+    partners would cut the bend short. The piece's own chord (from its first joint to
+    its last) is off the cable's direction by at most what its end joints being up to a
+    half width off the centre line makes of it, ``atan(2 width / chord)``; turned from
+    the partners' line by more, the chord is the direction through the piece. The
     joins themselves, and their costs, are left as they were.
     """
     partner = partners(len(ends), joins)
@@ -91,9 +97,27 @@ def ends_through_short_pieces(
             continue
         axis = axis / length
         start, end = ends[2 * piece], ends[2 * piece + 1]
+        axis = _chord_across(points, axis, start.width)
         adjusted[2 * piece] = replace(start, direction=-axis, **_UNFITTED)
         adjusted[2 * piece + 1] = replace(end, direction=axis, **_UNFITTED)
     return adjusted
+
+
+def _chord_across(points: np.ndarray, axis: np.ndarray, half_width: float) -> np.ndarray:
+    """The direction of a short piece joined on both sides: ``axis`` (unit, the line
+    between its partners), or the piece's own chord where that turns from ``axis`` by
+    more than its uncertainty (a piece of unknown ``half_width`` keeps ``axis``, and so
+    does one of two joints: both are its end joints, placed by the cuts)."""
+    chord = points[-1] - points[0]
+    length = float(np.hypot(*chord))
+    if half_width <= 0 or len(points) < 3 or length < 1e-9:
+        return axis
+    chord = chord / length
+    off = float(np.arccos(np.clip(chord @ axis, -1.0, 1.0)))
+    if off <= np.arctan2(2.0 * half_width, length):
+        return axis
+    middle = chord + axis
+    return middle / float(np.hypot(*middle))
 
 
 def ends_of_short_pieces_from_partners(

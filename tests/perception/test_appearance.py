@@ -253,3 +253,36 @@ def test_a_cut_just_past_a_bend_is_read_along_the_cable(tip, square):
     mask = _bent_end_mask(tip)
     position, direction = np.array([84.0, 56.0]), np.array([1.0, 0.0])
     assert appearance.cut_square(mask, position, direction, 6.0) is square
+
+
+@pytest.mark.parametrize(
+    ("seed", "position", "direction", "half_width", "skip"),
+    [
+        (76043, [294.2, 446.7], [-0.69, -0.72], 7.8, 10.0),
+        (76044, [300.5, 236.3], [-1.0, 0.01], 4.39, 10.4),
+        (76004, [373.0, 470.7], [-0.26, 0.96], 4.0, 10.0),
+    ],
+)
+def test_a_cable_entering_a_disc_at_a_shallow_angle_is_cut(
+    seed, position, direction, half_width, skip
+):
+    """Ends of `occluded` tuning scenes where a cable (bending, or a little off its
+    fitted direction) enters the rim of a disc of the background's colour at a shallow
+    angle: the line on the cut's far side, which runs furthest, leaves through the
+    cable's side before it reaches the rim, and the middle seemed to bulge as a round
+    tip's does. The cut is that far from square across the cable, and is read as cut."""
+    mask = make_family_scene("occluded", seed).mask
+    direction = np.array(direction) / np.hypot(*direction)
+    assert appearance.cut_square(mask, np.array(position), direction, half_width, skip)
+
+
+@pytest.mark.parametrize("tilt", [-15.0, -8.0, 0.0, 8.0, 15.0])
+def test_a_round_tip_read_off_its_axis_stays_round(tilt):
+    """The bulge allowed grows with how far one side's front reaches past the other's;
+    a cable's own round tip read along a direction up to 15 degrees off its axis is
+    nearly symmetric, and still not cut."""
+    mask = _cable_end_mask("round")
+    angle = np.radians(tilt)
+    direction = np.array([np.cos(angle), np.sin(angle)])
+    for skip in (0.0, 10.0):
+        assert not appearance.cut_square(mask, np.array([78.0, 50.0]), direction, 6.5, skip)

@@ -15,13 +15,11 @@ from service.perception.appearance import EndColours
 from service.perception.bridge_ends import (
     bridge_from_the_fits,
     ends_of_short_pieces_from_partners,
-    ends_through_short_pieces,
 )
 from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.geometry import resample
 from service.perception.merging import (
     ChainEnd,
-    assemble_paths,
     chain_ends,
     choose_joins,
     gap_curve,
@@ -167,27 +165,31 @@ def test_a_short_pieces_end_fit_stops_short_of_its_other_ends_cut():
     np.testing.assert_allclose(near.direction, [-1.0, 0.0], atol=1e-6)
 
 
-def test_a_short_piece_joined_on_both_sides_is_bridged_along_its_partners_line():
-    # A straight cable along y = 50 seen in three pieces: the middle one, between two
-    # occluders, is short and its thinned line is tilted (cut at a slant at both ends).
-    pieces = [
-        np.array([[0.0, 50.0], [10.0, 50.0], [20.0, 50.0], [30.0, 50.0], [40.0, 50.0]]),
-        np.array([[60.0, 48.0], [66.0, 52.0]]),
-        np.array([[90.0, 50.0], [100.0, 50.0], [110.0, 50.0], [120.0, 50.0], [130.0, 50.0]]),
-    ]
-    ends = chain_ends(pieces, 40.0)
-    joins = [(1, 2, 0.1), (3, 4, 0.1)]  # end of piece 0 to piece 1, piece 1 to piece 2
-    adjusted = ends_through_short_pieces(pieces, ends, joins, 40.0)
-    np.testing.assert_allclose(adjusted[2].direction, [-1.0, 0.0], atol=1e-9)
-    np.testing.assert_allclose(adjusted[3].direction, [1.0, 0.0], atol=1e-9)
-    assert adjusted[0] is ends[0] and adjusted[5] is ends[5]  # long pieces keep theirs
-
-    def worst_offset(which):
-        (path,) = assemble_paths(pieces, which, joins, "smooth")
-        return float(np.abs(path.vertices[:, 1] - 50.0).max())
-
-    # The piece's own tilted directions throw the bridges well off the line.
-    assert worst_offset(adjusted) <= 2.5 < worst_offset(ends)
+def test_a_short_piece_cut_at_a_slant_at_both_ends_has_its_cables_width():
+    # A cable 13 px wide seen for 40 px between two objects that cut it at 50
+    # degrees: most of the piece's few joints lie where a cut narrows it, and their
+    # median is well below the cable's width. Its widest joint between the ends is not.
+    mask = np.zeros((100, 160), np.uint8)
+    cv2.rectangle(mask, (20, 44), (120, 56), 1, -1)
+    rows, cols = np.mgrid[0:100, 0:160]
+    slope = np.tan(np.radians(50.0))
+    mask[(cols < 50 + slope * (rows - 50)) | (cols > 90 + slope * (rows - 50))] = 0
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    piece = np.array([[44.0, 50.0], [52.0, 50.0], [60.0, 50.0], [70.0, 50.0], [88.0, 50.0]])
+    values = distance[50, piece[:, 0].astype(int)]
+    (start, end) = chain_ends([piece], 40.0, skip=6.0, distance=distance, full_width=5.2)
+    assert start.width == end.width == pytest.approx(float(values[1:-1].max()))
+    assert start.width >= 5.5 > float(np.median(values))
+    # Where the median is not narrow (a piece seen whole between two crossings), its
+    # widest joint (here where something touches it) is only its noise: the median stays.
+    whole_mask = np.zeros_like(mask)
+    cv2.rectangle(whole_mask, (20, 44), (120, 56), 1, -1)
+    cv2.circle(whole_mask, (60, 50), 8, 1, -1)
+    uncut = cv2.distanceTransform(whole_mask, cv2.DIST_L2, 5)
+    values = uncut[50, piece[:, 0].astype(int)]
+    (whole, _) = chain_ends([piece], 40.0, skip=6.0, distance=uncut, full_width=5.2)
+    assert whole.width == pytest.approx(float(np.median(values)))
+    assert whole.width < float(values[1:-1].max())
 
 
 # --------------------------------------------------------------------------- kernels

@@ -46,6 +46,16 @@ def chain_ends(pieces, span, skip=0.0, distance=None, full_width=0.0, bend_aware
             # blob the piece runs through widens its middle.)
             piece_full = min(piece_full, merging.FULL_WIDTH_FRACTION * float(interior[index]))
         piece_width = float(medians[index]) if medians is not None else 0.0
+        minimum = 2 * merging.NARROW_END_JOINTS + merging.MIN_INTERIOR_JOINTS
+        if medians is not None and 3 <= len(points) < minimum:
+            # A short piece narrowed by cuts (often at a slant) at both ends: its widest
+            # joint between the end joints.
+            height, width = distance.shape
+            inner = np.rint(points[1:-1]).astype(np.int64)
+            values = distance[inner[:, 1].clip(0, height - 1), inner[:, 0].clip(0, width - 1)]
+            widest = float(values.max())
+            if piece_width < merging.FULL_WIDTH_FRACTION * widest:
+                piece_width = widest
         skips = [skip, skip]
         if distance is not None:
             skips = [

@@ -1,0 +1,82 @@
+"""Where merging's bridges start (:mod:`service.perception.bridge_ends`): short pieces
+joined on both sides, on straight cables and on bends."""
+
+from dataclasses import replace
+
+import numpy as np
+
+from service.perception.bridge_ends import ends_through_short_pieces
+from service.perception.merging import assemble_paths, chain_ends
+
+
+def test_a_short_piece_joined_on_both_sides_is_bridged_along_its_partners_line():
+    # A straight cable along y = 50 seen in three pieces: the middle one, between two
+    # occluders, is short and its thinned line is tilted (cut at a slant at both ends).
+    pieces = [
+        np.array([[0.0, 50.0], [10.0, 50.0], [20.0, 50.0], [30.0, 50.0], [40.0, 50.0]]),
+        np.array([[60.0, 48.0], [66.0, 52.0]]),
+        np.array([[90.0, 50.0], [100.0, 50.0], [110.0, 50.0], [120.0, 50.0], [130.0, 50.0]]),
+    ]
+    ends = chain_ends(pieces, 40.0)
+    joins = [(1, 2, 0.1), (3, 4, 0.1)]  # end of piece 0 to piece 1, piece 1 to piece 2
+    adjusted = ends_through_short_pieces(pieces, ends, joins, 40.0)
+    np.testing.assert_allclose(adjusted[2].direction, [-1.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(adjusted[3].direction, [1.0, 0.0], atol=1e-9)
+    assert adjusted[0] is ends[0] and adjusted[5] is ends[5]  # long pieces keep theirs
+
+    def worst_offset(which):
+        (path,) = assemble_paths(pieces, which, joins, "smooth")
+        return float(np.abs(path.vertices[:, 1] - 50.0).max())
+
+    # The piece's own tilted directions throw the bridges well off the line.
+    assert worst_offset(adjusted) <= 2.5 < worst_offset(ends)
+
+
+def test_a_short_piece_on_a_bend_is_bridged_between_its_chord_and_its_partners_line():
+    # A cable bending up out of a crossing: the short piece beyond it runs steeply up
+    # (its chord 29 degrees off the line to the next piece's end, more than its end
+    # joints' uncertainty of atan(2 * 4 / 31) = 14.5 degrees allows); the line between
+    # its partners cuts the bend. Its ends point half way between the two.
+    pieces = [
+        np.array([[0.0, 100.0], [20.0, 100.0], [40.0, 100.0]]),
+        np.array([[55.0, 95.0], [62.0, 82.0], [70.0, 68.0]]),
+        np.array([[120.0, 50.0], [140.0, 40.0], [160.0, 30.0]]),
+    ]
+    ends = [replace(end, width=4.0) for end in chain_ends(pieces, 40.0)]
+    joins = [(1, 2, 0.1), (3, 4, 0.1)]
+    adjusted = ends_through_short_pieces(pieces, ends, joins, 40.0)
+    chord = np.array([15.0, -27.0]) / np.hypot(15.0, -27.0)
+    axis = np.array([80.0, -50.0]) / np.hypot(80.0, -50.0)
+    middle = (chord + axis) / np.hypot(*(chord + axis))
+    np.testing.assert_allclose(adjusted[3].direction, middle, atol=1e-9)
+    np.testing.assert_allclose(adjusted[2].direction, -middle, atol=1e-9)
+    # Of unknown width, the piece is crossed along its partners' line.
+    unknown = ends_through_short_pieces(pieces, chain_ends(pieces, 40.0), joins, 40.0)
+    np.testing.assert_allclose(unknown[3].direction, axis, atol=1e-9)
+
+
+def test_a_short_piece_tilted_within_its_uncertainty_keeps_its_partners_line():
+    # The straight cable of the test above, its short middle piece tilted by 34 degrees
+    # over 7 px: with a half width of 6 its end joints could be off by atan(12 / 7).
+    pieces = [
+        np.array([[0.0, 50.0], [10.0, 50.0], [20.0, 50.0], [30.0, 50.0], [40.0, 50.0]]),
+        np.array([[60.0, 48.0], [66.0, 52.0]]),
+        np.array([[90.0, 50.0], [100.0, 50.0], [110.0, 50.0], [120.0, 50.0], [130.0, 50.0]]),
+    ]
+    ends = [replace(end, width=6.0) for end in chain_ends(pieces, 40.0)]
+    adjusted = ends_through_short_pieces(pieces, ends, [(1, 2, 0.1), (3, 4, 0.1)], 40.0)
+    np.testing.assert_allclose(adjusted[3].direction, [1.0, 0.0], atol=1e-9)
+
+
+def test_a_short_piece_of_two_joints_keeps_its_partners_line():
+    # Both joints of a two-joint piece are its end joints, placed by the cuts: its
+    # chord says nothing of the cable's direction, however far it turns.
+    pieces = [
+        np.array([[0.0, 100.0], [20.0, 100.0], [40.0, 100.0]]),
+        np.array([[55.0, 95.0], [70.0, 68.0]]),
+        np.array([[120.0, 50.0], [140.0, 40.0], [160.0, 30.0]]),
+    ]
+    ends = [replace(end, width=4.0) for end in chain_ends(pieces, 40.0)]
+    adjusted = ends_through_short_pieces(pieces, ends, [(1, 2, 0.1), (3, 4, 0.1)], 40.0)
+    axis = np.array([80.0, -50.0]) / np.hypot(80.0, -50.0)
+    np.testing.assert_allclose(adjusted[3].direction, axis, atol=1e-9)
