@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.perception.appearance import EndColours, cut_square, ends_alike
+from service.perception.appearance import EndColours, cut_or_lopsided, cut_square, ends_alike
 from service.perception.geometry import polyline_length
 
 # A gap over open background whose curve is up to this many of the cable's radii long
@@ -33,6 +33,7 @@ def cut_ends_alike(
     mask: np.ndarray,
     colours: EndColours | None,
     radius: float,
+    cut_needed: int = 2,
 ) -> bool:
     """Whether the free ends ``a`` (end ``i``) and ``b`` (end ``j``, both
     :class:`.merging.ChainEnd`), joined by ``curve`` at most :data:`CUT_GAP_RADII` long
@@ -49,6 +50,13 @@ def cut_ends_alike(
     width. A cable's end inside a blob of the foreground (a piece of a pattern
     segmented with the cables) is not cut; two cables of different colour or width are
     not one.
+
+    ``cut_needed`` (1 or 2) is how many of the two ends must be cut square. A turn
+    under an object (:mod:`.turn_joins`) asks one, the other end being no cable's own
+    tip (:func:`.appearance.cut_or_lopsided`): the two strands lie side by side under
+    one object, whose border crosses them at different slants, and where it cuts a
+    strand at its corner or along the strand's bend into the turn, the front is
+    lopsided, not straight across.
     """
     if colours is None:
         return False
@@ -56,9 +64,13 @@ def cut_ends_alike(
         return False
     if not ends_alike(colours, i, j, (a.width, b.width)):
         return False
-    return cut_square(mask, a.position, a.direction, a.width, a.skip) and cut_square(
-        mask, b.position, b.direction, b.width, b.skip
-    )
+    square = [cut_square(mask, end.position, end.direction, end.width, end.skip) for end in (a, b)]
+    if all(square):
+        return True
+    if cut_needed > 1 or not any(square):
+        return False
+    other = b if square[0] else a
+    return cut_or_lopsided(mask, other.position, other.direction, other.width, other.skip)
 
 
 # No bridge runs over more than this many radii of open background, however cheap its
