@@ -306,6 +306,10 @@ CUT_BULGE_SHARE = 0.15
 # (by 0.37 half widths for a difference of 0.58, 0.50 for 0.92; the limit there is 0.27
 # and 0.33).
 CUT_SLANT_BULGE_SHARE = 0.2
+# A front is lopsided (no cable's own tip) when one side line runs on past the other by
+# more than this share of the half width: a round tip read 15 degrees off its axis is
+# lopsided by about 0.37 of it.
+TIP_LOPSIDED_SHARE = 0.5
 # The cross-section is read this many half widths behind the end; a cable's there is
 # within this range of its piece's typical half width.
 CUT_BEHIND_RADII = 1.5
@@ -341,21 +345,20 @@ def _front(mask: np.ndarray, start: np.ndarray, direction: np.ndarray, count: in
     return 0.5 * float(off[0])
 
 
-def cut_square(
+def end_front(
     mask: np.ndarray,
     position: np.ndarray,
     direction: np.ndarray,
     half_width: float,
     skip: float = 0.0,
-) -> bool:
-    """Whether a chain end (``position``, outward unit ``direction``) of a cable of
-    ``half_width`` px stops as a cut straight across its width: the foreground ends
-    within :data:`CUT_AHEAD_RADII` half widths ahead of the end, and along lines
-    :data:`CUT_PROBE_SHARE` of the half width to either side of the centre it ends in
-    line with the centre (the middle bulging past the sides by at most
-    :data:`CUT_BULGE_SHARE` of the half width), as where an object's border crosses the
-    cable, and unlike a cable's own rounded or tapering tip. False when the march
-    starts off the mask, runs on or leaves the picture first.
+) -> np.ndarray | None:
+    """The front of a chain end (``position``, outward unit ``direction``) of a cable
+    of ``half_width`` px, as :func:`cut_square` reads it: how far the foreground runs on
+    along the cable's centre and lines :data:`CUT_PROBE_SHARE` of its half width to
+    either side (``(3,)``, in the local half width: one side, centre, other side);
+    None when it cannot be read: the march starts off the mask, runs on (the foreground
+    must end within :data:`CUT_AHEAD_RADII` half widths ahead of the end) or leaves the
+    picture first, or the cable's width there is not its own.
 
     The cable's cross-section is first read :data:`CUT_BEHIND_RADII` half widths
     behind the end, or ``skip`` px (the tip the end's fit left out, a cut's hook) where
@@ -380,10 +383,10 @@ def cut_square(
     behind = np.asarray(position, np.float64) - back_from_end * direction
     centre, local = cross_section(behind)
     if centre is None:
-        return False
+        return None
     ahead = _front(mask, centre, direction, count)
     if np.isnan(ahead) or ahead > CUT_AHEAD_RADII * half_width + back_from_end:
-        return False
+        return None
     # Read the front from a cross-section just behind it: on a bend, lines from further
     # back would leave through the cable's side before they reach the cut. A cut at a
     # steep slant (or along an object's round rim) takes one side of the cable off
@@ -394,7 +397,7 @@ def cut_square(
     while True:
         centre, local = cross_section(start + max(ahead - back, 0.0) * direction)
         if centre is None:
-            return False
+            return None
         if local >= CUT_WIDTH_RANGE[0] * half_width or back >= ahead:
             break
         back += CUT_STEP_BACK_SHARE * half_width
@@ -407,19 +410,58 @@ def cut_square(
         direction = axis / apart
         centre, local = cross_section(centre, direction)
         if centre is None:
-            return False
+            return None
     if not CUT_WIDTH_RANGE[0] * half_width <= local <= CUT_WIDTH_RANGE[1] * half_width:
-        return False
+        return None
     normal = np.array([-direction[1], direction[0]])
     fronts = [
         _front(mask, centre + share * local * normal, direction, count)
         for share in (-CUT_PROBE_SHARE, 0.0, CUT_PROBE_SHARE)
     ]
     if np.isnan(fronts).any():
+        return None
+    return np.array(fronts) / local
+
+
+def cut_square(
+    mask: np.ndarray,
+    position: np.ndarray,
+    direction: np.ndarray,
+    half_width: float,
+    skip: float = 0.0,
+) -> bool:
+    """Whether a chain end (``position``, outward unit ``direction``) of a cable of
+    ``half_width`` px stops as a cut straight across its width (:func:`end_front`): the
+    middle bulging past the sides by at most :data:`CUT_BULGE_SHARE` of the half width
+    (plus :data:`CUT_SLANT_BULGE_SHARE` of the two sides' difference: a slanted cut),
+    as where an object's border crosses the cable, and unlike a cable's own rounded or
+    tapering tip. False when the front cannot be read."""
+    return _straight(end_front(mask, position, direction, half_width, skip))
+
+
+def cut_or_lopsided(
+    mask: np.ndarray,
+    position: np.ndarray,
+    direction: np.ndarray,
+    half_width: float,
+    skip: float = 0.0,
+) -> bool:
+    """Whether a chain end's front (:func:`end_front`) is no cable's own tip: cut
+    straight across (:func:`cut_square`), or lopsided, one side running on past the
+    other by more than :data:`TIP_LOPSIDED_SHARE` of the half width, as where an
+    object's border or corner cuts a cable at a slant along its bend. A cable's round
+    or tapering tip is symmetric about its axis. False when the front cannot be read."""
+    front = end_front(mask, position, direction, half_width, skip)
+    return _straight(front) or (
+        front is not None and bool(abs(front[0] - front[2]) > TIP_LOPSIDED_SHARE)
+    )
+
+
+def _straight(front: np.ndarray | None) -> bool:
+    if front is None:
         return False
-    slant = abs(fronts[2] - fronts[0])
-    allowed = CUT_BULGE_SHARE * local + CUT_SLANT_BULGE_SHARE * slant
-    return bool(fronts[1] - 0.5 * (fronts[0] + fronts[2]) <= allowed)
+    allowed = CUT_BULGE_SHARE + CUT_SLANT_BULGE_SHARE * abs(front[2] - front[0])
+    return bool(front[1] - 0.5 * (front[0] + front[2]) <= allowed)
 
 
 def ends_alike(colours: EndColours, first: int, second: int, widths: tuple[float, float]) -> bool:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.perception.appearance import EndColours, cut_square, ends_alike
+from service.perception.appearance import EndColours, cut_or_lopsided, cut_square, ends_alike
 from service.perception.geometry import polyline_length
 
 # A gap over open background whose curve is up to this many of the cable's radii long
@@ -22,6 +22,9 @@ from service.perception.geometry import polyline_length
 # more at each end stand for the ends' fits stopping short of the object's border and
 # the curve running wider than the hidden stretch (as in OPEN_GAP_RADII).
 CUT_GAP_RADII = 19.0
+# An end near the picture's edge leaves the picture when it points out of it by at least
+# this sine (15 degrees off the edge's own line).
+BORDER_OUT_SINE = 0.26
 
 
 def cut_ends_alike(
@@ -33,6 +36,7 @@ def cut_ends_alike(
     mask: np.ndarray,
     colours: EndColours | None,
     radius: float,
+    cut_needed: int = 2,
 ) -> bool:
     """Whether the free ends ``a`` (end ``i``) and ``b`` (end ``j``, both
     :class:`.merging.ChainEnd`), joined by ``curve`` at most :data:`CUT_GAP_RADII` long
@@ -49,6 +53,13 @@ def cut_ends_alike(
     width. A cable's end inside a blob of the foreground (a piece of a pattern
     segmented with the cables) is not cut; two cables of different colour or width are
     not one.
+
+    ``cut_needed`` (1 or 2) is how many of the two ends must be cut square. A turn
+    under an object (:mod:`.turn_joins`) asks one, the other end being no cable's own
+    tip (:func:`.appearance.cut_or_lopsided`): the two strands lie side by side under
+    one object, whose border crosses them at different slants, and where it cuts a
+    strand at its corner or along the strand's bend into the turn, the front is
+    lopsided, not straight across.
     """
     if colours is None:
         return False
@@ -56,9 +67,13 @@ def cut_ends_alike(
         return False
     if not ends_alike(colours, i, j, (a.width, b.width)):
         return False
-    return cut_square(mask, a.position, a.direction, a.width, a.skip) and cut_square(
-        mask, b.position, b.direction, b.width, b.skip
-    )
+    square = [cut_square(mask, end.position, end.direction, end.width, end.skip) for end in (a, b)]
+    if all(square):
+        return True
+    if cut_needed > 1 or not any(square):
+        return False
+    other = b if square[0] else a
+    return cut_or_lopsided(mask, other.position, other.direction, other.width, other.skip)
 
 
 # No bridge runs over more than this many radii of open background, however cheap its
@@ -107,3 +122,31 @@ def open_gap_too_long(curve, mask, limit, hidden) -> bool:
     steps = np.hypot(*np.diff(curve, axis=0).T)
     off = inside[1:] & ~mask[rows[1:].clip(0, height - 1), cols[1:].clip(0, width - 1)]
     return float(steps[off].sum()) > limit and not hidden()
+
+
+def points_out_of_picture(
+    positions: np.ndarray, directions: np.ndarray, shape: tuple[int, ...], margin: float
+) -> np.ndarray:
+    """Per end, whether it is a cable leaving the picture: within ``margin`` px of an
+    edge of a picture of ``shape`` (height, width, ...) and pointing out of it by at
+    least :data:`BORDER_OUT_SINE` (or of no direction).
+
+    By the edge, an end running along it or back into the picture (a stub left beyond
+    an object by the edge, a cable lying along the edge) is an end like any other.
+
+    Parameters
+    ----------
+    positions, directions : ndarray, shape (N, 2)
+        The ends' (x, y) and outward directions (unit, or zero for none).
+    """
+    height, width = shape[:2]
+    x, y = positions[:, 0], positions[:, 1]
+    outwards = np.column_stack(
+        [
+            np.where(x < margin, -directions[:, 0], -np.inf),
+            np.where(y < margin, -directions[:, 1], -np.inf),
+            np.where(x > width - 1 - margin, directions[:, 0], -np.inf),
+            np.where(y > height - 1 - margin, directions[:, 1], -np.inf),
+        ]
+    )
+    return outwards.max(axis=1) >= BORDER_OUT_SINE * np.hypot(*directions.T)

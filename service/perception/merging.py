@@ -48,6 +48,7 @@ from service.perception.gap_evidence import (
     cut_ends_alike,
     open_gap_limit,
     open_gap_too_long,
+    points_out_of_picture,
 )
 from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
@@ -68,9 +69,6 @@ END_FIT_SPAN_RADII = 6.0
 # Thinning stops about a radius from the edge of the picture; an end this much
 # further in still counts as at the edge.
 BORDER_MARGIN_PX = 2.0
-# An end near the picture's edge leaves the picture when it points out of it by at least
-# this sine (15 degrees off the edge's own line).
-BORDER_OUT_SINE = 0.26
 # An end joint is narrow (part of a cut end) below this fraction of the full half width;
 # at most this many joints at an end are left out of its fit for being narrow.
 FULL_WIDTH_FRACTION = 0.8
@@ -407,6 +405,12 @@ def _best_matchings(
 
 # Junctions with more ends than this are paired greedily (the matching is exponential).
 MAX_JUNCTION_ENDS = 10
+
+# How many of a turn's two ends must be cut square when nothing the image shows lies
+# over it (:func:`.gap_evidence.cut_ends_alike`): one, since an object's border crosses
+# the two side-by-side strands at different slants, and at its corner or along a
+# strand's bend into the turn the cut is not straight across.
+TURN_CUT_ENDS = 1
 # Candidate joins tried between two looks at the deadline.
 DEADLINE_CHECK_EVERY = 4096
 
@@ -860,41 +864,23 @@ def merge_chains(
         pieces = split_where_leaving_together(
             pieces, mask, radius, radius + BORDER_MARGIN_PX, BORDER_MARGIN_PX, span
         )
-    ends = chain_ends(pieces, span, skip=radius, distance=distance, full_width=full_width)
+    # An end at a crossing is where the skeleton was cut at the other strand, not a cut
+    # end's hook: its fit may stay near the tip, and on a tight loop it must. Fitted over
+    # the usual span, a quadratic spans half the loop and puts the end several px off
+    # the cable, pointing tens of degrees off, and the crossing's bridge swings out of it.
     at_crossing = _tips_in_junctions(pieces, zones)
-    if at_crossing.any():
-        # An end at a crossing is where the skeleton was cut at the other strand, not a
-        # cut end's hook: its fit may stay near the tip, and on a tight loop it must.
-        # Fitted over the usual span, a quadratic spans half the loop and puts the end
-        # several px off the cable, pointing tens of degrees off, and the crossing's
-        # bridge swings out of the cable.
-        ends = chain_ends(
-            pieces,
-            span,
-            skip=radius,
-            distance=distance,
-            full_width=full_width,
-            bend_aware=at_crossing,
-        )
+    ends = chain_ends(
+        pieces, span, skip=radius, distance=distance, full_width=full_width, bend_aware=at_crossing
+    )
     check(deadline, "merging")
     at_border = None
     if zones is not None or mask is not None:
-        height, width = (zones if zones is not None else mask).shape
-        positions = np.array([end.position for end in ends]).reshape(-1, 2)
-        margin = radius + BORDER_MARGIN_PX
-        directions = np.array([end.direction for end in ends]).reshape(-1, 2)
-        outwards = np.column_stack(
-            [
-                np.where(positions[:, 0] < margin, -directions[:, 0], -np.inf),
-                np.where(positions[:, 1] < margin, -directions[:, 1], -np.inf),
-                np.where(positions[:, 0] > width - 1 - margin, directions[:, 0], -np.inf),
-                np.where(positions[:, 1] > height - 1 - margin, directions[:, 1], -np.inf),
-            ]
+        at_border = points_out_of_picture(
+            np.array([end.position for end in ends]).reshape(-1, 2),
+            np.array([end.direction for end in ends]).reshape(-1, 2),
+            (zones if zones is not None else mask).shape,
+            radius + BORDER_MARGIN_PX,
         )
-        # By the edge, an end pointing out of the picture (or of no direction) is a cable
-        # leaving it; one running along the edge or back into the picture (a stub left
-        # beyond an object by the edge) is an end like any other.
-        at_border = outwards.max(axis=1) >= BORDER_OUT_SINE * np.hypot(*directions.T)
     leaving = runs_out = None
     if mask is not None and ends:
         leaving = runs_out = _merging_kernels.runs_to_border(
@@ -937,7 +923,9 @@ def merge_chains(
     hidden_gap = None
     if image is not None and mask is not None:
 
-        def hidden_gap(i: int, j: int, curve: np.ndarray | None = None) -> bool:
+        def hidden_gap(
+            i: int, j: int, curve: np.ndarray | None = None, cut_needed: int = 2
+        ) -> bool:
             # The one test of the image's evidence that something hides a cable between
             # ends i and j, along ``curve`` (the gap's own curve when None): for the
             # joins across gaps and for the turns under objects alike.
@@ -948,7 +936,7 @@ def merge_chains(
                 )
             if gap_hidden(image, mask, curve, (a, b), radius):
                 return True
-            return cut_ends_alike(a, b, i, j, curve, mask, colours, radius)
+            return cut_ends_alike(a, b, i, j, curve, mask, colours, radius, cut_needed)
 
     open_gap = None
     if hidden_gap is not None:
@@ -997,6 +985,7 @@ def merge_chains(
             mutual,
             MAX_JUNCTION_ENDS,
             turn_bridges,
+            lambda i, j, curve: hidden_gap(i, j, curve, TURN_CUT_ENDS),
         )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.

@@ -6,11 +6,14 @@ junction where the strands meet and part. That line belongs to both strands. Str
 that touch all along cannot cross there (crossing, the mask would narrow to one cable's
 width), so each keeps its side: the strand on the left where they meet is the one on
 the left where they part. :func:`split_touching_strands` finds such lines by their
-width and replaces each with two pieces, one per strand, and says which ends join.
+width and replaces each with two pieces, one per strand, and says which ends join; and
+where the stretch is short enough for the junction zone to take it whole (no line, one
+junction of four ends), it says which of the four join, by the same sides.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -96,8 +99,32 @@ def split_touching_strands(
         for index in range(len(pieces))
         if all(len(members.get(labels[end], ())) == 3 for end in (2 * index, 2 * index + 1))
     ]
+    handled = _split_shared_pieces(
+        candidates, result, positions, directions, labels, members, distance, leaving
+    )
+    # A touching stretch short enough for the junction zone to take whole leaves no
+    # shared piece: one junction of four ends.
+    for label, ends in members.items():
+        if label in handled or len(ends) != 4:
+            continue
+        pairs = _touching_junction_pairs(ends, positions, directions, pieces, distance, leaving)
+        if pairs is not None:
+            result.pairs.extend(pairs)
+            handled.add(label)
+    result.junction_of_end = [-1 if label in handled else label for label in result.junction_of_end]
+    return result
+
+
+def _split_shared_pieces(
+    candidates, result, positions, directions, labels, members, distance, leaving
+) -> set[int]:
+    """Split the ``candidates`` (pieces with a three-way junction at both ends) that two
+    strands share, into ``result`` (:func:`split_touching_strands`); the junctions
+    handled."""
+    handled: set[int] = set()
     if not candidates:
-        return result
+        return handled
+    pieces = list(result.pieces)
     starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
     widths = _merging_kernels.median_distance_per_piece(
         np.ascontiguousarray(distance, np.float32),
@@ -105,7 +132,6 @@ def split_touching_strands(
         starts,
     )
     lengths: dict[int, float] = {}
-    handled: set[int] = set()
     for index in candidates:
         points = pieces[index]
         ends = (2 * index, 2 * index + 1)
@@ -144,8 +170,82 @@ def split_touching_strands(
         for end, side in zip(ends, sides, strict=True):
             result.pairs.extend([(side[0], end), (side[1], 2 * right_index + end % 2)])
         handled |= {labels[end] for end in ends} - {-1}
-    result.junction_of_end = [-1 if label in handled else label for label in result.junction_of_end]
-    return result
+    return handled
+
+
+def _touching_junction_pairs(ends, positions, directions, pieces, distance, leaving):
+    """The two pairs of ends to join at a four-way junction that is a touching stretch
+    short enough for the junction zone to take it whole, or None.
+
+    The two strands enter the stretch side by side at one end and leave it side by side
+    at the other: the ends fall into two close pairs (the partition whose pairs lie
+    closest together) at the stretch's two ends, each pointing along the stretch
+    towards the other pair. The mask between them, one strand's width clear of each
+    pair, keeps both strands' widths (:data:`SIDE_BY_SIDE_WIDTH_FRACTION`, as a shared
+    piece must): where two cables cross, even at a shallow angle, it narrows to one
+    cable's. Strands that touch all along cannot cross there, so each keeps its side:
+    the left end of one pair joins the left end of the other (read as
+    :func:`_end_kind` reads a junction's sides), not the one straight across, as the
+    cheapest matching of a crossing would.
+    """
+    ends = list(ends)
+    points = positions[ends].tolist()
+    spread = {}
+    for first in (1, 2, 3):
+        rest = [k for k in (1, 2, 3) if k != first]
+        spread[(0, first), tuple(rest)] = math.dist(points[0], points[first]) + math.dist(
+            points[rest[0]], points[rest[1]]
+        )
+    pair_a, pair_b = (tuple(ends[k] for k in pair) for pair in min(spread, key=spread.get))
+    middle_a = 0.5 * (positions[pair_a[0]] + positions[pair_a[1]])
+    middle_b = 0.5 * (positions[pair_b[0]] + positions[pair_b[1]])
+    length = float(np.hypot(*(middle_b - middle_a)))
+    if length <= 0:
+        return None
+    axis = (middle_b - middle_a) / length
+    if any(float(directions[end] @ axis) <= 0 for end in pair_a) or any(
+        float(directions[end] @ axis) >= 0 for end in pair_b
+    ):
+        return None
+    half_widths = _merging_kernels.median_distance_per_piece(
+        np.ascontiguousarray(distance, np.float32),
+        np.ascontiguousarray(np.concatenate([pieces[end // 2] for end in ends]), np.float64),
+        np.cumsum([0] + [len(pieces[end // 2]) for end in ends]).astype(np.int64),
+    )
+    strands = 0.5 * float(half_widths.sum())  # the two strands' half widths together
+    # Most four-way junctions are crossings, narrow at their middle: told at one pixel.
+    centre = np.rint(0.5 * (middle_a + middle_b)).astype(np.int64)
+    height, width = distance.shape
+    if distance[min(max(centre[1], 0), height - 1), min(max(centre[0], 0), width - 1)] < (
+        SIDE_BY_SIDE_WIDTH_FRACTION * strands
+    ):
+        return None
+    # Strands, not the scraps thinning leaves where a blob bulges (as for a shared piece).
+    lengths = [polyline_length(pieces[end // 2]) for end in ends]
+    if any(
+        length_k < 2 * strands and (leaving is None or not leaving[end ^ 1])
+        for end, length_k in zip(ends, lengths, strict=True)
+    ):
+        return None
+    line = np.array([middle_a, middle_b])
+    if _narrowest(line, distance, strands) < SIDE_BY_SIDE_WIDTH_FRACTION * strands:
+        return None
+    sides = []
+    for pair in (pair_a, pair_b):
+        # Each pair's two ends on the two sides of the stretch's line; where they lie
+        # together (a bulb's two ends, which thinning starts at one point), read clear
+        # of the junction.
+        origin = 0.5 * (positions[pair[0]] + positions[pair[1]])
+        offsets = _side_offsets(axis, origin, [positions[end] for end in pair])
+        if offsets[0] * offsets[1] >= 0:
+            points = [_point_in(pieces, end, strands) for end in pair]
+            offsets = _side_offsets(axis, origin, points)
+            if offsets[0] * offsets[1] >= 0:
+                return None
+        sides.append(pair if offsets[0] < 0 else pair[::-1])
+    if any(first // 2 == second // 2 for first, second in zip(*sides, strict=True)):
+        return None
+    return [tuple(pair) for pair in zip(*sides, strict=True)]
 
 
 def _end_kind(end, index, labels, members, positions, directions, pieces, reach):

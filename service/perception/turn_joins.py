@@ -13,7 +13,9 @@ join is made here only on the image's evidence, after every other join
   evidence, as for straight gaps: an object shows over the curve,
   :func:`.appearance.gap_hidden`, or both ends are cut square and alike and the curve
   no longer than an object of the background's own colour hides,
-  :func:`.gap_evidence.cut_ends_alike`): not open background beyond two round tips, which
+  :func:`.gap_evidence.cut_ends_alike`; where no curve passes that, one end cut square
+  and the other lopsided, ``weaker``: an object's corner or rim cutting a strand that
+  bends into the turn): not open background beyond two round tips, which
   is what lies beyond two cables that end side by side. The curves tried
   (:func:`hidden_turn_curves`) are the natural curve (:func:`natural_turn`) and the
   bulbs a cable doubled back on itself swings out into, turning round by up to
@@ -394,6 +396,7 @@ def turn_joins(
     rival_limit: float,
     max_group: int,
     bridges: dict[tuple[int, int], np.ndarray] | None = None,
+    weaker: Callable[[int, int, np.ndarray], bool] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -426,6 +429,10 @@ def turn_joins(
     bridges : dict or None
         When given, each turn joined ``(i, j)`` gets the curve found hidden, from end
         ``i`` to end ``j``, to bridge it with.
+    weaker : callable (i, j, curve) -> bool, optional
+        Weaker evidence (one end cut square, the other lopsided), asked of a pair's
+        curves only when ``hidden`` finds none: a curve an object is seen over is the
+        better bridge.
 
     Returns
     -------
@@ -469,11 +476,21 @@ def turn_joins(
                 -b.direction,
                 cable,
             )
+            tried = []
             for curve in curves:
+                tried.append(curve)
                 if hidden(i, j, curve):
                     turns[i, j] = pair_cost
                     hidden_curves[i, j] = curve
                     break
+            else:
+                # Only where no curve has the full evidence, the weaker: the shortest
+                # curve it finds.
+                for curve in tried if weaker is not None else ():
+                    if weaker(i, j, curve):
+                        turns[i, j] = pair_cost
+                        hidden_curves[i, j] = curve
+                        break
     if not turns:
         return []
     made = []
