@@ -12,7 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.perception.appearance import EndColours, cut_or_lopsided, cut_square, ends_alike
+from service.perception.appearance import (
+    EndColours,
+    cut_or_lopsided,
+    cut_square,
+    ends_alike,
+    gap_hidden,
+)
 from service.perception.geometry import polyline_length
 
 # A gap over open background whose curve is up to this many of the cable's radii long
@@ -25,6 +31,11 @@ CUT_GAP_RADII = 19.0
 # An end near the picture's edge leaves the picture when it points out of it by at least
 # this sine (15 degrees off the edge's own line).
 BORDER_OUT_SINE = 0.26
+# How many of a turn's two ends must be cut square when nothing the image shows lies
+# over it (:func:`.gap_evidence.cut_ends_alike`): one, since an object's border crosses
+# the two side-by-side strands at different slants, and at its corner or along a
+# strand's bend into the turn the cut is not straight across.
+TURN_CUT_ENDS = 1
 
 
 def cut_ends_alike(
@@ -150,3 +161,19 @@ def points_out_of_picture(
         ]
     )
     return outwards.max(axis=1) >= BORDER_OUT_SINE * np.hypot(*directions.T)
+
+
+def turn_evidence(image, mask, ends, colours, radius) -> tuple:
+    """The tests of the image's evidence that something hides a cable along a curve
+    from end ``i`` to end ``j`` (callables ``(i, j, curve) -> bool``), strongest first,
+    for the turns under objects (:func:`.turn_joins.turn_joins`): an object shows over
+    the curve (:func:`.appearance.gap_hidden`); both ends are cut square and alike
+    (:func:`cut_ends_alike`); one end cut square and the other lopsided, as where an
+    object's corner or rim cuts a strand bending into the turn (:data:`TURN_CUT_ENDS`)."""
+    return (
+        lambda i, j, curve: gap_hidden(image, mask, curve, (ends[i], ends[j]), radius),
+        lambda i, j, curve: cut_ends_alike(ends[i], ends[j], i, j, curve, mask, colours, radius),
+        lambda i, j, curve: cut_ends_alike(
+            ends[i], ends[j], i, j, curve, mask, colours, radius, TURN_CUT_ENDS
+        ),
+    )

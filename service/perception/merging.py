@@ -49,6 +49,7 @@ from service.perception.gap_evidence import (
     open_gap_limit,
     open_gap_too_long,
     points_out_of_picture,
+    turn_evidence,
 )
 from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
@@ -406,11 +407,6 @@ def _best_matchings(
 # Junctions with more ends than this are paired greedily (the matching is exponential).
 MAX_JUNCTION_ENDS = 10
 
-# How many of a turn's two ends must be cut square when nothing the image shows lies
-# over it (:func:`.gap_evidence.cut_ends_alike`): one, since an object's border crosses
-# the two side-by-side strands at different slants, and at its corner or along a
-# strand's bend into the turn the cut is not straight across.
-TURN_CUT_ENDS = 1
 # Candidate joins tried between two looks at the deadline.
 DEADLINE_CHECK_EVERY = 4096
 
@@ -923,9 +919,7 @@ def merge_chains(
     hidden_gap = None
     if image is not None and mask is not None:
 
-        def hidden_gap(
-            i: int, j: int, curve: np.ndarray | None = None, cut_needed: int = 2
-        ) -> bool:
+        def hidden_gap(i: int, j: int, curve: np.ndarray | None = None) -> bool:
             # The one test of the image's evidence that something hides a cable between
             # ends i and j, along ``curve`` (the gap's own curve when None): for the
             # joins across gaps and for the turns under objects alike.
@@ -936,7 +930,7 @@ def merge_chains(
                 )
             if gap_hidden(image, mask, curve, (a, b), radius):
                 return True
-            return cut_ends_alike(a, b, i, j, curve, mask, colours, radius, cut_needed)
+            return cut_ends_alike(a, b, i, j, curve, mask, colours, radius)
 
     open_gap = None
     if hidden_gap is not None:
@@ -979,13 +973,12 @@ def merge_chains(
                 join_cost(ends[i], ends[j], params, radius)
                 + params.colour_weight * float(colour_penalty(colours, [i], [j])[0])
             ),
-            hidden_gap,
+            turn_evidence(image, mask, ends, colours, radius),
             lambda i, j: float(open_gap_limit(radius, ends[i].width, ends[j].width)),
             mutual,
             mutual,
             MAX_JUNCTION_ENDS,
             turn_bridges,
-            lambda i, j, curve: hidden_gap(i, j, curve, TURN_CUT_ENDS),
         )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.

@@ -9,18 +9,18 @@ join is made here only on the image's evidence, after every other join
 
 - a curve a cable could have taken between the two ends, bending no tighter than
   :data:`HIDDEN_BEND_RADII` ``[0]`` of its radius, exists, and the image says
-  something hides a cable along it (``hidden``: the merging step's one test of that
-  evidence, as for straight gaps: an object shows over the curve,
-  :func:`.appearance.gap_hidden`, or both ends are cut square and alike and the curve
-  no longer than an object of the background's own colour hides,
-  :func:`.gap_evidence.cut_ends_alike`; where no curve passes that, one end cut square
-  and the other lopsided, ``weaker``: an object's corner or rim cutting a strand that
-  bends into the turn): not open background beyond two round tips, which
-  is what lies beyond two cables that end side by side. The curves tried
-  (:func:`hidden_turn_curves`) are the natural curve (:func:`natural_turn`) and the
-  bulbs a cable doubled back on itself swings out into, turning round by up to
-  :data:`MAX_HIDDEN_TURN` (:func:`bulb_turns`), from the ends' fitted directions and
-  from tilted ones; the join is then bridged along the curve found hidden;
+  something hides a cable along it (``evidence``, the merging step's tests, strongest
+  first: an object shows over the curve, :func:`.appearance.gap_hidden`; both ends are
+  cut square and alike and the curve no longer than an object of the background's own
+  colour hides, :func:`.gap_evidence.cut_ends_alike`; one end cut square and the other
+  lopsided, as where an object's corner or rim cuts a strand that bends into the
+  turn): not open background beyond two round tips, which is what lies beyond two
+  cables that end side by side. The curves tried (:func:`hidden_turn_curves`) are the
+  natural curve (:func:`natural_turn`) and the bulbs a cable doubled back on itself
+  swings out into, turning round by up to :data:`MAX_HIDDEN_TURN` (:func:`bulb_turns`),
+  from the ends' fitted directions and from tilted ones; the join is bridged along the
+  shortest curve the strongest test passes (a curve an object is seen over before the
+  shortest the ends' cuts allow);
 - the two pieces agree in colour and width (:func:`.appearance.ends_alike`);
 - neither end has a better partner: the turns and every free pair the merging step
   could have joined without evidence are paired together by the cheapest matching,
@@ -30,7 +30,7 @@ join is made here only on the image's evidence, after every other join
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -234,6 +234,15 @@ def hidden_turn_curves(
         yield curve
 
 
+def _cached(curves: Iterator[np.ndarray], tried: list[np.ndarray]) -> Iterator[np.ndarray]:
+    """The curves in ``tried``, then the rest of ``curves``, each kept in ``tried``: the
+    curves are drawn lazily and once, however many tests ask for them."""
+    yield from tried
+    for curve in curves:
+        tried.append(curve)
+        yield curve
+
+
 def _rotated(direction: np.ndarray, angle: float) -> np.ndarray:
     direction = np.asarray(direction, np.float64)
     cos, sin = np.cos(angle), np.sin(angle)
@@ -390,13 +399,12 @@ def turn_joins(
     radius: float,
     colours: EndColours | None,
     cost: Callable[[int, int], float],
-    hidden: Callable[[int, int, np.ndarray], bool],
+    evidence: Sequence[Callable[[int, int, np.ndarray], bool]],
     reach: Callable[[int, int], float],
     free_cost: float,
     rival_limit: float,
     max_group: int,
     bridges: dict[tuple[int, int], np.ndarray] | None = None,
-    weaker: Callable[[int, int, np.ndarray], bool] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -415,9 +423,11 @@ def turn_joins(
         The ends' colours; without them no turn is joined (the pieces must agree).
     cost : callable (i, j) -> float
         The join cost of ends ``i`` and ``j``, colour included.
-    hidden : callable (i, j, curve) -> bool
-        Whether the image says something hides a cable along the curve (the same test
-        merging applies to its gaps).
+    evidence : sequence of callable (i, j, curve) -> bool
+        Tests of whether the image says something hides a cable along the curve,
+        strongest first (the tests merging applies to its gaps): a pair is joined when
+        any passes on any curve, and bridged along the shortest curve the strongest
+        test that passes at all passes on.
     reach : callable (i, j) -> float
         The longest gap (px) between the two ends that anything hides.
     free_cost : float
@@ -429,10 +439,6 @@ def turn_joins(
     bridges : dict or None
         When given, each turn joined ``(i, j)`` gets the curve found hidden, from end
         ``i`` to end ``j``, to bridge it with.
-    weaker : callable (i, j, curve) -> bool, optional
-        Weaker evidence (one end cut square, the other lopsided), asked of a pair's
-        curves only when ``hidden`` finds none: a curve an object is seen over is the
-        better bridge.
 
     Returns
     -------
@@ -476,21 +482,15 @@ def turn_joins(
                 -b.direction,
                 cable,
             )
-            tried = []
-            for curve in curves:
-                tried.append(curve)
-                if hidden(i, j, curve):
+            # The strongest evidence any curve has picks the bridge: a curve an object
+            # is seen over before the shortest one the ends' cuts allow.
+            tried: list[np.ndarray] = []
+            for test in evidence:
+                found = next((curve for curve in _cached(curves, tried) if test(i, j, curve)), None)
+                if found is not None:
                     turns[i, j] = pair_cost
-                    hidden_curves[i, j] = curve
+                    hidden_curves[i, j] = found
                     break
-            else:
-                # Only where no curve has the full evidence, the weaker: the shortest
-                # curve it finds.
-                for curve in tried if weaker is not None else ():
-                    if weaker(i, j, curve):
-                        turns[i, j] = pair_cost
-                        hidden_curves[i, j] = curve
-                        break
     if not turns:
         return []
     made = []
