@@ -82,7 +82,8 @@ def ends_through_short_pieces(
     partners would cut the bend short. The piece's own chord (from its first joint to
     its last) is off the cable's direction by at most what its end joints being up to a
     half width off the centre line makes of it, ``atan(2 width / chord)``; turned from
-    the partners' line by more, the chord is the direction through the piece. The
+    the partners' line by more, the cable runs through the piece halfway between the
+    two. The
     joins themselves, and their costs, are left as they were.
     """
     partner = partners(len(ends), joins)
@@ -105,9 +106,10 @@ def ends_through_short_pieces(
 
 def _chord_across(points: np.ndarray, axis: np.ndarray, half_width: float) -> np.ndarray:
     """The direction of a short piece joined on both sides: ``axis`` (unit, the line
-    between its partners), or the piece's own chord where that turns from ``axis`` by
-    more than its uncertainty (a piece of unknown ``half_width`` keeps ``axis``, and so
-    does one of two joints: both are its end joints, placed by the cuts)."""
+    between its partners), or halfway between it and the piece's own chord where that
+    turns from ``axis`` by more than its uncertainty (a piece of unknown ``half_width``
+    keeps ``axis``, and so does one of two joints: both are its end joints, placed by
+    the cuts)."""
     chord = points[-1] - points[0]
     length = float(np.hypot(*chord))
     if half_width <= 0 or len(points) < 3 or length < 1e-9:
@@ -117,7 +119,8 @@ def _chord_across(points: np.ndarray, axis: np.ndarray, half_width: float) -> np
     if off <= np.arctan2(2.0 * half_width, length):
         return axis
     middle = chord + axis
-    return middle / float(np.hypot(*middle))
+    norm = float(np.hypot(*middle))
+    return axis if norm < 1e-9 else middle / norm
 
 
 def ends_of_short_pieces_from_partners(
