@@ -383,7 +383,7 @@ class _ZenohClient:
 
         from service.bus.config import chains_key, make_config
 
-        config = make_config(mode="client", multicast=False, connect=[self.endpoint])
+        config = make_config(mode="client", multicast=False, gossip=False, connect=[self.endpoint])
         self.session = zenoh.open(config)
         self.session.declare_subscriber(
             chains_key(CAMERA),

@@ -83,7 +83,9 @@ def replica_main() -> None:
 
         warm_up(default_detect)
         detect = default_detect
-    config = make_config(mode="client", connect=[endpoint], listen=[], multicast=False)
+    config = make_config(
+        mode="client", connect=[endpoint], listen=[], multicast=False, gossip=False
+    )
     balanced = assignment == "balanced"
     with DetectionBus(config, detect=detect, balanced=balanced, learn_s=REPLICA_LEARN_S) as bus:
         print(f"ready {bus.replica_id}", flush=True)
@@ -200,7 +202,9 @@ def _session(endpoint: str) -> Iterator:
 
     from service.bus.config import make_config
 
-    config = make_config(mode="client", connect=[endpoint], listen=[], multicast=False)
+    config = make_config(
+        mode="client", connect=[endpoint], listen=[], multicast=False, gossip=False
+    )
     with zenoh.open(config) as session:
         yield session
 

@@ -103,7 +103,9 @@ def measure_viewer(seconds: float, fps: float = 15.0, cpu_slowdown: float = 1.0)
 
     frames = _frames()
     with _dlo_serve() as (port, endpoint), chromium() as browser:
-        config = make_config(mode="peer", multicast=False, listen=[], connect=[endpoint])
+        config = make_config(
+            mode="peer", multicast=False, gossip=False, listen=[], connect=[endpoint]
+        )
         with zenoh.open(config) as session:
             camera = _Camera(session, frames, fps)
             thread = threading.Thread(target=camera.run, name="bench-camera", daemon=True)

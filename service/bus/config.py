@@ -68,9 +68,13 @@ def make_config(
     multicast: bool | None = None,
     listen: list[str] | None = None,
     connect: list[str] | None = None,
+    gossip: bool | None = None,
 ) -> zenoh.Config:
     """A zenoh configuration: the JSON5 file at ``path`` (else zenoh's default, a peer),
-    with the given settings written over it (None: leave as is)."""
+    with the given settings written over it (None: leave as is).
+
+    ``gossip`` is zenoh's gossip scouting (peers telling each other of further peers); a
+    session that connects to explicit endpoints only needs none of it."""
     config = zenoh.Config.from_file(str(path)) if path is not None else zenoh.Config()
     if mode is not None:
         config.insert_json5("mode", json.dumps(mode))
@@ -80,6 +84,8 @@ def make_config(
         config.insert_json5("listen/endpoints", json.dumps(listen))
     if connect is not None:
         config.insert_json5("connect/endpoints", json.dumps(connect))
+    if gossip is not None:
+        config.insert_json5("scouting/gossip/enabled", json.dumps(gossip))
     return config
 
 
@@ -96,11 +102,13 @@ def service_config(
     if path is not None:
         return make_config(path, listen=listen, multicast=multicast)
     scouting = bool(multicast)
-    config = make_config(
-        mode="peer", listen=listen or [DEFAULT_ZENOH_LISTEN], connect=[], multicast=scouting
+    return make_config(
+        mode="peer",
+        listen=listen or [DEFAULT_ZENOH_LISTEN],
+        connect=[],
+        multicast=scouting,
+        gossip=scouting,
     )
-    config.insert_json5("scouting/gossip/enabled", json.dumps(scouting))
-    return config
 
 
 def describe_config(config: zenoh.Config) -> str:

@@ -38,7 +38,7 @@ def encoded_scene(seed: int = 0, extension: str = ".png") -> bytes:
 @contextlib.contextmanager
 def client_of(endpoint: str, mode: str = "peer") -> Iterator[zenoh.Session]:
     """A session connected to ``endpoint`` only."""
-    config = make_config(mode=mode, multicast=False, listen=[], connect=[endpoint])
+    config = make_config(mode=mode, multicast=False, gossip=False, listen=[], connect=[endpoint])
     session = zenoh.open(config)
     try:
         yield session
@@ -50,7 +50,7 @@ def client_of(endpoint: str, mode: str = "peer") -> Iterator[zenoh.Session]:
 def bus_and_client(detect=None, **options) -> Iterator[tuple[DetectionBus, zenoh.Session]]:
     """A bus listening on a free loopback port and a client session connected to it."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    config = make_config(multicast=False, listen=[endpoint], connect=[])
+    config = make_config(multicast=False, gossip=False, listen=[endpoint], connect=[])
     with DetectionBus(config, detect=detect, **options) as bus, client_of(endpoint) as client:
         yield bus, client
 

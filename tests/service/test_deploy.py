@@ -178,3 +178,21 @@ def only_container(deployment: dict[str, Any]) -> dict[str, Any]:
 @pytest.fixture
 def free_endpoint() -> str:
     return f"tcp/127.0.0.1:{free_port()}"
+
+
+def test_scouting_is_off_unless_asked_for() -> None:
+    """The service's default session scouts nothing (neither multicast nor gossip), and
+    ``make_config`` writes gossip scouting only when told: loopback tests and tools that
+    connect to explicit endpoints turn it off, as the service does."""
+    from service.bus.config import service_config
+
+    def scouting(config: zenoh.Config, kind: str) -> object:
+        return json.loads(config.get_json(f"scouting/{kind}/enabled"))
+
+    default = service_config()
+    assert scouting(default, "multicast") is False
+    assert scouting(default, "gossip") is False
+    assert scouting(service_config(multicast=True), "gossip") is True
+    assert scouting(make_config(gossip=False), "gossip") is False
+    untouched = zenoh.Config()
+    assert scouting(make_config(), "gossip") == scouting(untouched, "gossip")

@@ -39,7 +39,7 @@ TOKEN = "live-test-token-1c5e"
 def peer_pair() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
     """A session listening on a free loopback port (the service's) and one connected to it."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    config = make_config(multicast=False, listen=[endpoint], connect=[])
+    config = make_config(multicast=False, gossip=False, listen=[endpoint], connect=[])
     with zenoh.open(config) as service, client_of(endpoint) as client:
         yield service, client
 

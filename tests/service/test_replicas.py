@@ -62,7 +62,7 @@ def in_process_router() -> Iterator[str]:
 
 
 def client_config(endpoint: str) -> zenoh.Config:
-    return make_config(mode="client", connect=[endpoint], listen=[], multicast=False)
+    return make_config(mode="client", connect=[endpoint], listen=[], multicast=False, gossip=False)
 
 
 def replica(endpoint: str, **options) -> DetectionBus:
