@@ -963,6 +963,7 @@ def merge_chains(
     if hidden_gap is not None and params.expected_count is None and ends:
         # Sharp turns under an object, on the image's evidence (:mod:`.turn_joins`).
         mutual = MUTUAL_COST_FACTOR * params.merge_cost_threshold
+        widths = np.array([end.width for end in ends], np.float64)
         joins = joins + turn_joins(
             ends,
             joins,
@@ -974,7 +975,7 @@ def merge_chains(
                 + params.colour_weight * float(colour_penalty(colours, [i], [j])[0])
             ),
             turn_evidence(image, mask, ends, colours, radius),
-            lambda i, j: float(open_gap_limit(radius, ends[i].width, ends[j].width)),
+            lambda i, j: open_gap_limit(radius, widths[i], widths[j]),
             mutual,
             mutual,
             MAX_JUNCTION_ENDS,

@@ -428,8 +428,9 @@ def turn_joins(
         strongest first (the tests merging applies to its gaps): a pair is joined when
         any passes on any curve, and bridged along the shortest curve the strongest
         test that passes at all passes on.
-    reach : callable (i, j) -> float
-        The longest gap (px) between the two ends that anything hides.
+    reach : callable (i, j) -> float or ndarray
+        The longest gap (px) between the two ends that anything hides; called once, on
+        arrays of ends ``i`` and ``j`` (every pair of free ends), elementwise.
     free_cost : float
         What leaving an end free costs in the matching.
     rival_limit : float
@@ -456,41 +457,43 @@ def turn_joins(
     turns: dict[tuple[int, int], float] = {}
     hidden_curves: dict[tuple[int, int], np.ndarray] = {}
     rivals: dict[tuple[int, int], float] = {}
-    for a_pos, i in enumerate(members):
-        for b_pos in range(a_pos + 1, len(members)):
-            j = members[b_pos]
-            if component.find(ends[i].piece) == component.find(ends[j].piece):
-                continue
-            distance = float(np.hypot(*(positions[a_pos] - positions[b_pos])))
-            if distance > reach(i, j):
-                continue
-            pair_cost = cost(i, j)
-            if pair_cost <= rival_limit:
-                rivals[i, j] = pair_cost
-                continue
-            if not ends_alike(colours, i, j, (ends[i].width, ends[j].width)):
-                continue
-            cable = 0.5 * (ends[i].width + ends[j].width) or radius
-            a, b = ends[i], ends[j]
-            # From where each end's fit begins: over a cut's hook the fit's extrapolation
-            # may leave the cable (the bridge starts there too,
-            # :func:`.bridge_ends.bridge_from_the_fits`).
-            curves = hidden_turn_curves(
-                a.position - a.skip * a.direction,
-                a.direction,
-                b.position - b.skip * b.direction,
-                -b.direction,
-                cable,
-            )
-            # The strongest evidence any curve has picks the bridge: a curve an object
-            # is seen over before the shortest one the ends' cuts allow.
-            tried: list[np.ndarray] = []
-            for test in evidence:
-                found = next((curve for curve in _cached(curves, tried) if test(i, j, curve)), None)
-                if found is not None:
-                    turns[i, j] = pair_cost
-                    hidden_curves[i, j] = found
-                    break
+    # Every pair's gap against its reach at once, in the order the pairs are asked
+    # (a frame of textured background may leave hundreds of free ends).
+    first, second = np.triu_indices(len(members), 1)
+    gaps = np.hypot(*(positions[first] - positions[second]).T)
+    member_index = np.asarray(members, np.int64)
+    within = gaps <= reach(member_index[first], member_index[second])
+    for a_pos, b_pos in zip(first[within].tolist(), second[within].tolist(), strict=True):
+        i, j = members[a_pos], members[b_pos]
+        if component.find(ends[i].piece) == component.find(ends[j].piece):
+            continue
+        pair_cost = cost(i, j)
+        if pair_cost <= rival_limit:
+            rivals[i, j] = pair_cost
+            continue
+        if not ends_alike(colours, i, j, (ends[i].width, ends[j].width)):
+            continue
+        cable = 0.5 * (ends[i].width + ends[j].width) or radius
+        a, b = ends[i], ends[j]
+        # From where each end's fit begins: over a cut's hook the fit's extrapolation
+        # may leave the cable (the bridge starts there too,
+        # :func:`.bridge_ends.bridge_from_the_fits`).
+        curves = hidden_turn_curves(
+            a.position - a.skip * a.direction,
+            a.direction,
+            b.position - b.skip * b.direction,
+            -b.direction,
+            cable,
+        )
+        # The strongest evidence any curve has picks the bridge: a curve an object
+        # is seen over before the shortest one the ends' cuts allow.
+        tried: list[np.ndarray] = []
+        for test in evidence:
+            found = next((curve for curve in _cached(curves, tried) if test(i, j, curve)), None)
+            if found is not None:
+                turns[i, j] = pair_cost
+                hidden_curves[i, j] = found
+                break
     if not turns:
         return []
     made = []
