@@ -709,12 +709,9 @@ def _tips_in_junctions(pieces: list[np.ndarray], zones: np.ndarray | None) -> np
     zone (as :func:`junctions_of_ends` reaches it)."""
     if zones is None or not pieces:
         return np.zeros(2 * len(pieces), bool)
-    tips = [
-        ChainEnd(index, at_start, points[0 if at_start else -1], np.zeros(2))
-        for index, points in enumerate(pieces)
-        for at_start in (True, False)
-    ]
-    return np.array(junctions_of_ends(tips, zones)) >= 0
+    # Both tips of every piece, (start, end) in turn, without building ChainEnds.
+    tips = np.array([(points[0], points[-1]) for points in pieces], np.float64).reshape(-1, 2)
+    return _grown_zone_labels(tips, zones) >= 0
 
 
 def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -> list[int]:
@@ -726,11 +723,16 @@ def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -
     if zones is None:
         return [-1] * len(ends)
     positions = np.array([end.position for end in ends], np.float64).reshape(-1, 2)
+    return _grown_zone_labels(positions, zones, reach).tolist()
+
+
+def _grown_zone_labels(positions: np.ndarray, zones: np.ndarray, reach: int = 3) -> np.ndarray:
+    """:func:`junctions_of_ends` for ``(E, 2)`` end positions, as an array."""
     zones_u8 = zones.view(np.uint8) if zones.dtype == np.bool_ else zones.astype(np.uint8)
     labels = _merging_kernels.grown_zone_labels(
         np.ascontiguousarray(zones_u8), positions, int(reach)
     )
-    return labels.tolist()
+    return labels
 
 
 def assemble_paths(

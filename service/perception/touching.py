@@ -99,15 +99,28 @@ def split_touching_strands(
         for index in range(len(pieces))
         if all(len(members.get(labels[end], ())) == 3 for end in (2 * index, 2 * index + 1))
     ]
+    four_way = [label for label, ends in members.items() if len(ends) == 4]
+    if not candidates and not four_way:
+        return result
+    # Every piece's half width (median distance at its joints), once: the shared pieces
+    # and the four-way junctions (several per photograph) read them piece by piece.
+    widths = _merging_kernels.median_distance_per_piece(
+        np.ascontiguousarray(distance, np.float32),
+        np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64),
+        np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64),
+    )
     handled = _split_shared_pieces(
-        candidates, result, positions, directions, labels, members, distance, leaving
+        candidates, result, positions, directions, labels, members, distance, leaving, widths
     )
     # A touching stretch short enough for the junction zone to take whole leaves no
     # shared piece: one junction of four ends.
-    for label, ends in members.items():
-        if label in handled or len(ends) != 4:
+    for label in four_way:
+        if label in handled:
             continue
-        pairs = _touching_junction_pairs(ends, positions, directions, pieces, distance, leaving)
+        ends = members[label]
+        pairs = _touching_junction_pairs(
+            ends, positions, directions, pieces, distance, leaving, widths
+        )
         if pairs is not None:
             result.pairs.extend(pairs)
             handled.add(label)
@@ -116,21 +129,15 @@ def split_touching_strands(
 
 
 def _split_shared_pieces(
-    candidates, result, positions, directions, labels, members, distance, leaving
+    candidates, result, positions, directions, labels, members, distance, leaving, widths
 ) -> set[int]:
     """Split the ``candidates`` (pieces with a three-way junction at both ends) that two
     strands share, into ``result`` (:func:`split_touching_strands`); the junctions
-    handled."""
+    handled. ``widths``: every piece's half width (median distance at its joints)."""
     handled: set[int] = set()
     if not candidates:
         return handled
     pieces = list(result.pieces)
-    starts = np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64)
-    widths = _merging_kernels.median_distance_per_piece(
-        np.ascontiguousarray(distance, np.float32),
-        np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64),
-        starts,
-    )
     lengths: dict[int, float] = {}
     for index in candidates:
         points = pieces[index]
@@ -173,9 +180,10 @@ def _split_shared_pieces(
     return handled
 
 
-def _touching_junction_pairs(ends, positions, directions, pieces, distance, leaving):
+def _touching_junction_pairs(ends, positions, directions, pieces, distance, leaving, widths):
     """The two pairs of ends to join at a four-way junction that is a touching stretch
-    short enough for the junction zone to take it whole, or None.
+    short enough for the junction zone to take it whole, or None. ``widths``: every
+    piece's half width (median distance at its joints).
 
     The two strands enter the stretch side by side at one end and leave it side by side
     at the other: the ends fall into two close pairs (the partition whose pairs lie
@@ -207,11 +215,7 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
         float(directions[end] @ axis) >= 0 for end in pair_b
     ):
         return None
-    half_widths = _merging_kernels.median_distance_per_piece(
-        np.ascontiguousarray(distance, np.float32),
-        np.ascontiguousarray(np.concatenate([pieces[end // 2] for end in ends]), np.float64),
-        np.cumsum([0] + [len(pieces[end // 2]) for end in ends]).astype(np.int64),
-    )
+    half_widths = widths[[end // 2 for end in ends]]
     strands = 0.5 * float(half_widths.sum())  # the two strands' half widths together
     # Most four-way junctions are crossings, narrow at their middle: told at one pixel.
     centre = np.rint(0.5 * (middle_a + middle_b)).astype(np.int64)

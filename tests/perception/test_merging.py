@@ -20,6 +20,7 @@ from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.geometry import resample
 from service.perception.merging import (
     ChainEnd,
+    _tips_in_junctions,
     chain_ends,
     choose_joins,
     gap_curve,
@@ -285,6 +286,28 @@ def test_junctions_of_ends_group_the_ends_as_the_labelled_grown_zones(seed):
         assert [label < 0 for label in fast] == [label < 0 for label in plain]
         assert len(set(zip(fast, plain, strict=True))) == len(set(plain)) == len(set(fast))
     assert junctions_of_ends(ends, np.zeros((90, 120), bool)) == [-1] * len(ends)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_tips_in_junctions_read_both_tips_of_every_piece_as_junctions_of_ends(seed):
+    # The tip check hands the pieces' first and last joints to the kernel directly:
+    # the same answer as the ends' own lookup, piece by piece, start then end.
+    rng = np.random.default_rng(seed)
+    zones = np.zeros((80, 100), np.uint8)
+    for _ in range(5):
+        centre = (int(rng.integers(0, 100)), int(rng.integers(0, 80)))
+        cv2.circle(zones, centre, int(rng.integers(2, 8)), 1, -1)
+    pieces = [rng.uniform(-3, 103, (int(rng.integers(1, 12)), 2)) for _ in range(30)]
+    tips = [
+        ChainEnd(index, at_start, points[0 if at_start else -1], np.zeros(2))
+        for index, points in enumerate(pieces)
+        for at_start in (True, False)
+    ]
+    expected = np.array(junctions_of_ends(tips, zones.view(np.bool_))) >= 0
+    got = _tips_in_junctions(pieces, zones.view(np.bool_))
+    assert expected.any() and not expected.all()
+    assert got.tolist() == expected.tolist()
+    assert not _tips_in_junctions(pieces, None).any()
 
 
 @pytest.mark.parametrize("seed", range(3))
