@@ -746,7 +746,8 @@ def assemble_paths(
     """Walk every group of joined pieces from one free end to the other; each join is
     bridged by :func:`gap_curve` of the given ``curve`` shape, or by the curve
     ``bridges[i, j]`` (from end ``i`` to end ``j``) where given: the shape a turn out
-    of sight was found hidden along (:mod:`.turn_joins`). ``trims[e]`` (optional)
+    of sight was found hidden along (:mod:`.turn_joins`), or a strand's own side of a
+    stretch where it touches another (:mod:`.touching`). ``trims[e]`` (optional)
     is the arc length left out of end ``e``'s piece at that end, where its bridge
     starts further in."""
     partner = partners(len(ends), joins)
@@ -990,7 +991,8 @@ def merge_chains(
         pieces, inner_ends, joins, span, junction_of_end
     )
     bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span)
-    assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, turn_bridges)
+    bridges = {**touching.bridges, **turn_bridges}
+    assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])

@@ -8,7 +8,10 @@ width), so each keeps its side: the strand on the left where they meet is the on
 the left where they part. :func:`split_touching_strands` finds such lines by their
 width and replaces each with two pieces, one per strand, and says which ends join; and
 where the stretch is short enough for the junction zone to take it whole (no line, one
-junction of four ends), it says which of the four join, by the same sides.
+junction of four ends), it says which of the four join, by the same sides. The curve
+across each such join follows its strand's own side of the stretch
+(:func:`_side_bridge`), whatever the ends' fits say: thinning bends the strands' tips
+toward the middle where they meet, and a curve along those tips cut across the stretch.
 """
 
 from __future__ import annotations
@@ -36,7 +39,9 @@ class TouchingSplit:
     shared one; the right strands are appended, ``origin[k]`` the input piece each
     came from (``origin[k] == k`` for the input's). ``junction_of_end`` has the handled
     junctions' ends (and the new pieces' ends) at -1; ``pairs`` are the ends to join
-    (end ``2 k`` is piece ``k``'s start, ``2 k + 1`` its end).
+    (end ``2 k`` is piece ``k``'s start, ``2 k + 1`` its end), two by two: the two strands
+    through one end of a stretch. ``bridges[i, j]`` is the curve from end ``i``'s tip to
+    end ``j``'s along its strand's side (:func:`_side_bridge`), one per pair.
     """
 
     pieces: list[np.ndarray]
@@ -44,6 +49,7 @@ class TouchingSplit:
     junction_of_end: list[int]
     pairs: list[tuple[int, int]] = field(default_factory=list)
     split: list[int] = field(default_factory=list)
+    bridges: dict[tuple[int, int], np.ndarray] = field(default_factory=dict)
 
 
 def split_touching_strands(
@@ -56,9 +62,9 @@ def split_touching_strands(
 ) -> TouchingSplit:
     """Split the pieces two touching strands share into one piece per strand.
 
-    A shared piece is told by its width: longer than it is wide, and the distance
-    transform along it, half its width clear of its ends, never under
-    ``SIDE_BY_SIDE_WIDTH_FRACTION`` of the two other strands' half widths at its
+    A shared piece is told by its width: the distance transform along it, half its
+    width clear of its ends (at its middle when it is shorter than it is wide), never
+    under ``SIDE_BY_SIDE_WIDTH_FRACTION`` of the two other strands' half widths at its
     junction(s) together, however long it is. At both of its ends there is a
     three-way junction where the two strands meet it on two sides of its line. The
     other strands must be at least as long as the stretch is wide (not the scraps
@@ -125,7 +131,78 @@ def split_touching_strands(
             result.pairs.extend(pairs)
             handled.add(label)
     result.junction_of_end = [-1 if label in handled else label for label in result.junction_of_end]
+    result.bridges = _side_bridges(result, len(pieces), distance, widths)
     return result
+
+
+def _side_bridges(result: TouchingSplit, count: int, distance: np.ndarray, widths) -> dict:
+    """The curve across every pair of ``result`` (:attr:`TouchingSplit.bridges`), each
+    kept on its own side, away from the other pair through the same end of the stretch.
+    A strand's half width is its pieces' (``widths``, of the ``count`` input pieces),
+    not a split piece's: that is both strands' together."""
+    bridges = {}
+    tips = [
+        np.asarray(result.pieces[end // 2][-(end % 2)], np.float64)
+        for pair in result.pairs
+        for end in pair
+    ]
+    for index, (first, second) in enumerate(result.pairs):
+        own = [
+            float(widths[end // 2])
+            for end in (first, second)
+            if end // 2 < count and end // 2 not in result.split
+        ]
+        if not own:
+            continue
+        other = 2 * (index ^ 1)  # the other pair of the same two (its tips in ``tips``)
+        away_from = 0.5 * (tips[other] + tips[other + 1])
+        bridges[first, second] = _side_bridge(
+            tips[2 * index], tips[2 * index + 1], away_from, float(np.mean(own)), distance
+        )
+    return bridges
+
+
+def _side_bridge(start, end, away_from, half_width: float, distance: np.ndarray) -> np.ndarray:
+    """A strand's curve from ``start`` to ``end`` (tips of its pieces) along its own side
+    of a stretch where it touches another strand, the side away from ``away_from``.
+
+    Where two strands touch, the mask is both strands wide and each strand's middle lies
+    its own half width in from the mask's border on its side, wherever the other strand
+    is. So every point of the chord between the tips is moved across the chord to
+    ``half_width`` (the distance transform's, to the background pixels' centres) from
+    the first background pixel on its side, found within four half widths (left where
+    none is). The moves are smoothed along the chord over about a strand's width (a
+    running median): a pixel's step of the border is not the strand's.
+
+    Returns
+    -------
+    ndarray
+        ``(M, 2)`` points about 1 px apart, ``start`` and ``end`` included.
+    """
+    start, end = np.asarray(start, np.float64), np.asarray(end, np.float64)
+    length = float(np.hypot(*(end - start)))
+    if length < 2.0 or half_width <= 0:
+        return np.array([start, end])
+    axis = (end - start) / length
+    across = np.array([-axis[1], axis[0]])
+    if float(across @ (0.5 * (start + end) - np.asarray(away_from, np.float64))) < 0:
+        across = -across
+    along = np.linspace(0.0, length, int(np.ceil(length)) + 1)
+    points = start + along[:, None] * axis
+    steps = np.arange(0.0, 4.0 * half_width, 0.5)
+    scanned = points[:, None, :] + steps[None, :, None] * across
+    height, width = distance.shape
+    cols, rows = np.rint(scanned[..., 0]).astype(int), np.rint(scanned[..., 1]).astype(int)
+    inside = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height)
+    outside = ~inside
+    outside[inside] = distance[rows[inside], cols[inside]] <= 0
+    found = outside.any(axis=1)
+    moves = np.where(found, steps[outside.argmax(axis=1)] - half_width, 0.0)
+    window = 2 * round(half_width) + 1
+    padded = np.pad(moves, window // 2, mode="edge")
+    moves = np.median(np.lib.stride_tricks.sliding_window_view(padded, window), axis=1)
+    moves[[0, -1]] = 0.0  # the tips are the pieces'
+    return points + moves[:, None] * across
 
 
 def _split_shared_pieces(
@@ -163,7 +240,9 @@ def _split_shared_pieces(
         ):
             continue
         strands = np.mean([sum(widths[other // 2] for other in side) for side in sides])
-        if _narrowest(points, distance, float(widths[index])) < (
+        # A piece shorter than its width (a stretch a little longer than the junction
+        # zones) is judged at its middle: its ends are in the zones' rims.
+        if _narrowest(points, distance, float(widths[index]), short_at_middle=True) < (
             SIDE_BY_SIDE_WIDTH_FRACTION * strands
         ):
             continue
@@ -236,14 +315,16 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
         return None
     sides = []
     for pair in (pair_a, pair_b):
-        # Each pair's two ends on the two sides of the stretch's line; where they lie
-        # together (a bulb's two ends, which thinning starts at one point), read clear
-        # of the junction.
+        # Each pair's two ends on the two sides of the stretch's line, read on the
+        # strands clear of the junction: the ends' fits, extrapolated over the tips
+        # thinning bends together, may swap them (a bulb's two ends, which thinning
+        # starts at one point, each bending toward the other's side); where the points
+        # there do not tell, from the ends.
         origin = 0.5 * (positions[pair[0]] + positions[pair[1]])
-        offsets = _side_offsets(axis, origin, [positions[end] for end in pair])
+        points = [_point_in(pieces, end, strands) for end in pair]
+        offsets = _side_offsets(axis, origin, points)
         if offsets[0] * offsets[1] >= 0:
-            points = [_point_in(pieces, end, strands) for end in pair]
-            offsets = _side_offsets(axis, origin, points)
+            offsets = _side_offsets(axis, origin, [positions[end] for end in pair])
             if offsets[0] * offsets[1] >= 0:
                 return None
         sides.append(pair if offsets[0] < 0 else pair[::-1])
@@ -295,13 +376,19 @@ def _point_in(pieces, end, reach: float) -> np.ndarray:
     return points_along(points, along, np.array([at]))[0]
 
 
-def _narrowest(points: np.ndarray, distance: np.ndarray, half_width: float) -> float:
+def _narrowest(
+    points: np.ndarray, distance: np.ndarray, half_width: float, short_at_middle: bool = False
+) -> float:
     """The least distance transform along the piece (every pixel of it) half its width
-    clear of its ends; 0 when nothing is left."""
+    clear of its ends; 0 when nothing is left, or with ``short_at_middle`` the distance
+    at the middle of a piece that short. (Where two cables cross, the middle of what
+    they share is where they cross, the narrowest.)"""
     points = np.asarray(points, np.float64)
     along = arc_lengths(points)
     if along[-1] <= 2 * half_width:
-        return 0.0
+        if not short_at_middle or along[-1] <= 0:
+            return 0.0
+        half_width = 0.5 * float(along[-1])
     samples = np.arange(half_width, along[-1] - half_width + 1e-9, 1.0)
     xs, ys = points_along(points, along, samples).T
     height, width = distance.shape

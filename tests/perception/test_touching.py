@@ -56,6 +56,32 @@ def test_four_ends_meeting_where_the_mask_keeps_both_widths_pair_by_side():
     assert split.junction_of_end == [-1] * 8
 
 
+def test_the_bridge_across_a_touching_stretch_follows_each_strands_own_side():
+    """The same four arms, their tips bent toward the stretch's middle as thinning bends
+    them where strands meet (1 px off it instead of 4): a curve between the tips ran down
+    the middle, a strand's half width off both cables (a doubled-back cable's outer
+    strand left uncovered). Each bridge keeps to its strand's side, away from the other."""
+    upper = [(20, 40), (100, 96), (130, 96), (210, 40)]
+    lower = [(20, 160), (100, 104), (130, 104), (210, 160)]
+    mask = _touching_strands_mask(upper, lower, shape=(200, 240))
+    arms = [
+        [(20, 40), (60, 68), (94, 92), (99, 99)],
+        [(20, 160), (60, 132), (94, 108), (99, 101)],
+        [(210, 40), (170, 68), (136, 92), (131, 99)],
+        [(210, 160), (170, 132), (136, 108), (131, 101)],
+    ]
+    split = split_touching_strands(*_four_arms(mask, arms))
+    assert sorted(tuple(sorted(pair)) for pair in split.pairs) == [(1, 5), (3, 7)]
+    for pair, strand_y in (((1, 5), 96.0), ((3, 7), 104.0)):
+        bridge = split.bridges.get(pair)
+        if bridge is None:
+            bridge = split.bridges[pair[::-1]][::-1]
+        assert np.allclose(bridge[[0, -1]], [arms[pair[0] // 2][-1], arms[pair[1] // 2][-1]])
+        middle = bridge[(bridge[:, 0] >= 105) & (bridge[:, 0] <= 125)]
+        assert len(middle) >= 15
+        assert np.abs(middle[:, 1] - strand_y).max() <= 1.0
+
+
 def test_four_ends_of_a_shallow_crossing_are_left_to_the_crossing():
     """Two cables crossing at 23 degrees: the same four arms, but the mask narrows to
     one cable's width where they cross, so the junction is left as it is."""
@@ -70,3 +96,44 @@ def test_four_ends_of_a_shallow_crossing_are_left_to_the_crossing():
     split = split_touching_strands(*_four_arms(mask, arms))
     assert split.pairs == []
     assert split.junction_of_end == [-1, 0] * 4
+
+
+@pytest.mark.parametrize(("crossing", "split_pieces"), [(False, [0]), (True, [])])
+def test_a_shared_piece_shorter_than_its_width_is_judged_at_its_middle(crossing, split_pieces):
+    """A line thinning leaves between two three-way junctions only 12 px long, shorter
+    than the stretch is wide (18 px): before, nothing of it was measured and two strands
+    touching there were taken for a crossing (a doubled-back cable's bridges cut across
+    the stretch). At its middle the mask keeps both strands' widths, and the strands
+    keep their sides; where two cables cross at 44 degrees the middle is where they
+    cross, one cable wide, and the junctions are left a crossing."""
+    if crossing:
+        first, second = [(20, 60), (220, 140)], [(20, 140), (220, 60)]
+        middle = 120.0
+    else:
+        first = [(20, 40), (100, 95.5), (112, 95.5), (192, 40)]
+        second = [(20, 160), (100, 104.5), (112, 104.5), (192, 160)]
+        middle = 106.0
+    mask = _touching_strands_mask(first, second, shape=(200, 240))
+    shared = np.column_stack([np.linspace(middle - 6, middle + 6, 4), np.full(4, 100.0)])
+    arms = [
+        np.array([first[0], (middle - 30, 100 - 14), (middle - 8, 99)], np.float64),
+        np.array([second[0], (middle - 30, 100 + 14), (middle - 8, 101)], np.float64),
+        np.array([(middle + 8, 99), (middle + 30, 100 - 14), first[-1]], np.float64),
+        np.array([(middle + 8, 101), (middle + 30, 100 + 14), second[-1]], np.float64),
+    ]
+    pieces = [shared, *arms]
+    positions = np.array([points[index] for points in pieces for index in (0, -1)])
+    directions = np.array(
+        [points[index] - points[inner] for points in pieces for index, inner in ((0, 1), (-1, -2))]
+    )
+    directions /= np.hypot(directions[:, 0], directions[:, 1])[:, None]
+    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    labels = [0, 1, -1, 0, -1, 0, 1, -1, 1, -1]
+    split = split_touching_strands(pieces, positions, directions, labels, distance)
+    assert split.split == split_pieces
+    if not crossing:
+        partner = {end: other for pair in split.pairs for end, other in (pair, pair[::-1])}
+        # Upper left (end 3) runs on through one copy of the line to upper right (end 6).
+        copy = partner[3] // 2
+        assert split.pieces[copy][:, 1].mean() < 100.0
+        assert partner[2 * copy + 1] == 6
