@@ -557,13 +557,24 @@ def test_cables_touching_side_by_side_keep_their_sides_along_a_long_stretch():
 
 @pytest.mark.parametrize(
     ("family", "seed"),
-    [("doubled_back", 105), ("doubled_back", 4015), ("doubled_back", 4029), ("side_by_side", 103)],
+    [
+        ("doubled_back", 105),
+        ("doubled_back", 4015),
+        ("doubled_back", 4029),
+        ("side_by_side", 103),
+        ("doubled_back", 82016),
+        ("doubled_back", 82031),
+        ("doubled_back", 82101),
+    ],
 )
 def test_touching_strands_of_generated_scenes_come_out_whole(family, seed):
     """Scenes (tuning seeds) where strands touch along a stretch: a cable doubled back
     on itself round a bend that leaves a small hole, and two cables side by side. Each
     cable must be one chain covering it all (the bridge along the middle of a doubled-back
-    stretch left the strands' outer edges uncovered)."""
+    stretch left the strands' outer edges uncovered; so did a bridge across a junction
+    zone that takes the whole stretch, 82016, drawn from the ends' bent fits, and one
+    across a stretch left short between two junctions, 82031; 82101: a bulb's two ends
+    whose fits swap their sides)."""
     score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
 
