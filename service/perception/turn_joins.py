@@ -22,10 +22,10 @@ join is made here only on the image's evidence, after every other join
   shortest curve the strongest test passes (a curve an object is seen over before the
   shortest the ends' cuts allow);
 - the two pieces agree in colour and width (:func:`.appearance.ends_alike`);
-- neither end has a better partner: the turns and every free pair the merging step
-  could have joined without evidence are paired together by the cheapest matching,
-  each end left free at an explicit cost (:func:`.pairing.cheapest_pairing`), and only
-  the turns it chooses are made.
+- neither end has a better partner: the turns and every free pair of alike ends the
+  merging step could have joined without evidence are paired together by the cheapest
+  matching, each end left free at an explicit cost (:func:`.pairing.cheapest_pairing`),
+  and only the turns it chooses are made.
 """
 
 from __future__ import annotations
@@ -434,7 +434,8 @@ def turn_joins(
     free_cost : float
         What leaving an end free costs in the matching.
     rival_limit : float
-        A free pair up to this cost counts as a rival partner, evidence or not.
+        A free pair of alike ends up to this cost counts as a rival partner, evidence
+        or not.
     max_group : int
         Groups of ends linked by candidates larger than this are left alone.
     bridges : dict or None
@@ -467,11 +468,13 @@ def turn_joins(
         i, j = members[a_pos], members[b_pos]
         if component.find(ends[i].piece) == component.find(ends[j].piece):
             continue
+        # Two pieces of clearly different colour or width are not one cable: no turn,
+        # and no rival to one either, however cheap their geometry.
+        if not ends_alike(colours, i, j, (ends[i].width, ends[j].width)):
+            continue
         pair_cost = cost(i, j)
         if pair_cost <= rival_limit:
             rivals[i, j] = pair_cost
-            continue
-        if not ends_alike(colours, i, j, (ends[i].width, ends[j].width)):
             continue
         cable = 0.5 * (ends[i].width + ends[j].width) or radius
         a, b = ends[i], ends[j]

@@ -179,3 +179,14 @@ def test_doubled_back_turns_under_objects_of_generated_scenes_come_out_whole(see
     box is seen over, not the shortest with the ends' weaker evidence, is the bridge."""
     score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
+
+
+def test_a_cheap_pair_of_unlike_ends_is_no_rival_to_a_turn():
+    """Tuning scene 83058 of the same_colour family, true mask: a loop's bend hidden under
+    a green box, its two strands' ends alike. A thicker cable's free end (half width 8.6
+    against 4.4) lies where the join cost of it and one strand's end is under the rival
+    limit: two pieces that clearly differ in width are not one cable, so that pair no
+    longer keeps the turn from being joined (two chains for the cable before)."""
+    scene = make_family_scene("same_colour", 83058)
+    score, _ = evaluate_scene(scene, 83058, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
