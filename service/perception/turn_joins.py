@@ -20,12 +20,18 @@ join is made here only on the image's evidence, after every other join
   swings out into, turning round by up to :data:`MAX_HIDDEN_TURN` (:func:`bulb_turns`),
   from the ends' fitted directions and from tilted ones; the join is bridged along the
   shortest curve the strongest test passes (a curve an object is seen over before the
-  shortest the ends' cuts allow);
+  shortest the ends' cuts allow), except that a turn seen on the cuts alone, its strands
+  far enough apart to turn round in one arc, is bridged as any gap is (the cuts say
+  nothing of the curve's shape, :mod:`.bridge_ends`);
 - the two pieces agree in colour and width (:func:`.appearance.ends_alike`);
 - neither end has a better partner: the turns and every free pair of alike ends the
   merging step could have joined without evidence are paired together by the cheapest
   matching, each end left free at an explicit cost (:func:`.pairing.cheapest_pairing`),
   and only the turns it chooses are made.
+
+A free pair cheap enough for merging to have joined on geometry alone, left free because
+the evidence failed along its gap's one curve (a gap whose object cut one end at a
+slant), is tried here as well, with the turns' curves and tests.
 """
 
 from __future__ import annotations
@@ -474,8 +480,10 @@ def turn_joins(
             continue
         pair_cost = cost(i, j)
         if pair_cost <= rival_limit:
+            # A pair merging could have joined on geometry alone, had the evidence for
+            # its gap's one curve held: a rival to every turn, and a turn itself where
+            # the evidence holds on a curve of the turn's (a gap cut at a slant).
             rivals[i, j] = pair_cost
-            continue
         cable = 0.5 * (ends[i].width + ends[j].width) or radius
         a, b = ends[i], ends[j]
         # From where each end's fit begins: over a cut's hook the fit's extrapolation
@@ -491,11 +499,18 @@ def turn_joins(
         # The strongest evidence any curve has picks the bridge: a curve an object
         # is seen over before the shortest one the ends' cuts allow.
         tried: list[np.ndarray] = []
-        for test in evidence:
+        for strength, test in enumerate(evidence):
             found = next((curve for curve in _cached(curves, tried) if test(i, j, curve)), None)
             if found is not None:
                 turns[i, j] = pair_cost
-                hidden_curves[i, j] = found
+                # The ends' cuts say only that the gap is short enough for an object of
+                # the background's own colour to hide: a turn seen on them alone is
+                # bridged as any gap is (from where the fits begin, a short piece along
+                # its partner, :mod:`.bridge_ends`), unless its strands lie too close to
+                # turn round in one arc (a bulb, which only the turn's curve follows).
+                apart = float(np.hypot(*(a.position - b.position)))
+                if strength == 0 or apart < 2.0 * HIDDEN_BEND_RADII[0] * cable:
+                    hidden_curves[i, j] = found
                 break
     if not turns:
         return []
@@ -509,7 +524,7 @@ def turn_joins(
         for i, j, value in cheapest_pairing(sorted(group), costs, free_cost):
             if (i, j) in turns:
                 made.append((i, j, value))
-                if bridges is not None:
+                if bridges is not None and (i, j) in hidden_curves:
                     bridges[i, j] = hidden_curves[i, j]
     return sorted(made, key=lambda item: item[2])
 
