@@ -196,9 +196,12 @@ def test_brightness_and_cleaning_equal_the_reference_on_scenes(seed):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_threshold_and_clean_equals_hysteresis_then_clean_mask(seed):
+@pytest.mark.parametrize("shape", [(80, 110), (37, 53)])
+def test_threshold_and_clean_equals_hysteresis_then_clean_mask(seed, shape):
+    # 37 x 53 px: an image whose pixel count is no multiple of 8 (the seeds are scanned
+    # 8 at a time), with components and holes on its border.
     rng = np.random.default_rng(seed)
-    cue = cv2.GaussianBlur((rng.random((80, 110)) * 255).astype(np.uint8), (5, 5), 0)
+    cue = cv2.GaussianBlur((rng.random(shape) * 255).astype(np.uint8), (5, 5), 0)
     counts = np.bincount(cue.ravel(), minlength=256)
     for low, high in ((120.0, 135.0), (127.5, 127.5), (130.0, 125.0), (250.0, 254.0), (0.0, 10.0)):
         weak_count = int(counts[max(int(np.floor(low)) + 1, 0) :].sum())
