@@ -215,6 +215,21 @@ def test_threshold_and_clean_equals_hysteresis_then_clean_mask(seed, shape):
             np.testing.assert_array_equal(fused.view(bool), expected)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_full_blocks_equal_opencvs_area_resize(seed):
+    rng = np.random.default_rng(seed)
+    for block in (3, 4, 5):
+        height, width = block * rng.integers(3, 40, 2)
+        # Shares near a half: many blocks exactly half set (OpenCV rounds those to 0).
+        mask = (rng.random((height, width)) < rng.uniform(0.3, 0.7)).astype(np.uint8)
+        found = _segmentation_kernels.full_blocks(mask, block)
+        np.testing.assert_array_equal(found, reference.full_blocks(mask, block))
+    half = np.zeros((8, 8), np.uint8)
+    half[:2, :4] = 1  # the first 4 x 4 block exactly half set
+    half[4:7, 4:] = 1  # the last three quarters
+    assert _segmentation_kernels.full_blocks(half, 4).tolist() == [[0, 0], [0, 1]]
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_own_threshold_kernels_equal_the_reference(seed):
     rng = np.random.default_rng(seed)
