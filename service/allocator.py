@@ -1,13 +1,16 @@
 """How a ``dlo`` process asks the C allocator to keep the memory a detection frees.
 
-A detection of a 1280x720 photograph allocates, and frees again, a few megabytes of
-image-sized scratch arrays (the distance transform, the skeleton and its copies, the
-spur walk's marks, the segmentation's masks). With glibc's default settings the freed
-memory at the top of the heap is handed back to the kernel at the end of every frame
-(``brk`` down), so the next frame gets it again as fresh pages, each zeroed by a page
-fault: about 1,100 faults and 1.5-2 ms of a 10 ms frame on a virtual machine. Raising
-glibc's trim and ``mmap`` thresholds keeps that memory in the process, so later frames
-reuse it without faults. The results do not change: only where the memory comes from.
+A detection of a photograph allocates, and frees again, a few megabytes of image-sized
+scratch arrays (the distance transform, the skeleton and its copies, the spur walk's
+marks, the segmentation's masks). With glibc's default settings the freed memory at the
+top of the heap may be handed back to the kernel at the end of every frame (``brk``
+down), so that the next frame gets it again as fresh pages, each zeroed by a page fault:
+800 to 1,200 faults per mbest photograph in a process where that happens, 2 to 5 ms of a
+frame on a busy virtual machine. Whether it happens depends on what the process
+allocated before (glibc adapts its thresholds to the blocks it has freed). Raising
+glibc's trim and ``mmap`` thresholds keeps that memory in the process in every case, so
+later frames reuse it without faults. The results do not change: only where the memory
+comes from.
 
 glibc adapts both thresholds by itself, upwards, but only when it frees a block it had
 mapped on its own (a block larger than the current ``mmap`` threshold), and setting
