@@ -157,9 +157,14 @@ def load_kernels(console: Console, kernel_sets: Sequence[str] = ("detection",)) 
     build is a one-line warning, and numba's kernels stay in use). Either way the next
     detection's ``timings_ms`` are detection time alone, not compiling or loading machine
     code. Ctrl-C meanwhile exits with :data:`EXIT_INTERRUPTED` (nothing was processed yet).
-    Kernels load without numba's registries and BLAS probe (:mod:`service.numba_start`).
+    Kernels load without numba's registries and BLAS probe (:mod:`service.numba_start`),
+    and the process keeps the memory a detection frees for the next one
+    (:mod:`service.allocator`).
     """
+    from service.allocator import keep_freed_memory
     from service.perception import compiled_ahead_of_time, kernels_cached
+
+    keep_freed_memory()
 
     on_numba = not all(compiled_ahead_of_time(name) for name in kernel_sets)
     first_run = not all(kernels_cached(name) for name in kernel_sets)

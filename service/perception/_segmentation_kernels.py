@@ -131,6 +131,16 @@ _UNSEEN, _SMALL_HOLE, _OPEN = 0, 1, 2
 
 
 @njit(cache=True, nogil=True)
+def _neighbour_offsets(width, count):
+    """Flat-index offsets of the first ``count`` neighbours in ``ORTHOGONAL_FIRST`` order
+    (4: the 4-connected ones) in an image ``width`` pixels wide."""
+    offsets = np.empty(count, np.int64)
+    for k in range(count):
+        offsets[k] = ORTHOGONAL_FIRST_DR[k] * width + ORTHOGONAL_FIRST_DC[k]
+    return offsets
+
+
+@njit(cache=True, nogil=True)
 def _fill_holes_next_to(mask, foreground, n_foreground, max_hole_area):
     """Fill, in place, the small holes next to the listed foreground pixels.
 
@@ -144,55 +154,63 @@ def _fill_holes_next_to(mask, foreground, n_foreground, max_hole_area):
     ``max_hole_area`` pixels, the image border, or a pixel an earlier stopped fill
     reached (the same component). Its pixels are then marked open, so no background
     pixel is filled twice and the cost stays near the length of the mask's border.
+    Neighbours are found by flat offsets, without bounds checks, away from the image's
+    border (a fill's pixels always are: one on the border ends it).
     """
     height, width = mask.shape
-    state = np.zeros((height, width), np.uint8)
+    flat = mask.reshape(height * width)
+    state = np.zeros(height * width, np.uint8)
+    offsets = _neighbour_offsets(width, 4)
     # A fill stops before it holds more than ``max_hole_area`` pixels.
     members = np.empty(max_hole_area + 1, np.int64)
     for i0 in range(n_foreground):
-        r0 = foreground[i0] // width
-        c0 = foreground[i0] - r0 * width
+        seed = foreground[i0]
+        r0 = seed // width
+        c0 = seed - r0 * width
+        inner = 0 < r0 < height - 1 and 0 < c0 < width - 1
         for k0 in range(4):
-            rs = r0 + ORTHOGONAL_FIRST_DR[k0]
-            cs = c0 + ORTHOGONAL_FIRST_DC[k0]
-            if not (0 <= rs < height and 0 <= cs < width):
+            if inner:
+                start = seed + offsets[k0]
+            else:
+                rs = r0 + ORTHOGONAL_FIRST_DR[k0]
+                cs = c0 + ORTHOGONAL_FIRST_DC[k0]
+                if not (0 <= rs < height and 0 <= cs < width):
+                    continue
+                start = rs * width + cs
+            if flat[start] or state[start] != _UNSEEN:
                 continue
-            if mask[rs, cs] or state[rs, cs] != _UNSEEN:
-                continue
-            state[rs, cs] = _SMALL_HOLE
-            members[0] = rs * width + cs
+            state[start] = _SMALL_HOLE
+            members[0] = start
             count = 1
             head = 0
             is_hole = True
             while head < count and is_hole:
-                r = members[head] // width
-                c = members[head] - r * width
+                pixel = members[head]
                 head += 1
+                r = pixel // width
+                c = pixel - r * width
                 if r == 0 or c == 0 or r == height - 1 or c == width - 1:
                     is_hole = False
                     break
                 for k in range(4):
-                    rr = r + ORTHOGONAL_FIRST_DR[k]
-                    cc = c + ORTHOGONAL_FIRST_DC[k]
-                    if mask[rr, cc]:
+                    there = pixel + offsets[k]
+                    if flat[there]:
                         continue
-                    if state[rr, cc] == _OPEN:
+                    if state[there] == _OPEN:
                         is_hole = False
                         break
-                    if state[rr, cc] == _UNSEEN:
+                    if state[there] == _UNSEEN:
                         if count >= max_hole_area:
                             is_hole = False
                             break
-                        state[rr, cc] = _SMALL_HOLE
-                        members[count] = rr * width + cc
+                        state[there] = _SMALL_HOLE
+                        members[count] = there
                         count += 1
             for i in range(count):
-                r = members[i] // width
-                c = members[i] - r * width
                 if is_hole:
-                    mask[r, c] = 1
+                    flat[members[i]] = 1
                 else:
-                    state[r, c] = _OPEN
+                    state[members[i]] = _OPEN
 
 
 @njit(cache=True, nogil=True)
@@ -221,26 +239,53 @@ def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
     of fewer than ``min_area`` pixels is exactly a speck; the kept floods list every
     foreground pixel, so the holes are found next to them without a scan.
     ``weak_count`` is the number of pixels above ``low`` (from the histogram).
+
+    The seeds (above both thresholds) are marked in one branch-free pass that the
+    compiler vectorizes, then visited in raster order eight at a time, skipping eight
+    unmarked pixels at once; a flood finds the neighbours of a pixel away from the
+    image's border by flat offsets, without bounds checks. The floods, and so the order
+    of ``members``, are those of a plain raster scan.
     """
     height, width = cue.shape
+    size = height * width
     result = np.zeros((height, width), np.uint8)
+    flat_cue = cue.reshape(size)
+    flat_result = result.reshape(size)
+    offsets = _neighbour_offsets(width, 8)
     # Kept components fill ``members`` from the front, removed ones from the back.
     members = np.empty(max(weak_count, 1), np.int64)
     speck = np.empty(max(min_area, 1), np.int64)
+    # Whole 8-byte words, the tail's bytes unmarked.
+    seeds = np.zeros((size + 7) // 8 * 8, np.uint8)
+    for i in range(size):
+        level = flat_cue[i]
+        seeds[i] = (level > high) & (level > low)
+    seed_words = seeds.view(np.uint64)
     kept = 0
     removed = 0
-    for r0 in range(height):
-        for c0 in range(width):
-            if result[r0, c0] or not (cue[r0, c0] > high and cue[r0, c0] > low):
+    for word in range(seed_words.size):
+        if seed_words[word] == 0:
+            continue
+        for index in range(8 * word, 8 * word + 8):
+            if not seeds[index] or flat_result[index]:
                 continue
-            result[r0, c0] = 1
-            members[kept] = r0 * width + c0
+            flat_result[index] = 1
+            members[kept] = index
             count = 1
             head = 0
             while head < count:
-                r = members[kept + head] // width
-                c = members[kept + head] - r * width
+                here = members[kept + head]
                 head += 1
+                r = here // width
+                c = here - r * width
+                if 0 < r < height - 1 and 0 < c < width - 1:
+                    for k in range(8):
+                        there = here + offsets[k]
+                        if not flat_result[there] and flat_cue[there] > low:
+                            flat_result[there] = 1
+                            members[kept + count] = there
+                            count += 1
+                    continue
                 for k in range(8):
                     rr = r + ORTHOGONAL_FIRST_DR[k]
                     cc = c + ORTHOGONAL_FIRST_DC[k]
@@ -259,11 +304,37 @@ def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
                     members[members.size - 1 - removed - i] = speck[i]
                 removed += count
     for i in range(removed):
-        index = members[members.size - 1 - i]
-        result[index // width, index - (index // width) * width] = 0
+        flat_result[members[members.size - 1 - i]] = 0
     if max_hole_area > 0:
         _fill_holes_next_to(result, members, kept, max_hole_area)
     return result
+
+
+@njit(cache=True, nogil=True)
+def full_blocks(mask, block):
+    """1 for each ``block`` x ``block`` square of a 0/1 image more than half of whose
+    pixels are set, else 0: ``cv2.resize(mask, (width // block, height // block),
+    interpolation=cv2.INTER_AREA) == 1`` for an image a whole number of blocks wide and
+    high and ``block`` 3 or more (OpenCV then takes each square's mean, rounded half to
+    even: a square exactly half set is 0; its 2 x 2 path rounds halves up). Whole rows
+    are added at a time, which vectorizes.
+    """
+    height, width = mask.shape
+    rows, cols = height // block, width // block
+    # Per column, the set pixels of the block's rows: whole rows added at a time.
+    column_counts = np.empty(width, np.int32)
+    full = np.empty((rows, cols), np.uint8)
+    for block_row in range(rows):
+        column_counts[:] = 0
+        for row in range(block_row * block, (block_row + 1) * block):
+            for col in range(width):
+                column_counts[col] += mask[row, col]
+        for block_col in range(cols):
+            total = 0
+            for col in range(block_col * block, (block_col + 1) * block):
+                total += column_counts[col]
+            full[block_row, block_col] = 2 * total > block * block
+    return full
 
 
 # --------------------------------------------------------------------------- own thresholds

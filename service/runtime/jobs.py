@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from schemas import Detection, DetectParams
+from service.allocator import keep_freed_memory
 from service.imageio import ImageFileError, decode_image, decode_mask
 from service.perception import (
     Deadline,
@@ -196,7 +197,9 @@ def run_labels(
 def warm_up(detect: DetectFunction) -> Detection:
     """Load every compiled kernel (compiling them on a machine's first run), then run one
     detection on a tiny synthetic image (two crossing strokes) through ``detect``: after
-    this no request pays for loading code, and its ``timings_ms`` are detection alone."""
+    this no request pays for loading code, and its ``timings_ms`` are detection alone.
+    The process keeps the memory a detection frees for the next (:mod:`service.allocator`)."""
+    keep_freed_memory()
     warm_up_kernels()
     image = np.full((96, 160, 3), 30, np.uint8)
     cv2.line(image, (8, 20), (150, 80), (40, 160, 230), 7, cv2.LINE_AA)

@@ -196,9 +196,12 @@ def test_brightness_and_cleaning_equal_the_reference_on_scenes(seed):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_threshold_and_clean_equals_hysteresis_then_clean_mask(seed):
+@pytest.mark.parametrize("shape", [(80, 110), (37, 53)])
+def test_threshold_and_clean_equals_hysteresis_then_clean_mask(seed, shape):
+    # 37 x 53 px: an image whose pixel count is no multiple of 8 (the seeds are scanned
+    # 8 at a time), with components and holes on its border.
     rng = np.random.default_rng(seed)
-    cue = cv2.GaussianBlur((rng.random((80, 110)) * 255).astype(np.uint8), (5, 5), 0)
+    cue = cv2.GaussianBlur((rng.random(shape) * 255).astype(np.uint8), (5, 5), 0)
     counts = np.bincount(cue.ravel(), minlength=256)
     for low, high in ((120.0, 135.0), (127.5, 127.5), (130.0, 125.0), (250.0, 254.0), (0.0, 10.0)):
         weak_count = int(counts[max(int(np.floor(low)) + 1, 0) :].sum())
@@ -210,6 +213,21 @@ def test_threshold_and_clean_equals_hysteresis_then_clean_mask(seed):
                 reference.hysteresis(cue, low, high), min_area, max_hole
             )
             np.testing.assert_array_equal(fused.view(bool), expected)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_full_blocks_equal_opencvs_area_resize(seed):
+    rng = np.random.default_rng(seed)
+    for block in (3, 4, 5):
+        height, width = block * rng.integers(3, 40, 2)
+        # Shares near a half: many blocks exactly half set (OpenCV rounds those to 0).
+        mask = (rng.random((height, width)) < rng.uniform(0.3, 0.7)).astype(np.uint8)
+        found = _segmentation_kernels.full_blocks(mask, block)
+        np.testing.assert_array_equal(found, reference.full_blocks(mask, block))
+    half = np.zeros((8, 8), np.uint8)
+    half[:2, :4] = 1  # the first 4 x 4 block exactly half set
+    half[4:7, 4:] = 1  # the last three quarters
+    assert _segmentation_kernels.full_blocks(half, 4).tolist() == [[0, 0], [0, 1]]
 
 
 @pytest.mark.parametrize("seed", range(6))

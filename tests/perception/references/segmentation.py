@@ -40,6 +40,14 @@ def hysteresis(cue, low, high):
     return keep[labels]
 
 
+def full_blocks(mask, block):
+    """The blocks of a 0/1 ``uint8`` image that OpenCV's area resize makes 1 (the plain
+    code of segmentation._thin_bright_class)."""
+    height, width = mask.shape
+    blocks = cv2.resize(mask, (width // block, height // block), interpolation=cv2.INTER_AREA)
+    return (blocks == 1).view(np.uint8)
+
+
 def clean_mask(mask, min_component_area, max_hole_area):
     mask_u8 = mask.astype(np.uint8)
     if min_component_area > 0:
