@@ -16,6 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from service.perception._geometry_kernels import END_FIT_MAX_TURNING
 from service.perception.geometry import fit_where_skipped, polyline_length
 
 # An end put along a line through a short piece carries no fit of its own.
@@ -36,6 +37,7 @@ def bridge_from_the_fits(
     joins: list[tuple[int, int, float]],
     span: float,
     junction_of_end: list[int],
+    distance: np.ndarray | None = None,
 ) -> tuple[list, np.ndarray]:
     """Ends to bridge gaps from: where each end's fit begins, not extrapolated to the tip.
 
@@ -44,13 +46,22 @@ def bridge_from_the_fits(
     extrapolation turns the bridge off the cable. A gap's bridge (ends in no junction)
     starts instead where the fitted stretch begins, with the fit's own tangent there,
     and the piece's joints before that are left out of the path (not for pieces shorter
-    than the fit's ``span``: :func:`ends_through_short_pieces`). Returns the ends and
-    the arc lengths to trim per end (for :func:`assemble_paths`).
+    than the fit's ``span``: :func:`ends_through_short_pieces`). With ``distance`` (the
+    mask's distance transform) a crossing's bridge starts clear of the other strand
+    (:func:`ends_clear_of_crossing`). Returns the ends and the arc lengths to trim per
+    end (for :func:`assemble_paths`).
     """
     adjusted = list(ends)
     trims = np.zeros(len(ends))
     for i, j, _ in joins:
         if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
+            if distance is not None and junction_of_end[i] == junction_of_end[j]:
+                for k in (i, j):
+                    clear = ends_clear_of_crossing(
+                        pieces[ends[k].piece], ends[k], ends[k ^ 1].skip, span, distance
+                    )
+                    if clear is not None:
+                        adjusted[k], trims[k] = clear
             continue
         for k in (i, j):
             end = ends[k]
@@ -62,6 +73,81 @@ def bridge_from_the_fits(
                 adjusted[k] = replace(end, position=inner[0], direction=inner[1])
                 trims[k] = end.skip
     return adjusted, trims
+
+
+# A joint is where another strand widens the mask when the distance to the border
+# there exceeds its piece's typical half width by more than the distance transform's
+# pixel steps along one straight cable.
+WIDENED_MARGIN_PX = 1.0
+
+
+def ends_clear_of_crossing(
+    points: np.ndarray, end, far_skip: float, span: float, distance: np.ndarray
+):
+    """Where a crossing's bridge should start from one of its ends: clear of the other
+    strand, or None to keep ``end`` as it is.
+
+    Near a crossing the skeleton follows the middle of both strands together, so the
+    piece's last joints bend toward the other strand, and an end fitted through them,
+    extrapolated to the tip, points off its own strand: the bridge drawn from it swings
+    out of the cable. The bridge starts instead where the piece is its own width again
+    (past the tip joints where the mask is wider than the piece by more than
+    ``WIDENED_MARGIN_PX``), at least past the tip its fit skipped, with the tangent of a
+    fit of the stretch beyond (over a span short enough for a tight loop's bend, as
+    ``_geometry_kernels.bend_aware_fit`` does, and short of the arc length ``far_skip``
+    the other end's fit left out, a cut end's narrow hook); the piece's joints before it
+    are left out. Pieces shorter than ``span``, of unknown width, or too short to fit
+    beyond the widened tip are left as they are. Returns the end and the arc length to
+    trim.
+    """
+    length = polyline_length(points)
+    if end.width <= 0 or length < span:
+        return None
+    # The piece from the end's tip inwards.
+    backwards = np.ascontiguousarray(points if end.at_start else points[::-1], np.float64)
+    skip = max(float(end.skip), _widened_tip_length(backwards, distance, end.width))
+    # Like the end's own fit, the fit stops short of the other end's tip where that was
+    # left out for being narrow (more than this end's usual tip), if half a span is left.
+    reach = length - skip - far_skip
+    if far_skip > end.skip and reach >= 0.5 * span:
+        span = min(span, reach)
+    if skip <= 0:
+        return None
+    span = _bend_aware_span(backwards, skip, span)
+    inner = fit_where_skipped(points, end.at_start, span, skip)
+    if inner is None:
+        return None
+    return replace(end, position=inner[0], direction=inner[1]), skip
+
+
+def _bend_aware_span(backwards: np.ndarray, skip: float, span: float) -> float:
+    """The span ``_geometry_kernels.bend_aware_fit`` fits over, for a polyline from its
+    end inwards (``backwards``): halved while the turns at the joints between ``skip``
+    and ``skip + span`` of arc length add up to more than ``END_FIT_MAX_TURNING``."""
+    steps = np.diff(backwards, axis=0)
+    inner = np.cumsum(np.hypot(steps[:, 0], steps[:, 1]))[:-1]  # arc length at joints 1..
+    # The signed turn at each inner joint, from the step before it to the step after.
+    turns = np.arctan2(
+        steps[:-1, 0] * steps[1:, 1] - steps[:-1, 1] * steps[1:, 0],
+        steps[:-1, 0] * steps[1:, 0] + steps[:-1, 1] * steps[1:, 1],
+    )
+    while span > 1.0:
+        within = (inner >= skip) & (inner <= skip + span)
+        if abs(float(turns[within].sum())) <= END_FIT_MAX_TURNING:
+            break
+        span *= 0.5
+    return span
+
+
+def _widened_tip_length(backwards: np.ndarray, distance: np.ndarray, width: float) -> float:
+    """Arc length from the tip (``backwards[0]``) to the first joint where the mask is
+    no wider than ``width + WIDENED_MARGIN_PX`` (0 when the tip joint is not widened;
+    the whole length when every joint is)."""
+    rows = np.clip(np.rint(backwards[:, 1]).astype(int), 0, distance.shape[0] - 1)
+    cols = np.clip(np.rint(backwards[:, 0]).astype(int), 0, distance.shape[1] - 1)
+    narrow = np.flatnonzero(distance[rows, cols] <= width + WIDENED_MARGIN_PX)
+    last = int(narrow[0]) if narrow.size else len(backwards) - 1
+    return polyline_length(backwards[: last + 1])
 
 
 def ends_through_short_pieces(

@@ -3,9 +3,10 @@ joined on both sides, on straight cables and on bends."""
 
 from dataclasses import replace
 
+import cv2
 import numpy as np
 
-from service.perception.bridge_ends import ends_through_short_pieces
+from service.perception.bridge_ends import bridge_from_the_fits, ends_through_short_pieces
 from service.perception.merging import assemble_paths, chain_ends
 
 
@@ -80,3 +81,38 @@ def test_a_short_piece_of_two_joints_keeps_its_partners_line():
     adjusted = ends_through_short_pieces(pieces, ends, [(1, 2, 0.1), (3, 4, 0.1)], 40.0)
     axis = np.array([80.0, -50.0]) / np.hypot(80.0, -50.0)
     np.testing.assert_allclose(adjusted[3].direction, axis, atol=1e-9)
+
+
+def test_a_crossing_is_bridged_from_where_the_strand_is_clear_of_the_other():
+    # A thin strand along y = 50 (half width 3.5) under a thick one across it (x 85 to
+    # 115): thinning bends the thin strand's last joints down toward the middle of both.
+    # The ends fitted through them and extrapolated to the tips point 18.5 degrees off,
+    # and the crossing's bridge swings 6 px off the strand's centreline.
+    mask = np.zeros((100, 200), np.uint8)
+    mask[47:54, :] = 1
+    mask[:, 85:116] = 1
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    pieces = [
+        np.array([[x, 50.0] for x in range(0, 81, 10)] + [[88.0, 52.0], [95.0, 56.0]]),
+        np.array([[105.0, 56.0], [112.0, 52.0]] + [[x, 50.0] for x in range(120, 201, 10)]),
+    ]
+    ends = chain_ends(
+        pieces, 40.0, skip=3.0, distance=distance, full_width=2.8, bend_aware=np.ones(4, bool)
+    )
+    joins = [(1, 2, 0.0)]  # the thin strand's two pieces, through one junction
+    junction_of_end = [-1, 0, 0, -1]
+    inner, trims = bridge_from_the_fits(pieces, ends, joins, 40.0, junction_of_end, distance)
+    # The bridge starts where the mask is the strand's own width again (the tip joint
+    # lies in the thick strand), the joints before it left out of the path.
+    assert trims[0] == trims[3] == 0.0
+    np.testing.assert_allclose(trims[1:3], np.hypot(7.0, 4.0))
+    assert abs(inner[1].direction[1]) < 0.55 * abs(ends[1].direction[1])
+
+    def worst_offset(which, trimmed):
+        (path,) = assemble_paths(pieces, which, joins, "smooth", trimmed)
+        return float(np.abs(path.vertices[:, 1] - 50.0).max())
+
+    assert worst_offset(inner, trims) < 3.5 < worst_offset(ends, None)
+    # Without the distance transform, crossings keep their ends (gaps alone are moved).
+    kept, no_trims = bridge_from_the_fits(pieces, ends, joins, 40.0, junction_of_end)
+    assert kept == ends and not no_trims.any()
