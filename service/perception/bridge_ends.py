@@ -16,7 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from service.perception import _geometry_kernels
+from service.perception._geometry_kernels import END_FIT_MAX_TURNING
 from service.perception.geometry import fit_where_skipped, polyline_length
 
 # An end put along a line through a short piece carries no fit of its own.
@@ -122,11 +122,18 @@ def ends_clear_of_crossing(
 
 def _bend_aware_span(backwards: np.ndarray, skip: float, span: float) -> float:
     """The span ``_geometry_kernels.bend_aware_fit`` fits over, for a polyline from its
-    end inwards (``backwards``): halved while it turns by more than
-    ``END_FIT_MAX_TURNING`` between ``skip`` and ``skip + span`` of arc length."""
-    limit = _geometry_kernels.END_FIT_MAX_TURNING
+    end inwards (``backwards``): halved while the turns at the joints between ``skip``
+    and ``skip + span`` of arc length add up to more than ``END_FIT_MAX_TURNING``."""
+    steps = np.diff(backwards, axis=0)
+    inner = np.cumsum(np.hypot(steps[:, 0], steps[:, 1]))[:-1]  # arc length at joints 1..
+    # The signed turn at each inner joint, from the step before it to the step after.
+    turns = np.arctan2(
+        steps[:-1, 0] * steps[1:, 1] - steps[:-1, 1] * steps[1:, 0],
+        steps[:-1, 0] * steps[1:, 0] + steps[:-1, 1] * steps[1:, 1],
+    )
     while span > 1.0:
-        if abs(_geometry_kernels.turning_within(backwards, skip, skip + span)) <= limit:
+        within = (inner >= skip) & (inner <= skip + span)
+        if abs(float(turns[within].sum())) <= END_FIT_MAX_TURNING:
             break
         span *= 0.5
     return span
