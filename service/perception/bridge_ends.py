@@ -16,8 +16,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from service.perception._geometry_kernels import END_FIT_MAX_TURNING
-from service.perception.geometry import fit_where_skipped, polyline_length
+from service.perception import _bridge_ends_kernels
+from service.perception._bridge_ends_kernels import MOVED, UNDECIDED
+from service.perception.geometry import fit_at, fit_where_skipped, polyline_length
 
 # An end put along a line through a short piece carries no fit of its own.
 _UNFITTED = {"curvature": 0.0, "skip": 0.0, "width": 0.0}
@@ -100,54 +101,50 @@ def ends_clear_of_crossing(
     beyond the widened tip are left as they are. Returns the end and the arc length to
     trim.
     """
-    length = polyline_length(points)
-    if end.width <= 0 or length < span:
-        return None
-    # The piece from the end's tip inwards.
+    # The piece from the end's tip inwards; the loop is compiled
+    # (_bridge_ends_kernels.clear_of_crossing).
     backwards = np.ascontiguousarray(points if end.at_start else points[::-1], np.float64)
-    skip = max(float(end.skip), _widened_tip_length(backwards, distance, end.width))
-    # Like the end's own fit, the fit stops short of the other end's tip where that was
-    # left out for being narrow (more than this end's usual tip), if half a span is left.
-    reach = length - skip - far_skip
-    if far_skip > end.skip and reach >= 0.5 * span:
-        span = min(span, reach)
-    if skip <= 0:
+    # NumPy compares a float32 distance transform with a float in float32.
+    narrow_at_most = end.width + WIDENED_MARGIN_PX
+    if distance.dtype == np.float32:
+        narrow_at_most = float(np.float32(narrow_at_most))
+    arguments = (
+        backwards,
+        bool(end.at_start),
+        distance,
+        float(end.width),
+        float(narrow_at_most),
+        float(end.skip),
+        float(far_skip),
+        float(span),
+    )
+    outcome, skip, *fit = _bridge_ends_kernels.clear_of_crossing(*arguments, _OWN_TURNS)
+    if outcome == UNDECIDED:
+        outcome, skip, *fit = _bridge_ends_kernels.clear_of_crossing(*arguments, _turns(backwards))
+    if outcome != MOVED:
         return None
-    span = _bend_aware_span(backwards, skip, span)
-    inner = fit_where_skipped(points, end.at_start, span, skip)
+    # Evaluated here, as geometry.fit_where_skipped does: Python's ``skip**2`` is the C
+    # library's pow, now and then an ulp off the ``skip * skip`` compiled code takes.
+    inner = fit_at(*fit, skip)
     if inner is None:
         return None
     return replace(end, position=inner[0], direction=inner[1]), skip
 
 
-def _bend_aware_span(backwards: np.ndarray, skip: float, span: float) -> float:
-    """The span ``_geometry_kernels.bend_aware_fit`` fits over, for a polyline from its
-    end inwards (``backwards``): halved while the turns at the joints between ``skip``
-    and ``skip + span`` of arc length add up to more than ``END_FIT_MAX_TURNING``."""
+# The kernel computes the turns itself (see _turns).
+_OWN_TURNS = np.empty(0, np.float64)
+
+
+def _turns(backwards: np.ndarray) -> np.ndarray:
+    """The signed turn at each inner joint of a polyline, from the step before it to the
+    step after, by NumPy's arctan2: the kernel's own (the C library's) is an ulp off now
+    and then, and decides a span's halving alike unless the turning lies within a hair of
+    the limit."""
     steps = np.diff(backwards, axis=0)
-    inner = np.cumsum(np.hypot(steps[:, 0], steps[:, 1]))[:-1]  # arc length at joints 1..
-    # The signed turn at each inner joint, from the step before it to the step after.
-    turns = np.arctan2(
+    return np.arctan2(
         steps[:-1, 0] * steps[1:, 1] - steps[:-1, 1] * steps[1:, 0],
         steps[:-1, 0] * steps[1:, 0] + steps[:-1, 1] * steps[1:, 1],
     )
-    while span > 1.0:
-        within = (inner >= skip) & (inner <= skip + span)
-        if abs(float(turns[within].sum())) <= END_FIT_MAX_TURNING:
-            break
-        span *= 0.5
-    return span
-
-
-def _widened_tip_length(backwards: np.ndarray, distance: np.ndarray, width: float) -> float:
-    """Arc length from the tip (``backwards[0]``) to the first joint where the mask is
-    no wider than ``width + WIDENED_MARGIN_PX`` (0 when the tip joint is not widened;
-    the whole length when every joint is)."""
-    rows = np.clip(np.rint(backwards[:, 1]).astype(int), 0, distance.shape[0] - 1)
-    cols = np.clip(np.rint(backwards[:, 0]).astype(int), 0, distance.shape[1] - 1)
-    narrow = np.flatnonzero(distance[rows, cols] <= width + WIDENED_MARGIN_PX)
-    last = int(narrow[0]) if narrow.size else len(backwards) - 1
-    return polyline_length(backwards[: last + 1])
 
 
 def ends_through_short_pieces(

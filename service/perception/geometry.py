@@ -96,10 +96,17 @@ def fit_where_skipped(
     )
     if not fitted or skip <= 0 or polyline_length(backwards) < 2.0 * skip + 1.0:
         return None
-    position = np.array(
-        [x0 + dx * skip + 0.5 * ddx * skip**2, y0 + dy * skip + 0.5 * ddy * skip**2]
-    )
-    inwards = np.array([dx + ddx * skip, dy + ddy * skip])
+    return fit_at(x0, y0, dx, dy, ddx, ddy, skip)
+
+
+def fit_at(
+    x0: float, y0: float, dx: float, dy: float, ddx: float, ddy: float, arc: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """A quadratic end fit (``_geometry_kernels.end_fit``'s position at the end, first and
+    second derivatives along the arc inwards) evaluated at ``arc`` from the end: the
+    position and the outward unit tangent there, or None where the tangent vanishes."""
+    position = np.array([x0 + dx * arc + 0.5 * ddx * arc**2, y0 + dy * arc + 0.5 * ddy * arc**2])
+    inwards = np.array([dx + ddx * arc, dy + ddy * arc])
     if float(np.hypot(*inwards)) < 1e-9:
         return None
     return position, unit(-inwards)

@@ -26,6 +26,7 @@ from schemas import (
 )
 from service.perception import _pipeline_kernels
 from service.perception._kernel_cache import kernels_cached, write_stamp
+from service.perception.bridge_ends import ends_clear_of_crossing
 from service.perception.contours import extract_contours
 from service.perception.crossings import detect_crossings, find_intersections
 from service.perception.deadline import Deadline, check
@@ -457,6 +458,8 @@ def warm_up() -> None:
     ends = chain_ends(strands, 10.0, skip=1.0, distance=distance, full_width=2.0)
     # One end's fit alone, where its skipped tip begins (the bridges from the fits).
     fit_where_skipped(strands[0], True, 10.0, 1.0)
+    # A crossing's bridge clear of the other strand (from the cross's distance transform).
+    ends_clear_of_crossing(strands[0], ends[0], ends[1].skip, 10.0, distance)
     # The candidates' grid, and a junction's pairing (the strands' first ends meet).
     choose_joins(ends, len(strands), DetectParams(), radius, junction_of_end=[0, -1, 0, -1])
     # The image's evidence: ends running to the border, the ends' colours (warmed even

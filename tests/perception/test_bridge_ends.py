@@ -5,9 +5,16 @@ from dataclasses import replace
 
 import cv2
 import numpy as np
+import pytest
 
-from service.perception.bridge_ends import bridge_from_the_fits, ends_through_short_pieces
-from service.perception.merging import assemble_paths, chain_ends
+from service.perception import bridge_ends
+from service.perception.bridge_ends import (
+    bridge_from_the_fits,
+    ends_clear_of_crossing,
+    ends_through_short_pieces,
+)
+from service.perception.merging import ChainEnd, assemble_paths, chain_ends
+from tests.perception.references import bridge_ends as reference
 
 
 def test_a_short_piece_joined_on_both_sides_is_bridged_along_its_partners_line():
@@ -116,3 +123,53 @@ def test_a_crossing_is_bridged_from_where_the_strand_is_clear_of_the_other():
     # Without the distance transform, crossings keep their ends (gaps alone are moved).
     kept, no_trims = bridge_from_the_fits(pieces, ends, joins, 40.0, junction_of_end)
     assert kept == ends and not no_trims.any()
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_crossing_ends_kernel_equals_the_plain_code_bit_for_bit(seed, monkeypatch):
+    # Wandering pieces and pieces of pixel steps (whose 45-degree turns add up to the
+    # bend limit exactly, where the kernel asks for NumPy's turns), from either end, over
+    # a distance transform with narrow and wide places, of every kind of end: unknown
+    # width, none or some of the tip skipped, the other end's tip skipped or not.
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((120, 160), np.uint8)
+    for _ in range(8):
+        start, stop = rng.integers(0, 160, 2), rng.integers(0, 120, 2)
+        thickness = int(rng.integers(3, 15))
+        cv2.line(mask, (int(start[0]), int(stop[0])), (int(start[1]), int(stop[1])), 1, thickness)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    asked = []
+    turns = bridge_ends._turns
+    monkeypatch.setattr(bridge_ends, "_turns", lambda points: asked.append(1) or turns(points))
+    moved = 0
+    for trial in range(1500):
+        count = int(rng.integers(2, 60))
+        if trial % 2:
+            steps = rng.integers(-1, 2, (count, 2)).astype(np.float64)
+            steps[(steps == 0).all(axis=1)] = [1.0, 0.0]
+            if trial % 4 == 1:  # straight runs between the turns
+                steps = np.repeat(steps[::3], 3, axis=0)[:count]
+        else:
+            steps = rng.normal(size=(count, 2)) * 3.0 + rng.normal(size=2) * 2.0
+        points = rng.uniform(0, 150, 2) + np.cumsum(steps, axis=0)
+        end = ChainEnd(
+            piece=0,
+            at_start=bool(rng.random() < 0.5),
+            position=points[0],
+            direction=np.array([1.0, 0.0]),
+            skip=float(rng.choice([0.0, 2.0, 3.5, 6.0])),
+            width=float(rng.choice([0.0, 1.6, 2.2, 2.4, 3.0, 4.7])),
+        )
+        far_skip = float(rng.choice([0.0, 3.0, 8.0, 15.0]))
+        span = float(rng.choice([10.0, 20.0, 30.0, 40.0]))
+        got = ends_clear_of_crossing(points, end, far_skip, span, distance)
+        expected = reference.ends_clear_of_crossing(points, end, far_skip, span, distance)
+        assert (got is None) == (expected is None), trial
+        if got is not None:
+            moved += 1
+            assert got[1] == expected[1], trial
+            assert np.array_equal(got[0].position, expected[0].position), trial
+            assert np.array_equal(got[0].direction, expected[0].direction), trial
+            assert got[0].curvature == expected[0].curvature and got[0].skip == end.skip
+    assert moved > 200
+    assert asked  # some spans turned by the limit to the last bit
