@@ -1,6 +1,7 @@
-"""Compiled loops of :mod:`service.perception.geometry`: resampling and end fits.
+"""Compiled loops of :mod:`service.perception.geometry`: resampling, end fits and arc
+lengths.
 
-Plain version of the resampling: ``tests/perception/references/geometry.py``.
+Plain version of the resampling and the arc lengths: ``tests/perception/references/geometry.py``.
 """
 
 from __future__ import annotations
@@ -8,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from service.perception._shared_kernels import solve_small
+from service.perception._shared_kernels import pairwise_sum, solve_small
 
 # The most a fitted stretch may turn (radians) in bend_aware_fit. Over half a turn of a
 # tight loop, a quadratic in arc length puts the end several px off the cable and its
@@ -207,3 +208,38 @@ def bend_aware_fit(backwards, skip, span):
     while span > 1.0 and abs(turning_within(backwards, skip, skip + span)) > END_FIT_MAX_TURNING:
         span *= 0.5
     return outward_fit(backwards, skip, span)
+
+
+@njit(cache=True, nogil=True)
+def step_lengths(points):
+    """The length of each step of a float64 polyline, as NumPy computes it for
+    geometry.polyline_length (the square root of the sum of the squares)."""
+    count = max(points.shape[0] - 1, 0)
+    lengths = np.empty(count, np.float64)
+    for i in range(count):
+        dx = points[i + 1, 0] - points[i, 0]
+        dy = points[i + 1, 1] - points[i, 1]
+        lengths[i] = np.sqrt(dx * dx + dy * dy)
+    return lengths
+
+
+@njit(cache=True, nogil=True)
+def polyline_length(points):
+    """geometry.polyline_length of an ``(N, 2)`` float64 polyline, bit for bit: the steps'
+    lengths added in NumPy's order (:func:`pairwise_sum`)."""
+    lengths = step_lengths(points)
+    return pairwise_sum(lengths, 0, lengths.shape[0])
+
+
+@njit(cache=True, nogil=True)
+def arc_lengths(points):
+    """geometry.arc_lengths of an ``(N, 2)`` float64 polyline, bit for bit (NumPy's
+    cumulative sum adds one step after the other)."""
+    lengths = step_lengths(points)
+    arcs = np.empty(lengths.shape[0] + 1, np.float64)
+    arcs[0] = 0.0
+    total = 0.0
+    for i in range(lengths.shape[0]):
+        total += lengths[i]
+        arcs[i + 1] = total
+    return arcs

@@ -105,11 +105,15 @@ def fit_at(
     """A quadratic end fit (``_geometry_kernels.end_fit``'s position at the end, first and
     second derivatives along the arc inwards) evaluated at ``arc`` from the end: the
     position and the outward unit tangent there, or None where the tangent vanishes."""
-    position = np.array([x0 + dx * arc + 0.5 * ddx * arc**2, y0 + dy * arc + 0.5 * ddy * arc**2])
-    inwards = np.array([dx + ddx * arc, dy + ddy * arc])
-    if float(np.hypot(*inwards)) < 1e-9:
+    # In Python floats, one by one as NumPy would (unit: the tangent over its np.hypot).
+    inwards_x, inwards_y = dx + ddx * arc, dy + ddy * arc
+    norm = float(np.hypot(inwards_x, inwards_y))
+    if norm < 1e-9:
         return None
-    return position, unit(-inwards)
+    position = np.array([x0 + dx * arc + 0.5 * ddx * arc**2, y0 + dy * arc + 0.5 * ddy * arc**2])
+    if not norm > 1e-12:  # NaN: as unit() has it
+        return position, np.zeros(2)
+    return position, np.array([-inwards_x / norm, -inwards_y / norm])
 
 
 def end_direction(points: np.ndarray, at_start: bool, span: float) -> np.ndarray:
@@ -147,6 +151,8 @@ def resample(points: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
 
 def arc_lengths(points: np.ndarray) -> np.ndarray:
     """Arc of each vertex of a polyline from its first (px)."""
+    if _compiled_layout(points):
+        return _geometry_kernels.arc_lengths(points)
     steps = np.diff(points, axis=0)
     return np.concatenate([[0.0], np.cumsum(np.sqrt((steps * steps).sum(axis=1)))])
 
@@ -185,6 +191,10 @@ def polyline_length(points: np.ndarray) -> float:
     """Arc length of a polyline."""
     if len(points) < 2:
         return 0.0
+    # Called for every piece and path of a frame, a few times: compiled for the float64
+    # polylines the steps hand it, where NumPy's calls took most of the time.
+    if _compiled_layout(points):
+        return _geometry_kernels.polyline_length(points)
     points = np.asarray(points)
     steps = points[1:] - points[:-1]
     if not np.issubdtype(steps.dtype, np.inexact):
@@ -192,3 +202,21 @@ def polyline_length(points: np.ndarray) -> float:
     # What np.linalg.norm(steps, axis=1) computes, without its checks (called for
     # every piece and path of a frame).
     return float(np.sqrt((steps * steps).sum(axis=1)).sum())
+
+
+# numpy's ndarray.flags.num bits: C order, aligned, writeable (as _aot checks a kernel's
+# array arguments).
+_C_ALIGNED_WRITEABLE = 0x1 | 0x100 | 0x400
+
+
+def _compiled_layout(points) -> bool:
+    """Is ``points`` an ``(N, 2)`` float64 array in the layout the geometry kernels are
+    compiled for (C order, aligned, writeable)? Others take NumPy's path, to the same
+    result, rather than a kernel compiled for them."""
+    return (
+        type(points) is np.ndarray
+        and points.dtype == np.float64
+        and points.ndim == 2
+        and points.shape[1] == 2
+        and points.flags.num & _C_ALIGNED_WRITEABLE == _C_ALIGNED_WRITEABLE
+    )

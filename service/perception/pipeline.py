@@ -33,7 +33,7 @@ from service.perception.deadline import Deadline, check
 from service.perception.end_extension import extend_ends
 from service.perception.errors import InvalidInputError
 from service.perception.fitting import fit_chains, junction_zones
-from service.perception.geometry import fit_where_skipped, polyline_length, resample
+from service.perception.geometry import arc_lengths, fit_where_skipped, polyline_length, resample
 from service.perception.merging import (
     Join,
     MergedPath,
@@ -442,6 +442,8 @@ def warm_up() -> None:
     clean_mask(mask, 2, 2)
     line = np.array([[2.0, 20.0], [45.0, 20.0]])
     grow_by_own_thresholds(cue, mask, [line], [3.0], [np.array([False])], [])
+    polyline_length(line)
+    arc_lengths(line)
     # 2 to 5.
     skeleton = skeletonize(mask)
     distance = distance_transform(mask)

@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from service.perception import _geometry_kernels
-from service.perception.geometry import end_direction, end_fit, fit_where_skipped, resample
+from service.perception.geometry import (
+    arc_lengths,
+    end_direction,
+    end_fit,
+    fit_where_skipped,
+    polyline_length,
+    resample,
+)
 from tests.perception.references import geometry as reference
 
 
@@ -64,3 +71,25 @@ def test_the_fit_where_the_skipped_tip_ends_lies_on_a_bend_and_follows_it():
     along = np.array([-position[1], position[0]]) / 60.0  # the circle's tangent there
     assert float(direction @ along) == pytest.approx(1.0, abs=1e-3)
     assert fit_where_skipped(arc, False, 40.0, 0.0) is None
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_arc_length_kernels_equal_the_references_bit_for_bit(seed):
+    # Lengths past NumPy's blocks of 128 (summed pairwise), and the polylines the
+    # kernels are not compiled for (views, reversed, integer, a list), which take NumPy.
+    rng = np.random.default_rng(seed)
+    for count in [*range(0, 20), 127, 128, 129, 130, 257, 300, 1000]:
+        points = np.cumsum(rng.normal(size=(count, 2)) * rng.uniform(0.1, 30.0), axis=0) + 300.0
+        expected_arcs = reference.arc_lengths(points)
+        for variant in (points, points[::-1], np.asfortranarray(points), points.tolist()):
+            assert polyline_length(variant) == reference.polyline_length(variant)
+        np.testing.assert_array_equal(arc_lengths(points), expected_arcs)
+        np.testing.assert_array_equal(
+            arc_lengths(points[::-1]), reference.arc_lengths(points[::-1])
+        )
+        if count >= 2:
+            assert _geometry_kernels.polyline_length(points) == reference.polyline_length(points)
+            np.testing.assert_array_equal(_geometry_kernels.arc_lengths(points), expected_arcs)
+    pixels = rng.integers(0, 500, (40, 2))
+    assert polyline_length(pixels) == reference.polyline_length(pixels)
+    np.testing.assert_array_equal(arc_lengths(pixels), reference.arc_lengths(pixels))

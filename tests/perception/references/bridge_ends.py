@@ -7,7 +7,8 @@ import numpy as np
 
 from service.perception._geometry_kernels import END_FIT_MAX_TURNING
 from service.perception.bridge_ends import WIDENED_MARGIN_PX
-from service.perception.geometry import fit_where_skipped, polyline_length
+from service.perception.geometry import fit_where_skipped
+from tests.perception.references.geometry import polyline_length
 
 
 def ends_clear_of_crossing(points, end, far_skip, span, distance):

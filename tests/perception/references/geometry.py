@@ -21,3 +21,16 @@ def resample(points, step):
         joints.append(current)
         edges.append(edge)
     return np.array(joints), np.array(edges)
+
+
+def polyline_length(points):
+    """Arc length of a polyline: the steps' Euclidean lengths added up (by NumPy)."""
+    if len(points) < 2:
+        return 0.0
+    return float(np.linalg.norm(np.diff(np.asarray(points, np.float64), axis=0), axis=1).sum())
+
+
+def arc_lengths(points):
+    """Arc length of each vertex from the first."""
+    steps = np.linalg.norm(np.diff(np.asarray(points, np.float64), axis=0), axis=1)
+    return np.concatenate([[0.0], np.cumsum(steps)])
