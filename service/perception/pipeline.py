@@ -442,6 +442,7 @@ def warm_up() -> None:
     clean_mask(mask, 2, 2)
     line = np.array([[2.0, 20.0], [45.0, 20.0]])
     grow_by_own_thresholds(cue, mask, [line], [3.0], [np.array([False])], [])
+    # The arc lengths of a float64 polyline (compiled for those).
     polyline_length(line)
     arc_lengths(line)
     # 2 to 5.
