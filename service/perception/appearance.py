@@ -17,7 +17,9 @@ into the object. Its colour there is the object's, and an end that lies in such 
 has no colour of its own (too few samples before it): it is judged on geometry alone,
 as with the colour cost off. Nor has a piece shorter than three radii (a scrap where
 the skeleton meets a blob or a junction): it has no radius of cable clear of the rims
-at both its ends. Nor has an end whose colour differs from that of its own piece further
+at both its ends; unless neither of its tips is in a junction: then it is a stretch of
+cable seen between two objects, whose skeleton stops about a radius short of each cut.
+Nor has an end whose colour differs from that of its own piece further
 in: an occluder segmented with the cable, not much wider than it, that the piece runs
 into.
 
@@ -75,6 +77,7 @@ def end_colours(
     ends,
     radius: float,
     distance: np.ndarray | None = None,
+    free: np.ndarray | None = None,
 ) -> EndColours:
     """The colour of the cable at every chain end (see the module's docstring).
 
@@ -93,9 +96,14 @@ def end_colours(
         (``radius + 0.5``), on are left out, and so are the ``limit`` px before it
         (the rim of the wide blob, where it widens from a cable's width). An end
         left with fewer than :data:`MIN_SAMPLES` has an unknown colour (NaN), as has
-        every end of a piece shorter than three radii, and an end whose colour
-        differs (a :func:`colour_penalty` above 0) from its piece's further in (the
-        next stretch as long, where the piece is long enough).
+        every end of a piece shorter than three radii (unless ``free``), and an end
+        whose colour differs (a :func:`colour_penalty` above 0) from its piece's
+        further in (the next stretch as long, where the piece is long enough).
+    free : ndarray of bool, optional
+        Per piece, whether neither of its tips is in a junction zone: such a piece
+        shorter than three radii is a stretch of cable seen between two objects, not a
+        scrap where the skeleton meets a blob or a junction, and keeps the colour of
+        its whole length.
     """
     count = len(ends)
     if count == 0:
@@ -113,6 +121,11 @@ def end_colours(
 
     colour, spread, lengths = stretch(STRETCH_SKIP_RADII * radius)
     scraps = lengths < 3.0 * STRETCH_SKIP_RADII * radius
+    if free is not None:
+        # A short piece with neither tip in a junction is a stretch of cable seen
+        # between two objects: thinning stops about a radius short of each cut, so its
+        # whole length is clear of the rims, and it is the cable's own colour.
+        scraps &= ~np.asarray(free, bool)[end_piece]
     colour[scraps], spread[scraps] = np.nan, np.nan
     # The same piece further in: where the end's colour is not the body's, the end
     # lies on something else segmented with the cable.

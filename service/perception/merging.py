@@ -704,7 +704,7 @@ def _ends_of_split_pieces(
     return ends
 
 
-def _tips_in_junctions(pieces: list[np.ndarray], zones: np.ndarray | None) -> np.ndarray:
+def tips_in_junctions(pieces: list[np.ndarray], zones: np.ndarray | None) -> np.ndarray:
     """Per end (piece i: ends 2i, 2i+1), whether the piece's tip joint is in a junction
     zone (as :func:`junctions_of_ends` reaches it)."""
     if zones is None or not pieces:
@@ -867,7 +867,7 @@ def merge_chains(
     # end's hook: its fit may stay near the tip, and on a tight loop it must. Fitted over
     # the usual span, a quadratic spans half the loop and puts the end several px off
     # the cable, pointing tens of degrees off, and the crossing's bridge swings out of it.
-    at_crossing = _tips_in_junctions(pieces, zones)
+    at_crossing = tips_in_junctions(pieces, zones)
     ends = chain_ends(
         pieces, span, skip=radius, distance=distance, full_width=full_width, bend_aware=at_crossing
     )
@@ -915,7 +915,8 @@ def merge_chains(
     junction_of_end, dropped = absorb_shared_pieces(pieces, touching.junction_of_end, radius)
     colours = None
     if image is not None and params.colour_weight > 0:
-        colours = end_colours(image, pieces, ends, radius, distance)
+        free = None if zones is None else ~tips_in_junctions(pieces, zones).reshape(-1, 2).any(1)
+        colours = end_colours(image, pieces, ends, radius, distance, free)
     picture = None
     if zones is not None or mask is not None:
         picture = (zones if zones is not None else mask).shape[:2]

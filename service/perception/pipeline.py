@@ -42,6 +42,7 @@ from service.perception.merging import (
     gap_curve,
     join_cost,
     merge_chains,
+    tips_in_junctions,
 )
 from service.perception.pruning import prune_overlaps
 from service.perception.segmentation import (
@@ -266,8 +267,17 @@ def detect_full(
 
     # 5. Pruning of segments that repeat kept ones.
     pieces = prune_overlaps(pieces, shape)
-    # Scraps shorter than the cable is wide carry no direction worth merging on.
-    pieces = [p for p in pieces if polyline_length(p) >= min(radius, params.min_chain_length)]
+    # Scraps shorter than the cable is wide carry no direction worth merging on, unless
+    # neither tip is in a junction zone: then the scrap is all thinning leaves of a
+    # stretch of cable seen between two objects (a blob cut short at both ends, about as
+    # long as it is wide), and without it the two gaps round it are one nothing explains.
+    free = ~tips_in_junctions(pieces, zones).reshape(-1, 2).any(axis=1)
+    shortest = min(radius, params.min_chain_length)
+    pieces = [
+        points
+        for points, alone in zip(pieces, free.tolist(), strict=True)
+        if alone or polyline_length(points) >= shortest
+    ]
     watch.lap("pruning")
     check(deadline, "pruning")
 

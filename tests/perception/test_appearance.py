@@ -286,3 +286,20 @@ def test_a_round_tip_read_off_its_axis_stays_round(tilt):
     direction = np.array([np.cos(angle), np.sin(angle)])
     for skip in (0.0, 10.0):
         assert not appearance.cut_square(mask, np.array([78.0, 50.0]), direction, 6.5, skip)
+
+
+def test_a_short_piece_between_two_objects_keeps_its_colour_when_its_tips_are_free():
+    """A stretch of cable seen between two objects thins to a piece shorter than three
+    radii: a scrap has no colour, but one whose tips lie in no junction (``free``) is
+    the cable's, all along."""
+    image = np.full((60, 120, 3), 60, np.uint8)
+    cv2.line(image, (50, 30), (62, 30), (40, 200, 40), 9)  # a green stretch of cable
+    pieces = [np.column_stack([np.linspace(52, 60, 3), np.full(3, 30.0)])]
+    ends = [ChainEnd(0, at_start, np.zeros(2), np.zeros(2)) for at_start in (True, False)]
+    radius = 4.0
+    scrap = appearance.end_colours(image, pieces, ends, radius)
+    free = appearance.end_colours(image, pieces, ends, radius, free=np.array([True]))
+    assert not scrap.known.any()
+    assert free.known.all()
+    green = cv2.cvtColor(np.array([[[40, 200, 40]]], np.float32) / 255.0, cv2.COLOR_BGR2LAB)
+    np.testing.assert_allclose(free.colour, np.repeat(green.reshape(1, 3), 2, axis=0), atol=1)

@@ -20,13 +20,13 @@ from service.perception.deadline import Deadline, DeadlineExceeded
 from service.perception.geometry import resample
 from service.perception.merging import (
     ChainEnd,
-    _tips_in_junctions,
     chain_ends,
     choose_joins,
     gap_curve,
     join_cost,
     junctions_of_ends,
     merge_chains,
+    tips_in_junctions,
 )
 from service.perception.touching import split_touching_strands, split_where_leaving_together
 from service.synthetic.families import make_family_scene
@@ -304,10 +304,10 @@ def test_tips_in_junctions_read_both_tips_of_every_piece_as_junctions_of_ends(se
         for at_start in (True, False)
     ]
     expected = np.array(junctions_of_ends(tips, zones.view(np.bool_))) >= 0
-    got = _tips_in_junctions(pieces, zones.view(np.bool_))
+    got = tips_in_junctions(pieces, zones.view(np.bool_))
     assert expected.any() and not expected.all()
     assert got.tolist() == expected.tolist()
-    assert not _tips_in_junctions(pieces, None).any()
+    assert not tips_in_junctions(pieces, None).any()
 
 
 @pytest.mark.parametrize("seed", range(3))
