@@ -152,6 +152,7 @@ def ends_through_short_pieces(
     ends: list,
     joins: list[tuple[int, int, float]],
     shorter_than: float,
+    junction_of_end: list[int] | None = None,
 ) -> list:
     """Ends for bridging, with short pieces taken along the line between their partners.
 
@@ -166,7 +167,18 @@ def ends_through_short_pieces(
     its last) is off the cable's direction by at most what its end joints being up to a
     half width off the centre line makes of it, ``atan(2 width / chord)``; turned from
     the partners' line by more, the cable runs through the piece halfway between the
-    two. The
+    two.
+
+    With ``junction_of_end``, an end of such a piece whose join is a gap while its
+    other end's join runs through a crossing takes the middle of three readings of
+    its direction (:func:`_middle_direction`): the line above, and the circles that
+    leave each partner along its direction and pass through the end
+    (:func:`_arriving_on_circle`). A short piece between a crossing and an object
+    often sits where a loop bends into its hidden stretch; there the line between the
+    partners is a chord of the bend, 20-30 degrees off the cable at the cut, while the
+    two circles follow the bend. On a straight cable all three agree; one reading
+    thrown off (a partner's direction tilted by a crossing or a slanted cut) is
+    outvoted. The piece's own end fit is no reading: thinning bends its ends. The
     joins themselves, and their costs, are left as they were.
     """
     partner = partners(len(ends), joins)
@@ -182,9 +194,58 @@ def ends_through_short_pieces(
         axis = axis / length
         start, end = ends[2 * piece], ends[2 * piece + 1]
         axis = _chord_across(points, axis, start.width)
-        adjusted[2 * piece] = replace(start, direction=-axis, **_UNFITTED)
-        adjusted[2 * piece + 1] = replace(end, direction=axis, **_UNFITTED)
+        directions = [-axis, axis]
+        if junction_of_end is not None:
+            for side in (0, 1):
+                own, other = 2 * piece + side, 2 * piece + 1 - side
+                if _gap_beside_crossing(own, other, partner, junction_of_end):
+                    readings = (
+                        _arriving_on_circle(ends[partner[other]], ends[own].position),
+                        -_arriving_on_circle(ends[partner[own]], ends[own].position),
+                    )
+                    directions[side] = _middle_direction(directions[side], readings)
+        adjusted[2 * piece] = replace(start, direction=directions[0], **_UNFITTED)
+        adjusted[2 * piece + 1] = replace(end, direction=directions[1], **_UNFITTED)
     return adjusted
+
+
+def _gap_beside_crossing(own: int, other: int, partner: np.ndarray, junction_of_end) -> bool:
+    """Whether end ``own`` is joined across a gap (neither end in a junction) while its
+    piece's ``other`` end is joined through a crossing (both ends in one junction)."""
+    across, through = partner[own], partner[other]
+    return (
+        junction_of_end[own] < 0
+        and junction_of_end[across] < 0
+        and junction_of_end[other] >= 0
+        and junction_of_end[other] == junction_of_end[through]
+    )
+
+
+def _arriving_on_circle(leaving, position: np.ndarray) -> np.ndarray:
+    """The direction in which a circle that leaves end ``leaving`` along its direction
+    passes through ``position``: the leaving direction reflected in the chord between
+    the two (the leaving direction itself for a point on the end)."""
+    chord = np.asarray(position, np.float64) - leaving.position
+    length = float(np.hypot(*chord))
+    if length < 1e-9:
+        return leaving.direction
+    chord = chord / length
+    return 2.0 * float(leaving.direction @ chord) * chord - leaving.direction
+
+
+def _middle_direction(reference: np.ndarray, readings) -> np.ndarray:
+    """The middle, by angle, of ``reference`` and the unit directions ``readings``
+    (two): with three readings of one direction, the middle one is the one that the
+    other two do not both contradict, so one reading far off is outvoted."""
+    turns = sorted(
+        float(np.arctan2(reference[0] * r[1] - reference[1] * r[0], reference @ r))
+        for r in (reference, *readings)
+    )
+    turn = turns[1]
+    cos, sin = np.cos(turn), np.sin(turn)
+    return np.array(
+        [cos * reference[0] - sin * reference[1], sin * reference[0] + cos * reference[1]]
+    )
 
 
 def _chord_across(points: np.ndarray, axis: np.ndarray, half_width: float) -> np.ndarray:

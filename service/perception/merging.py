@@ -991,7 +991,7 @@ def merge_chains(
     inner_ends = ends_of_short_pieces_from_partners(
         pieces, inner_ends, joins, span, junction_of_end
     )
-    bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span)
+    bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span, junction_of_end)
     bridges = {**touching.bridges, **turn_bridges}
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)
     paths = [p for p in assembled if p.pieces[0] not in dropped]

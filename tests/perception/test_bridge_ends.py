@@ -173,3 +173,48 @@ def test_the_crossing_ends_kernel_equals_the_plain_code_bit_for_bit(seed, monkey
             assert got[0].curvature == expected[0].curvature and got[0].skip == end.skip
     assert moved > 200
     assert asked  # some spans turned by the limit to the last bit
+
+
+def _arc(radius: float, start_degrees: float, stop_degrees: float) -> np.ndarray:
+    """Joints every 5 degrees along a circle round (200, 200), anticlockwise in angle."""
+    angles = np.radians(np.arange(start_degrees, stop_degrees + 1e-9, 5.0))
+    return np.column_stack([200.0 + radius * np.cos(angles), 200.0 + radius * np.sin(angles)])
+
+
+def test_a_short_piece_beside_a_crossing_on_a_bend_follows_the_bend_into_the_gap():
+    # A loop of radius 60 seen in three pieces: a long one up to -90 degrees, the bend's
+    # next quarter hidden under an object, a short piece (0 to 10 degrees, its chord
+    # within its end joints' uncertainty) and, through the loop's own crossing (10 to 45
+    # degrees), the rest. The line between the short piece's partners is a chord of the
+    # bend, 22 degrees off the cable at the cut; the circles from both partners follow
+    # the bend, and outvote it.
+    pieces = [_arc(60.0, -180.0, -90.0), _arc(60.0, 0.0, 10.0), _arc(60.0, 45.0, 180.0)]
+    ends = [replace(end, width=4.0) for end in chain_ends(pieces, 40.0)]
+    joins = [(1, 2, 0.1), (3, 4, 0.1)]
+    junctions = [-1, -1, -1, 0, 0, -1]  # the second join runs through a crossing
+    at_the_cut = np.array([0.0, -1.0])  # the cable's direction at 0 degrees, outwards
+
+    def off_the_cable(direction):
+        return float(np.degrees(np.arccos(np.clip(direction @ at_the_cut, -1.0, 1.0))))
+
+    chord_only = ends_through_short_pieces(pieces, ends, joins, 40.0)
+    adjusted = ends_through_short_pieces(pieces, ends, joins, 40.0, junctions)
+    assert (
+        off_the_cable(adjusted[2].direction) < 5.0 < 20.0 < off_the_cable(chord_only[2].direction)
+    )
+    # The end at the crossing, and every end of a piece with no crossing beside it, keep
+    # the line; so does the whole piece on a straight cable.
+    np.testing.assert_allclose(adjusted[3].direction, chord_only[3].direction, atol=1e-12)
+    gaps_only = ends_through_short_pieces(pieces, ends, joins, 40.0, [-1] * 6)
+    np.testing.assert_allclose(gaps_only[2].direction, chord_only[2].direction, atol=1e-12)
+    straight = [
+        np.column_stack([x, np.full(len(x), 50.0)])
+        for x in (
+            np.arange(0.0, 61.0, 10.0),
+            np.arange(90.0, 111.0, 5.0),
+            np.arange(130.0, 201.0, 10.0),
+        )
+    ]
+    straight_ends = [replace(end, width=4.0) for end in chain_ends(straight, 40.0)]
+    along = ends_through_short_pieces(straight, straight_ends, joins, 40.0, junctions)
+    np.testing.assert_allclose(along[2].direction, [-1.0, 0.0], atol=1e-9)
