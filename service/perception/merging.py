@@ -851,6 +851,14 @@ def merge_chains(
         # An end at the picture's edge is a cable leaving it, too.
         leaving = at_border if leaving is None else leaving | at_border
     junction_of_end = junctions_of_ends(ends, zones)
+    if zones is not None and ends:
+        # The piece was cut at its junction: an end belongs there though its fit,
+        # extrapolated over a tip bending into the zone, ends a few px outside it.
+        fitted = np.array([end.position for end in ends], np.float64)
+        tips = np.array([(points[0], points[-1]) for points in pieces], np.float64)
+        both = _grown_zone_labels(np.concatenate([fitted, tips.reshape(-1, 2)]), zones)
+        junction_of_end = np.where(both[: len(ends)] >= 0, both[: len(ends)], both[len(ends) :])
+        junction_of_end = junction_of_end.tolist()
     touching = TouchingSplit(pieces, list(range(len(pieces))), junction_of_end)
     if distance is not None and pieces:
         touching = split_touching_strands(
@@ -870,8 +878,13 @@ def merge_chains(
         at_border = None if at_border is None else at_border[from_ends]
         leaving = None if leaving is None else leaving[from_ends]
         runs_out = None if runs_out is None else runs_out[from_ends]
-    junction_of_end, dropped = absorb_shared_pieces(
-        pieces, touching.junction_of_end, radius, distance
+    junction_of_end, dropped, crossing_pairs = absorb_shared_pieces(
+        pieces,
+        touching.junction_of_end,
+        radius,
+        distance,
+        np.array([end.position for end in ends], np.float64).reshape(-1, 2),
+        np.array([end.direction for end in ends], np.float64).reshape(-1, 2),
     )
     colours = None
     if image is not None and params.colour_weight > 0:
@@ -917,7 +930,7 @@ def merge_chains(
         colours,
         leaving,
         picture,
-        touching.pairs,
+        touching.pairs + crossing_pairs,
         hidden_gap,
         runs_out,
         open_gap,

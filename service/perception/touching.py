@@ -600,7 +600,9 @@ def absorb_shared_pieces(
     junction_of_end: list[int],
     radius: float,
     distance: np.ndarray | None = None,
-) -> tuple[list[int], set[int]]:
+    positions: np.ndarray | None = None,
+    directions: np.ndarray | None = None,
+) -> tuple[list[int], set[int], list[tuple[int, int]]]:
     """Fold pieces that two strands share into one junction.
 
     Where two strands cross at a shallow angle, thinning draws one line along the
@@ -610,7 +612,13 @@ def absorb_shared_pieces(
     ``SHARED_PIECE_RADII`` (a crossing shallower than about 14 degrees, or one strand
     between two places where others touch it) is dropped only when ``distance`` (the
     mask's distance transform) shows two strands overlapping along it and crossing
-    (:func:`_crossed_along`).
+    (:func:`_crossed_along`). With the ends' ``positions`` and ``directions`` (``(2 N,
+    2)``, start then end of every piece, pointing out of it), the strands are paired
+    across the crossing by their sides: two strands that cross swap sides, so the strand
+    on the left of the shared line where they meet is the one on its right where they
+    part (read as :func:`_end_kind` reads a touching stretch's sides, whose strands keep
+    them). The ends' fits near a shallow crossing follow the line down both strands'
+    middle, and their directions, bent toward it, cannot tell the pairs apart.
 
     Returns
     -------
@@ -618,6 +626,8 @@ def absorb_shared_pieces(
         Updated junction labels (the dropped pieces' ends get -1).
     dropped : set of int
         Indices of the dropped pieces.
+    pairs : list of (int, int)
+        The ends to join across each dropped piece whose sides could be read.
     """
     labels = list(junction_of_end)
     sizes: dict[int, int] = {}
@@ -625,6 +635,7 @@ def absorb_shared_pieces(
         if label >= 0:
             sizes[label] = sizes.get(label, 0) + 1
     dropped: set[int] = set()
+    pairs: list[tuple[int, int]] = []
     widths = None
     for index, points in enumerate(pieces):
         first, second = labels[2 * index], labels[2 * index + 1]
@@ -632,15 +643,16 @@ def absorb_shared_pieces(
             continue
         if sizes.get(first) != 3 or sizes.get(second) != 3:
             continue
-        if polyline_length(points) > SHARED_PIECE_RADII * radius:
+        long = polyline_length(points) > SHARED_PIECE_RADII * radius
+        if (long or positions is not None) and distance is not None and widths is None:
+            widths = _merging_kernels.median_distance_per_piece(
+                np.ascontiguousarray(distance, np.float32),
+                np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64),
+                np.cumsum([0] + [len(piece) for piece in pieces]).astype(np.int64),
+            )
+        if long:
             if distance is None:
                 continue
-            if widths is None:
-                widths = _merging_kernels.median_distance_per_piece(
-                    np.ascontiguousarray(distance, np.float32),
-                    np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64),
-                    np.cumsum([0] + [len(piece) for piece in pieces]).astype(np.int64),
-                )
             # The two other strands at each of its junctions.
             strands = [
                 [
@@ -652,12 +664,24 @@ def absorb_shared_pieces(
             ]
             if not _crossed_along(points, distance, strands):
                 continue
+        if positions is not None and directions is not None:
+            members = {
+                label: [end for end, at in enumerate(labels) if at == label]
+                for label in (first, second)
+            }
+            reach = float(widths[index]) if widths is not None else radius
+            sides = [
+                _end_kind(end, index, labels, members, positions, directions, pieces, reach)
+                for end in (2 * index, 2 * index + 1)
+            ]
+            if None not in sides:
+                pairs.extend([(sides[0][0], sides[1][1]), (sides[0][1], sides[1][0])])
         dropped.add(index)
         labels[2 * index] = labels[2 * index + 1] = -1
         labels = [first if label == second else label for label in labels]
         sizes[first] = 4
         sizes.pop(second, None)
-    return labels, dropped
+    return labels, dropped, pairs
 
 
 def _crossed_along(points: np.ndarray, distance: np.ndarray, strands: list[list[float]]) -> bool:
