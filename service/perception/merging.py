@@ -885,6 +885,7 @@ def merge_chains(
         distance,
         np.array([end.position for end in ends], np.float64).reshape(-1, 2),
         np.array([end.direction for end in ends], np.float64).reshape(-1, 2),
+        leaving,
     )
     colours = None
     if image is not None and params.colour_weight > 0:

@@ -234,8 +234,7 @@ def _split_shared_pieces(
             if other // 2 not in lengths:
                 lengths[other // 2] = polyline_length(pieces[other // 2])
         if any(
-            lengths[other // 2] < 2 * widths[other // 2]
-            and (leaving is None or not leaving[other ^ 1])
+            lengths[other // 2] < 2 * widths[index] and (leaving is None or not leaving[other ^ 1])
             for side in sides
             for other in side
         ):
@@ -307,8 +306,8 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     # Strands, not the scraps thinning leaves where a blob bulges (as for a shared piece).
     lengths = [polyline_length(pieces[end // 2]) for end in ends]
     if any(
-        length_k < 2 * half_width and (leaving is None or not leaving[end ^ 1])
-        for end, length_k, half_width in zip(ends, lengths, half_widths, strict=True)
+        length_k < 2 * strands and (leaving is None or not leaving[end ^ 1])
+        for end, length_k in zip(ends, lengths, strict=True)
     ):
         return None
     line = np.array([middle_a, middle_b])
@@ -602,6 +601,7 @@ def absorb_shared_pieces(
     distance: np.ndarray | None = None,
     positions: np.ndarray | None = None,
     directions: np.ndarray | None = None,
+    leaving: np.ndarray | None = None,
 ) -> tuple[list[int], set[int], list[tuple[int, int]]]:
     """Fold pieces that two strands share into one junction.
 
@@ -612,7 +612,9 @@ def absorb_shared_pieces(
     ``SHARED_PIECE_RADII`` (a crossing shallower than about 14 degrees, or one strand
     between two places where others touch it) is dropped only when ``distance`` (the
     mask's distance transform) shows two strands overlapping along it and crossing
-    (:func:`_crossed_along`). With the ends' ``positions`` and ``directions`` (``(2 N,
+    (:func:`_crossed_along`), and no strand meeting it leaves the picture (``leaving``,
+    per end) within the stretch's width: two strands leaving side by side, the border
+    cutting them, look the same. With the ends' ``positions`` and ``directions`` (``(2 N,
     2)``, start then end of every piece, pointing out of it), the strands are paired
     across the crossing by their sides: two strands that cross swap sides, so the strand
     on the left of the shared line where they meet is the one on its right where they
@@ -652,6 +654,15 @@ def absorb_shared_pieces(
             )
         if long:
             if distance is None:
+                continue
+            # A strand meeting it that leaves the picture within the stretch's width:
+            # the border cuts the band there, and two strands leaving side by side look
+            # as a crossing the border cuts.
+            if leaving is not None and any(
+                leaving[end ^ 1] and polyline_length(pieces[end // 2]) < 2 * widths[index]
+                for end in range(len(labels))
+                if labels[end] in (first, second) and end // 2 != index
+            ):
                 continue
             # The two other strands at each of its junctions.
             strands = [
