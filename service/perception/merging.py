@@ -55,6 +55,7 @@ from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
 from service.perception.touching import (
     TouchingSplit,
+    absorb_shared_pieces,
     split_touching_strands,
     split_where_leaving_together,
 )
@@ -643,49 +644,6 @@ def _mutual_best(
     return sorted(pairs)
 
 
-# Pieces shared by two strands (a shallow crossing) are at most this many radii long.
-SHARED_PIECE_RADII = 16.0
-
-
-def absorb_shared_pieces(
-    pieces: list[np.ndarray], junction_of_end: list[int], radius: float
-) -> tuple[list[int], set[int]]:
-    """Fold pieces that two strands share into one junction.
-
-    Where two strands cross at a shallow angle, thinning draws one line along the
-    stretch where they overlap, with a three-way junction at each end. That piece
-    belongs to both strands, so it is dropped and its two junctions become one
-    crossing whose four ends are paired like any other.
-
-    Returns
-    -------
-    junction_of_end : list of int
-        Updated junction labels (the dropped pieces' ends get -1).
-    dropped : set of int
-        Indices of the dropped pieces.
-    """
-    labels = list(junction_of_end)
-    sizes: dict[int, int] = {}
-    for label in labels:
-        if label >= 0:
-            sizes[label] = sizes.get(label, 0) + 1
-    dropped: set[int] = set()
-    for index, points in enumerate(pieces):
-        first, second = labels[2 * index], labels[2 * index + 1]
-        if first < 0 or second < 0 or first == second:
-            continue
-        if sizes.get(first) != 3 or sizes.get(second) != 3:
-            continue
-        if polyline_length(points) > SHARED_PIECE_RADII * radius:
-            continue
-        dropped.add(index)
-        labels[2 * index] = labels[2 * index + 1] = -1
-        labels = [first if label == second else label for label in labels]
-        sizes[first] = 4
-        sizes.pop(second, None)
-    return labels, dropped
-
-
 def _ends_of_split_pieces(
     ends: list[ChainEnd], pieces: list[np.ndarray], touching: TouchingSplit, span: float
 ) -> list[ChainEnd]:
@@ -893,6 +851,14 @@ def merge_chains(
         # An end at the picture's edge is a cable leaving it, too.
         leaving = at_border if leaving is None else leaving | at_border
     junction_of_end = junctions_of_ends(ends, zones)
+    if zones is not None and ends:
+        # The piece was cut at its junction: an end belongs there though its fit,
+        # extrapolated over a tip bending into the zone, ends a few px outside it.
+        fitted = np.array([end.position for end in ends], np.float64)
+        tips = np.array([(points[0], points[-1]) for points in pieces], np.float64)
+        both = _grown_zone_labels(np.concatenate([fitted, tips.reshape(-1, 2)]), zones)
+        junction_of_end = np.where(both[: len(ends)] >= 0, both[: len(ends)], both[len(ends) :])
+        junction_of_end = junction_of_end.tolist()
     touching = TouchingSplit(pieces, list(range(len(pieces))), junction_of_end)
     if distance is not None and pieces:
         touching = split_touching_strands(
@@ -912,7 +878,15 @@ def merge_chains(
         at_border = None if at_border is None else at_border[from_ends]
         leaving = None if leaving is None else leaving[from_ends]
         runs_out = None if runs_out is None else runs_out[from_ends]
-    junction_of_end, dropped = absorb_shared_pieces(pieces, touching.junction_of_end, radius)
+    junction_of_end, dropped, crossing_pairs = absorb_shared_pieces(
+        pieces,
+        touching.junction_of_end,
+        radius,
+        distance,
+        np.array([end.position for end in ends], np.float64).reshape(-1, 2),
+        np.array([end.direction for end in ends], np.float64).reshape(-1, 2),
+        leaving,
+    )
     colours = None
     if image is not None and params.colour_weight > 0:
         free = None if zones is None else ~tips_in_junctions(pieces, zones).reshape(-1, 2).any(1)
@@ -958,7 +932,7 @@ def merge_chains(
         colours,
         leaving,
         picture,
-        touching.pairs,
+        touching.pairs + crossing_pairs,
         hidden_gap,
         runs_out,
         open_gap,

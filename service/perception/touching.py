@@ -353,7 +353,13 @@ def _end_kind(end, index, labels, members, positions, directions, pieces, reach)
             heading, positions[end], [_point_in(pieces, other, reach) for other in others]
         )
         if offsets[0] * offsets[1] >= 0:
-            return None
+            # Both on one side of the end's line: on a stretch bending into the
+            # junction the end's fit lags the bend and tilts that line. Two strands
+            # parting side by side still lie a strand's width apart across it (the
+            # stretch's half width, ``reach``); the one further left is on the left.
+            if abs(offsets[0] - offsets[1]) < 0.5 * reach:
+                return None
+            return others if offsets[0] < offsets[1] else others[::-1]
     return others if offsets[0] < 0 else others[::-1]
 
 
@@ -578,3 +584,143 @@ def _signed_turn(before: np.ndarray, at: np.ndarray, after: np.ndarray) -> float
     arriving, leaving = at - before, after - at
     cross = float(arriving[0] * leaving[1] - arriving[1] * leaving[0])
     return float(np.arctan2(cross, float(arriving @ leaving)))
+
+
+# A piece between two three-way junctions up to this many radii long is taken as shared
+# by two strands crossing at a shallow angle on its junctions alone. Two strands of
+# half width r crossing at an angle a (radians) overlap over about 4 r / a: up to 16
+# radii, crossings steeper than about 14 degrees; a longer piece is shared only when
+# its mask says so (:func:`_crossed_along`).
+SHARED_PIECE_RADII = 16.0
+
+
+def absorb_shared_pieces(
+    pieces: list[np.ndarray],
+    junction_of_end: list[int],
+    radius: float,
+    distance: np.ndarray | None = None,
+    positions: np.ndarray | None = None,
+    directions: np.ndarray | None = None,
+    leaving: np.ndarray | None = None,
+) -> tuple[list[int], set[int], list[tuple[int, int]]]:
+    """Fold pieces that two strands share into one junction.
+
+    Where two strands cross at a shallow angle, thinning draws one line along the
+    stretch where they overlap, with a three-way junction at each end. That piece
+    belongs to both strands, so it is dropped and its two junctions become one
+    crossing whose four ends are paired like any other. A piece longer than
+    ``SHARED_PIECE_RADII`` (a crossing shallower than about 14 degrees, or one strand
+    between two places where others touch it) is dropped only when ``distance`` (the
+    mask's distance transform) shows two strands overlapping along it and crossing
+    (:func:`_crossed_along`), and no strand meeting it leaves the picture (``leaving``,
+    per end) within the stretch's width: two strands leaving side by side, the border
+    cutting them, look the same. With the ends' ``positions`` and ``directions`` (``(2 N,
+    2)``, start then end of every piece, pointing out of it), the strands are paired
+    across the crossing by their sides: two strands that cross swap sides, so the strand
+    on the left of the shared line where they meet is the one on its right where they
+    part (read as :func:`_end_kind` reads a touching stretch's sides, whose strands keep
+    them). The ends' fits near a shallow crossing follow the line down both strands'
+    middle, and their directions, bent toward it, cannot tell the pairs apart.
+
+    Returns
+    -------
+    junction_of_end : list of int
+        Updated junction labels (the dropped pieces' ends get -1).
+    dropped : set of int
+        Indices of the dropped pieces.
+    pairs : list of (int, int)
+        The ends to join across each dropped piece whose sides could be read.
+    """
+    labels = list(junction_of_end)
+    sizes: dict[int, int] = {}
+    for label in labels:
+        if label >= 0:
+            sizes[label] = sizes.get(label, 0) + 1
+    dropped: set[int] = set()
+    pairs: list[tuple[int, int]] = []
+    widths = None
+    for index, points in enumerate(pieces):
+        first, second = labels[2 * index], labels[2 * index + 1]
+        if first < 0 or second < 0 or first == second:
+            continue
+        if sizes.get(first) != 3 or sizes.get(second) != 3:
+            continue
+        long = polyline_length(points) > SHARED_PIECE_RADII * radius
+        if (long or positions is not None) and distance is not None and widths is None:
+            widths = _merging_kernels.median_distance_per_piece(
+                np.ascontiguousarray(distance, np.float32),
+                np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64),
+                np.cumsum([0] + [len(piece) for piece in pieces]).astype(np.int64),
+            )
+        if long:
+            if distance is None:
+                continue
+            # A strand meeting it that leaves the picture within the stretch's width:
+            # the border cuts the band there, and two strands leaving side by side look
+            # as a crossing the border cuts.
+            if leaving is not None and any(
+                leaving[end ^ 1] and polyline_length(pieces[end // 2]) < 2 * widths[index]
+                for end in range(len(labels))
+                if labels[end] in (first, second) and end // 2 != index
+            ):
+                continue
+            # The two other strands at each of its junctions.
+            strands = [
+                [
+                    float(widths[end // 2])
+                    for end in range(len(labels))
+                    if labels[end] == label and end // 2 != index
+                ]
+                for label in (first, second)
+            ]
+            if not _crossed_along(points, distance, strands):
+                continue
+        if positions is not None and directions is not None:
+            members = {
+                label: [end for end, at in enumerate(labels) if at == label]
+                for label in (first, second)
+            }
+            reach = float(widths[index]) if widths is not None else radius
+            sides = [
+                _end_kind(end, index, labels, members, positions, directions, pieces, reach)
+                for end in (2 * index, 2 * index + 1)
+            ]
+            if None not in sides:
+                pairs.extend([(sides[0][0], sides[1][1]), (sides[0][1], sides[1][0])])
+        dropped.add(index)
+        labels[2 * index] = labels[2 * index + 1] = -1
+        labels = [first if label == second else label for label in labels]
+        sizes[first] = 4
+        sizes.pop(second, None)
+    return labels, dropped, pairs
+
+
+def _crossed_along(points: np.ndarray, distance: np.ndarray, strands: list[list[float]]) -> bool:
+    """Whether two strands overlap along a piece and cross within it, read from the
+    mask's half width along it (``distance`` at every pixel of its line) against the
+    half widths of the two strands meeting it at each of its junctions (``strands``).
+
+    Two strands crossing at a shallow angle make one band whose width grows from one
+    strand's at the crossing to both strands' where they part: a quarter of the way in
+    from each end it is half-way, wider than either strand alone, which a single strand
+    between two junctions never is. Where they cross it narrows to one strand's width,
+    below ``SIDE_BY_SIDE_WIDTH_FRACTION`` of the two together, which strands touching
+    all along never do (those :func:`split_touching_strands` has taken).
+    """
+    points = np.asarray(points, np.float64)
+    along = arc_lengths(points)
+    length = float(along[-1])
+    samples = np.arange(0.0, length + 1e-9, 1.0)
+    xs, ys = points_along(points, along, samples).T
+    height, width = distance.shape
+    cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
+    rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
+    half_widths = distance[rows, cols].astype(np.float64)
+    widest = max(max(side) for side in strands)
+    for low, high in ((0.125, 0.375), (0.625, 0.875)):
+        span = (samples >= low * length) & (samples <= high * length)
+        if not span.any() or float(np.median(half_widths[span])) <= widest:
+            return False
+    together = min(sum(side) for side in strands)
+    middle = (samples >= 0.25 * length) & (samples <= 0.75 * length)
+    return float(half_widths[middle].min()) < SIDE_BY_SIDE_WIDTH_FRACTION * together

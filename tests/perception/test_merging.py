@@ -627,6 +627,43 @@ def test_strands_that_cross_at_a_shallow_angle_are_not_taken_as_side_by_side():
         assert min(_strand_error(chain, cable) for chain in chains) < 6.0
 
 
+@pytest.mark.parametrize("half_rise", [16, 20, 24])
+def test_strands_crossing_at_a_very_shallow_angle_keep_their_strands(half_rise):
+    """Two cables 9 px wide crossing at 6-9 degrees share a line 21-35 radii long, longer
+    than a shared piece is taken on its junctions alone: the mask's width along it (wider
+    than either strand a quarter of the way in, one strand's where they cross) says two
+    strands overlap there, and they are paired across it by their sides, which crossing
+    strands swap. (Before: 3 chains at 6 and 7.6 degrees, the strands swapped at 9.)"""
+    cables = (
+        [(20, 92 - half_rise), (620, 92 + half_rise)],
+        [(20, 92 + half_rise), (620, 92 - half_rise)],
+    )
+    detection = detect(None, mask=_touching_strands_mask(*cables, shape=(200, 640)))
+    chains = [np.asarray(chain.points, np.float64) for chain in detection.chains]
+    assert len(chains) == 2
+    for cable in cables:
+        assert min(_strand_error(chain, cable) for chain in chains) < 6.0
+
+
+@pytest.mark.parametrize(
+    ("family", "seed"),
+    [
+        ("shallow_crossings", 86067),
+        ("shallow_crossings", 86104),
+        ("side_by_side", 86065),
+        ("doubled_back", 86009),
+    ],
+)
+def test_junctions_of_generated_scenes_are_paired_right(family, seed):
+    """Tuning scenes wrong at a junction: two cables crossing at about 10 degrees, their
+    shared line longer than 16 radii (86067, 86104: one strand's halves left apart); a
+    touching stretch bending into its junction, the end's fit tilted so both other strands
+    lay on one side of it (side_by_side 86065: taken as a crossing); a bulb's end whose
+    fit, extrapolated, left the junction zone its piece was cut at (doubled_back 86009)."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
+
+
 def test_two_ends_facing_each_other_across_a_long_gap_join_only_under_an_object():
     """A straight cable with a 100 px gap (28 radii): its ends are each other's only
     partner but a little over the threshold. Across a short gap that is enough; across a
