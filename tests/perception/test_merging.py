@@ -2,7 +2,6 @@
 
 from collections import Counter
 from dataclasses import replace
-from itertools import pairwise
 
 import cv2
 import numpy as np
@@ -28,10 +27,11 @@ from service.perception.merging import (
     merge_chains,
     tips_in_junctions,
 )
-from service.perception.touching import split_touching_strands, split_where_leaving_together
+from service.perception.touching import split_where_leaving_together
 from service.synthetic.families import make_family_scene
 from tests.perception.references import merging as reference
 from tests.perception.test_appearance import gap_scene
+from tests.perception.test_merging_touching import strand_error, touching_strands_mask
 
 
 def test_gap_curves_are_straight_for_aligned_ends():
@@ -519,151 +519,6 @@ def test_ends_are_not_joined_round_a_bend_outside_the_picture():
     assert len(free.paths) == 1 and len(inside.paths) == 2
 
 
-def _touching_strands_mask(first, second, thickness=9, shape=(200, 500)):
-    """Two cables drawn ``thickness`` px wide along ``first`` and ``second``."""
-    mask = np.zeros(shape, np.uint8)
-    for points in (first, second):
-        cv2.polylines(mask, [np.array(points, np.int32)], False, 1, thickness)
-    return mask > 0
-
-
-def _strand_error(chain: np.ndarray, cable: list) -> float:
-    """Largest distance from the cable's polyline samples to the chain's polyline."""
-    cable = np.array(cable, np.float64)
-    samples = np.concatenate([np.linspace(a, b, 40, endpoint=False) for a, b in pairwise(cable)])
-    start, step = chain[:-1], np.diff(chain, axis=0)
-    along = ((samples[:, None, :] - start[None]) * step[None]).sum(2)
-    along = np.clip(along / np.maximum((step**2).sum(1), 1e-12)[None], 0.0, 1.0)
-    nearest = start[None] + along[..., None] * step[None]
-    return float(np.hypot(*(samples[:, None, :] - nearest).transpose(2, 0, 1)).min(1).max())
-
-
-def test_cables_touching_side_by_side_keep_their_sides_along_a_long_stretch():
-    """Two cables 9 px wide lie touching for 300 px (66 radii), then part: thinning draws
-    one line down the stretch, and each cable must keep its own side through it.
-    (Without the width the stretch was one cable's piece and the other cable two chains.)"""
-    upper = [(20, 30), (100, 96), (400, 96), (480, 30)]
-    lower = [(20, 170), (100, 104), (400, 104), (480, 170)]
-    detection = detect(None, mask=_touching_strands_mask(upper, lower))
-    chains = [np.asarray(chain.points, np.float64) for chain in detection.chains]
-    assert len(chains) == 2
-    errors = sorted(
-        min(_strand_error(chain, cable) for chain in chains) for cable in (upper, lower)
-    )
-    # Each cable has a chain near its centreline all along: within its half width (4.5
-    # px) and the rounding of the drawn polylines' corners.
-    assert errors[-1] < 6.0
-
-
-@pytest.mark.parametrize(
-    ("family", "seed"),
-    [
-        ("doubled_back", 105),
-        ("doubled_back", 4015),
-        ("doubled_back", 4029),
-        ("side_by_side", 103),
-        ("doubled_back", 82016),
-        ("doubled_back", 82031),
-        ("doubled_back", 82101),
-    ],
-)
-def test_touching_strands_of_generated_scenes_come_out_whole(family, seed):
-    """Scenes (tuning seeds) where strands touch along a stretch: a cable doubled back
-    on itself round a bend that leaves a small hole, and two cables side by side. Each
-    cable must be one chain covering it all (the bridge along the middle of a doubled-back
-    stretch left the strands' outer edges uncovered; so did a bridge across a junction
-    zone that takes the whole stretch, 82016, drawn from the ends' bent fits, and one
-    across a stretch left short between two junctions, 82031; 82101: a bulb's two ends
-    whose fits swap their sides)."""
-    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
-    assert score.frame.correct, score.frame.coverage
-
-
-def test_a_doubled_back_stretch_takes_its_bulbs_sides_from_clear_of_the_junction():
-    """A cable doubled back round a bulb: thinning draws one line down the touching
-    stretch (piece 0), parting at x = 100 into two strands (pieces 1, 2) and ending at
-    x = 300 in the bulb (piece 3), whose two ends start together there, so where they
-    lie says nothing of their sides. Read clear of the junction, the bulb's end that
-    leaves upwards continues the upper strand. (Before, the stretch was left whole and
-    one strand came out as a bridge along it, 1-2 half widths off the cable.)"""
-    sweep = np.linspace(np.pi, 3 * np.pi, 80)
-    bulb = np.array([322.0, 100.0]) + 22.0 * np.column_stack([np.cos(sweep), np.sin(sweep)])
-    pieces = [
-        np.column_stack([np.linspace(100, 300, 41), np.full(41, 100.0)]),
-        np.array([[20.0, 40.0], [60.0, 70.0], [100.0, 100.0]]),
-        np.array([[20.0, 160.0], [60.0, 130.0], [100.0, 100.0]]),
-        bulb,
-    ]
-    upper = [(20, 40), (100, 95.5), (300, 95.5), *map(tuple, bulb[:40])]
-    lower = [*map(tuple, bulb[40:]), (300, 104.5), (100, 104.5), (20, 160)]
-    distance = cv2.distanceTransform(
-        _touching_strands_mask(upper, lower).astype(np.uint8), cv2.DIST_L2, 5
-    )
-    positions = np.array([points[index] for points in pieces for index in (0, -1)])
-    directions = np.array(
-        [points[index] - points[inner] for points in pieces for index, inner in ((0, 1), (-1, -2))]
-    )
-    directions /= np.hypot(directions[:, 0], directions[:, 1])[:, None]
-    split = split_touching_strands(
-        pieces, positions, directions, [0, 1, -1, 0, -1, 0, 1, 1], distance
-    )
-    assert split.split == [0]
-    partner = {end: other for pair in split.pairs for end, other in (pair, pair[::-1])}
-    # The upper strand's end (3) meets one copy of the stretch; that copy's far end
-    # meets the bulb's start (6), which leaves upwards.
-    copy = partner[3] // 2
-    assert split.pieces[copy][:, 1].mean() < 100.0
-    assert partner[2 * copy + 1] == 6
-
-
-def test_strands_that_cross_at_a_shallow_angle_are_not_taken_as_side_by_side():
-    """Two cables crossing at 8 degrees overlap along a long stretch too, but there the
-    mask narrows to one cable's width: the side-by-side rule must leave it a crossing."""
-    pieces_mask = _touching_strands_mask([(20, 60), (480, 124)], [(20, 124), (480, 60)])
-    detection = detect(None, mask=pieces_mask)
-    chains = [np.asarray(chain.points, np.float64) for chain in detection.chains]
-    assert len(chains) == 2
-    for cable in ([(20, 60), (480, 124)], [(20, 124), (480, 60)]):
-        assert min(_strand_error(chain, cable) for chain in chains) < 6.0
-
-
-@pytest.mark.parametrize("half_rise", [16, 20, 24])
-def test_strands_crossing_at_a_very_shallow_angle_keep_their_strands(half_rise):
-    """Two cables 9 px wide crossing at 6-9 degrees share a line 21-35 radii long, longer
-    than a shared piece is taken on its junctions alone: the mask's width along it (wider
-    than either strand a quarter of the way in, one strand's where they cross) says two
-    strands overlap there, and they are paired across it by their sides, which crossing
-    strands swap. (Before: 3 chains at 6 and 7.6 degrees, the strands swapped at 9.)"""
-    cables = (
-        [(20, 92 - half_rise), (620, 92 + half_rise)],
-        [(20, 92 + half_rise), (620, 92 - half_rise)],
-    )
-    detection = detect(None, mask=_touching_strands_mask(*cables, shape=(200, 640)))
-    chains = [np.asarray(chain.points, np.float64) for chain in detection.chains]
-    assert len(chains) == 2
-    for cable in cables:
-        assert min(_strand_error(chain, cable) for chain in chains) < 6.0
-
-
-@pytest.mark.parametrize(
-    ("family", "seed"),
-    [
-        ("shallow_crossings", 86067),
-        ("shallow_crossings", 86104),
-        ("side_by_side", 86065),
-        ("doubled_back", 86009),
-    ],
-)
-def test_junctions_of_generated_scenes_are_paired_right(family, seed):
-    """Tuning scenes wrong at a junction: two cables crossing at about 10 degrees, their
-    shared line longer than 16 radii (86067, 86104: one strand's halves left apart); a
-    touching stretch bending into its junction, the end's fit tilted so both other strands
-    lay on one side of it (side_by_side 86065: taken as a crossing); a bulb's end whose
-    fit, extrapolated, left the junction zone its piece was cut at (doubled_back 86009)."""
-    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
-    assert score.frame.correct, score.frame.coverage
-
-
 def test_two_ends_facing_each_other_across_a_long_gap_join_only_under_an_object():
     """A straight cable with a 100 px gap (28 radii): its ends are each other's only
     partner but a little over the threshold. Across a short gap that is enough; across a
@@ -931,11 +786,11 @@ def test_two_cables_touching_as_they_leave_the_picture_come_out_as_two_chains():
     simple/00012); a cable bending round close to the border must stay one."""
     first = [(100, 0), (0, 100)]
     second = [(0, 100), (100, 200)]
-    detection = detect(None, mask=_touching_strands_mask(first, second, shape=(200, 300)))
+    detection = detect(None, mask=touching_strands_mask(first, second, shape=(200, 300)))
     chains = [np.asarray(chain.points, np.float64) for chain in detection.chains]
     assert len(chains) == 2
     for cable in (first, second):
-        assert min(_strand_error(chain, cable) for chain in chains) < 6.0
+        assert min(strand_error(chain, cable) for chain in chains) < 6.0
     # One cable round a wide bend whose outer side the border clips.
     mask = np.zeros((200, 300), np.uint8)
     cv2.ellipse(mask, (60, 100), (62, 70), 0, 90, 270, 1, 9)
@@ -970,7 +825,7 @@ def test_a_v_whose_turn_thinning_spreads_over_two_joints_is_cut_at_the_border(ap
     chains = [np.asarray(chain.points, np.float64) for chain in detect(None, mask=mask).chains]
     assert len(chains) == 2
     for cable in cables:
-        assert min(_strand_error(chain, cable) for chain in chains) < 6.0
+        assert min(strand_error(chain, cable) for chain in chains) < 6.0
 
 
 @pytest.mark.parametrize(("apex_y", "half_angle"), [(16, 30), (24, 45), (24, 20)])
@@ -981,7 +836,7 @@ def test_a_crossing_near_the_border_is_not_cut_into_a_v(apex_y, half_angle):
     chains = [np.asarray(chain.points, np.float64) for chain in detect(None, mask=mask).chains]
     assert len(chains) == 2
     for cable in cables:
-        assert min(_strand_error(chain, cable) for chain in chains) < 6.0
+        assert min(strand_error(chain, cable) for chain in chains) < 6.0
 
 
 def test_a_tight_hairpin_touching_the_border_stays_one_chain():
