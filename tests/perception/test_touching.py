@@ -6,7 +6,7 @@ import pytest
 
 from service.perception.pipeline import detect
 from service.perception.touching import split_touching_strands
-from tests.perception.test_merging import _strand_error, _touching_strands_mask
+from tests.perception.test_merging_touching import strand_error, touching_strands_mask
 
 
 @pytest.mark.parametrize("stretch", [20, 30])
@@ -17,11 +17,11 @@ def test_a_touching_stretch_the_junction_takes_whole_keeps_each_strands_side(str
     105 px off); the stretch keeps both widths, so each strand keeps its side."""
     upper = [(20, 30), (100, 96), (100 + stretch, 96), (180 + stretch, 30)]
     lower = [(20, 170), (100, 104), (100 + stretch, 104), (180 + stretch, 170)]
-    detection = detect(None, mask=_touching_strands_mask(upper, lower, shape=(200, 400)))
+    detection = detect(None, mask=touching_strands_mask(upper, lower, shape=(200, 400)))
     chains = [np.asarray(chain.points, np.float64) for chain in detection.chains]
     assert len(chains) == 2
     for cable in (upper, lower):
-        assert min(_strand_error(chain, cable) for chain in chains) < 6.0
+        assert min(strand_error(chain, cable) for chain in chains) < 6.0
 
 
 def _four_arms(mask, arms):
@@ -43,7 +43,7 @@ def test_four_ends_meeting_where_the_mask_keeps_both_widths_pair_by_side():
     right (piece 2), lower left (piece 1) lower right (piece 3), not straight across."""
     upper = [(20, 40), (100, 96), (130, 96), (210, 40)]
     lower = [(20, 160), (100, 104), (130, 104), (210, 160)]
-    mask = _touching_strands_mask(upper, lower, shape=(200, 240))
+    mask = touching_strands_mask(upper, lower, shape=(200, 240))
     arms = [
         [(20, 40), (60, 68), (96, 93)],
         [(20, 160), (60, 132), (96, 107)],
@@ -63,7 +63,7 @@ def test_the_bridge_across_a_touching_stretch_follows_each_strands_own_side():
     strand left uncovered). Each bridge keeps to its strand's side, away from the other."""
     upper = [(20, 40), (100, 96), (130, 96), (210, 40)]
     lower = [(20, 160), (100, 104), (130, 104), (210, 160)]
-    mask = _touching_strands_mask(upper, lower, shape=(200, 240))
+    mask = touching_strands_mask(upper, lower, shape=(200, 240))
     arms = [
         [(20, 40), (60, 68), (94, 92), (99, 99)],
         [(20, 160), (60, 132), (94, 108), (99, 101)],
@@ -86,7 +86,7 @@ def test_four_ends_of_a_shallow_crossing_are_left_to_the_crossing():
     """Two cables crossing at 23 degrees: the same four arms, but the mask narrows to
     one cable's width where they cross, so the junction is left as it is."""
     first, second = [(20, 80), (220, 120)], [(20, 120), (220, 80)]
-    mask = _touching_strands_mask(first, second, shape=(200, 240))
+    mask = touching_strands_mask(first, second, shape=(200, 240))
     arms = [
         [(20, 80), (55, 87), (90, 94)],
         [(20, 120), (55, 113), (90, 106)],
@@ -113,7 +113,7 @@ def test_a_shared_piece_shorter_than_its_width_is_judged_at_its_middle(crossing,
         first = [(20, 40), (100, 95.5), (112, 95.5), (192, 40)]
         second = [(20, 160), (100, 104.5), (112, 104.5), (192, 160)]
         middle = 106.0
-    mask = _touching_strands_mask(first, second, shape=(200, 240))
+    mask = touching_strands_mask(first, second, shape=(200, 240))
     shared = np.column_stack([np.linspace(middle - 6, middle + 6, 4), np.full(4, 100.0)])
     arms = [
         np.array([first[0], (middle - 30, 100 - 14), (middle - 8, 99)], np.float64),
