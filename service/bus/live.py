@@ -12,7 +12,9 @@
 * pairs each result with the frame it was made from, through the identity the result's
   attachment gives back (:class:`schemas.ResultAttachment`): the camera's ``frame_id``,
   else the zenoh timestamp of the frame's sample, else (a camera that sends neither) the
-  newest frame that had arrived when the detection began;
+  newest frame that had arrived when the detection began. A result can overtake its own
+  frame (the replica's and the hub's callbacks run on different threads); such a result
+  waits, briefly, for its frame instead of being dropped;
 * hands every paired frame (:class:`LiveView`) to the watchers' callbacks. While no
   result comes for a camera (no replica detects it, or none yet), its frames are handed
   on bare, so that the viewer still shows the camera.
@@ -58,6 +60,10 @@ BARE_AFTER_S = 1.0
 FORGET_CAMERA_S = 60.0
 """A camera silent for this long leaves the camera list."""
 PREFER_TRACKS_S = 2.0
+EARLY_RESULTS = 8
+"""Results whose frame has not arrived yet, kept per watched camera ..."""
+EARLY_RESULT_S = 2.0
+"""... for at most this long: then they count as unpaired."""
 """While tracks came for a camera within this long, ``auto`` watchers take tracks only."""
 _CAMERA_NAME_FORBIDDEN = frozenset("/*$?#")
 
@@ -172,6 +178,27 @@ class _Watcher:
     """``auto`` (tracks when there are some, else chains), ``chains`` or ``tracks``."""
 
 
+@dataclass(frozen=True)
+class _EarlyResult:
+    """A result whose frame had not arrived when it came."""
+
+    kind: str
+    attachment: dict[str, Any]
+    payload: bytes
+    arrived: float
+
+    def made_from(self, frame: LiveFrame) -> str | None:
+        """How this result pairs with ``frame`` (``frame_id``, ``sample_timestamp``), or
+        None when it was made from another frame."""
+        frame_id = self.attachment.get("frame_id")
+        if frame_id is not None:
+            return "frame_id" if frame.frame_id == frame_id else None
+        stamp = self.attachment.get("sample_timestamp")
+        if stamp is not None and frame.sample_timestamp == stamp:
+            return "sample_timestamp"
+        return None
+
+
 @dataclass
 class _Feed:
     """One watched camera: its last frames, its result subscribers and its watchers."""
@@ -183,8 +210,27 @@ class _Feed:
     subscribers: list[Any] = field(default_factory=list)
     last_result: float = float("-inf")
     last_tracks: float = float("-inf")
+    early: deque[_EarlyResult] = field(default_factory=deque)
+    """Results that came before their frame (paired by ``frame_id`` or timestamp)."""
     unpaired: int = 0
     too_large: int = 0
+
+    def keep_early(self, result: _EarlyResult) -> None:
+        self.early.append(result)
+        while len(self.early) > EARLY_RESULTS:
+            self.early.popleft()
+            self.unpaired += 1
+
+    def early_results_of(self, frame: LiveFrame, now: float) -> list[tuple[_EarlyResult, str]]:
+        """The waiting results made from ``frame`` (taken out) and how each was paired;
+        stale ones are dropped."""
+        while self.early and now - self.early[0].arrived > EARLY_RESULT_S:
+            self.early.popleft()
+            self.unpaired += 1
+        found = [(early, how) for early in self.early if (how := early.made_from(frame))]
+        for early, _ in found:
+            self.early.remove(early)
+        return found
 
 
 class LiveHub:
@@ -335,18 +381,27 @@ class LiveHub:
                 feed.frame_bytes > RING_BYTES and len(feed.frames) > 1
             ):
                 feed.frame_bytes -= len(feed.frames.popleft().payload)
+            early = [
+                (
+                    _paired_view(camera, frame, result, pairing, now),
+                    _watchers_for(feed, result.kind, now),
+                )
+                for result, pairing in feed.early_results_of(frame, now)
+            ]
             bare = now - feed.last_result > BARE_AFTER_S
-            watchers = list(feed.watchers) if bare else []
+            watchers = list(feed.watchers) if bare and not early else []
         view = LiveView(camera, frame)
         for watcher in watchers:
             watcher.deliver(view)
+        for paired_view, paired_watchers in early:  # results that came before this frame
+            for watcher in paired_watchers:
+                watcher.deliver(paired_view)
 
     def _on_result(self, camera: str, kind: str, sample: zenoh.Sample) -> None:
         if sample.kind != zenoh.SampleKind.PUT:
             return
         now = time.monotonic()
-        attachment = _json_object(sample.attachment)
-        payload = sample.payload.to_bytes()
+        result = _EarlyResult(kind, _json_object(sample.attachment), sample.payload.to_bytes(), now)
         with self._lock:
             feed = self._feeds.get(camera)
             if feed is None:
@@ -354,24 +409,38 @@ class LiveHub:
             feed.last_result = now
             if kind == "tracks":
                 feed.last_tracks = now
-            frame, pairing = _pair(feed.frames, attachment, payload, now)
+            frame, pairing = _pair(feed.frames, result.attachment, result.payload, now)
             if frame is None:
-                feed.unpaired += 1
+                if pairing is None:
+                    feed.unpaired += 1
+                else:  # its frame may still be on its way here
+                    feed.keep_early(result)
                 return
-            prefer_tracks = now - feed.last_tracks <= PREFER_TRACKS_S
-            watchers = [w for w in feed.watchers if _wants(w.results, kind, prefer_tracks)]
-        replica = attachment.get("replica")
-        view = LiveView(
-            camera,
-            frame,
-            kind=kind,
-            result=payload,
-            pairing=pairing,
-            latency_ms=round((now - frame.arrived) * 1000.0, 2),
-            replica=replica if isinstance(replica, str) else None,
-        )
+            watchers = _watchers_for(feed, kind, now)
+        view = _paired_view(camera, frame, result, pairing, now)
         for watcher in watchers:
             watcher.deliver(view)
+
+
+def _watchers_for(feed: _Feed, kind: str, now: float) -> list[_Watcher]:
+    """The watchers of ``feed`` that take a ``kind`` result now."""
+    prefer_tracks = now - feed.last_tracks <= PREFER_TRACKS_S
+    return [w for w in feed.watchers if _wants(w.results, kind, prefer_tracks)]
+
+
+def _paired_view(
+    camera: str, frame: LiveFrame, result: _EarlyResult, pairing: str, now: float
+) -> LiveView:
+    replica = result.attachment.get("replica")
+    return LiveView(
+        camera,
+        frame,
+        kind=result.kind,
+        result=result.payload,
+        pairing=pairing,
+        latency_ms=round(max(0.0, now - frame.arrived) * 1000.0, 2),
+        replica=replica if isinstance(replica, str) else None,
+    )
 
 
 def _wants(results: str, kind: str, prefer_tracks: bool) -> bool:
@@ -385,19 +454,23 @@ def _wants(results: str, kind: str, prefer_tracks: bool) -> bool:
 def _pair(
     frames: deque[LiveFrame], attachment: dict[str, Any], payload: bytes, now: float
 ) -> tuple[LiveFrame | None, str | None]:
-    """The frame a result was made from, and how it was found (see the module's doc)."""
+    """The frame a result was made from, and how it was found (see the module's doc).
+
+    A result that names its frame (``frame_id``, ``sample_timestamp``) which is not among
+    ``frames`` gives None and how it would be paired: its frame may not have come yet.
+    """
     frame_id = attachment.get("frame_id")
     if frame_id is not None:
         for frame in reversed(frames):
             if frame.frame_id == frame_id:
                 return frame, "frame_id"
-        return None, None
+        return None, "frame_id"
     stamp = attachment.get("sample_timestamp")
     if stamp is not None:
         for frame in reversed(frames):
             if frame.sample_timestamp == stamp:
                 return frame, "sample_timestamp"
-        return None, None
+        return None, "sample_timestamp"
     # Neither: the replica took the newest frame waiting when it began (latest wins), so
     # the newest that had arrived by then, the detection's own time before the result.
     began = now - _detection_seconds(payload)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import json
 import queue
+import time
 from collections.abc import Iterator
 
 import cv2
@@ -84,12 +85,20 @@ def ack(socket: ClientConnection) -> None:
 
 def acknowledged_until(socket: ClientConnection, kind: str, frame_id) -> tuple[dict, bytes, bytes]:
     """The frame message with a ``kind`` result for ``frame_id``, every frame before it
-    acknowledged (skipped)."""
-    while True:
-        header, result, jpeg = next_frame(socket)
+    acknowledged (skipped); fails after TIMEOUT (statuses keep coming while none does)."""
+    deadline = time.monotonic() + TIMEOUT
+    while time.monotonic() < deadline:
+        try:
+            message = socket.recv(timeout=max(0.0, deadline - time.monotonic()))
+        except TimeoutError:
+            break
+        if not isinstance(message, bytes):
+            continue
+        header, result, jpeg = decode_view(message)
         ack(socket)
         if header["kind"] == kind and header["frame_id"] == frame_id:
             return header, result, jpeg
+    raise AssertionError(f"no {kind} for frame {frame_id!r} within {TIMEOUT} s")
 
 
 def watched_publisher(client: zenoh.Session, camera: str) -> zenoh.Publisher:
@@ -97,6 +106,19 @@ def watched_publisher(client: zenoh.Session, camera: str) -> zenoh.Publisher:
     publisher = client.declare_publisher(f"dlo/{camera}/image")
     wait_until(lambda: publisher.matching_status.matching, "a subscriber of the frames", TIMEOUT)
     return publisher
+
+
+@contextlib.contextmanager
+def watched_hub(name: str) -> Iterator[tuple[LiveHub, zenoh.Session, queue.Queue, zenoh.Publisher]]:
+    """A hub on the service's session watching camera ``name``, the camera's session, the
+    queue of the views handed on, and the camera's publisher (matched by the hub)."""
+    with (
+        peer_pair() as (service, camera),
+        contextlib.closing(LiveHub(service, max_bytes=10_000_000, max_pixels=10_000_000)) as hub,
+    ):
+        views: queue.Queue[LiveView] = queue.Queue()
+        hub.watch(name, views.put)
+        yield hub, camera, views, watched_publisher(camera, name)
 
 
 def next_result(views: queue.Queue[LiveView]) -> LiveView:
@@ -183,6 +205,21 @@ def test_the_hub_lists_cameras_and_pairs_results_with_their_frames() -> None:
         assert views.empty()  # unwatched: counted for the list, handed to nobody
 
 
+def test_a_result_that_overtakes_its_frame_waits_for_it() -> None:
+    """The replica's result can reach the hub before the frame it was made from (their
+    callbacks run on different threads): it is paired when the frame comes, not lost."""
+    with watched_hub("cam3") as (_, camera, views, publisher):
+        wait_for_subscriber(camera, "dlo/cam3/chains")
+        detection = Detection(width=240, height=160, segment_length=10).model_dump_json()
+        camera.put("dlo/cam3/chains", detection, attachment=json.dumps({"frame_id": 7}))
+        frame = scene_jpeg()
+        publisher.put(frame, attachment=json.dumps({"frame_id": 7}))
+        view = views.get(timeout=TIMEOUT)  # the paired view, not the frame bare
+        assert (view.kind, view.pairing, view.frame.frame_id) == ("chains", "frame_id", 7)
+        assert view.result == detection.encode() and view.latency_ms == 0.0
+        assert view.frame.jpeg(10_000_000) == frame
+
+
 def test_tracks_win_over_chains_for_auto_watchers() -> None:
     with (
         peer_pair() as (service, camera),
@@ -208,13 +245,7 @@ def test_tracks_win_over_chains_for_auto_watchers() -> None:
 
 
 def test_png_frames_are_sent_as_jpeg_and_unreadable_ones_say_why() -> None:
-    with (
-        peer_pair() as (service, camera),
-        contextlib.closing(LiveHub(service, max_bytes=10_000_000, max_pixels=10_000_000)) as hub,
-    ):
-        views: queue.Queue[LiveView] = queue.Queue()
-        hub.watch("cam3", views.put)
-        publisher = watched_publisher(camera, "cam3")
+    with watched_hub("cam3") as (_, _, views, publisher):
         png = encoded_scene(1, ".png")
         publisher.put(png)
         jpeg = views.get(timeout=TIMEOUT).frame.jpeg(10_000_000)
