@@ -105,32 +105,91 @@ def end_samples(image, joints, starts, end_piece, end_at_start, skip, length):
 
 
 @njit(cache=True, nogil=True)
+def _select(values, low, high, k):
+    """Partition ``values[low:high + 1]`` in place (Hoare, median-of-three pivots) until
+    ``values[k]`` is its k-th smallest, with none greater before it; return that value."""
+    while high > low:
+        middle = (low + high) >> 1
+        if values[middle] < values[low]:
+            values[middle], values[low] = values[low], values[middle]
+        if values[high] < values[low]:
+            values[high], values[low] = values[low], values[high]
+        if values[high] < values[middle]:
+            values[high], values[middle] = values[middle], values[high]
+        pivot = values[middle]
+        i = low
+        j = high
+        while i <= j:
+            while values[i] < pivot:
+                i += 1
+            while values[j] > pivot:
+                j -= 1
+            if i <= j:
+                values[i], values[j] = values[j], values[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            high = j
+        elif k >= i:
+            low = i
+        else:
+            break
+    return values[k]
+
+
+@njit(cache=True, nogil=True)
+def _median(values, n):
+    """The median of ``values[:n]`` (reordered in place), as ``np.median`` of numba: the
+    middle value, or the mean of the two middle ones."""
+    half = n >> 1
+    upper = _select(values, 0, n - 1, half)
+    if n & 1:
+        return upper
+    # The lower middle value is the largest of those partitioned before the upper.
+    lower = values[0]
+    for i in range(1, half):
+        if values[i] > lower:
+            lower = values[i]
+    return (lower + upper) / 2
+
+
+@njit(cache=True, nogil=True)
 def colour_medians(lab, bounds, wide, min_samples, margin):
     """Per end: the median of each channel of its samples before the first ``wide`` one
     (in order from the end) less ``margin`` more, and the median distance of those from
-    that colour (as ``np.median``); NaN for an end with fewer than ``min_samples``."""
+    that colour (as ``np.median``); NaN for an end with fewer than ``min_samples``.
+
+    The medians are selected in one buffer reused by every end (a median of a few dozen
+    samples cost less than the copies and allocations of ``np.median``).
+    """
     count = bounds.size - 1
     colour = np.full((count, 3), np.nan)
     spread = np.full(count, np.nan)
+    longest = 0
+    for e in range(count):
+        longest = max(longest, bounds[e + 1] - bounds[e])
+    buffer = np.empty(longest)
     for e in range(count):
         stop = bounds[e]
         while stop < bounds[e + 1] and not wide[stop]:
             stop += 1
         if stop < bounds[e + 1]:
             stop = max(stop - margin, bounds[e])
-        chunk = lab[bounds[e] : stop]
-        if chunk.shape[0] == 0 or chunk.shape[0] < min_samples:
+        size = stop - bounds[e]
+        if size == 0 or size < min_samples:
             continue
         for channel in range(3):
-            colour[e, channel] = np.median(chunk[:, channel].astype(np.float64))
-        distances = np.empty(chunk.shape[0])
-        for i in range(chunk.shape[0]):
-            distances[i] = np.sqrt(
-                (chunk[i, 0] - colour[e, 0]) ** 2
-                + (chunk[i, 1] - colour[e, 1]) ** 2
-                + (chunk[i, 2] - colour[e, 2]) ** 2
+            for i in range(size):
+                buffer[i] = lab[bounds[e] + i, channel]
+            colour[e, channel] = _median(buffer, size)
+        for i in range(size):
+            sample = bounds[e] + i
+            buffer[i] = np.sqrt(
+                (lab[sample, 0] - colour[e, 0]) ** 2
+                + (lab[sample, 1] - colour[e, 1]) ** 2
+                + (lab[sample, 2] - colour[e, 2]) ** 2
             )
-        spread[e] = np.median(distances)
+        spread[e] = _median(buffer, size)
     return colour, spread
 
 

@@ -167,6 +167,23 @@ def _in_grown_zones(zones, row, col, reach):
 
 
 @njit(cache=True, nogil=True)
+def on_grown_zones(zones, positions, reach):
+    """merging.tips_in_junctions: whether each position's pixel lies on the grown zones
+    (see :func:`_in_grown_zones`), as :func:`grown_zone_labels` rounds and clips it.
+
+    One look at the square round each position: the pieces need no labels for this, so
+    none is filled.
+    """
+    height, width = zones.shape
+    inside = np.zeros(positions.shape[0], np.bool_)
+    for index in range(positions.shape[0]):
+        col = min(max(int(np.rint(positions[index, 0])), 0), width - 1)
+        row = min(max(int(np.rint(positions[index, 1])), 0), height - 1)
+        inside[index] = _in_grown_zones(zones, row, col, reach)
+    return inside
+
+
+@njit(cache=True, nogil=True)
 def grown_zone_labels(zones, positions, reach):
     """merging.junctions_of_ends: the 8-connected piece of the grown zones (see
     :func:`_in_grown_zones`) each position's pixel lies in, or -1.

@@ -9,6 +9,7 @@ different colours, its colour). The strand whose profile varies least is on top.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import pairwise
 
 import cv2
 import numpy as np
@@ -78,19 +79,29 @@ def find_intersections(chains: list[np.ndarray]) -> list[tuple[int, int, int, in
     return found
 
 
-def _profile_maps(centre: np.ndarray, direction: np.ndarray, half_length: float):
-    """The ``float32`` sampling maps of a line through ``centre`` (1 px apart)."""
-    offsets = np.arange(-half_length, half_length + 0.5, 1.0)
-    points = centre[None, :] + offsets[:, None] * direction[None, :]
+def _profile_maps(lines: list[tuple[np.ndarray, np.ndarray, float]]):
+    """The ``float32`` sampling maps of all the lines, one after the other in one row
+    (each line's samples 1 px apart), and where each line's samples start and stop."""
+    offsets = [np.arange(-half, half + 0.5, 1.0) for _, _, half in lines]
+    counts = [len(steps) for steps in offsets]
+    bounds = np.cumsum([0, *counts])
+    centres = np.repeat(np.array([centre for centre, _, _ in lines]), counts, axis=0)
+    directions = np.repeat(np.array([direction for _, direction, _ in lines]), counts, axis=0)
+    points = centres + np.concatenate(offsets)[:, None] * directions
     map_x = points[:, 0].astype(np.float32).reshape(1, -1)
     map_y = points[:, 1].astype(np.float32).reshape(1, -1)
-    return map_x, map_y
+    return map_x, map_y, bounds
 
 
-def _variation(image_lab: np.ndarray, map_x: np.ndarray, map_y: np.ndarray) -> float:
+def _variations(image_lab: np.ndarray, map_x: np.ndarray, map_y: np.ndarray, bounds) -> list[float]:
+    """Mean absolute change per pixel of each line's samples, ``bounds`` apart in the maps.
+
+    One remap for all the lines (a bilinear sample depends on its own coordinates
+    alone); the change from one line's last sample to the next line's first is left out.
+    """
     samples = cv2.remap(image_lab, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
-    samples = samples.reshape(-1, image_lab.shape[2])
-    return float(np.abs(np.diff(samples, axis=0)).sum(axis=1).mean())
+    changes = np.abs(np.diff(samples.reshape(-1, image_lab.shape[2]), axis=0)).sum(axis=1)
+    return [float(changes[start : stop - 1].mean()) for start, stop in pairwise(bounds.tolist())]
 
 
 def _lab(image_bgr: np.ndarray) -> np.ndarray:
@@ -119,23 +130,20 @@ def profile_variations(
     pixels (exact in ``float32``). Near the border (where the reflection would differ)
     the whole image is converted, once, and returned for the next call.
     """
-    maps = [_profile_maps(centre, direction, half) for centre, direction, half in lines]
-    xs = np.concatenate([map_x.ravel() for map_x, _ in maps])
-    ys = np.concatenate([map_y.ravel() for _, map_y in maps])
+    map_x, map_y, bounds = _profile_maps(lines)
     height, width = image_bgr.shape[:2]
-    x0 = int(np.floor(xs.min())) - _SAMPLE_MARGIN
-    y0 = int(np.floor(ys.min())) - _SAMPLE_MARGIN
-    x1 = int(np.floor(xs.max())) + _SAMPLE_MARGIN + 1
-    y1 = int(np.floor(ys.max())) + _SAMPLE_MARGIN + 1
+    x0 = int(np.floor(map_x.min())) - _SAMPLE_MARGIN
+    y0 = int(np.floor(map_y.min())) - _SAMPLE_MARGIN
+    x1 = int(np.floor(map_x.max())) + _SAMPLE_MARGIN + 1
+    y1 = int(np.floor(map_y.max())) + _SAMPLE_MARGIN + 1
     m = _BLUR_MARGIN
     if x0 - m >= 0 and y0 - m >= 0 and x1 + m <= width and y1 + m <= height:
         patch = _lab(image_bgr[y0 - m : y1 + m, x0 - m : x1 + m])[m:-m, m:-m]
         shift_x, shift_y = np.float32(x0), np.float32(y0)
-        values = [_variation(patch, mx - shift_x, my - shift_y) for mx, my in maps]
-        return values, full_lab
+        return _variations(patch, map_x - shift_x, map_y - shift_y, bounds), full_lab
     if full_lab is None:
         full_lab = _lab(image_bgr)
-    return [_variation(full_lab, mx, my) for mx, my in maps], full_lab
+    return _variations(full_lab, map_x, map_y, bounds), full_lab
 
 
 def detect_crossings(

@@ -669,7 +669,9 @@ def tips_in_junctions(pieces: list[np.ndarray], zones: np.ndarray | None) -> np.
         return np.zeros(2 * len(pieces), bool)
     # Both tips of every piece, (start, end) in turn, without building ChainEnds.
     tips = np.array([(points[0], points[-1]) for points in pieces], np.float64).reshape(-1, 2)
-    return _grown_zone_labels(tips, zones) >= 0
+    # In a zone or not needs no labels, so no fill of the zone's piece: a look round each tip.
+    zones_u8 = zones.view(np.uint8) if zones.dtype == np.bool_ else zones.astype(np.uint8)
+    return _merging_kernels.on_grown_zones(np.ascontiguousarray(zones_u8), tips, 3)
 
 
 def junctions_of_ends(ends: list[ChainEnd], zones: np.ndarray, reach: int = 3) -> list[int]:
@@ -850,7 +852,6 @@ def merge_chains(
     if at_border is not None:
         # An end at the picture's edge is a cable leaving it, too.
         leaving = at_border if leaving is None else leaving | at_border
-    junction_of_end = junctions_of_ends(ends, zones)
     if zones is not None and ends:
         # The piece was cut at its junction: an end belongs there though its fit,
         # extrapolated over a tip bending into the zone, ends a few px outside it.
@@ -859,6 +860,8 @@ def merge_chains(
         both = _grown_zone_labels(np.concatenate([fitted, tips.reshape(-1, 2)]), zones)
         junction_of_end = np.where(both[: len(ends)] >= 0, both[: len(ends)], both[len(ends) :])
         junction_of_end = junction_of_end.tolist()
+    else:
+        junction_of_end = junctions_of_ends(ends, zones)
     touching = TouchingSplit(pieces, list(range(len(pieces))), junction_of_end)
     if distance is not None and pieces:
         touching = split_touching_strands(

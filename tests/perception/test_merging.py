@@ -274,6 +274,8 @@ def test_junctions_of_ends_group_the_ends_as_the_labelled_grown_zones(seed):
     if seed % 2:
         cv2.line(zones, (10, 10), (60, 40), 1, 1)
     positions = rng.uniform(-3.0, 123.0, (200, 2))
+    # And some on half pixels, which round half to even.
+    positions = np.concatenate([positions, np.round(rng.uniform(0, 90, (40, 2))) + 0.5])
     ends = [
         ChainEnd(k // 2, k % 2 == 0, position, np.array([1.0, 0.0]))
         for k, position in enumerate(positions)
@@ -285,6 +287,9 @@ def test_junctions_of_ends_group_the_ends_as_the_labelled_grown_zones(seed):
         # otherwise: only which ends share a zone counts).
         assert [label < 0 for label in fast] == [label < 0 for label in plain]
         assert len(set(zip(fast, plain, strict=True))) == len(set(plain)) == len(set(fast))
+        # Whether an end is on the zones at all, without labels (tips_in_junctions).
+        on_zones = _merging_kernels.on_grown_zones(zones, positions, reach)
+        assert on_zones.tolist() == reference.on_grown_zones(zones, positions, reach).tolist()
     assert junctions_of_ends(ends, np.zeros((90, 120), bool)) == [-1] * len(ends)
 
 

@@ -141,6 +141,18 @@ def junctions_of_ends(ends, zones, reach=3):
     return result
 
 
+def on_grown_zones(zones, positions, reach=3):
+    """``_merging_kernels.on_grown_zones``: the whole picture's zones grown
+    (``cv2.dilate``) by a ``2 reach + 1`` square, read at each position rounded half to
+    even and clipped to the picture."""
+    height, width = zones.shape
+    square = np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)
+    grown = cv2.dilate(zones.astype(np.uint8), square)
+    cols = np.clip(np.rint(positions[:, 0]).astype(np.int64), 0, width - 1)
+    rows = np.clip(np.rint(positions[:, 1]).astype(np.int64), 0, height - 1)
+    return grown[rows, cols] > 0
+
+
 def _arc(start: np.ndarray, heading: np.ndarray, turn: float, radius: float, step: float):
     """Points of a circular arc leaving ``start`` along ``heading`` and turning ``turn`` rad."""
     sign = 1.0 if turn >= 0 else -1.0
