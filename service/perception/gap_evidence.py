@@ -163,17 +163,68 @@ def points_out_of_picture(
     return outwards.max(axis=1) >= BORDER_OUT_SINE * np.hypot(*directions.T)
 
 
-def turn_evidence(image, mask, ends, colours, radius) -> tuple:
+def turn_evidence(image, mask, ends, colours, radius, partings=()) -> tuple:
     """The tests of the image's evidence that something hides a cable along a curve
     from end ``i`` to end ``j`` (callables ``(i, j, curve) -> bool``), strongest first,
     for the turns under objects (:func:`.turn_joins.turn_joins`): an object shows over
     the curve (:func:`.appearance.gap_hidden`); both ends are cut square and alike
     (:func:`cut_ends_alike`); one end cut square and the other lopsided, as where an
-    object's corner or rim cuts a strand bending into the turn (:data:`TURN_CUT_ENDS`)."""
+    object's corner or rim cuts a strand bending into the turn (:data:`TURN_CUT_ENDS`);
+    the ends are the far ends of the two strands parting at one end of a stretch where
+    they touch (``partings``, pairs of ends, :attr:`.touching.TouchingSplit.partings`)
+    and the curve no longer than an object of the background's own colour hides
+    (:data:`CUT_GAP_RADII`). Which of them a turn is bridged along the curve for:
+    :data:`TURN_EVIDENCE_ALONG_CURVE`.
+
+    Two strands touching all along a stretch are a cable doubled back on itself (or
+    two cables laid together, whose other ends the merging step joins first, at less
+    cost than a turn's: the turns' rivals). Where both strands stop past the stretch's
+    end within a bulb's reach of each other, alike, the cable turned round there out of
+    sight; an object of the background's own colour, cutting the strands along a round
+    rim or as they bend into the bulb, leaves neither cut straight across.
+    """
     return (
         lambda i, j, curve: gap_hidden(image, mask, curve, (ends[i], ends[j]), radius),
         lambda i, j, curve: cut_ends_alike(ends[i], ends[j], i, j, curve, mask, colours, radius),
         lambda i, j, curve: cut_ends_alike(
             ends[i], ends[j], i, j, curve, mask, colours, radius, TURN_CUT_ENDS
         ),
+        lambda i, j, curve: (
+            ((i, j) in partings or (j, i) in partings)
+            and strands_turn_out_of_sight(ends[i], ends[j], curve, mask, radius)
+        ),
     )
+
+
+def strands_turn_out_of_sight(a, b, curve: np.ndarray, mask: np.ndarray, radius: float) -> bool:
+    """Whether the cable may have turned round out of sight along ``curve`` from end
+    ``a`` to end ``b`` (:class:`.merging.ChainEnd`), two strands parting from a stretch
+    where they touch (:func:`turn_evidence`): the curve is no longer than an object of
+    the background's own colour hides (:data:`CUT_GAP_RADII`), it leaves the foreground
+    through the first strand's tip and comes back onto it through the second's (within
+    a cable's width of the ends), and in between it stays off it: a cable seen nowhere
+    along the turn, not one drawn back over the strands it turns round between."""
+    if polyline_length(curve) > CUT_GAP_RADII * cable_radius(radius, a.width, b.width):
+        return False
+    height, width = mask.shape
+    cols = np.rint(curve[:, 0]).astype(np.int64)
+    rows = np.rint(curve[:, 1]).astype(np.int64)
+    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
+    seen = np.zeros(len(curve), bool)
+    seen[inside] = mask[rows[inside], cols[inside]]
+    off = np.flatnonzero(~seen)
+    if not len(off) or seen[off[0] : off[-1] + 1].any():
+        return False
+    # Out of sight through the strands' tips: within a cable's width of where the
+    # ends' fits put them, not out through a strand's side.
+    return bool(
+        np.hypot(*(curve[off[0]] - a.position)) <= 2.0 * a.width
+        and np.hypot(*(curve[off[-1]] - b.position)) <= 2.0 * b.width
+    )
+
+
+# Per test of :func:`turn_evidence`, whether a turn it finds is bridged along its curve
+# (:func:`.turn_joins.turn_joins`' ``along_curve``): an object seen over it; a bulb
+# between two strands parting from a touching stretch, which a gap's bridge would cut
+# across. The cuts say only that the gap is short enough to hide.
+TURN_EVIDENCE_ALONG_CURVE = (True, False, False, True)

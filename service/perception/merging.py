@@ -44,6 +44,7 @@ from service.perception.bridge_ends import (
 )
 from service.perception.deadline import Deadline, check
 from service.perception.gap_evidence import (
+    TURN_EVIDENCE_ALONG_CURVE,
     beyond_hiding,
     cut_ends_alike,
     open_gap_limit,
@@ -659,6 +660,9 @@ def _ends_of_split_pieces(
                 ends[2 * index + side] = end
             else:
                 ends.append(end)
+    for index, width in touching.strand_widths.items():
+        ends[2 * index] = replace(ends[2 * index], width=width)
+        ends[2 * index + 1] = replace(ends[2 * index + 1], width=width)
     return ends
 
 
@@ -893,6 +897,10 @@ def merge_chains(
     colours = None
     if image is not None and params.colour_weight > 0:
         free = None if zones is None else ~tips_in_junctions(pieces, zones).reshape(-1, 2).any(1)
+        if free is not None and touching.strand_widths:
+            # A short strand parting from a touching stretch is no scrap either (its
+            # width said so, :func:`.touching.split_touching_strands`): its whole length.
+            free[list(touching.strand_widths)] = True
         colours = end_colours(image, pieces, ends, radius, distance, free)
     picture = None
     if zones is not None or mask is not None:
@@ -955,12 +963,13 @@ def merge_chains(
                 join_cost(ends[i], ends[j], params, radius)
                 + params.colour_weight * float(colour_penalty(colours, [i], [j])[0])
             ),
-            turn_evidence(image, mask, ends, colours, radius),
+            turn_evidence(image, mask, ends, colours, radius, set(touching.partings)),
             lambda i, j: open_gap_limit(radius, widths[i], widths[j]),
             mutual,
             mutual,
             MAX_JUNCTION_ENDS,
             turn_bridges,
+            TURN_EVIDENCE_ALONG_CURVE,
         )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.

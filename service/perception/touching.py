@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from service.perception import _merging_kernels
+from service.perception.appearance import WIDTH_AGREEMENT
 from service.perception.geometry import arc_lengths, points_along, polyline_length
 
 # Two strands lie side by side along a piece when its mask never narrows below this
@@ -42,6 +43,11 @@ class TouchingSplit:
     (end ``2 k`` is piece ``k``'s start, ``2 k + 1`` its end), two by two: the two strands
     through one end of a stretch. ``bridges[i, j]`` is the curve from end ``i``'s tip to
     end ``j``'s along its strand's side (:func:`_side_bridge`), one per pair.
+    ``partings`` are, per end of every split stretch, the far ends of the two strands
+    parting there (where a cable doubled back on itself turns round, out of sight when
+    both stop: :func:`.gap_evidence.turn_evidence`); ``strand_widths`` the half widths of
+    the strands shorter than their stretch is wide, read from their mask
+    (:func:`_strand_widths`), by piece.
     """
 
     pieces: list[np.ndarray]
@@ -50,6 +56,8 @@ class TouchingSplit:
     pairs: list[tuple[int, int]] = field(default_factory=list)
     split: list[int] = field(default_factory=list)
     bridges: dict[tuple[int, int], np.ndarray] = field(default_factory=dict)
+    partings: list[tuple[int, int]] = field(default_factory=list)
+    strand_widths: dict[int, float] = field(default_factory=dict)
 
 
 def split_touching_strands(
@@ -68,7 +76,9 @@ def split_touching_strands(
     junction(s) together, however long it is. At both of its ends there is a
     three-way junction where the two strands meet it on two sides of its line. The
     other strands must be at least as long as the stretch is wide (not the scraps
-    thinning leaves where a blob bulges), or leave the picture at their far end. Each
+    thinning leaves where a blob bulges), or leave the picture at their far end, or be
+    as wide as the strand beside them (:func:`_cable_wide_pair`: a doubled-back cable's
+    strand an object cuts short of its bulb). Each
     strand runs along the piece's line moved half the piece's half width to its side
     (the middle of one of two touching cables of one width).
 
@@ -233,13 +243,17 @@ def _split_shared_pieces(
         for other in (other for side in sides for other in side):
             if other // 2 not in lengths:
                 lengths[other // 2] = polyline_length(pieces[other // 2])
-        if any(
-            lengths[other // 2] < 2 * widths[index] and (leaving is None or not leaving[other ^ 1])
+        # Each junction's two other strands' half widths, the short ones' by their mask.
+        short_widths: dict[int, float] = {}
+        strand_widths = [
+            _strand_widths(
+                side, pieces, lengths, widths, 2 * widths[index], distance, leaving, short_widths
+            )
             for side in sides
-            for other in side
-        ):
+        ]
+        if None in strand_widths:
             continue
-        strands = np.mean([sum(widths[other // 2] for other in side) for side in sides])
+        strands = np.mean([sum(side_widths) for side_widths in strand_widths])
         # A piece shorter than its width (a stretch a little longer than the junction
         # zones) is judged at its middle: its ends are in the zones' rims.
         if _narrowest(points, distance, float(widths[index]), short_at_middle=True) < (
@@ -255,8 +269,65 @@ def _split_shared_pieces(
         result.split.append(index)
         for end, side in zip(ends, sides, strict=True):
             result.pairs.extend([(side[0], end), (side[1], 2 * right_index + end % 2)])
+            result.partings.append((side[0] ^ 1, side[1] ^ 1))
+        result.strand_widths.update(short_widths)
         handled |= {labels[end] for end in ends} - {-1}
     return handled
+
+
+def _strand_widths(side, pieces, lengths, widths, stretch_width, distance, leaving, short_widths):
+    """The half widths of a junction's two other strands (ends ``side``), or None when
+    one is a scrap, not a strand (:func:`_cable_wide_pair`). A strand shorter than the
+    stretch is wide (``stretch_width``) that does not leave the picture is short: its
+    half width is the widest its mask gets (:func:`_widest`; the median of its few
+    joints falls in the hook an object's slanted cut leaves), put in ``short_widths``
+    (by piece); the others' their median (``widths``)."""
+    short = [
+        lengths[other // 2] < stretch_width and (leaving is None or not leaving[other ^ 1])
+        for other in side
+    ]
+    side_widths = [
+        _widest(pieces[other // 2], distance) if is_short else float(widths[other // 2])
+        for other, is_short in zip(side, short, strict=True)
+    ]
+    if any(short) and not _cable_wide_pair(side_widths, short):
+        return None
+    short_widths.update(
+        (other // 2, width)
+        for other, width, is_short in zip(side, side_widths, short, strict=True)
+        if is_short
+    )
+    return side_widths
+
+
+def _cable_wide_pair(side_widths: list[float], short: list[bool]) -> bool:
+    """Whether a junction's two other strands, one or both shorter than the stretch is
+    wide (``short``), are two strands of one cable's width, not a strand and a scrap.
+
+    A cable doubled back on itself, its bulb hidden by an object, leaves one strand cut
+    a few radii past the junction: shorter than the stretch is wide, but as wide as the
+    strand beside it, both strands being the one cable. Thinning's scraps where a blob
+    bulges (a cable segmented with its shadow: ariadne simple/00004 end to end, the
+    shadow half the cable's width) are narrower than the strand they part from. So a
+    short strand counts when the two agree in width as two pieces of one cable must
+    (:data:`.appearance.WIDTH_AGREEMENT`); two short ones are both scraps or both
+    strands, and are not told apart here.
+    """
+    if all(short):
+        return False
+    narrow, wide = sorted(side_widths)
+    return narrow > 0 and narrow >= WIDTH_AGREEMENT * wide
+
+
+def _widest(points: np.ndarray, distance: np.ndarray) -> float:
+    """The largest distance transform along the piece, at every pixel of its line."""
+    points = np.asarray(points, np.float64)
+    along = arc_lengths(points)
+    xs, ys = points_along(points, along, np.arange(0.0, along[-1] + 1e-9, 1.0)).T
+    height, width = distance.shape
+    cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
+    rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
+    return float(distance[rows, cols].max())
 
 
 def _touching_junction_pairs(ends, positions, directions, pieces, distance, leaving, widths):

@@ -411,6 +411,7 @@ def turn_joins(
     rival_limit: float,
     max_group: int,
     bridges: dict[tuple[int, int], np.ndarray] | None = None,
+    along_curve: Sequence[bool] = (True,),
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -447,6 +448,12 @@ def turn_joins(
     bridges : dict or None
         When given, each turn joined ``(i, j)`` gets the curve found hidden, from end
         ``i`` to end ``j``, to bridge it with.
+    along_curve : sequence of bool
+        Per test of ``evidence`` (False past its end), whether a turn it finds is
+        bridged along the curve it passed on, however far apart the ends: an object
+        seen over the curve (the first test), or two strands parting from a stretch
+        where they touch, whose bulb a gap's bridge would cut across. The others say
+        only that the gap is short enough to hide.
 
     Returns
     -------
@@ -509,7 +516,8 @@ def turn_joins(
                 # its partner, :mod:`.bridge_ends`), unless its strands lie too close to
                 # turn round in one arc (a bulb, which only the turn's curve follows).
                 apart = float(np.hypot(*(a.position - b.position)))
-                if strength == 0 or apart < 2.0 * HIDDEN_BEND_RADII[0] * cable:
+                shaped = strength < len(along_curve) and along_curve[strength]
+                if shaped or apart < 2.0 * HIDDEN_BEND_RADII[0] * cable:
                     hidden_curves[i, j] = found
                 break
     if not turns:

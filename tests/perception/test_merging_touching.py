@@ -155,3 +155,15 @@ def test_junctions_of_generated_scenes_are_paired_right(family, seed):
     fit, extrapolated, left the junction zone its piece was cut at (doubled_back 86009)."""
     score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
+
+
+@pytest.mark.parametrize("seed", [86062, 86097])
+def test_a_doubled_back_cable_whose_strand_an_object_cuts_short_turns_round_under_it(seed):
+    """Tuning scenes where a cable doubles back and an object hides its bulb: one strand
+    is cut a few radii past the touching stretch, shorter than the stretch is wide, and
+    was taken for a scrap, the stretch left one strand's (a cable in two chains). As wide
+    as the strand beside it, it is a strand; in 86062 the object is a disc of the
+    background's own colour cutting both strands along its rim (neither cut straight
+    across), and the two strands parting from the stretch turn round under it."""
+    score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage

@@ -121,6 +121,52 @@ def test_a_shared_piece_shorter_than_its_width_is_judged_at_its_middle(crossing,
         np.array([(middle + 8, 99), (middle + 30, 100 - 14), first[-1]], np.float64),
         np.array([(middle + 8, 101), (middle + 30, 100 + 14), second[-1]], np.float64),
     ]
+    split = _split_stretch_between_arms(mask, shared, arms)
+    assert split.split == split_pieces
+    if not crossing:
+        partner = {end: other for pair in split.pairs for end, other in (pair, pair[::-1])}
+        # Upper left (end 3) runs on through one copy of the line to upper right (end 6).
+        copy = partner[3] // 2
+        assert split.pieces[copy][:, 1].mean() < 100.0
+        assert partner[2 * copy + 1] == 6
+
+
+@pytest.mark.parametrize(("stub_thickness", "split_pieces"), [(9, [0]), (4, [])])
+def test_a_strand_cut_short_past_the_stretch_is_a_strand_when_as_wide_as_its_partner(
+    stub_thickness, split_pieces
+):
+    """Two strands touch for 200 px; past the stretch's right end one runs on and the
+    other stops after 15 px (an object cuts a doubled-back cable's strand short of its
+    bulb), shorter than the stretch is wide (20 px). As wide as the strand beside it
+    (9 px) it is a strand, and the stretch is split, its two strands' far ends a
+    parting to turn round between; a narrow stub (4 px, as the scraps thinning leaves
+    where a cable's shadow, segmented with it, ends) is a scrap, and nothing is split."""
+    upper = [(20, 40), (100, 95.5), (300, 95.5), (380, 40)]
+    lower = [(20, 160), (100, 104.5), (300, 104.5)]
+    mask = touching_strands_mask(upper, lower, shape=(200, 400))
+    stub = np.zeros(mask.shape, np.uint8)
+    cv2.polylines(stub, [np.array([(300, 104), (326, 112)], np.int32)], False, 1, stub_thickness)
+    mask |= stub > 0
+    shared = np.column_stack([np.linspace(108, 292, 24), np.full(24, 100.0)])
+    arms = [
+        np.array([upper[0], (70, 75), (92, 99)], np.float64),
+        np.array([lower[0], (70, 125), (92, 101)], np.float64),
+        np.array([(308, 99), (330, 74.7), upper[-1]], np.float64),
+        np.array([(308, 104), (322, 110.5)], np.float64),
+    ]
+    split = _split_stretch_between_arms(mask, shared, arms)
+    assert split.split == split_pieces
+    if split_pieces:
+        # The far ends of the two strands parting at the right end: upper right's (7)
+        # and the stub's (9).
+        assert sorted(sorted(pair) for pair in split.partings)[-1] == [7, 9]
+        assert split.strand_widths[4] >= 4.0
+
+
+def _split_stretch_between_arms(mask, shared, arms):
+    """:func:`split_touching_strands` of a ``shared`` piece between two three-way
+    junctions (0 at its start, 1 at its end), ``arms`` upper left, lower left (their
+    last point at junction 0), upper right and lower right (their first at junction 1)."""
     pieces = [shared, *arms]
     positions = np.array([points[index] for points in pieces for index in (0, -1)])
     directions = np.array(
@@ -129,11 +175,4 @@ def test_a_shared_piece_shorter_than_its_width_is_judged_at_its_middle(crossing,
     directions /= np.hypot(directions[:, 0], directions[:, 1])[:, None]
     distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
     labels = [0, 1, -1, 0, -1, 0, 1, -1, 1, -1]
-    split = split_touching_strands(pieces, positions, directions, labels, distance)
-    assert split.split == split_pieces
-    if not crossing:
-        partner = {end: other for pair in split.pairs for end, other in (pair, pair[::-1])}
-        # Upper left (end 3) runs on through one copy of the line to upper right (end 6).
-        copy = partner[3] // 2
-        assert split.pieces[copy][:, 1].mean() < 100.0
-        assert partner[2 * copy + 1] == 6
+    return split_touching_strands(pieces, positions, directions, labels, distance)

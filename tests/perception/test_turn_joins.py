@@ -1,11 +1,15 @@
 """Joins where a cable turns sharply out of sight (service/perception/turn_joins.py)."""
 
+from itertools import pairwise
+from types import SimpleNamespace
+
 import cv2
 import numpy as np
 import pytest
 
 from schemas import DetectParams
 from service.evaluation.synthetic_eval import evaluate_scene
+from service.perception.gap_evidence import strands_turn_out_of_sight
 from service.perception.merging import merge_chains
 from service.perception.pairing import cheapest_pairing
 from service.perception.turn_joins import bulb_turns, natural_turn
@@ -207,3 +211,36 @@ def test_a_gap_cut_at_a_slant_under_an_object_of_the_backgrounds_colour_is_joine
     gap curve, not the shortest turn the cuts allowed (which cut the bend short)."""
     score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
+
+
+def test_strands_turn_out_of_sight_only_through_their_tips():
+    """Two strands 9 px wide stop side by side; a turn between their tips leaves the
+    foreground through one tip and comes back through the other, off it in between. A
+    curve looping back over the strands (the wrong way round, from ends' fits off the
+    cable) is seen there: no turn out of sight along it (doubled_back 86063)."""
+    mask = np.zeros((120, 200), np.uint8)
+    for y in (50, 60):
+        cv2.line(mask, (10, y), (100, y), 1, 9)
+    mask = mask > 0
+    a = SimpleNamespace(position=np.array([104.0, 50.0]), width=4.5)
+    b = SimpleNamespace(position=np.array([104.0, 60.0]), width=4.5)
+    # Round a bulb centred 13 px past the tips' middle, through both tips.
+    reach = np.arctan2(5.0, 9.0)
+    angles = np.linspace(-np.pi + reach, np.pi - reach, 80)
+    bend = np.hypot(9.0, 5.0)
+    bulb = np.column_stack([113 + bend * np.cos(angles), 55 + bend * np.sin(angles)])
+    bulb = np.concatenate([[(90.0, 50.0)], bulb, [(90.0, 60.0)]])
+    assert strands_turn_out_of_sight(a, b, _dense(bulb), mask, 4.5)
+    back_over = np.array(
+        [(90, 50), (110, 50), (110, 30), (60, 30), (60, 80), (104, 80), (90, 60)], np.float64
+    )
+    assert not strands_turn_out_of_sight(a, b, _dense(back_over), mask, 4.5)
+
+
+def _dense(points: np.ndarray) -> np.ndarray:
+    """The polyline sampled about 1 px apart."""
+    parts = [
+        np.linspace(first, second, max(int(np.hypot(*(second - first))), 1), endpoint=False)
+        for first, second in pairwise(points)
+    ]
+    return np.concatenate([*parts, points[-1:]])
