@@ -83,13 +83,14 @@ def bridge_from_the_fits(
                 adjusted[k] = replace(end, position=inner[0], direction=inner[1])
                 trims[k] = end.skip
     for piece in np.flatnonzero(hooks.reshape(-1, 2).any(axis=1)).tolist():
-        for k, position, trim in _beyond_hooks(pieces[piece], hooks[2 * piece : 2 * piece + 2]):
+        pair = slice(2 * piece, 2 * piece + 2)
+        for k, position, trim in _beyond_hooks(pieces[piece], hooks[pair], trims[pair]):
             adjusted[2 * piece + k] = replace(adjusted[2 * piece + k], position=position)
             trims[2 * piece + k] = trim
     return adjusted, trims
 
 
-def _beyond_hooks(points: np.ndarray, hooks: np.ndarray):
+def _beyond_hooks(points: np.ndarray, hooks: np.ndarray, trims: np.ndarray):
     """Where a piece too short to fit beyond its cut's hook starts its bridges.
 
     An end's fit leaves out the tip where the cut narrows the cable (``hooks``, arc
@@ -97,25 +98,32 @@ def _beyond_hooks(points: np.ndarray, hooks: np.ndarray):
     skeleton toward the cut's far corner, up to a half width off the cable. A piece too
     short to fit beyond that has no extrapolation to trust either: its bridge starts
     at its first joint past the hook instead, on the cable's middle, and the hook's
-    joints are left out of the path. At least two joints are kept (the hook's inner
-    joints are given back, the longer hook's first). Yields (0 for the start or 1 for
-    the end, position, arc length to trim) for each end trimmed.
+    joints are left out of the path. The other end's bridge may already start further
+    in (``trims``, a crossing's); at least two joints are kept between them (the
+    hook's inner joints are given back, the longer hook's first, or the hook is kept
+    whole). Yields (0 for the start or 1 for the end, position, arc length to trim)
+    for each end trimmed past its hook.
     """
     along = arc_lengths(points)
-    first = int(np.searchsorted(along, hooks[0])) if hooks[0] > 0 else 0
+    cut = np.maximum(hooks, trims)
+    first = int(np.searchsorted(along, cut[0])) if cut[0] > 0 else 0
     last = len(points) - 1
-    if hooks[1] > 0:
-        last = int(np.searchsorted(along, along[-1] - hooks[1], side="right")) - 1
-    while last - first < 1 and (first > 0 or last < len(points) - 1):
-        if first > 0 and (last == len(points) - 1 or hooks[0] >= hooks[1]):
+    if cut[1] > 0:
+        last = int(np.searchsorted(along, along[-1] - cut[1], side="right")) - 1
+    floor = first if hooks[0] <= 0 else 0  # how far each hook may give back
+    ceiling = last if hooks[1] <= 0 else len(points) - 1
+    while last - first < 1 and (first > floor or last < ceiling):
+        if first > floor and (last == ceiling or hooks[0] >= hooks[1]):
             first -= 1
         else:
             last += 1
+    if last - first < 1:
+        return
     # Trims just short of the kept joints' arc lengths, so that they stay.
-    if first > 0:
+    if hooks[0] > 0 and first > 0:
         tip = _along_beyond(points[first], points[first + 1], points[0])
         yield 0, tip, float(along[first]) - 1e-6
-    if last < len(points) - 1:
+    if hooks[1] > 0 and last < len(points) - 1:
         tip = _along_beyond(points[last], points[last - 1], points[-1])
         yield 1, tip, float(along[-1] - along[last]) - 1e-6
 
