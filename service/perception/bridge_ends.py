@@ -18,7 +18,7 @@ import numpy as np
 
 from service.perception import _bridge_ends_kernels
 from service.perception._bridge_ends_kernels import MOVED, UNDECIDED
-from service.perception.geometry import fit_at, fit_where_skipped, polyline_length
+from service.perception.geometry import arc_lengths, fit_at, fit_where_skipped, polyline_length
 
 # An end put along a line through a short piece carries no fit of its own.
 _UNFITTED = {"curvature": 0.0, "skip": 0.0, "width": 0.0}
@@ -39,6 +39,7 @@ def bridge_from_the_fits(
     span: float,
     junction_of_end: list[int],
     distance: np.ndarray | None = None,
+    nominal_skip: float | None = None,
 ) -> tuple[list, np.ndarray]:
     """Ends to bridge gaps from: where each end's fit begins, not extrapolated to the tip.
 
@@ -54,6 +55,7 @@ def bridge_from_the_fits(
     """
     adjusted = list(ends)
     trims = np.zeros(len(ends))
+    hooks = np.zeros(len(ends))
     for i, j, _ in joins:
         if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
             if distance is not None and junction_of_end[i] == junction_of_end[j]:
@@ -66,14 +68,77 @@ def bridge_from_the_fits(
             continue
         for k in (i, j):
             end = ends[k]
+            if end.skip <= 0:
+                continue
             # Pieces shorter than the fit's span are crossed along their partners' line.
-            if end.skip <= 0 or polyline_length(pieces[end.piece]) < span:
+            length = polyline_length(pieces[end.piece])
+            if length < span or length < 2.0 * end.skip + 1.0:
+                # Too short to fit beyond the skipped tip (fit_where_skipped's own
+                # bound): where that tip is narrow, a cut's hook, the bridge starts past it.
+                if nominal_skip is not None and end.skip > nominal_skip:
+                    hooks[k] = end.skip
                 continue
             inner = fit_where_skipped(pieces[end.piece], end.at_start, span, end.skip)
             if inner is not None:
                 adjusted[k] = replace(end, position=inner[0], direction=inner[1])
                 trims[k] = end.skip
+    for piece in np.flatnonzero(hooks.reshape(-1, 2).any(axis=1)).tolist():
+        pair = slice(2 * piece, 2 * piece + 2)
+        for k, position, trim in _beyond_hooks(pieces[piece], hooks[pair], trims[pair]):
+            adjusted[2 * piece + k] = replace(adjusted[2 * piece + k], position=position)
+            trims[2 * piece + k] = trim
     return adjusted, trims
+
+
+def _beyond_hooks(points: np.ndarray, hooks: np.ndarray, trims: np.ndarray):
+    """Where a piece too short to fit beyond its cut's hook starts its bridges.
+
+    An end's fit leaves out the tip where the cut narrows the cable (``hooks``, arc
+    lengths at the piece's start and end, 0 for none); there thinning bends the
+    skeleton toward the cut's far corner, up to a half width off the cable. A piece too
+    short to fit beyond that has no extrapolation to trust either: its bridge starts
+    at its first joint past the hook instead, on the cable's middle, and the hook's
+    joints are left out of the path. The other end's bridge may already start further
+    in (``trims``, a crossing's); at least two joints are kept between them (the
+    hook's inner joints are given back, the longer hook's first, or the hook is kept
+    whole). Yields (0 for the start or 1 for the end, position, arc length to trim)
+    for each end trimmed past its hook.
+    """
+    along = arc_lengths(points)
+    cut = np.maximum(hooks, trims)
+    first = int(np.searchsorted(along, cut[0])) if cut[0] > 0 else 0
+    last = len(points) - 1
+    if cut[1] > 0:
+        last = int(np.searchsorted(along, along[-1] - cut[1], side="right")) - 1
+    floor = first if hooks[0] <= 0 else 0  # how far each hook may give back
+    ceiling = last if hooks[1] <= 0 else len(points) - 1
+    while last - first < 1 and (first > floor or last < ceiling):
+        if first > floor and (last == ceiling or hooks[0] >= hooks[1]):
+            first -= 1
+        else:
+            last += 1
+    if last - first < 1:
+        return
+    # Trims just short of the kept joints' arc lengths, so that they stay.
+    if hooks[0] > 0 and first > 0:
+        tip = _along_beyond(points[first], points[first + 1], points[0])
+        yield 0, tip, float(along[first]) - 1e-6
+    if hooks[1] > 0 and last < len(points) - 1:
+        tip = _along_beyond(points[last], points[last - 1], points[-1])
+        yield 1, tip, float(along[-1] - along[last]) - 1e-6
+
+
+def _along_beyond(outer: np.ndarray, inner: np.ndarray, tip: np.ndarray) -> np.ndarray:
+    """The cut's tip taken back onto the line from ``inner`` through ``outer`` (the
+    piece beyond its hook): the hook bends the skeleton sideways, toward the cut's far
+    corner, but how far the cable reaches along the piece is still where its tip is."""
+    outer, inner = np.asarray(outer, np.float64), np.asarray(inner, np.float64)
+    step = outer - inner
+    length = float(np.hypot(*step))
+    if length < 1e-9:
+        return outer
+    step = step / length
+    return outer + max(0.0, float((np.asarray(tip, np.float64) - outer) @ step)) * step
 
 
 # A joint is where another strand widens the mask when the distance to the border

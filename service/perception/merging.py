@@ -973,7 +973,9 @@ def merge_chains(
         )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
-    inner_ends, trims = bridge_from_the_fits(pieces, ends, joins, span, junction_of_end, distance)
+    inner_ends, trims = bridge_from_the_fits(
+        pieces, ends, joins, span, junction_of_end, distance, nominal_skip=radius
+    )
     inner_ends = ends_of_short_pieces_from_partners(
         pieces, inner_ends, joins, span, junction_of_end
     )

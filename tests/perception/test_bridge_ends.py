@@ -218,3 +218,29 @@ def test_a_short_piece_beside_a_crossing_on_a_bend_follows_the_bend_into_the_gap
     straight_ends = [replace(end, width=4.0) for end in chain_ends(straight, 40.0)]
     along = ends_through_short_pieces(straight, straight_ends, joins, 40.0, junctions)
     np.testing.assert_allclose(along[2].direction, [-1.0, 0.0], atol=1e-9)
+
+
+def test_a_short_piece_cut_at_a_slant_is_bridged_from_past_its_hook():
+    # A cable along y = 50 seen in two pieces across a gap; the right one is short and
+    # its left tip, cut at a slant, was thinned into a hook 6 px off toward the cut's
+    # corner. Its fit left out 12 px of narrow tip (more than the nominal skip of 4):
+    # the bridge starts past the hook, the tip taken back onto the piece's line.
+    pieces = [
+        np.array([[x, 50.0] for x in range(0, 81, 10)]),
+        np.array([[104.0, 56.0], [112.0, 50.0], [122.0, 50.0], [132.0, 50.0]]),
+    ]
+    ends = [replace(end, width=4.0) for end in chain_ends(pieces, 40.0, skip=4.0)]
+    ends[2] = replace(ends[2], skip=12.0)
+    joins = [(1, 2, 0.1)]
+    inner, trims = bridge_from_the_fits(pieces, ends, joins, 40.0, [-1] * 4, nominal_skip=4.0)
+    np.testing.assert_allclose(inner[2].position, [104.0, 50.0])
+    assert 19.9 < trims[2] < 20.0 and trims[3] == 0.0  # the joints within 12 px left out
+
+    def worst_offset(which, trimmed):
+        (path,) = assemble_paths(pieces, which, joins, "smooth", trimmed)
+        return float(np.abs(path.vertices[:, 1] - 50.0).max())
+
+    assert worst_offset(inner, trims) < 1.0 < 5.0 < worst_offset(ends, None)
+    # A tip no narrower than the nominal skip says is no hook: left as it is.
+    kept, _ = bridge_from_the_fits(pieces, ends, joins, 40.0, [-1] * 4, nominal_skip=12.0)
+    np.testing.assert_allclose(kept[2].position, ends[2].position)
