@@ -7,7 +7,10 @@ of degrees off, up to a right angle, and a bridge leaving it along that directio
 misses the cable's hidden stretch. The blob's own outline holds the direction: the
 cable's two sides are straight and parallel, the cable's width apart, while the cuts
 are the objects' outlines. :func:`ends_of_stubs` reads the direction across which the
-blob is as wide as the cable.
+blob is as wide as the cable. Up to twice as long, the skeleton is no better a reading:
+the end fit leaves out a radius at the tip and the cut's narrow joints at the other
+end, and the cable width or less left between is where thinning bends the axis toward
+the cuts' corners.
 """
 
 from __future__ import annotations
@@ -26,8 +29,8 @@ SIDE_DIRECTIONS = 90
 def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius: float) -> list:
     """``ends`` with those of every isolated stub read from the stub's sides.
 
-    A stub is a piece whose skeleton is shorter than the cable's full width (``2
-    radius``) and whose foreground blob is its own: a connected part of ``mask`` that
+    A stub is a piece whose skeleton is shorter than twice the cable's full width
+    (``2 radius + 1``) and whose foreground blob is its own: a connected part of ``mask`` that
     holds no other piece's joint (not at a crossing, not touching another cable).
     Its direction is the one across which the blob's extent is a local minimum (a
     pair of parallel straight sides), of the minima the one nearest the cable's full
@@ -53,7 +56,7 @@ def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius
     list of ChainEnd
     """
     full_width = 2.0 * radius + 1.0
-    stubs = [k for k, points in enumerate(pieces) if polyline_length(points) < full_width]
+    stubs = [k for k, points in enumerate(pieces) if polyline_length(points) < 2.0 * full_width]
     if not stubs:
         return ends
     height, width = mask.shape[:2]
