@@ -54,6 +54,7 @@ from service.perception.gap_evidence import (
 )
 from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
+from service.perception.short_pieces import ends_of_stubs
 from service.perception.touching import (
     TouchingSplit,
     absorb_shared_pieces,
@@ -835,6 +836,8 @@ def merge_chains(
     ends = chain_ends(
         pieces, span, skip=radius, distance=distance, full_width=full_width, bend_aware=at_crossing
     )
+    if mask is not None:
+        ends = ends_of_stubs(pieces, ends, mask, radius)  # a stub's skeleton runs across it
     check(deadline, "merging")
     at_border = None
     if zones is not None or mask is not None:

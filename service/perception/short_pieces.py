@@ -1,0 +1,127 @@
+"""The ends of pieces too short for their skeleton to show the cable's direction.
+
+A stretch of cable seen between two objects is a blob cut off at both ends; when it is
+no longer than the cable is wide, its skeleton (the medial axis) runs along the blob's
+longer diagonal, often across the cable: its two or three joints give a direction tens
+of degrees off, up to a right angle, and a bridge leaving it along that direction
+misses the cable's hidden stretch. The blob's own outline holds the direction: the
+cable's two sides are straight and parallel, the cable's width apart, while the cuts
+are the objects' outlines. :func:`ends_of_stubs` reads the direction across which the
+blob is as wide as the cable. Up to twice as long, the skeleton is no better a reading:
+the end fit leaves out a radius at the tip and the cut's narrow joints at the other
+end, and the cable width or less left between is where thinning bends the axis toward
+the cuts' corners.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+
+from service.perception.geometry import polyline_length
+
+# The directions tried for a stub's sides, over half a turn.
+SIDE_DIRECTIONS = 90
+
+
+def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius: float) -> list:
+    """``ends`` with those of every isolated stub read from the stub's sides.
+
+    A stub is a piece whose skeleton is shorter than twice the cable's full width
+    (``2 radius + 1``) and whose foreground blob is its own: a connected part of ``mask`` that
+    holds no other piece's joint (not at a crossing, not touching another cable).
+    Its direction is the one across which the blob's extent is a local minimum (a
+    pair of parallel straight sides), of the minima the one nearest the cable's full
+    width: between two cuts closer together than the cable is wide, the cuts' own
+    direction is a narrower minimum, but not the cable's width. The stub's two ends lie
+    where its middle line (the line along that direction through the blob's centre)
+    leaves the blob; the start end points back along the skeleton's first-to-last
+    joint, as before. Their curvature is 0: a stub shows no bend.
+
+    Parameters
+    ----------
+    pieces : list of ndarray
+        ``(K, 2)`` joints of the pieces (x, y).
+    ends : list of ChainEnd
+        Both ends of every piece (piece i: ends 2i, 2i+1).
+    mask : ndarray of bool
+        The foreground.
+    radius : float
+        Typical cable half width in pixels.
+
+    Returns
+    -------
+    list of ChainEnd
+    """
+    full_width = 2.0 * radius + 1.0
+    stubs = [k for k, points in enumerate(pieces) if polyline_length(points) < 2.0 * full_width]
+    if not stubs:
+        return ends
+    height, width = mask.shape[:2]
+    joints = np.rint(np.concatenate(pieces)).astype(np.int64)
+    owner = np.repeat(np.arange(len(pieces)), [len(points) for points in pieces])
+    reach = int(np.ceil(2.0 * full_width))
+    adjusted = list(ends)
+    for piece in stubs:
+        centre = np.rint(pieces[piece].mean(0)).astype(np.int64)
+        x0, y0 = max(int(centre[0]) - reach, 0), max(int(centre[1]) - reach, 0)
+        x1, y1 = min(int(centre[0]) + reach + 1, width), min(int(centre[1]) + reach + 1, height)
+        window = np.ascontiguousarray(mask[y0:y1, x0:x1], np.uint8)
+        _, labels = cv2.connectedComponents(window, connectivity=8)
+        inside = (
+            (joints[:, 0] >= x0) & (joints[:, 0] < x1) & (joints[:, 1] >= y0) & (joints[:, 1] < y1)
+        )
+        label_of = np.zeros(len(joints), np.int64)
+        label_of[inside] = labels[joints[inside, 1] - y0, joints[inside, 0] - x0]
+        own = label_of[owner == piece]
+        if own.min() == 0 or (own != own[0]).any():
+            continue
+        blob = labels == own[0]
+        if (label_of[inside & (owner != piece)] == own[0]).any():
+            continue  # another piece's blob too: a crossing or a touching cable
+        if blob[0].any() or blob[-1].any() or blob[:, 0].any() or blob[:, -1].any():
+            continue  # runs on beyond the window: no stub
+        ys, xs = np.nonzero(blob)
+        pixels = np.stack([xs + x0, ys + y0], axis=1).astype(np.float64)
+        axis = _side_direction(pixels, full_width)
+        if axis is None:
+            continue
+        points = pieces[piece]
+        if axis @ (points[-1] - points[0]) < 0:
+            axis = -axis
+        middle = pixels.mean(0)
+        along = (pixels - middle) @ axis
+        across = (pixels - middle) @ np.array([-axis[1], axis[0]])
+        on_line = np.abs(across) <= 1.0
+        if not on_line.any():
+            continue
+        first, last = float(along[on_line].min()), float(along[on_line].max())
+        start, end = ends[2 * piece], ends[2 * piece + 1]
+        adjusted[2 * piece] = replace(
+            start, position=middle + first * axis, direction=-axis, curvature=0.0
+        )
+        adjusted[2 * piece + 1] = replace(
+            end, position=middle + last * axis, direction=axis.copy(), curvature=0.0
+        )
+    return adjusted
+
+
+def _side_direction(pixels: np.ndarray, full_width: float) -> np.ndarray | None:
+    """The unit direction of a blob's pair of parallel sides nearest ``full_width``
+    apart: of the local minima of the blob's extent across a direction (of the pixels
+    ``pixels``, each a unit square), the one nearest ``full_width`` by ratio; None for
+    a blob with no minimum (round)."""
+    angles = np.arange(SIDE_DIRECTIONS) * (np.pi / SIDE_DIRECTIONS)
+    normals = np.stack([-np.sin(angles), np.cos(angles)], axis=1)
+    projections = pixels @ normals.T
+    # A pixel is a unit square: across a slanted direction it spans |nx| + |ny|.
+    footprint = np.abs(normals).sum(1)
+    extents = projections.max(0) - projections.min(0) + footprint
+    before, after = np.roll(extents, 1), np.roll(extents, -1)
+    minima = np.flatnonzero((extents <= before) & (extents <= after) & (extents < extents.max()))
+    if len(minima) == 0:
+        return None
+    best = minima[np.argmin(np.abs(np.log(extents[minima] / full_width)))]
+    return np.array([np.cos(angles[best]), np.sin(angles[best])])
