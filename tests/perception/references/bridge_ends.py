@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 
 from service.perception._geometry_kernels import END_FIT_MAX_TURNING
-from service.perception.bridge_ends import WIDENED_MARGIN_PX
+from service.perception.bridge_ends import WIDENED_MARGIN_PX, start_on_the_piece
 from service.perception.geometry import fit_where_skipped
 from tests.perception.references.geometry import polyline_length
 
@@ -18,15 +18,18 @@ def ends_clear_of_crossing(points, end, far_skip, span, distance):
     backwards = np.ascontiguousarray(points if end.at_start else points[::-1], np.float64)
     skip = max(float(end.skip), widened_tip_length(backwards, distance, end.width))
     reach = length - skip - far_skip
+    fit_span = span
     if far_skip > end.skip and reach >= 0.5 * span:
-        span = min(span, reach)
+        fit_span = min(span, reach)
     if skip <= 0:
         return None
-    span = bend_aware_span(backwards, skip, span)
-    inner = fit_where_skipped(points, end.at_start, span, skip)
+    fit_span = bend_aware_span(backwards, skip, fit_span)
+    inner = fit_where_skipped(points, end.at_start, fit_span, skip)
     if inner is None:
         return None
-    return replace(end, position=inner[0], direction=inner[1]), skip
+    # The bridge starts on the piece where the fit misses it (over half the full span).
+    position, direction = start_on_the_piece(backwards, skip, span, *inner)
+    return replace(end, position=position, direction=direction), skip
 
 
 def bend_aware_span(backwards, skip, span):
