@@ -109,9 +109,10 @@ def ends_clear_of_crossing(
     ``_geometry_kernels.bend_aware_fit`` does, and short of the arc length ``far_skip``
     the other end's fit left out, a cut end's narrow hook); the piece's joints before it
     are left out; where that fit misses the piece's own line at the start, the bridge
-    starts on the piece (:func:`start_on_the_piece`). Pieces shorter than ``span``, of
-    unknown width, or too short to fit beyond the widened tip are left as they are.
-    Returns the end and the arc length to trim.
+    starts on the piece (:func:`start_on_the_piece`). Pieces shorter than ``span`` keep
+    their end unless its fit misses the piece (:func:`short_piece_clear_of_crossing`);
+    pieces of unknown width, or too short to fit beyond the widened tip, are left as
+    they are. Returns the end and the arc length to trim.
     """
     # The piece from the end's tip inwards; the loop is compiled
     # (_bridge_ends_kernels.clear_of_crossing).
@@ -134,6 +135,8 @@ def ends_clear_of_crossing(
     if outcome == UNDECIDED:
         outcome, skip, *fit = _bridge_ends_kernels.clear_of_crossing(*arguments, _turns(backwards))
     if outcome != MOVED:
+        if end.width > 0 and polyline_length(points) < span:
+            return short_piece_clear_of_crossing(points, backwards, end, span, distance)
         return None
     # Evaluated here, as geometry.fit_where_skipped does: Python's ``skip**2`` is the C
     # library's pow, now and then an ulp off the ``skip * skip`` compiled code takes.
@@ -142,6 +145,40 @@ def ends_clear_of_crossing(
         return None
     position, direction = start_on_the_piece(backwards, skip, span, *inner)
     return replace(end, position=position, direction=direction), skip
+
+
+def short_piece_clear_of_crossing(
+    points: np.ndarray, backwards: np.ndarray, end, span: float, distance: np.ndarray
+):
+    """:func:`ends_clear_of_crossing` for a piece shorter than the fit's ``span``: its
+    end's fit (over the whole piece, as :func:`.merging.chain_ends` fitted it) stays
+    unless it misses the piece where the bridge starts, past the widened tip and the tip
+    the fit skipped; then the bridge starts on the piece (:func:`start_on_the_piece`).
+    A short piece's fit runs into whatever bends its far end (a hook at the picture's
+    edge, a cut), and a quadratic over a few joints turns that into an end several px
+    off its strand. Returns the end and the arc length to trim, or None to keep it."""
+    skip = max(float(end.skip), widened_tip_length(backwards, distance, end.width))
+    if skip <= 0 or polyline_length(points) < 2.0 * skip + 1.0:
+        return None
+    inner = fit_where_skipped(points, end.at_start, span, skip)
+    if inner is None:
+        return None
+    position, direction = start_on_the_piece(backwards, skip, span, *inner)
+    if position is inner[0]:
+        return None
+    return replace(end, position=position, direction=direction), skip
+
+
+def widened_tip_length(backwards: np.ndarray, distance: np.ndarray, width: float) -> float:
+    """Arc length from the tip of ``backwards`` (a piece from its tip inwards) to its
+    first joint where the mask (``distance``, its distance transform) is no wider than
+    the piece's half ``width`` plus ``WIDENED_MARGIN_PX``: the stretch another strand
+    widens."""
+    rows = np.clip(np.rint(backwards[:, 1]).astype(int), 0, distance.shape[0] - 1)
+    cols = np.clip(np.rint(backwards[:, 0]).astype(int), 0, distance.shape[1] - 1)
+    narrow = np.flatnonzero(distance[rows, cols] <= width + WIDENED_MARGIN_PX)
+    last = int(narrow[0]) if narrow.size else len(backwards) - 1
+    return polyline_length(backwards[: last + 1])
 
 
 def start_on_the_piece(

@@ -200,6 +200,22 @@ def test_a_crossing_bridge_starts_on_a_piece_that_bends_behind_the_crossing():
     assert np.array_equal(moved.direction, expected[0].direction)
 
 
+def test_a_short_crossing_piece_whose_fit_misses_it_starts_its_bridge_on_it():
+    # A piece shorter than the fit's span leaves a crossing along y = 60 (tip at
+    # x = 120) and hooks at its far end (the picture's edge): the quadratic over the
+    # whole piece lands 2 px off the strand, tilted 22 degrees; the bridge starts on it.
+    points = np.array([[120.0, 60], [112, 60], [104, 60], [97, 60], [92, 64], [90, 69]])
+    mask = np.zeros((70, 200), np.uint8)
+    cv2.polylines(mask, [np.round(points).astype(np.int32)], False, 1, 9)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    end = ChainEnd(0, True, points[0], np.array([1.0, 0.0]), skip=4.0, width=4.5)
+    assert abs(fit_where_skipped(points, True, 40.0, 4.0)[0][1] - 60.0) > 2.0
+
+    moved, trim = ends_clear_of_crossing(points, end, 0.0, 40.0, distance)
+    assert trim == 4.0
+    assert np.allclose(moved.position, [116.0, 60.0]) and np.allclose(moved.direction, [1, 0])
+
+
 def _arc(radius: float, start_degrees: float, stop_degrees: float) -> np.ndarray:
     """Joints every 5 degrees along a circle round (200, 200), anticlockwise in angle."""
     angles = np.radians(np.arange(start_degrees, stop_degrees + 1e-9, 5.0))
