@@ -18,7 +18,13 @@ import numpy as np
 
 from service.perception import _bridge_ends_kernels
 from service.perception._bridge_ends_kernels import MOVED, UNDECIDED
-from service.perception.geometry import arc_lengths, fit_at, fit_where_skipped, polyline_length
+from service.perception.geometry import (
+    arc_lengths,
+    fit_at,
+    fit_where_skipped,
+    points_along,
+    polyline_length,
+)
 
 # An end put along a line through a short piece carries no fit of its own.
 _UNFITTED = {"curvature": 0.0, "skip": 0.0, "width": 0.0}
@@ -146,6 +152,11 @@ def _along_beyond(outer: np.ndarray, inner: np.ndarray, tip: np.ndarray) -> np.n
 # pixel steps along one straight cable.
 WIDENED_MARGIN_PX = 1.0
 
+# Where a crossing's bridge starts, the piece's own line lies on its strand to within
+# the skeleton's pixel steps; a fit that passes further from it than one such step is
+# bent by the stretch beyond (a bend behind the crossing), not describing the cable there.
+FIT_MISS_PX = 1.0
+
 
 def ends_clear_of_crossing(
     points: np.ndarray, end, far_skip: float, span: float, distance: np.ndarray
@@ -162,9 +173,11 @@ def ends_clear_of_crossing(
     fit of the stretch beyond (over a span short enough for a tight loop's bend, as
     ``_geometry_kernels.bend_aware_fit`` does, and short of the arc length ``far_skip``
     the other end's fit left out, a cut end's narrow hook); the piece's joints before it
-    are left out. Pieces shorter than ``span``, of unknown width, or too short to fit
-    beyond the widened tip are left as they are. Returns the end and the arc length to
-    trim.
+    are left out; where that fit misses the piece's own line at the start, the bridge
+    starts on the piece (:func:`start_on_the_piece`). Pieces shorter than ``span`` keep
+    their end unless its fit misses the piece (:func:`short_piece_clear_of_crossing`);
+    pieces of unknown width, or too short to fit beyond the widened tip, are left as
+    they are. Returns the end and the arc length to trim.
     """
     # The piece from the end's tip inwards; the loop is compiled
     # (_bridge_ends_kernels.clear_of_crossing).
@@ -187,13 +200,81 @@ def ends_clear_of_crossing(
     if outcome == UNDECIDED:
         outcome, skip, *fit = _bridge_ends_kernels.clear_of_crossing(*arguments, _turns(backwards))
     if outcome != MOVED:
+        if end.width > 0 and polyline_length(points) < span:
+            return short_piece_clear_of_crossing(points, backwards, end, span, distance)
         return None
     # Evaluated here, as geometry.fit_where_skipped does: Python's ``skip**2`` is the C
     # library's pow, now and then an ulp off the ``skip * skip`` compiled code takes.
     inner = fit_at(*fit, skip)
     if inner is None:
         return None
-    return replace(end, position=inner[0], direction=inner[1]), skip
+    position, direction = start_on_the_piece(backwards, skip, span, *inner)
+    return replace(end, position=position, direction=direction), skip
+
+
+def short_piece_clear_of_crossing(
+    points: np.ndarray, backwards: np.ndarray, end, span: float, distance: np.ndarray
+):
+    """:func:`ends_clear_of_crossing` for a piece shorter than the fit's ``span``: its
+    end's fit (over the whole piece, as :func:`.merging.chain_ends` fitted it) stays
+    unless it misses the piece where the bridge starts, past the widened tip and the tip
+    the fit skipped; then the bridge starts on the piece (:func:`start_on_the_piece`).
+    A short piece's fit runs into whatever bends its far end (a hook at the picture's
+    edge, a cut), and a quadratic over a few joints turns that into an end several px
+    off its strand. Returns the end and the arc length to trim, or None to keep it."""
+    skip = max(float(end.skip), widened_tip_length(backwards, distance, end.width))
+    if skip <= 0 or polyline_length(points) < 2.0 * skip + 1.0:
+        return None
+    inner = fit_where_skipped(points, end.at_start, span, skip)
+    if inner is None:
+        return None
+    position, direction = start_on_the_piece(backwards, skip, span, *inner)
+    if position is inner[0]:
+        return None
+    return replace(end, position=position, direction=direction), skip
+
+
+def widened_tip_length(backwards: np.ndarray, distance: np.ndarray, width: float) -> float:
+    """Arc length from the tip of ``backwards`` (a piece from its tip inwards) to its
+    first joint where the mask (``distance``, its distance transform) is no wider than
+    the piece's half ``width`` plus ``WIDENED_MARGIN_PX``: the stretch another strand
+    widens."""
+    rows = np.clip(np.rint(backwards[:, 1]).astype(int), 0, distance.shape[0] - 1)
+    cols = np.clip(np.rint(backwards[:, 0]).astype(int), 0, distance.shape[1] - 1)
+    narrow = np.flatnonzero(distance[rows, cols] <= width + WIDENED_MARGIN_PX)
+    last = int(narrow[0]) if narrow.size else len(backwards) - 1
+    return polyline_length(backwards[: last + 1])
+
+
+def start_on_the_piece(
+    backwards: np.ndarray, skip: float, span: float, position: np.ndarray, direction: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where a crossing's bridge starts and which way it leaves: the fit's ``position``
+    and ``direction`` at arc length ``skip`` of the piece ``backwards`` (from its tip
+    inwards), or the piece's own point there when the fit misses it.
+
+    A quadratic in arc length over a stretch that runs straight out of the crossing and
+    bends further in spreads the bend over the whole stretch: at the crossing it lands
+    several px off the strand, pointing 20-30 degrees off it, and the bridge leaves the
+    cable. Past the widened tip the piece's own line is on its strand (to within
+    ``FIT_MISS_PX``); where the fit is further from it than that, the bridge starts on the
+    piece, along the chord to its last joint within half the fit's ``span`` (halved as
+    ``_geometry_kernels.bend_aware_fit`` halves it on a bend; a chord is tilted from the
+    tangent at its start by half the turning along it). Returns the position and the
+    outward unit direction.
+    """
+    arcs = arc_lengths(backwards)
+    on_piece = points_along(backwards, arcs, np.array([skip]))[0]
+    if float(np.hypot(*(position - on_piece))) <= FIT_MISS_PX:
+        return position, direction
+    beyond = np.flatnonzero((arcs > skip) & (arcs <= skip + 0.5 * span))
+    if not beyond.size:
+        return position, direction
+    chord = on_piece - backwards[beyond[-1]]
+    length = float(np.hypot(*chord))
+    if length < 1e-9:
+        return position, direction
+    return on_piece, chord / length
 
 
 # The kernel computes the turns itself (see _turns).

@@ -13,6 +13,7 @@ from service.perception.bridge_ends import (
     ends_clear_of_crossing,
     ends_through_short_pieces,
 )
+from service.perception.geometry import fit_where_skipped
 from service.perception.merging import ChainEnd, assemble_paths, chain_ends
 from tests.perception.references import bridge_ends as reference
 
@@ -173,6 +174,46 @@ def test_the_crossing_ends_kernel_equals_the_plain_code_bit_for_bit(seed, monkey
             assert got[0].curvature == expected[0].curvature and got[0].skip == end.skip
     assert moved > 200
     assert asked  # some spans turned by the limit to the last bit
+
+
+def test_a_crossing_bridge_starts_on_a_piece_that_bends_behind_the_crossing():
+    # A strand leaves a crossing straight along y = 60 (tip at x = 120) and bends 25 px
+    # in (radius 20, 60 degrees within the fit's span): the quadratic over the stretch
+    # spreads the bend over it and misses the strand at the bridge's start, tilted
+    # 14 degrees; the bridge starts on the piece, along it.
+    straight = np.array([[120.0, 60.0], [112.0, 60.0], [102.0, 60.0], [95.0, 60.0]])
+    angles = np.radians(np.arange(20.0, 91.0, 20.0))
+    bend = np.column_stack([95.0 - 20.0 * np.sin(angles), 80.0 - 20.0 * np.cos(angles)])
+    points = np.vstack([straight, bend])
+    mask = np.zeros((160, 200), np.uint8)
+    cv2.polylines(mask, [np.round(points).astype(np.int32)], False, 1, 9)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    end = ChainEnd(0, True, points[0], np.array([1.0, 0.0]), skip=4.0, width=4.5)
+    fitted = fit_where_skipped(points, True, 40.0, 4.0)
+    assert abs(fitted[0][1] - 60.0) > bridge_ends.FIT_MISS_PX
+
+    moved, trim = ends_clear_of_crossing(points, end, 0.0, 40.0, distance)
+    assert trim == 4.0
+    assert np.allclose(moved.position, [116.0, 60.0]) and np.allclose(moved.direction, [1, 0])
+    expected = reference.ends_clear_of_crossing(points, end, 0.0, 40.0, distance)
+    assert np.array_equal(moved.position, expected[0].position)
+    assert np.array_equal(moved.direction, expected[0].direction)
+
+
+def test_a_short_crossing_piece_whose_fit_misses_it_starts_its_bridge_on_it():
+    # A piece shorter than the fit's span leaves a crossing along y = 60 (tip at
+    # x = 120) and hooks at its far end (the picture's edge): the quadratic over the
+    # whole piece lands 2 px off the strand, tilted 22 degrees; the bridge starts on it.
+    points = np.array([[120.0, 60], [112, 60], [104, 60], [97, 60], [92, 64], [90, 69]])
+    mask = np.zeros((70, 200), np.uint8)
+    cv2.polylines(mask, [np.round(points).astype(np.int32)], False, 1, 9)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    end = ChainEnd(0, True, points[0], np.array([1.0, 0.0]), skip=4.0, width=4.5)
+    assert abs(fit_where_skipped(points, True, 40.0, 4.0)[0][1] - 60.0) > 2.0
+
+    moved, trim = ends_clear_of_crossing(points, end, 0.0, 40.0, distance)
+    assert trim == 4.0
+    assert np.allclose(moved.position, [116.0, 60.0]) and np.allclose(moved.direction, [1, 0])
 
 
 def _arc(radius: float, start_degrees: float, stop_degrees: float) -> np.ndarray:
