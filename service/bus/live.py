@@ -179,8 +179,8 @@ class _Watcher:
 
 
 @dataclass(frozen=True)
-class _EarlyResult:
-    """A result whose frame had not arrived when it came."""
+class _ResultSample:
+    """A result as it came (kept in ``_Feed.early`` while its frame has not arrived)."""
 
     kind: str
     attachment: dict[str, Any]
@@ -210,18 +210,18 @@ class _Feed:
     subscribers: list[Any] = field(default_factory=list)
     last_result: float = float("-inf")
     last_tracks: float = float("-inf")
-    early: deque[_EarlyResult] = field(default_factory=deque)
+    early: deque[_ResultSample] = field(default_factory=deque)
     """Results that came before their frame (paired by ``frame_id`` or timestamp)."""
     unpaired: int = 0
     too_large: int = 0
 
-    def keep_early(self, result: _EarlyResult) -> None:
+    def keep_early(self, result: _ResultSample) -> None:
         self.early.append(result)
         while len(self.early) > EARLY_RESULTS:
             self.early.popleft()
             self.unpaired += 1
 
-    def early_results_of(self, frame: LiveFrame, now: float) -> list[tuple[_EarlyResult, str]]:
+    def early_results_of(self, frame: LiveFrame, now: float) -> list[tuple[_ResultSample, str]]:
         """The waiting results made from ``frame`` (taken out) and how each was paired;
         stale ones are dropped."""
         while self.early and now - self.early[0].arrived > EARLY_RESULT_S:
@@ -401,7 +401,9 @@ class LiveHub:
         if sample.kind != zenoh.SampleKind.PUT:
             return
         now = time.monotonic()
-        result = _EarlyResult(kind, _json_object(sample.attachment), sample.payload.to_bytes(), now)
+        result = _ResultSample(
+            kind, _json_object(sample.attachment), sample.payload.to_bytes(), now
+        )
         with self._lock:
             feed = self._feeds.get(camera)
             if feed is None:
@@ -429,7 +431,7 @@ def _watchers_for(feed: _Feed, kind: str, now: float) -> list[_Watcher]:
 
 
 def _paired_view(
-    camera: str, frame: LiveFrame, result: _EarlyResult, pairing: str, now: float
+    camera: str, frame: LiveFrame, result: _ResultSample, pairing: str, now: float
 ) -> LiveView:
     replica = result.attachment.get("replica")
     return LiveView(

@@ -126,13 +126,22 @@ def open_gap_too_long(curve, mask, limit, hidden) -> bool:
     ``limit`` px of background (off ``mask``, inside the picture) and ``hidden()`` (the
     image's evidence, called only then) finds nothing lying over it. A bridge along the
     foreground (a doubled-back cable's touching strands, another cable) is not open."""
+    inside, seen = _samples_on_mask(curve, mask)
+    steps = np.hypot(*np.diff(curve, axis=0).T)
+    off = (inside & ~seen)[1:]
+    return float(steps[off].sum()) > limit and not hidden()
+
+
+def _samples_on_mask(curve: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per (x, y) sample of ``curve``: whether its pixel is inside the picture, and
+    whether it is on ``mask`` (False outside the picture)."""
     height, width = mask.shape
     cols = np.rint(curve[:, 0]).astype(np.int64)
     rows = np.rint(curve[:, 1]).astype(np.int64)
     inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
-    steps = np.hypot(*np.diff(curve, axis=0).T)
-    off = inside[1:] & ~mask[rows[1:].clip(0, height - 1), cols[1:].clip(0, width - 1)]
-    return float(steps[off].sum()) > limit and not hidden()
+    seen = np.zeros(len(curve), bool)
+    seen[inside] = mask[rows[inside], cols[inside]]
+    return inside, seen
 
 
 def points_out_of_picture(
@@ -206,12 +215,7 @@ def strands_turn_out_of_sight(a, b, curve: np.ndarray, mask: np.ndarray, radius:
     along the turn, not one drawn back over the strands it turns round between."""
     if polyline_length(curve) > CUT_GAP_RADII * cable_radius(radius, a.width, b.width):
         return False
-    height, width = mask.shape
-    cols = np.rint(curve[:, 0]).astype(np.int64)
-    rows = np.rint(curve[:, 1]).astype(np.int64)
-    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
-    seen = np.zeros(len(curve), bool)
-    seen[inside] = mask[rows[inside], cols[inside]]
+    _, seen = _samples_on_mask(curve, mask)
     off = np.flatnonzero(~seen)
     if not len(off) or seen[off[0] : off[-1] + 1].any():
         return False
