@@ -338,10 +338,11 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     The two strands enter the stretch side by side at one end and leave it side by side
     at the other: the ends fall into two close pairs (the partition whose pairs lie
     closest together) at the stretch's two ends, each pointing along the stretch
-    towards the other pair. The mask between them, one strand's width clear of each
-    pair, keeps both strands' widths (:data:`SIDE_BY_SIDE_WIDTH_FRACTION`, as a shared
-    piece must): where two cables cross, even at a shallow angle, it narrows to one
-    cable's. Strands that touch all along cannot cross there, so each keeps its side:
+    towards the other pair. The mask along the middle third of the line between them
+    (:func:`_middle_of_stretch`) keeps both strands' widths
+    (:data:`SIDE_BY_SIDE_WIDTH_FRACTION`, as a shared piece must): where two cables
+    cross, even at a shallow angle, it narrows to one cable's there, at the crossing.
+    Strands that touch all along cannot cross there, so each keeps its side:
     the left end of one pair joins the left end of the other (read as
     :func:`_end_kind` reads a junction's sides), not the one straight across, as the
     cheapest matching of a crossing would.
@@ -382,7 +383,9 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     ):
         return None
     line = np.array([middle_a, middle_b])
-    if _narrowest(line, distance, strands) < SIDE_BY_SIDE_WIDTH_FRACTION * strands:
+    if _narrowest(line, distance, _middle_of_stretch(length, strands)) < (
+        SIDE_BY_SIDE_WIDTH_FRACTION * strands
+    ):
         return None
     sides = []
     for pair in (pair_a, pair_b):
@@ -402,6 +405,20 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     if any(first // 2 == second // 2 for first, second in zip(*sides, strict=True)):
         return None
     return [tuple(pair) for pair in zip(*sides, strict=True)]
+
+
+def _middle_of_stretch(length: float, strands: float) -> float:
+    """How far clear of each end (px) the width of a stretch ``length`` px long between
+    a four-way junction's two pairs of ends is read (:func:`_touching_junction_pairs`):
+    a third of its length, and at least the two strands' half widths together
+    (``strands``).
+
+    The line runs from between one pair's ends to between the other's: at a bulb's two
+    ends it starts in the bulb's hole, and where the strands part it ends in the notch
+    between them, which narrows the mask over a few radii when they part at a shallow
+    angle (2.7 radii at 20 degrees), whether the strands touch or cross. Where two
+    cables cross, the mask is narrowest at the crossing, the middle of the line."""
+    return max(strands, length / 3.0)
 
 
 def _end_kind(end, index, labels, members, positions, directions, pieces, reach):

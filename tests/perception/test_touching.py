@@ -82,6 +82,28 @@ def test_the_bridge_across_a_touching_stretch_follows_each_strands_own_side():
         assert np.abs(middle[:, 1] - strand_y).max() <= 1.0
 
 
+def test_four_ends_in_the_notches_of_strands_parting_at_a_shallow_angle_pair_by_side():
+    """Two strands touching for 40 px part at 18 degrees at both ends, and the junction's
+    four ends lie where they have just parted: the line between the two pairs starts and
+    ends in the notches between the strands, where the mask narrows to nothing, whether
+    the strands touch or cross (doubled_back 86057, 86068, 86073, 280060, 280114: the
+    cable ran across its own stretch). The stretch is judged along the line's middle
+    third, where a crossing would narrow it: each strand keeps its side."""
+    upper = [(20, 70), (100, 96), (140, 96), (220, 70)]
+    lower = [(20, 130), (100, 104), (140, 104), (220, 130)]
+    mask = touching_strands_mask(upper, lower, shape=(200, 240))
+    arms = [
+        [(20, 70), (50, 80), (80, 89)],
+        [(20, 130), (50, 120), (80, 111)],
+        [(220, 70), (190, 80), (160, 89)],
+        [(220, 130), (190, 120), (160, 111)],
+    ]
+    pieces, positions, directions, labels, distance = _four_arms(mask, arms)
+    assert distance[100, 89] == 0  # the notch, a strand's width in from the line's end
+    split = split_touching_strands(pieces, positions, directions, labels, distance)
+    assert sorted(tuple(sorted(pair)) for pair in split.pairs) == [(1, 5), (3, 7)]
+
+
 def test_four_ends_of_a_shallow_crossing_are_left_to_the_crossing():
     """Two cables crossing at 23 degrees: the same four arms, but the mask narrows to
     one cable's width where they cross, so the junction is left as it is."""
