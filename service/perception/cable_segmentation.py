@@ -96,7 +96,8 @@ COARSEST_STEP = 16.0
 LEVEL_RATIO = float(np.sqrt(2.0))
 END_PROBE = 2.0
 """A seed ends a line when no seed lies near the point this far ahead on its line (level
-px): half its segment's length."""
+px): half its segment's length. Only seeds at least half this far ahead of it count
+(:func:`line_goes_on`)."""
 END_WIDTH = REACH
 """Ahead of a line's end the cable is judged as wide as beside its seeds (level px): a
 cable keeps its width up to its end, where the line's ratio fell because its segment ran
@@ -755,20 +756,10 @@ def _extent(lab8: np.ndarray, lines: SeedLines, seeds: np.ndarray) -> np.ndarray
     the length of their segment: there the segment ran past the cable's end and its ratio
     fell.
     """
-    height = lab8.shape[0]
-    grid_h, grid_w = seeds.shape
-    grid_step = height / grid_h
-    around = cv2.dilate(seeds.view(np.uint8), np.ones((3, 3), np.uint8))
-    ahead = []
-    for sign in (1.0, -1.0):
-        probe_x = lines.centres_x + sign * END_PROBE * lines.steps * np.cos(lines.angles)
-        probe_y = lines.centres_y + sign * END_PROBE * lines.steps * np.sin(lines.angles)
-        gx = np.floor((probe_x + 0.5) / grid_step).astype(np.int64)
-        gy = np.floor((probe_y + 0.5) / grid_step).astype(np.int64)
-        inside = (gx >= 0) & (gx < grid_w) & (gy >= 0) & (gy < grid_h)
-        continues = np.ones(gx.size, bool)
-        continues[inside] = around[gy[inside], gx[inside]] > 0
-        ahead.append(np.where(continues, 0.0, HALF_LENGTH * lines.steps))
+    ahead = [
+        np.where(line_goes_on(lines, seeds, sign, lab8.shape[0]), 0.0, HALF_LENGTH * lines.steps)
+        for sign in (1.0, -1.0)
+    ]
     return _cable_segmentation_kernels.colour_class_within_reach(
         lab8,
         lines.centres_y,
@@ -782,6 +773,56 @@ def _extent(lab8: np.ndarray, lines: SeedLines, seeds: np.ndarray) -> np.ndarray
         float(OFFSET),
         lines.colours,
     )
+
+
+def line_goes_on(lines: SeedLines, seeds: np.ndarray, sign: float, height: int) -> np.ndarray:
+    """Which seeds' lines go on past them, forward (``sign`` 1) or back (-1).
+
+    A line goes on when a seed of the finest grid lies within one grid pixel of the point
+    :data:`END_PROBE` level px ahead on it, and that seed is itself at least half that
+    far ahead. Without the second condition, the seed's own grid pixel (or the one beside
+    it across the line) is within a grid pixel of the point on the finest level whenever
+    the line runs diagonally (the point is only sqrt(2) grid px off each way), so such a
+    line never ended: the lower cable at a crossing, its last seeds short of the upper
+    one, was not followed up to it, and its mask stopped a few px short, cut in two.
+
+    Parameters
+    ----------
+    lines : SeedLines
+    seeds : ndarray of bool
+        The finest grid's seeds, those of ``lines`` only.
+    sign : float
+        1.0 along the line's angle, -1.0 against it.
+    height : int
+        The image's height (px), for the grid's step.
+
+    Returns
+    -------
+    ndarray of bool
+        ``(N,)``; True also where the point lies beyond the picture.
+    """
+    grid_h, grid_w = seeds.shape
+    grid_step = height / grid_h
+    along_x = sign * np.cos(lines.angles)
+    along_y = sign * np.sin(lines.angles)
+    probe = END_PROBE * lines.steps
+    gx = np.floor((lines.centres_x + probe * along_x + 0.5) / grid_step).astype(np.int64)
+    gy = np.floor((lines.centres_y + probe * along_y + 0.5) / grid_step).astype(np.int64)
+    inside = (gx >= 0) & (gx < grid_w) & (gy >= 0) & (gy < grid_h)
+    goes_on = ~inside
+    padded = np.pad(seeds, 1)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            near_x, near_y = gx + dx, gy + dy
+            seed_there = padded[
+                np.clip(near_y + 1, 0, grid_h + 1), np.clip(near_x + 1, 0, grid_w + 1)
+            ]
+            # How far ahead of the seed that grid pixel's centre lies, in image px.
+            forward = ((near_x + 0.5) * grid_step - 0.5 - lines.centres_x) * along_x + (
+                (near_y + 0.5) * grid_step - 0.5 - lines.centres_y
+            ) * along_y
+            goes_on |= inside & seed_there & (forward >= 0.5 * probe)
+    return goes_on
 
 
 def fill_slits(mask: np.ndarray) -> np.ndarray:

@@ -542,3 +542,28 @@ def test_a_cables_end_is_found_at_its_full_width():
     # The core only (END_WIDTH 1.0) left 19 of the end's 193 px out; the full reach, 4.
     assert np.count_nonzero(end & ~mask[:, 290:]) <= 0.05 * np.count_nonzero(end)
     assert not mask[:, 312:].any()
+
+
+def test_a_diagonal_line_ends_at_its_last_seed():
+    """On the finest grid the point ahead of a diagonal line's last seed lies next to the
+    seed's own grid pixel: that seed is not the line going on (the lower cable at a
+    crossing was cut short of the upper one while it counted)."""
+    from service.perception.cable_segmentation import SeedLines, line_goes_on
+
+    seeds = np.zeros((50, 50), bool)
+    diagonal = np.arange(10, 21)
+    seeds[diagonal, diagonal] = True
+    centres = (diagonal + 0.5) * 2.0 - 0.5
+    n = diagonal.size
+    lines = SeedLines(
+        centres,
+        centres.copy(),
+        np.full(n, np.pi / 4),
+        np.full(n, 2.0),
+        np.zeros((n, 4, 3), np.float32),
+        np.arange(n),
+    )
+    forward = line_goes_on(lines, seeds, 1.0, 100)
+    back = line_goes_on(lines, seeds, -1.0, 100)
+    assert not forward[-1] and forward[:-1].all()
+    assert not back[0] and back[1:].all()
