@@ -146,12 +146,15 @@ def _beyond_hooks(
             last += 1
     if last - first < 1:
         return
-    # Trims just short of the kept joints' arc lengths, so that they stay.
-    start_past = hooks[0] > 0 and first > 0 and along[-1] - along[first + 1] >= narrow[1]
+    # Trims just short of the kept joints' arc lengths, so that they stay. A narrow tip
+    # ends at the first joint of full width (that joint is past it), and arc lengths
+    # summed in another order differ in the last bits: compared with the same slack.
+    past = narrow - 1e-6
+    start_past = hooks[0] > 0 and first > 0 and along[-1] - along[first + 1] >= past[1]
     if start_past and _hooked_off(points[first], points[first + 1], points[0], widths[0]):
         tip = _along_beyond(points[first], points[first + 1], points[0])
         yield 0, tip, float(along[first]) - 1e-6
-    end_past = hooks[1] > 0 and last < len(points) - 1 and along[last - 1] >= narrow[0]
+    end_past = hooks[1] > 0 and last < len(points) - 1 and along[last - 1] >= past[0]
     if end_past and _hooked_off(points[last], points[last - 1], points[-1], widths[1]):
         tip = _along_beyond(points[last], points[last - 1], points[-1])
         yield 1, tip, float(along[-1] - along[last]) - 1e-6

@@ -332,3 +332,15 @@ def test_a_hook_is_not_taken_back_onto_a_line_through_the_other_narrow_tip():
     inner, trims = bridge_from_the_fits(pieces, ends, joins, 40.0, [-1] * 4, nominal_skip=4.0)
     np.testing.assert_allclose(inner[2].position, ends[2].position)
     assert trims[2] == 0.0
+
+
+def test_a_line_joint_where_the_other_narrow_tip_ends_is_past_it():
+    # The far tip is narrow up to the joint 10 px in, where the cable is full width
+    # again: that joint lies past it (its arc length summed otherwise, a hair longer).
+    pieces, ends, joins = _short_piece_with_a_narrow_tip(
+        [[104.0, 56.0], [112.0, 50.0], [122.0, 50.0], [132.0, 50.0]], skip=10.0, width=6.0
+    )
+    ends[3] = replace(ends[3], skip=10.0 + 1e-9)
+    inner, trims = bridge_from_the_fits(pieces, ends, joins, 40.0, [-1] * 4, nominal_skip=4.0)
+    np.testing.assert_allclose(inner[2].position, [104.0, 50.0])
+    assert trims[2] > 0.0
