@@ -46,6 +46,7 @@ def bridge_from_the_fits(
     junction_of_end: list[int],
     distance: np.ndarray | None = None,
     nominal_skip: float | None = None,
+    curve_given: frozenset[int] = frozenset(),
 ) -> tuple[list, np.ndarray]:
     """Ends to bridge gaps from: where each end's fit begins, not extrapolated to the tip.
 
@@ -56,8 +57,12 @@ def bridge_from_the_fits(
     and the piece's joints before that are left out of the path (not for pieces shorter
     than the fit's ``span``: :func:`ends_through_short_pieces`). With ``distance`` (the
     mask's distance transform) a crossing's bridge starts clear of the other strand
-    (:func:`ends_clear_of_crossing`). Returns the ends and the arc lengths to trim per
-    end (for :func:`assemble_paths`).
+    (:func:`ends_clear_of_crossing`). A piece too short to fit beyond a tip narrower
+    than ``nominal_skip`` says (a cut's hook) starts its bridge past it
+    (:func:`_beyond_hooks`), unless the end is in ``curve_given``: its bridge is a curve
+    found elsewhere (a turn out of sight, :mod:`.turn_joins`), which starts where that
+    curve does. Returns the ends and the arc lengths to trim per end (for
+    :func:`assemble_paths`).
     """
     adjusted = list(ends)
     trims = np.zeros(len(ends))
@@ -81,7 +86,7 @@ def bridge_from_the_fits(
             if length < span or length < 2.0 * end.skip + 1.0:
                 # Too short to fit beyond the skipped tip (fit_where_skipped's own
                 # bound): where that tip is narrow, a cut's hook, the bridge starts past it.
-                if nominal_skip is not None and end.skip > nominal_skip:
+                if nominal_skip is not None and end.skip > nominal_skip and k not in curve_given:
                     hooks[k] = end.skip
                 continue
             inner = fit_where_skipped(pieces[end.piece], end.at_start, span, end.skip)
@@ -90,13 +95,24 @@ def bridge_from_the_fits(
                 trims[k] = end.skip
     for piece in np.flatnonzero(hooks.reshape(-1, 2).any(axis=1)).tolist():
         pair = slice(2 * piece, 2 * piece + 2)
-        for k, position, trim in _beyond_hooks(pieces[piece], hooks[pair], trims[pair]):
+        pair_ends = ends[pair]
+        widths = np.array([end.width for end in pair_ends])
+        # Narrow tips, joined or not: a line through one is no line of the cable.
+        narrow = np.array([end.skip if end.skip > nominal_skip else 0.0 for end in pair_ends])
+        beyond = _beyond_hooks(pieces[piece], hooks[pair], trims[pair], widths, narrow)
+        for k, position, trim in beyond:
             adjusted[2 * piece + k] = replace(adjusted[2 * piece + k], position=position)
             trims[2 * piece + k] = trim
     return adjusted, trims
 
 
-def _beyond_hooks(points: np.ndarray, hooks: np.ndarray, trims: np.ndarray):
+def _beyond_hooks(
+    points: np.ndarray,
+    hooks: np.ndarray,
+    trims: np.ndarray,
+    widths: np.ndarray,
+    narrow: np.ndarray,
+):
     """Where a piece too short to fit beyond its cut's hook starts its bridges.
 
     An end's fit leaves out the tip where the cut narrows the cable (``hooks``, arc
@@ -107,8 +123,13 @@ def _beyond_hooks(points: np.ndarray, hooks: np.ndarray, trims: np.ndarray):
     joints are left out of the path. The other end's bridge may already start further
     in (``trims``, a crossing's); at least two joints are kept between them (the
     hook's inner joints are given back, the longer hook's first, or the hook is kept
-    whole). Yields (0 for the start or 1 for the end, position, arc length to trim)
-    for each end trimmed past its hook.
+    whole). The tip is taken back onto the line of the two joints past its hook, which
+    must lie past the other end's narrow tip too (``narrow``, arc lengths as
+    ``hooks``, of either end whether joined or not), and it must lie where a hook puts
+    it: off that line by no more than its piece's half width (``widths``, per end;
+    :func:`_hooked_off`). A tip further off is no hook but the cable bending (a tight
+    loop, a bend at the cut): that end is left as it is. Yields (0 for the start or 1
+    for the end, position, arc length to trim) for each end trimmed past its hook.
     """
     along = arc_lengths(points)
     cut = np.maximum(hooks, trims)
@@ -125,13 +146,38 @@ def _beyond_hooks(points: np.ndarray, hooks: np.ndarray, trims: np.ndarray):
             last += 1
     if last - first < 1:
         return
-    # Trims just short of the kept joints' arc lengths, so that they stay.
-    if hooks[0] > 0 and first > 0:
+    # Trims just short of the kept joints' arc lengths, so that they stay. A narrow tip
+    # ends at the first joint of full width (that joint is past it), and arc lengths
+    # summed in another order differ in the last bits: compared with the same slack.
+    past = narrow - 1e-6
+    start_past = hooks[0] > 0 and first > 0 and along[-1] - along[first + 1] >= past[1]
+    if start_past and _hooked_off(points[first], points[first + 1], points[0], widths[0]):
         tip = _along_beyond(points[first], points[first + 1], points[0])
         yield 0, tip, float(along[first]) - 1e-6
-    if hooks[1] > 0 and last < len(points) - 1:
+    end_past = hooks[1] > 0 and last < len(points) - 1 and along[last - 1] >= past[0]
+    if end_past and _hooked_off(points[last], points[last - 1], points[-1], widths[1]):
         tip = _along_beyond(points[last], points[last - 1], points[-1])
         yield 1, tip, float(along[-1] - along[last]) - 1e-6
+
+
+def _hooked_off(outer: np.ndarray, inner: np.ndarray, tip: np.ndarray, half_width: float) -> bool:
+    """Whether ``tip`` lies where a cut's hook puts it beyond the line from ``inner``
+    through ``outer``: ahead of ``outer`` and off the line by no more than ``half_width``
+    (thinning bends the tip at most to the cut's corner). A tip further off is the cable
+    itself bending (the line cuts inside the bend), and one behind the line's start is
+    no continuation of it (a line through the other end's hook). A piece of unknown
+    width (0) sets no bound: any tip ahead counts."""
+    step = np.asarray(outer, np.float64) - np.asarray(inner, np.float64)
+    length = float(np.hypot(*step))
+    if length < half_width or length < 1e-9:
+        return False  # two joints closer than a half width give the line no direction
+    step = step / length
+    offset = np.asarray(tip, np.float64) - np.asarray(outer, np.float64)
+    ahead = float(offset @ step)
+    off = abs(float(step[0] * offset[1] - step[1] * offset[0]))
+    # The joints lie on whole pixels: each may be half a pixel off the line, which
+    # tilts it by up to one pixel over its length, carried ahead to the tip.
+    return ahead > 0.0 and (half_width <= 0 or off <= half_width + 0.5 + ahead / length)
 
 
 def _along_beyond(outer: np.ndarray, inner: np.ndarray, tip: np.ndarray) -> np.ndarray:

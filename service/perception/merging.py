@@ -976,14 +976,15 @@ def merge_chains(
         )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
+    bridges = {**touching.bridges, **turn_bridges}
+    curve_given = frozenset(end for pair in bridges for end in pair)
     inner_ends, trims = bridge_from_the_fits(
-        pieces, ends, joins, span, junction_of_end, distance, nominal_skip=radius
+        pieces, ends, joins, span, junction_of_end, distance, radius, curve_given
     )
     inner_ends = ends_of_short_pieces_from_partners(
         pieces, inner_ends, joins, span, junction_of_end
     )
     bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span, junction_of_end)
-    bridges = {**touching.bridges, **turn_bridges}
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]

@@ -285,3 +285,62 @@ def test_a_short_piece_cut_at_a_slant_is_bridged_from_past_its_hook():
     # A tip no narrower than the nominal skip says is no hook: left as it is.
     kept, _ = bridge_from_the_fits(pieces, ends, joins, 40.0, [-1] * 4, nominal_skip=12.0)
     np.testing.assert_allclose(kept[2].position, ends[2].position)
+
+
+def _short_piece_with_a_narrow_tip(second_piece, skip=12.0, width=4.0):
+    """A long piece along y = 50 and ``second_piece`` joined to it across a gap, the
+    latter's first end left out for ``skip`` of narrow tip (more than the nominal 4)."""
+    pieces = [np.array([[x, 50.0] for x in range(0, 81, 10)]), np.asarray(second_piece, float)]
+    ends = [replace(end, width=width) for end in chain_ends(pieces, 40.0, skip=4.0)]
+    ends[2] = replace(ends[2], skip=skip)
+    return pieces, ends, [(1, 2, 0.1)]
+
+
+def test_a_short_piece_whose_tip_bends_further_than_a_hook_keeps_its_tip():
+    # A tight loop's piece at an object's edge: its tip turns 10 px off the line of the
+    # joints beyond (half width 4), further than a cut's hook bends it. The cable bends
+    # there; the straight line past the hook would cut inside the bend.
+    pieces, ends, joins = _short_piece_with_a_narrow_tip(
+        [[106.0, 62.0], [112.0, 52.0], [122.0, 50.0], [132.0, 50.0]]
+    )
+    inner, trims = bridge_from_the_fits(pieces, ends, joins, 40.0, [-1] * 4, nominal_skip=4.0)
+    np.testing.assert_allclose(inner[2].position, ends[2].position)
+    assert trims[2] == 0.0
+
+
+def test_a_hook_bridged_along_a_given_curve_keeps_its_tip():
+    # A turn out of sight bridges the join along its own curve, from where it was found:
+    # the piece is not trimmed past its hook for a bridge that does not start there.
+    pieces, ends, joins = _short_piece_with_a_narrow_tip(
+        [[104.0, 56.0], [112.0, 50.0], [122.0, 50.0], [132.0, 50.0]]
+    )
+    arguments = (pieces, ends, joins, 40.0, [-1] * 4, None, 4.0)
+    inner, trims = bridge_from_the_fits(*arguments)
+    assert trims[2] > 0.0
+    inner, trims = bridge_from_the_fits(*arguments, curve_given=frozenset({1, 2}))
+    np.testing.assert_allclose(inner[2].position, ends[2].position)
+    assert trims[2] == 0.0
+
+
+def test_a_hook_is_not_taken_back_onto_a_line_through_the_other_narrow_tip():
+    # Both tips of a short piece narrow (its far end at the picture's edge, free): the
+    # only two joints past the joined end's hook include the far tip, bent itself.
+    pieces, ends, joins = _short_piece_with_a_narrow_tip(
+        [[104.0, 56.0], [112.0, 50.0], [118.0, 44.0]], skip=10.0
+    )
+    ends[3] = replace(ends[3], skip=8.0)
+    inner, trims = bridge_from_the_fits(pieces, ends, joins, 40.0, [-1] * 4, nominal_skip=4.0)
+    np.testing.assert_allclose(inner[2].position, ends[2].position)
+    assert trims[2] == 0.0
+
+
+def test_a_line_joint_where_the_other_narrow_tip_ends_is_past_it():
+    # The far tip is narrow up to the joint 10 px in, where the cable is full width
+    # again: that joint lies past it (its arc length summed otherwise, a hair longer).
+    pieces, ends, joins = _short_piece_with_a_narrow_tip(
+        [[104.0, 56.0], [112.0, 50.0], [122.0, 50.0], [132.0, 50.0]], skip=10.0, width=6.0
+    )
+    ends[3] = replace(ends[3], skip=10.0 + 1e-9)
+    inner, trims = bridge_from_the_fits(pieces, ends, joins, 40.0, [-1] * 4, nominal_skip=4.0)
+    np.testing.assert_allclose(inner[2].position, [104.0, 50.0])
+    assert trims[2] > 0.0
