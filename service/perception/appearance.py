@@ -56,6 +56,9 @@ LIGHTNESS_SHARE = 0.5
 WIDE_FACTOR = 2.0
 # Fewer samples than this before the first wide one: the end's colour is unknown.
 MIN_SAMPLES = 3
+# A piece shorter than this many radii with a tip in a junction is a scrap (where the
+# skeleton meets a blob or a junction): no radius of it is clear of the rims at both ends.
+SCRAP_RADII = 3.0
 
 
 @dataclass(frozen=True)
@@ -120,7 +123,7 @@ def end_colours(
         )
 
     colour, spread, lengths = stretch(STRETCH_SKIP_RADII * radius)
-    scraps = lengths < 3.0 * STRETCH_SKIP_RADII * radius
+    scraps = lengths < SCRAP_RADII * STRETCH_SKIP_RADII * radius
     if free is not None:
         # A short piece with neither tip in a junction is a stretch of cable seen
         # between two objects: thinning stops about a radius short of each cut, so its

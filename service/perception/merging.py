@@ -54,7 +54,7 @@ from service.perception.gap_evidence import (
 )
 from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
-from service.perception.short_pieces import ends_of_stubs
+from service.perception.short_pieces import ends_of_stubs, scraps_through_junctions
 from service.perception.touching import (
     TouchingSplit,
     absorb_shared_pieces,
@@ -953,20 +953,25 @@ def merge_chains(
     )
     turn_bridges: dict[tuple[int, int], np.ndarray] = {}
     if hidden_gap is not None and params.expected_count is None and ends:
-        # Sharp turns under an object, on the image's evidence (:mod:`.turn_joins`).
+        # Sharp turns under an object, on the image's evidence (:mod:`.turn_joins`); a
+        # scrap joined through its crossing is judged as the strand it continues.
         mutual = MUTUAL_COST_FACTOR * params.merge_cost_threshold
-        widths = np.array([end.width for end in ends], np.float64)
+        lengths = np.array([polyline_length(points) for points in pieces])
+        seen, hues = scraps_through_junctions(
+            ends, colours, joins, junction_of_end, lengths, radius
+        )
+        widths = np.array([end.width for end in seen], np.float64)
         joins = joins + turn_joins(
-            ends,
+            seen,
             joins,
             ~leaving & ~np.isin([end.piece for end in ends], sorted(dropped)),
             radius,
-            colours,
+            hues,
             lambda i, j: (
                 join_cost(ends[i], ends[j], params, radius)
-                + params.colour_weight * float(colour_penalty(colours, [i], [j])[0])
+                + params.colour_weight * float(colour_penalty(hues, [i], [j])[0])
             ),
-            turn_evidence(image, mask, ends, colours, radius, set(touching.partings)),
+            turn_evidence(image, mask, seen, hues, radius, set(touching.partings)),
             lambda i, j: open_gap_limit(radius, widths[i], widths[j]),
             mutual,
             mutual,

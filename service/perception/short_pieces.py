@@ -20,6 +20,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
+from service.perception.appearance import SCRAP_RADII, EndColours
 from service.perception.geometry import polyline_length
 
 # The directions tried for a stub's sides, over half a turn.
@@ -125,3 +126,68 @@ def _side_direction(pixels: np.ndarray, full_width: float) -> np.ndarray | None:
         return None
     best = minima[np.argmin(np.abs(np.log(extents[minima] / full_width)))]
     return np.array([np.cos(angles[best]), np.sin(angles[best])])
+
+
+def scraps_through_junctions(
+    ends: list,
+    colours: EndColours | None,
+    joins: list[tuple[int, int, float]],
+    junction_of_end: list[int],
+    lengths: np.ndarray,
+    radius: float,
+) -> tuple[list, EndColours]:
+    """``ends`` and ``colours`` with every scrap joined through its junction seen as
+    the strand it continues.
+
+    A scrap is a piece shorter than :data:`.appearance.SCRAP_RADII` radii (``lengths``,
+    px) with no colour of its own (:func:`.appearance.end_colours`): where a cable runs
+    out of a crossing straight under an object, the skeleton between the two is such a
+    scrap, its joints widened by the other strand at one end and narrowed by the cut
+    at the other, so that neither its colour nor its width is the cable's. Once the
+    junction pairing has joined its junction end (``junction_of_end`` >= 0) to an end
+    of a known colour, the two are one strand through the crossing: the scrap's other
+    end, where the object cuts it, takes that strand's colour and half width, and its
+    gap beyond the object is judged as that cable's (the evidence tests of
+    :mod:`.gap_evidence` ask both ends to look alike).
+
+    Parameters
+    ----------
+    ends : list of ChainEnd
+        Both ends of every piece (piece i: ends 2i, 2i+1).
+    colours : EndColours
+    joins : list of (int, int, float)
+        The joins made so far.
+    junction_of_end : list of int
+        Per end, the junction zone it lies in, or -1.
+    lengths : ndarray
+        Per piece, its length (px).
+    radius : float
+        Typical cable half width in pixels.
+
+    Returns
+    -------
+    (list of ChainEnd, EndColours or None)
+        New lists; the inputs are left as they were (and returned without colours).
+    """
+    if colours is None:
+        return ends, colours
+    known = colours.known
+    colour, spread = colours.colour.copy(), colours.spread.copy()
+    adjusted = list(ends)
+    for first, second, _ in joins:
+        for own, other in ((first, second), (second, first)):
+            piece = ends[own].piece
+            far = own ^ 1  # the piece's other end
+            if (
+                junction_of_end[own] < 0
+                or junction_of_end[far] >= 0
+                or junction_of_end[other] != junction_of_end[own]
+                or known[own]
+                or known[far]
+                or not known[other]
+                or lengths[piece] >= SCRAP_RADII * radius
+            ):
+                continue
+            colour[far], spread[far] = colours.colour[other], colours.spread[other]
+            adjusted[far] = replace(ends[far], width=ends[other].width)
+    return adjusted, EndColours(colour, spread)

@@ -4,8 +4,9 @@
 import cv2
 import numpy as np
 
-from service.perception.merging import chain_ends
-from service.perception.short_pieces import ends_of_stubs
+from service.perception.appearance import EndColours
+from service.perception.merging import ChainEnd, chain_ends
+from service.perception.short_pieces import ends_of_stubs, scraps_through_junctions
 
 
 def _stub_mask(cable: np.ndarray, half_width: float, cut: np.ndarray, half_length: float):
@@ -57,3 +58,41 @@ def test_a_stub_touching_another_piece_or_a_longer_piece_keeps_its_ends():
     long_piece = np.array([[60.0, 100.0], [100.0, 100.0], [140.0, 100.0]])
     ends = chain_ends([long_piece], 40.0)
     assert ends_of_stubs([long_piece], ends, mask, 8.0) == ends
+
+
+def _end(piece: int, at_start: bool, width: float) -> ChainEnd:
+    return ChainEnd(piece, at_start, np.zeros(2), np.array([1.0, 0.0]), width=width)
+
+
+def test_a_scrap_joined_through_its_crossing_takes_that_strands_colour_and_width():
+    # Piece 0: a long strand ending at a crossing (end 1 in junction 0). Piece 1: a
+    # scrap 10 px long from that crossing (end 2) to an object's border (end 3), with no
+    # colour of its own and a width the cut narrowed. Piece 2: another strand.
+    ends = [_end(0, True, 6.0), _end(0, False, 6.0), _end(1, True, 3.5), _end(1, False, 3.5)]
+    ends += [_end(2, True, 6.2), _end(2, False, 6.2)]
+    red = [50.0, 60.0, 40.0]
+    nan = [np.nan] * 3
+    colours = EndColours(
+        np.array([red, red, nan, nan, red, red]), np.array([2.0, 2.0, np.nan, np.nan, 2.0, 2.0])
+    )
+    junction_of_end = [-1, 0, 0, -1, -1, -1]
+    lengths = np.array([200.0, 10.0, 150.0])
+    joins = [(1, 2, 0.1)]
+    seen, hues = scraps_through_junctions(ends, colours, joins, junction_of_end, lengths, 5.0)
+    assert hues.known.tolist() == [True, True, False, True, True, True]
+    np.testing.assert_allclose(hues.colour[3], red)
+    assert seen[3].width == 6.0 and seen[2].width == 3.5
+    assert seen[:3] == ends[:3] and seen[4:] == ends[4:]
+    assert not colours.known[3]  # the inputs are left as they were
+    # Not joined at its junction, joined across a gap, or a piece long enough to have
+    # a colour of its own: no change.
+    for other_joins, other_lengths in (([], lengths), ([(3, 4, 0.5)], lengths)):
+        _, same = scraps_through_junctions(
+            ends, colours, other_joins, junction_of_end, other_lengths, 5.0
+        )
+        assert not same.known[3]
+    _, same = scraps_through_junctions(
+        ends, colours, joins, junction_of_end, np.array([200.0, 16.0, 150.0]), 5.0
+    )
+    assert not same.known[3]
+    assert scraps_through_junctions(ends, None, joins, junction_of_end, lengths, 5.0)[1] is None
