@@ -33,6 +33,7 @@ from service.perception import _merging_kernels
 from service.perception.appearance import (
     EndColours,
     colour_penalty,
+    colours_along_chains,
     end_colours,
     gap_hidden,
 )
@@ -49,6 +50,7 @@ from service.perception.gap_evidence import (
     cut_ends_alike,
     open_gap_limit,
     open_gap_too_long,
+    own_tips_rule,
     points_out_of_picture,
     turn_evidence,
 )
@@ -429,6 +431,7 @@ def choose_joins(
     hidden_gap: Callable[[int, int], bool] | None = None,
     runs_out: np.ndarray | None = None,
     open_gap: Callable[[int, int], bool] | None = None,
+    tips: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
@@ -458,7 +461,8 @@ def choose_joins(
     With ``open_gap``, a join across more than :data:`.gap_evidence.OPEN_GAP_RADII` (the
     ends' chord) is left out, however cheap, when ``open_gap(i, j)`` says its bridge runs
     that far over open background that nothing in the image hides
-    (:func:`.gap_evidence.open_gap_too_long`). In the last step, a partner that
+    (:func:`.gap_evidence.open_gap_too_long`); with ``tips``, two cables' own tips stay ends
+    (:func:`.gap_evidence.tips_stay_ends`). In the last step, a partner that
     ``hidden_gap`` does not let an end join across a longer gap is no rival.
 
     Returns
@@ -529,6 +533,9 @@ def choose_joins(
         pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
     if picture is not None and params.expected_count is None and len(costs):
         keep = _bridges_inside(ends, pairs, costs, picture, params)
+        pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
+    if tips is not None and params.expected_count is None and len(costs):
+        keep = tips(pairs, costs, MUTUAL_COST_FACTOR * params.merge_cost_threshold)
         pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
     check(deadline, "merging")
     # Cheapest first, ties by end indices (as sorting (cost, i, j) tuples).
@@ -950,11 +957,13 @@ def merge_chains(
         hidden_gap,
         runs_out,
         open_gap,
+        own_tips_rule(ends, mask, hidden_gap),
     )
     turn_bridges: dict[tuple[int, int], np.ndarray] = {}
     if hidden_gap is not None and params.expected_count is None and ends:
         # Sharp turns under an object, on the image's evidence (:mod:`.turn_joins`).
         mutual = MUTUAL_COST_FACTOR * params.merge_cost_threshold
+        colours = colours_along_chains(colours, joins)  # a scrap's is its chain's
         widths = np.array([end.width for end in ends], np.float64)
         joins = joins + turn_joins(
             ends,

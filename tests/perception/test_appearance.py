@@ -168,15 +168,44 @@ def _cable_end_mask(tip: str, slant_degrees: float = 0.0, half_width: int = 6):
     ],
 )
 def test_a_cut_across_the_width_is_square_and_a_round_tip_is_not(tip, slant, square):
+    """A cable's own tip rounds off ahead of its end (:func:`.appearance.own_tip`); an
+    object's border cuts it straight across, or at a slant."""
     mask = _cable_end_mask(tip, slant)
     position, direction = np.array([78.0, 50.0]), np.array([1.0, 0.0])
     assert appearance.cut_square(mask, position, direction, 6.5) is square
+    front = appearance.end_front(mask, position, direction, 6.5)
+    assert appearance.own_tip(front, 6.5) is not square
 
 
 def test_an_end_whose_foreground_runs_on_is_not_cut():
     mask = _cable_end_mask("cut")
     mask[30:70, 70:130] = True  # the piece runs into a blob of the foreground
     assert not appearance.cut_square(mask, np.array([60.0, 50.0]), np.array([1.0, 0.0]), 6.5)
+
+
+def test_an_end_whose_foreground_runs_on_is_no_tip():
+    mask = _cable_end_mask("round")
+    mask[30:70, 70:130] = True  # the piece runs into a blob of the foreground
+    front = appearance.end_front(mask, np.array([60.0, 50.0]), np.array([1.0, 0.0]), 6.5)
+    assert not appearance.own_tip(front, 6.5)
+
+
+def test_an_end_of_no_colour_takes_the_nearest_known_colour_along_its_chain():
+    """Pieces 0-1-2 joined end 1 to end 2 and end 3 to end 4 (piece 1 a scrap of no
+    colour); piece 3 joined to nothing, of no colour either."""
+    nan = [np.nan] * 3
+    colours = EndColours(
+        np.array([[50.0, 60.0, 40.0]] * 2 + [nan] * 2 + [[30.0, 0.0, 0.0]] * 2 + [nan] * 2),
+        np.array([1.0, 1.0, np.nan, np.nan, 2.0, 2.0, np.nan, np.nan]),
+    )
+    along = appearance.colours_along_chains(colours, [(1, 2, 0.1), (3, 4, 0.1)])
+    # Each of the scrap's ends looks out through its piece's other end: end 2 (free
+    # had it not been joined) finds piece 2's colour, end 3 piece 0's.
+    assert along.colour[2].tolist() == [30.0, 0.0, 0.0]
+    assert along.colour[3].tolist() == [50.0, 60.0, 40.0]
+    assert along.spread[2] == 2.0 and along.spread[3] == 1.0
+    assert not along.known[6:].any()  # a piece joined to nothing stays unknown
+    assert appearance.colours_along_chains(None, []) is None
 
 
 def test_ends_alike_need_known_agreeing_colours_and_one_width():
