@@ -328,6 +328,14 @@ CUT_SLANT_BULGE_SHARE = 0.2
 # more than this share of the half width: a round tip read 15 degrees off its axis is
 # lopsided by about 0.37 of it.
 TIP_LOPSIDED_SHARE = 0.5
+# A cable's own round tip (a half disc) bulges past lines CUT_PROBE_SHARE of its half
+# width to either side of its axis by this share of the half width. Each front is read
+# in 0.5 px steps on a pixel grid: two readings may differ by up to TIP_READING_PX for
+# nothing. A bulge under TIP_MIN_BULGE_PX (a cap on a cable under about 3.5 px in half
+# width) is not told from a cut's pixel steps.
+CAP_BULGE_SHARE = 1.0 - float(np.sqrt(1.0 - CUT_PROBE_SHARE**2))
+TIP_READING_PX = 1.5
+TIP_MIN_BULGE_PX = 1.0
 # The cross-section is read this many half widths behind the end; a cable's there is
 # within this range of its piece's typical half width.
 CUT_BEHIND_RADII = 1.5
@@ -470,9 +478,29 @@ def cut_or_lopsided(
     object's border or corner cuts a cable at a slant along its bend. A cable's round
     or tapering tip is symmetric about its axis. False when the front cannot be read."""
     front = end_front(mask, position, direction, half_width, skip)
-    return _straight(front) or (
-        front is not None and bool(abs(front[0] - front[2]) > TIP_LOPSIDED_SHARE)
+    return _straight(front) or _lopsided(front)
+
+
+def own_tip(front: np.ndarray | None, half_width: float) -> bool:
+    """Whether a chain end's front (:func:`end_front`, of a cable of ``half_width`` px)
+    is a cable's own round tip: read, symmetric about the cable's axis and bulging past
+    the two side lines as a half disc does (:data:`CAP_BULGE_SHARE`), within
+    :data:`TIP_READING_PX` on each count, and by at least :data:`TIP_MIN_BULGE_PX`. Where an
+    object lies over a cable, its border cuts the cable straight, concave (a disc's
+    rim) or at a slant, and a cut read on a bend may bulge far more than a cap. False
+    when the front cannot be read (the foreground runs on ahead: a crossing, a junction,
+    the picture's edge)."""
+    if front is None:
+        return False
+    bulge = (front[1] - 0.5 * (front[0] + front[2])) * half_width
+    return bool(
+        abs(front[0] - front[2]) * half_width <= TIP_READING_PX
+        and TIP_MIN_BULGE_PX <= bulge <= CAP_BULGE_SHARE * half_width + TIP_READING_PX
     )
+
+
+def _lopsided(front: np.ndarray | None) -> bool:
+    return front is not None and bool(abs(front[0] - front[2]) > TIP_LOPSIDED_SHARE)
 
 
 def _straight(front: np.ndarray | None) -> bool:

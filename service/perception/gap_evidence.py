@@ -16,8 +16,10 @@ from service.perception.appearance import (
     EndColours,
     cut_or_lopsided,
     cut_square,
+    end_front,
     ends_alike,
     gap_hidden,
+    own_tip,
 )
 from service.perception.geometry import polyline_length
 
@@ -96,6 +98,51 @@ def cut_ends_alike(
 # where the image shows something lying over it (:func:`.appearance.gap_hidden`) or
 # along the foreground (a doubled-back cable's touching strands).
 OPEN_GAP_RADII = 25.0
+
+
+# Two cables' own tips are joined over open background only on far stronger geometry
+# than other ends: a join costing at most this share of the looser limit (half the
+# threshold, merging.MUTUAL_COST_FACTOR being 1.5), the cable running straight on.
+TIP_STRAIGHT_SHARE = 1.0 / 3.0
+
+
+def tips_stay_ends(ends, pairs, costs, limit, mask, hidden) -> np.ndarray:
+    """Which candidate joins (``pairs`` of indices into ``ends``, :class:`.merging.ChainEnd`,
+    at ``costs``) may be made: all but those, at most ``limit`` dear (dearer ones are
+    never made), that join two cables' own tips (:func:`.appearance.own_tip`, fronts
+    read on ``mask``) across a gap that ``hidden(i, j)`` finds nothing in the image
+    lying over.
+
+    The foreground stops right ahead of such an end and rounds off as a cable's end
+    does: an object lying over the cable, even one of the background's own colour,
+    would have cut it straight, concave or at a slant. Two cables of one colour whose
+    tips lie close are two cables, unless the cable runs straight on between them (a
+    join at most :data:`TIP_STRAIGHT_SHARE` of ``limit`` dear: a stretch the segmentation
+    lost, as across a highlight). Both ends must read so: a cut across a strand bending
+    into a turn under an object can read round on one of them."""
+    keep = np.ones(len(costs), bool)
+    tips: dict[int, bool] = {}
+
+    def is_tip(index: int) -> bool:
+        if index not in tips:
+            end = ends[index]
+            front = end_front(mask, end.position, end.direction, end.width, end.skip)
+            tips[index] = own_tip(front, end.width)
+        return tips[index]
+
+    for row in np.flatnonzero((costs > TIP_STRAIGHT_SHARE * limit) & (costs <= limit)).tolist():
+        i, j = pairs[row].tolist()
+        if is_tip(i) and is_tip(j):
+            keep[row] = hidden(i, j)
+    return keep
+
+
+def own_tips_rule(ends, mask, hidden):
+    """:func:`tips_stay_ends` for these ``ends`` and ``mask``: a callable ``(pairs, costs,
+    limit)`` -> which may be made; None without the image's evidence (``hidden``)."""
+    if hidden is None:
+        return None
+    return lambda pairs, costs, limit: tips_stay_ends(ends, pairs, costs, limit, mask, hidden)
 
 
 def open_gap_limit(radius, first_width, second_width):

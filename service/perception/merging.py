@@ -49,12 +49,17 @@ from service.perception.gap_evidence import (
     cut_ends_alike,
     open_gap_limit,
     open_gap_too_long,
+    own_tips_rule,
     points_out_of_picture,
     turn_evidence,
 )
 from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
-from service.perception.short_pieces import ends_of_stubs, scraps_through_junctions
+from service.perception.short_pieces import (
+    ends_of_stubs,
+    scraps_through_junctions,
+    short_piece_widths,
+)
 from service.perception.touching import (
     TouchingSplit,
     absorb_shared_pieces,
@@ -182,7 +187,13 @@ def chain_ends(
         thinner = interior > 0
         held = long[thinner]
         full_widths[held] = np.minimum(full_widths[held], FULL_WIDTH_FRACTION * interior[thinner])
-        widths = _short_piece_widths(pieces, widths, narrow_in)
+        widths = short_piece_widths(
+            pieces,
+            widths,
+            narrow_in,
+            2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS,
+            FULL_WIDTH_FRACTION,
+        )
     # Both fits of every piece in one compiled loop (geometry.end_fit's, end by end); a
     # short piece's fit stops short of its other end's narrow tip (its length is needed).
     lengths = np.array([polyline_length(points) for points in pieces])
@@ -210,42 +221,6 @@ def chain_ends(
         )
         for end in range(2 * len(pieces))
     ]
-
-
-def _short_piece_widths(
-    pieces: list[np.ndarray], widths: np.ndarray, distance: np.ndarray
-) -> np.ndarray:
-    """``widths`` with each piece too short for a middle of its own (fewer than
-    ``2 NARROW_END_JOINTS + MIN_INTERIOR_JOINTS`` joints) whose median is narrow (below
-    ``FULL_WIDTH_FRACTION`` of its widest joint between its two end joints) measured at
-    that widest joint.
-
-    A short piece seen between two objects is cut at both ends, often at a slant:
-    most of its few joints lie where a cut has narrowed the cable, and their median
-    is far below the cable's half width (2.6 px for a cable of 6), so the piece would
-    not look like the rest of its own cable (:func:`.appearance.ends_alike`). A cut only
-    ever narrows: between the cuts, the widest joint is the cable's width. A piece
-    whose median is not narrow keeps it: the widest of a few joints is the median's
-    own noise and more (a wider piece may bridge longer open gaps,
-    :func:`.gap_evidence.open_gap_limit`). Only the ends' widths change; the end fits
-    keep the median's full width."""
-    short = [
-        k
-        for k, points in enumerate(pieces)
-        if 3 <= len(points) < 2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS
-    ]
-    if not short:
-        return widths
-    height, width = distance.shape
-    inner = [pieces[k][1:-1] for k in short]
-    joints = np.rint(np.concatenate(inner)).astype(np.int64)
-    values = distance[joints[:, 1].clip(0, height - 1), joints[:, 0].clip(0, width - 1)]
-    starts = np.cumsum([0, *(len(points) for points in inner[:-1])])
-    widest = np.maximum.reduceat(values, starts).astype(np.float64)
-    narrow = widths[short] < FULL_WIDTH_FRACTION * widest
-    widths = widths.copy()
-    widths[np.array(short)[narrow]] = widest[narrow]
-    return widths
 
 
 def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> float:
@@ -429,6 +404,7 @@ def choose_joins(
     hidden_gap: Callable[[int, int], bool] | None = None,
     runs_out: np.ndarray | None = None,
     open_gap: Callable[[int, int], bool] | None = None,
+    tips: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
@@ -458,7 +434,8 @@ def choose_joins(
     With ``open_gap``, a join across more than :data:`.gap_evidence.OPEN_GAP_RADII` (the
     ends' chord) is left out, however cheap, when ``open_gap(i, j)`` says its bridge runs
     that far over open background that nothing in the image hides
-    (:func:`.gap_evidence.open_gap_too_long`). In the last step, a partner that
+    (:func:`.gap_evidence.open_gap_too_long`); with ``tips``, two cables' own tips stay ends
+    (:func:`.gap_evidence.tips_stay_ends`). In the last step, a partner that
     ``hidden_gap`` does not let an end join across a longer gap is no rival.
 
     Returns
@@ -529,6 +506,9 @@ def choose_joins(
         pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
     if picture is not None and params.expected_count is None and len(costs):
         keep = _bridges_inside(ends, pairs, costs, picture, params)
+        pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
+    if tips is not None and params.expected_count is None and len(costs):
+        keep = tips(pairs, costs, MUTUAL_COST_FACTOR * params.merge_cost_threshold)
         pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
     check(deadline, "merging")
     # Cheapest first, ties by end indices (as sorting (cost, i, j) tuples).
@@ -950,6 +930,7 @@ def merge_chains(
         hidden_gap,
         runs_out,
         open_gap,
+        own_tips_rule(ends, mask, hidden_gap),
     )
     turn_bridges: dict[tuple[int, int], np.ndarray] = {}
     if hidden_gap is not None and params.expected_count is None and ends:

@@ -191,3 +191,39 @@ def scraps_through_junctions(
             colour[far], spread[far] = colours.colour[other], colours.spread[other]
             adjusted[far] = replace(ends[far], width=ends[other].width)
     return adjusted, EndColours(colour, spread)
+
+
+def short_piece_widths(
+    pieces: list[np.ndarray],
+    widths: np.ndarray,
+    distance: np.ndarray,
+    middle_joints: int,
+    full_width_fraction: float,
+) -> np.ndarray:
+    """``widths`` (the pieces' median half widths) with each piece too short for a middle
+    of its own (fewer than ``middle_joints`` joints) whose median is narrow (below
+    ``full_width_fraction`` of its widest joint between its two end joints) measured at
+    that widest joint.
+
+    A short piece seen between two objects is cut at both ends, often at a slant:
+    most of its few joints lie where a cut has narrowed the cable, and their median
+    is far below the cable's half width (2.6 px for a cable of 6), so the piece would
+    not look like the rest of its own cable (:func:`.appearance.ends_alike`). A cut only
+    ever narrows: between the cuts, the widest joint is the cable's width. A piece
+    whose median is not narrow keeps it: the widest of a few joints is the median's
+    own noise and more (a wider piece may bridge longer open gaps,
+    :func:`.gap_evidence.open_gap_limit`). Only the ends' widths change; the end fits
+    keep the median's full width."""
+    short = [k for k, points in enumerate(pieces) if 3 <= len(points) < middle_joints]
+    if not short:
+        return widths
+    height, width = distance.shape
+    inner = [pieces[k][1:-1] for k in short]
+    joints = np.rint(np.concatenate(inner)).astype(np.int64)
+    values = distance[joints[:, 1].clip(0, height - 1), joints[:, 0].clip(0, width - 1)]
+    starts = np.cumsum([0, *(len(points) for points in inner[:-1])])
+    widest = np.maximum.reduceat(values, starts).astype(np.float64)
+    narrow = widths[short] < full_width_fraction * widest
+    widths = widths.copy()
+    widths[np.array(short)[narrow]] = widest[narrow]
+    return widths

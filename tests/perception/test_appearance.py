@@ -168,15 +168,26 @@ def _cable_end_mask(tip: str, slant_degrees: float = 0.0, half_width: int = 6):
     ],
 )
 def test_a_cut_across_the_width_is_square_and_a_round_tip_is_not(tip, slant, square):
+    """A cable's own tip rounds off ahead of its end (:func:`.appearance.own_tip`); an
+    object's border cuts it straight across, or at a slant."""
     mask = _cable_end_mask(tip, slant)
     position, direction = np.array([78.0, 50.0]), np.array([1.0, 0.0])
     assert appearance.cut_square(mask, position, direction, 6.5) is square
+    front = appearance.end_front(mask, position, direction, 6.5)
+    assert appearance.own_tip(front, 6.5) is not square
 
 
 def test_an_end_whose_foreground_runs_on_is_not_cut():
     mask = _cable_end_mask("cut")
     mask[30:70, 70:130] = True  # the piece runs into a blob of the foreground
     assert not appearance.cut_square(mask, np.array([60.0, 50.0]), np.array([1.0, 0.0]), 6.5)
+
+
+def test_an_end_whose_foreground_runs_on_is_no_tip():
+    mask = _cable_end_mask("round")
+    mask[30:70, 70:130] = True  # the piece runs into a blob of the foreground
+    front = appearance.end_front(mask, np.array([60.0, 50.0]), np.array([1.0, 0.0]), 6.5)
+    assert not appearance.own_tip(front, 6.5)
 
 
 def test_ends_alike_need_known_agreeing_colours_and_one_width():

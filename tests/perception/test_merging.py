@@ -668,6 +668,17 @@ def test_two_ends_cut_square_and_alike_join_across_a_gap_over_open_paper(
     assert len(result.paths) == chains
 
 
+@pytest.mark.parametrize("seed", [280002, 280049, 280074, 280058])
+def test_cables_of_one_colour_whose_own_tips_lie_close_come_out_apart(seed):
+    """Tuning scenes of `same_colour`: two cables' round tips 40-50 px apart over open
+    background, whose join would bend (costs 0.60-0.86), stay two cables' ends; and a
+    loop's bend under an object of the background's colour, between a crossing and the
+    object a scrap of no colour of its own, is joined as a turn (its chain's colour)."""
+    scene = make_family_scene("same_colour", seed)
+    score, _ = evaluate_scene(scene, seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
+
+
 def _ends_by_the_top_edge():
     """A piece of cable lying along the picture's top edge (y = 5, radius 5) from its
     right edge to x = 300, where an object cuts it; the cable comes out again at
