@@ -937,10 +937,7 @@ def merge_chains(
         # Sharp turns under an object, on the image's evidence (:mod:`.turn_joins`); a
         # scrap joined through its crossing is judged as the strand it continues.
         mutual = MUTUAL_COST_FACTOR * params.merge_cost_threshold
-        lengths = np.array([polyline_length(points) for points in pieces])
-        seen, hues = scraps_through_junctions(
-            ends, colours, joins, junction_of_end, lengths, radius
-        )
+        seen, hues = scraps_through_junctions(ends, colours, joins, junction_of_end, pieces, radius)
         widths = np.array([end.width for end in seen], np.float64)
         joins = joins + turn_joins(
             seen,

@@ -133,15 +133,15 @@ def scraps_through_junctions(
     colours: EndColours | None,
     joins: list[tuple[int, int, float]],
     junction_of_end: list[int],
-    lengths: np.ndarray,
+    pieces: list[np.ndarray],
     radius: float,
 ) -> tuple[list, EndColours]:
     """``ends`` and ``colours`` with every scrap joined through its junction seen as
     the strand it continues.
 
-    A scrap is a piece shorter than :data:`.appearance.SCRAP_RADII` radii (``lengths``,
-    px) with no colour of its own (:func:`.appearance.end_colours`): where a cable runs
-    out of a crossing straight under an object, the skeleton between the two is such a
+    A scrap is a piece shorter than :data:`.appearance.SCRAP_RADII` radii with no colour
+    of its own (:func:`.appearance.end_colours`): where a cable runs out of a crossing
+    straight under an object, the skeleton between the two is such a
     scrap, its joints widened by the other strand at one end and narrowed by the cut
     at the other, so that neither its colour nor its width is the cable's. Once the
     junction pairing has joined its junction end (``junction_of_end`` >= 0) to an end
@@ -159,8 +159,8 @@ def scraps_through_junctions(
         The joins made so far.
     junction_of_end : list of int
         Per end, the junction zone it lies in, or -1.
-    lengths : ndarray
-        Per piece, its length (px).
+    pieces : list of ndarray
+        The pieces' joints (only the candidates' lengths are measured).
     radius : float
         Typical cable half width in pixels.
 
@@ -185,7 +185,7 @@ def scraps_through_junctions(
                 or known[own]
                 or known[far]
                 or not known[other]
-                or lengths[piece] >= SCRAP_RADII * radius
+                or polyline_length(pieces[piece]) >= SCRAP_RADII * radius
             ):
                 continue
             colour[far], spread[far] = colours.colour[other], colours.spread[other]

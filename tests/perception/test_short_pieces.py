@@ -64,6 +64,11 @@ def _end(piece: int, at_start: bool, width: float) -> ChainEnd:
     return ChainEnd(piece, at_start, np.zeros(2), np.array([1.0, 0.0]), width=width)
 
 
+def _straight_pieces(lengths: list[float]) -> list[np.ndarray]:
+    """Pieces of two joints, ``lengths`` px long."""
+    return [np.array([[0.0, 0.0], [length, 0.0]]) for length in lengths]
+
+
 def test_a_scrap_joined_through_its_crossing_takes_that_strands_colour_and_width():
     # Piece 0: a long strand ending at a crossing (end 1 in junction 0). Piece 1: a
     # scrap 10 px long from that crossing (end 2) to an object's border (end 3), with no
@@ -76,9 +81,9 @@ def test_a_scrap_joined_through_its_crossing_takes_that_strands_colour_and_width
         np.array([red, red, nan, nan, red, red]), np.array([2.0, 2.0, np.nan, np.nan, 2.0, 2.0])
     )
     junction_of_end = [-1, 0, 0, -1, -1, -1]
-    lengths = np.array([200.0, 10.0, 150.0])
+    pieces = _straight_pieces([200.0, 10.0, 150.0])
     joins = [(1, 2, 0.1)]
-    seen, hues = scraps_through_junctions(ends, colours, joins, junction_of_end, lengths, 5.0)
+    seen, hues = scraps_through_junctions(ends, colours, joins, junction_of_end, pieces, 5.0)
     assert hues.known.tolist() == [True, True, False, True, True, True]
     np.testing.assert_allclose(hues.colour[3], red)
     assert seen[3].width == 6.0 and seen[2].width == 3.5
@@ -86,13 +91,13 @@ def test_a_scrap_joined_through_its_crossing_takes_that_strands_colour_and_width
     assert not colours.known[3]  # the inputs are left as they were
     # Not joined at its junction, joined across a gap, or a piece long enough to have
     # a colour of its own: no change.
-    for other_joins, other_lengths in (([], lengths), ([(3, 4, 0.5)], lengths)):
+    for other_joins, other_pieces in (([], pieces), ([(3, 4, 0.5)], pieces)):
         _, same = scraps_through_junctions(
-            ends, colours, other_joins, junction_of_end, other_lengths, 5.0
+            ends, colours, other_joins, junction_of_end, other_pieces, 5.0
         )
         assert not same.known[3]
     _, same = scraps_through_junctions(
-        ends, colours, joins, junction_of_end, np.array([200.0, 16.0, 150.0]), 5.0
+        ends, colours, joins, junction_of_end, _straight_pieces([200.0, 16.0, 150.0]), 5.0
     )
     assert not same.known[3]
-    assert scraps_through_junctions(ends, None, joins, junction_of_end, lengths, 5.0)[1] is None
+    assert scraps_through_junctions(ends, None, joins, junction_of_end, pieces, 5.0)[1] is None
