@@ -73,6 +73,12 @@ BULB_MIN_TURN = 0.5 * np.pi
 no bulbs, and no tilts, are tried for them."""
 MAX_TURN_TRIALS = 8
 """The most curves (the shortest) tried for one pair of ends."""
+KINK_SHARE = 0.75
+"""A curve whose samples bend, over a stretch one cable radius long, tighter than this
+share of the tightest bend a cable takes (:data:`HIDDEN_BEND_RADII` ``[0]``) has a kink
+(:func:`bends_as_a_cable`). The arcs the curves are built of measure 0.95 of their radius
+and more on their samples; a bulb closing the miss to the second end
+(:data:`BULB_TOLERANCE_RADII`) in one step, 0.7 and less."""
 
 
 def natural_turn(
@@ -238,6 +244,42 @@ def hidden_turn_curves(
             continue
         seen.append(curve)
         yield curve
+
+
+def tightest_bend(curve: np.ndarray, window: float) -> float:
+    """The smallest radius (px) the polyline ``curve`` bends at: over every stretch of
+    at least ``window`` px of arc (from one step's start to a later step's), the
+    stretch's length over the angle its steps' headings turn by; ``inf`` for a curve
+    shorter than ``window`` or turning nowhere."""
+    steps = np.diff(np.asarray(curve, np.float64), axis=0)
+    lengths = np.hypot(*steps.T)
+    moving = lengths > 1e-9
+    steps, lengths = steps[moving], lengths[moving]
+    if len(steps) < 2:
+        return float("inf")
+    headings = np.unwrap(np.arctan2(steps[:, 1], steps[:, 0]))
+    arc = np.concatenate([[0.0], np.cumsum(lengths)])
+    # For each step, the first later step whose start lies ``window`` past its own.
+    later = np.searchsorted(arc, arc[:-1] + window)
+    within = later < len(steps)
+    first = np.flatnonzero(within)
+    if not len(first):
+        return float("inf")
+    last = later[within]
+    turned = np.abs(headings[last] - headings[first])
+    spans = arc[last] - arc[first]
+    bending = turned > 1e-12
+    if not bending.any():
+        return float("inf")
+    return float(np.min(spans[bending] / turned[bending]))
+
+
+def bends_as_a_cable(curve: np.ndarray, cable_radius: float) -> bool:
+    """Whether ``curve`` bends nowhere tighter than a cable of half width
+    ``cable_radius`` takes (:data:`HIDDEN_BEND_RADII` ``[0]``, measured over a radius,
+    :data:`KINK_SHARE`): not a bulb that meets the second end with a kink."""
+    tightest = KINK_SHARE * HIDDEN_BEND_RADII[0] * cable_radius
+    return tightest_bend(curve, cable_radius) >= tightest
 
 
 def _cached(curves: Iterator[np.ndarray], tried: list[np.ndarray]) -> Iterator[np.ndarray]:
@@ -507,7 +549,13 @@ def turn_joins(
         # is seen over before the shortest one the ends' cuts allow.
         tried: list[np.ndarray] = []
         for strength, test in enumerate(evidence):
-            found = next((curve for curve in _cached(curves, tried) if test(i, j, curve)), None)
+            passing = (curve for curve in _cached(curves, tried) if test(i, j, curve))
+            found = next(passing, None)
+            if found is not None and not bends_as_a_cable(found, cable):
+                # A bulb that reaches the second end only with a kink is no shape a
+                # cable takes: the shortest curve the test passes on that bends as a
+                # cable does is the bridge, where there is one.
+                found = next((curve for curve in passing if bends_as_a_cable(curve, cable)), found)
             if found is not None:
                 turns[i, j] = pair_cost
                 # The ends' cuts say only that the gap is short enough for an object of
