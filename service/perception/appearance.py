@@ -254,37 +254,13 @@ def gap_hidden(
     radius : float
         Cable half width (px).
     """
-    height, width = mask.shape
-    reference = []
-    for end in ends:
-        normal = np.array([-end.direction[1], end.direction[0]])
-        for behind in BESIDE_BEHIND_RADII:
-            centre = end.position - behind * radius * end.direction
-            for side in (-1.0, 1.0):
-                reference.append(centre + side * BESIDE_SIDE_RADII * radius * normal)
-    reference = np.array(reference)
-
-    def off_mask(points):
-        inside = (
-            (points[:, 0] >= 0)
-            & (points[:, 1] >= 0)
-            & (points[:, 0] <= width - 1)
-            & (points[:, 1] <= height - 1)
-        )
-        points = points[inside]
-        cols = np.rint(points[:, 0]).astype(np.int64)
-        rows = np.rint(points[:, 1]).astype(np.int64)
-        return points[~mask[rows, cols]]
-
-    reference = off_mask(reference)
-    if len(reference) < MIN_GAP_SAMPLES:
+    background = _background_beside(image_bgr, mask, ends, radius)
+    if background is None:
         return False
-    background = _lab_means(image_bgr, reference)
-    colour = np.median(background, axis=0)
-    spread = float(np.median(_lab_distance(background, colour)))
+    colour, spread = background
 
     def mostly_unlike(points):
-        points = off_mask(points)
+        points = _off_mask(points, mask)
         if len(points) < MIN_GAP_SAMPLES:
             return False
         distance = _lab_distance(_lab_means(image_bgr, points), colour)
@@ -305,6 +281,62 @@ def gap_hidden(
     ) and all(
         mostly_unlike(curve[middle] + side * radius * normals[middle]) for side in (-1.0, 0.0, 1.0)
     )
+
+
+def _off_mask(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The (x, y) ``points`` inside the picture that lie off the foreground ``mask``."""
+    height, width = mask.shape
+    inside = (
+        (points[:, 0] >= 0)
+        & (points[:, 1] >= 0)
+        & (points[:, 0] <= width - 1)
+        & (points[:, 1] <= height - 1)
+    )
+    points = points[inside]
+    cols = np.rint(points[:, 0]).astype(np.int64)
+    rows = np.rint(points[:, 1]).astype(np.int64)
+    return points[~mask[rows, cols]]
+
+
+def _background_beside(
+    image_bgr: np.ndarray, mask: np.ndarray, ends: tuple, radius: float
+) -> tuple[np.ndarray, float] | None:
+    """The open background beside two ends' cables just behind the ends
+    (:data:`BESIDE_BEHIND_RADII`, :data:`BESIDE_SIDE_RADII`; points off the mask): its
+    median Lab colour and its samples' median distance from it; None with too few."""
+    reference = []
+    for end in ends:
+        normal = np.array([-end.direction[1], end.direction[0]])
+        for behind in BESIDE_BEHIND_RADII:
+            centre = end.position - behind * radius * end.direction
+            for side in (-1.0, 1.0):
+                reference.append(centre + side * BESIDE_SIDE_RADII * radius * normal)
+    reference = _off_mask(np.array(reference), mask)
+    if len(reference) < MIN_GAP_SAMPLES:
+        return None
+    background = _lab_means(image_bgr, reference)
+    colour = np.median(background, axis=0)
+    return colour, float(np.median(_lab_distance(background, colour)))
+
+
+def out_of_view(
+    image_bgr: np.ndarray, mask: np.ndarray, curve: np.ndarray, ends: tuple, radius: float
+) -> bool:
+    """Whether a cable along ``curve`` would be out of view all the way: every sample of
+    the curve off the foreground differs from the open background beside the two
+    ``ends``' cables (:func:`gap_hidden`'s colour and tolerance), so that something lies
+    over each. A curve that runs out past the object that hides the turn onto open
+    background, where the cable would be seen, is not; nor is one with too few samples
+    off the foreground, or ends with too little background beside them, to tell."""
+    background = _background_beside(image_bgr, mask, ends, radius)
+    if background is None:
+        return False
+    colour, spread = background
+    points = _off_mask(np.asarray(curve, np.float64), mask)
+    if len(points) < MIN_GAP_SAMPLES:
+        return False
+    distance = _lab_distance(_lab_means(image_bgr, points), colour)
+    return bool(np.all(distance > COLOUR_TOLERANCE + 2 * spread))
 
 
 # An end is cut when the foreground stops within this many radii ahead of it (a

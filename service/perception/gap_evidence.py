@@ -10,6 +10,8 @@ own colour hides a cable without showing itself), and never over more than
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from service.perception.appearance import (
@@ -19,6 +21,7 @@ from service.perception.appearance import (
     end_front,
     ends_alike,
     gap_hidden,
+    out_of_view,
     own_tip,
 )
 from service.perception.geometry import polyline_length
@@ -250,6 +253,13 @@ def turn_evidence(image, mask, ends, colours, radius, partings=()) -> tuple:
             and strands_turn_out_of_sight(ends[i], ends[j], curve, mask, radius)
         ),
     )
+
+
+def turn_out_of_view(image, mask, ends, radius) -> Callable[[int, int, np.ndarray], bool]:
+    """Whether a cable turning from end ``i`` to end ``j`` along a curve would be out of
+    view all the way (:func:`.appearance.out_of_view`), as a callable ``(i, j, curve)``
+    for the turns under objects (:func:`.turn_joins.turn_joins`' ``out_of_view``)."""
+    return lambda i, j, curve: out_of_view(image, mask, curve, (ends[i], ends[j]), radius)
 
 
 def strands_turn_out_of_sight(a, b, curve: np.ndarray, mask: np.ndarray, radius: float) -> bool:

@@ -52,6 +52,7 @@ from service.perception.gap_evidence import (
     own_tips_rule,
     points_out_of_picture,
     turn_evidence,
+    turn_out_of_view,
 )
 from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
@@ -956,6 +957,7 @@ def merge_chains(
             MAX_JUNCTION_ENDS,
             turn_bridges,
             TURN_EVIDENCE_ALONG_CURVE,
+            turn_out_of_view(image, mask, seen, radius),
         )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.

@@ -37,6 +37,7 @@ slant), is tried here as well, with the turns' curves and tests.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
+from functools import partial
 
 import numpy as np
 
@@ -282,6 +283,35 @@ def bends_as_a_cable(curve: np.ndarray, cable_radius: float) -> bool:
     return tightest_bend(curve, cable_radius) >= tightest
 
 
+def _likeliest_shape(
+    first: np.ndarray,
+    others: Iterator[np.ndarray],
+    cable_radius: float,
+    out_of_view: Callable[[np.ndarray], bool] | None,
+) -> np.ndarray:
+    """Of the curves a test passes on, shortest first (``first``, then ``others``,
+    drawn only while needed), the one a hidden cable most likely took: the first that
+    lies out of view all the way (``out_of_view``, when given: the cable is not where
+    the image shows open background) and bends as a cable does
+    (:func:`bends_as_a_cable`: a bulb meeting the second end with a kink is no cable's
+    shape); failing both, the first that is out of view; failing that, the first that
+    bends as a cable does; else ``first``."""
+
+    def rank(curve: np.ndarray) -> tuple[bool, bool]:
+        hidden = out_of_view is None or out_of_view(curve)
+        return hidden, bends_as_a_cable(curve, cable_radius)
+
+    best, best_rank = first, rank(first)
+    while best_rank != (True, True):
+        curve = next(others, None)
+        if curve is None:
+            break
+        curve_rank = rank(curve)
+        if curve_rank > best_rank:
+            best, best_rank = curve, curve_rank
+    return best
+
+
 def _cached(curves: Iterator[np.ndarray], tried: list[np.ndarray]) -> Iterator[np.ndarray]:
     """The curves in ``tried``, then the rest of ``curves``, each kept in ``tried``: the
     curves are drawn lazily and once, however many tests ask for them."""
@@ -454,6 +484,7 @@ def turn_joins(
     max_group: int,
     bridges: dict[tuple[int, int], np.ndarray] | None = None,
     along_curve: Sequence[bool] = (True,),
+    out_of_view: Callable[[int, int, np.ndarray], bool] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -496,6 +527,10 @@ def turn_joins(
         seen over the curve (the first test), or two strands parting from a stretch
         where they touch, whose bulb a gap's bridge would cut across. The others say
         only that the gap is short enough to hide.
+    out_of_view : callable (i, j, curve) -> bool, optional
+        Whether a cable along the curve would be hidden all the way from end ``i`` to
+        end ``j`` (nowhere over open background): of the curves the first test passes
+        on, the shortest such is the bridge (:func:`_likeliest_shape`).
 
     Returns
     -------
@@ -551,12 +586,13 @@ def turn_joins(
         for strength, test in enumerate(evidence):
             passing = (curve for curve in _cached(curves, tried) if test(i, j, curve))
             found = next(passing, None)
-            if found is not None and not bends_as_a_cable(found, cable):
-                # A bulb that reaches the second end only with a kink is no shape a
-                # cable takes: the shortest curve the test passes on that bends as a
-                # cable does is the bridge, where there is one.
-                found = next((curve for curve in passing if bends_as_a_cable(curve, cable)), found)
             if found is not None:
+                # Where an object is seen over the turn, the cable lies under it all
+                # the way round, not out past its rim on open background.
+                hidden_all_along = None
+                if strength == 0 and out_of_view is not None:
+                    hidden_all_along = partial(out_of_view, i, j)
+                found = _likeliest_shape(found, passing, cable, hidden_all_along)
                 turns[i, j] = pair_cost
                 # The ends' cuts say only that the gap is short enough for an object of
                 # the background's own colour to hide: a turn seen on them alone is
