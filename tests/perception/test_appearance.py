@@ -314,3 +314,18 @@ def test_a_short_piece_between_two_objects_keeps_its_colour_when_its_tips_are_fr
     assert free.known.all()
     green = cv2.cvtColor(np.array([[[40, 200, 40]]], np.float32) / 255.0, cv2.COLOR_BGR2LAB)
     np.testing.assert_allclose(free.colour, np.repeat(green.reshape(1, 3), 2, axis=0), atol=1)
+
+
+def test_a_curve_out_of_view_all_the_way_lies_under_the_object_at_every_sample():
+    """The gap's straight line lies under the box all along; a curve swinging 24 px up
+    from it leaves the box (y 30-70) for open paper round its middle, where a cable
+    would be seen, though most of it, and of its edges, is still under the box
+    (gap_hidden's test). Over open paper nothing is out of view."""
+    image, mask, curve, ends = gap_scene((60, 140, 60))
+    assert appearance.out_of_view(image, mask, curve, ends, 3.5)
+    swing = curve.copy()
+    swing[:, 1] -= 24.0 * np.sin(np.pi * (swing[:, 0] - 78.0) / 104.0)
+    assert appearance.gap_hidden(image, mask, swing, ends, 3.5)
+    assert not appearance.out_of_view(image, mask, swing, ends, 3.5)
+    open_image, open_mask, _, _ = gap_scene(None)
+    assert not appearance.out_of_view(open_image, open_mask, curve, ends, 3.5)

@@ -12,7 +12,12 @@ from service.evaluation.synthetic_eval import evaluate_scene
 from service.perception.gap_evidence import strands_turn_out_of_sight
 from service.perception.merging import merge_chains
 from service.perception.pairing import cheapest_pairing
-from service.perception.turn_joins import bulb_turns, natural_turn
+from service.perception.turn_joins import (
+    bends_as_a_cable,
+    bulb_turns,
+    natural_turn,
+    tightest_bend,
+)
 from service.synthetic import make_family_scene
 
 PAPER = (235, 235, 235)
@@ -167,6 +172,20 @@ def test_natural_turns_keep_to_the_bend_limit():
     # A turn away from the other end, and no turn at all, have no natural turn.
     assert natural_turn([0, 30], up, [30, 0], -right, 10.0) is None
     assert natural_turn([0, 0], right, [50, 0], right, 10.0) is None
+
+
+def test_a_curve_that_closes_on_the_other_end_with_a_kink_does_not_bend_as_a_cable():
+    """An arc of 20 px measures its radius; the same arc whose last sample jumps 4 px
+    sideways onto the end (a bulb closing its miss) bends at the jump far tighter than a
+    cable of radius 5 takes (2 radii); a straight line does not bend."""
+    angles = np.linspace(0.0, np.pi, 64)
+    arc = np.column_stack([20.0 * np.cos(angles), 20.0 * np.sin(angles)])
+    assert tightest_bend(arc, 5.0) == pytest.approx(20.0, rel=0.05)
+    assert bends_as_a_cable(arc, 5.0)
+    kinked = np.vstack([arc, arc[-1] + np.array([4.0, 0.0])])
+    assert not bends_as_a_cable(kinked, 5.0)
+    line = np.column_stack([np.arange(30.0), np.zeros(30)])
+    assert tightest_bend(line, 5.0) == float("inf")
 
 
 def test_cheapest_pairing_leaves_an_end_free_when_pairing_costs_more():
