@@ -24,7 +24,6 @@ from service.perception.touching import (
     _end_kind,
     _offset_strands,
     _side_offsets,
-    _strand_widths,
 )
 
 # A strand running on past the end of the stretch is told from the hook thinning draws
@@ -40,9 +39,11 @@ def split_stretches_ending(
     end in the picture at the other) that are two touching strands from that junction
     on, into ``result`` (a :class:`.touching.TouchingSplit`); the junctions handled.
 
-    A candidate is split when its junction's two other strands are strands, not scraps,
-    alike in width (:func:`.touching._strand_widths`, :data:`.appearance.WIDTH_AGREEMENT`:
-    two strands of one cable, not a cable and its shadow), and the mask along the piece,
+    A candidate is split when its junction's two other strands are long (at least
+    :data:`RUN_ON_STRETCH_WIDTHS` times the stretch's width, or going on through another
+    junction or out of the picture)
+    and alike in width (:data:`.appearance.WIDTH_AGREEMENT`: two strands of one cable,
+    not a cable and its shadow), and the mask along the piece,
     from the junction on, keeps ``SIDE_BY_SIDE_WIDTH_FRACTION`` of their two widths
     together over a stretch longer than it is wide, then narrows for good. Where it
     narrows:
@@ -75,11 +76,19 @@ def split_stretches_ending(
         for other in side:
             if other // 2 not in lengths:
                 lengths[other // 2] = polyline_length(pieces[other // 2])
-        short_widths: dict[int, float] = {}
-        side_widths = _strand_widths(
-            side, pieces, lengths, widths, 2 * widths[index], distance, leaving, short_widths
-        )
-        if side_widths is None or min(side_widths) < WIDTH_AGREEMENT * max(side_widths):
+        # Both strands long where they part, at least twice the stretch's width, or
+        # going on through another junction or out of the picture (a scrap there, as
+        # wide as a strand, may be clutter the segmentation joins to a cable: bright
+        # 96001 end to end, 22 px), and alike.
+        if any(
+            lengths[other // 2] < RUN_ON_STRETCH_WIDTHS * 2 * widths[index]
+            and labels[other ^ 1] < 0
+            and not (leaving is not None and leaving[other ^ 1])
+            for other in side
+        ):
+            continue
+        side_widths = [float(widths[other // 2]) for other in side]
+        if min(side_widths) < WIDTH_AGREEMENT * max(side_widths):
             continue
         strands = float(sum(side_widths))
         # From the junction towards the free end.
@@ -115,7 +124,6 @@ def split_stretches_ending(
         right_index = result.split_in_two(index, left, right)
         result.pairs.extend([(side[0], end), (side[1], 2 * right_index + at_junction)])
         result.partings.append((side[0] ^ 1, side[1] ^ 1))
-        result.strand_widths.update(short_widths)
         # The strands' own half widths: refitted without the mask, their free ends would
         # have none for the turns' tests of width and cut.
         result.strand_widths.update({index: side_widths[0], right_index: side_widths[1]})
