@@ -284,10 +284,6 @@ def _split_shared_pieces(
             )
             for side in sides
         ]
-        if strand_widths.count(None) == 1:
-            strand_widths = _sliver_as_strand(
-                sides, strand_widths, pieces, lengths, widths, 2 * widths[index], short_widths
-            )
         if None in strand_widths:
             continue
         strands = np.mean([sum(side_widths) for side_widths in strand_widths])
@@ -329,34 +325,6 @@ def _strand_widths(side, pieces, lengths, widths, stretch_width, distance, leavi
         if is_short
     )
     return side_widths
-
-
-def _sliver_as_strand(sides, strand_widths, pieces, lengths, widths, stretch_width, short_widths):
-    """``strand_widths`` with the one junction's whose strand is a scrap (None) read
-    as a strand an object cuts short at a slant, when the other junction's two strands
-    are long and alike in width and the scrap's partner is long and as wide as they
-    (:data:`.appearance.WIDTH_AGREEMENT`): two strands of one cable's width touching all
-    along, one of them cut so close past the stretch that thinning leaves only a sliver
-    of it (doubled_back 280139). The scrap takes its partner's half width (in
-    ``short_widths``). A cable segmented with its shadow has the shadow's narrow strand
-    at both ends."""
-    at = strand_widths.index(None)
-    alike = strand_widths[1 - at]
-    if min(alike) < WIDTH_AGREEMENT * max(alike):
-        return strand_widths
-    if any(lengths[other // 2] < stretch_width for other in sides[1 - at]):
-        return strand_widths
-    long = [other for other in sides[at] if lengths[other // 2] >= stretch_width]
-    if len(long) != 1:
-        return strand_widths
-    partner = float(widths[long[0] // 2])
-    if min(partner, *alike) < WIDTH_AGREEMENT * max(partner, *alike):
-        return strand_widths
-    scrap = next(other for other in sides[at] if other not in long)
-    short_widths[scrap // 2] = partner
-    widened = list(strand_widths)
-    widened[at] = [partner, partner]
-    return widened
 
 
 def _cable_wide_pair(side_widths: list[float], short: list[bool]) -> bool:

@@ -113,15 +113,3 @@ def test_doubled_back_strands_touching_up_to_an_object_are_one_cable(seed, frame
     assert min(score.frame.coverage) > 0.9
     if frame_right:
         assert score.frame.correct
-
-
-def test_a_strand_cut_at_a_slant_right_past_the_stretch_is_a_strand_not_a_scrap():
-    """Tuning scene doubled_back 280139: two strands touch for 75 px between two
-    three-way junctions; past the right one an object cuts the upper strand at a slant
-    so close that thinning leaves a 7 px sliver of it, narrower than a strand. Both
-    strands at the left junction are long and alike, so the sliver is the upper strand
-    cut short: the stretch is split (it was taken for a shallow crossing, and the chain
-    crossed over to the other strand)."""
-    seed = 280139
-    score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
-    assert score.frame.correct, score.frame.coverage
