@@ -67,6 +67,7 @@ from service.perception.touching import (
     split_touching_strands,
     split_where_leaving_together,
 )
+from service.perception.touching_ends import keep_turns_free
 from service.perception.turn_joins import turn_joins
 
 # An end whose cable runs on along its direction, within this many radii plus
@@ -931,7 +932,7 @@ def merge_chains(
         hidden_gap,
         runs_out,
         open_gap,
-        own_tips_rule(ends, mask, hidden_gap),
+        keep_turns_free(own_tips_rule(ends, mask, hidden_gap), touching.turns),
     )
     turn_bridges: dict[tuple[int, int], np.ndarray] = {}
     if hidden_gap is not None and params.expected_count is None and ends:

@@ -47,7 +47,9 @@ class TouchingSplit:
     parting there (where a cable doubled back on itself turns round, out of sight when
     both stop: :func:`.gap_evidence.turn_evidence`); ``strand_widths`` the half widths of
     the strands shorter than their stretch is wide, read from their mask
-    (:func:`_strand_widths`), by piece.
+    (:func:`_strand_widths`), by piece; ``turns`` the two tips of the strands of a
+    stretch that both stop where an object cuts it off (:mod:`.touching_ends`), left
+    to the turn pass (:func:`.touching_ends.keep_turns_free`).
     """
 
     pieces: list[np.ndarray]
@@ -58,6 +60,18 @@ class TouchingSplit:
     bridges: dict[tuple[int, int], np.ndarray] = field(default_factory=dict)
     partings: list[tuple[int, int]] = field(default_factory=list)
     strand_widths: dict[int, float] = field(default_factory=dict)
+    turns: list[tuple[int, int]] = field(default_factory=list)
+
+    def split_in_two(self, index: int, left: np.ndarray, right: np.ndarray) -> int:
+        """Put piece ``index``'s ``left`` strand in its place and append its ``right``
+        one (its ends free of junctions); the right one's index."""
+        right_index = len(self.pieces)
+        self.pieces[index] = left
+        self.pieces.append(right)
+        self.origin.append(index)
+        self.junction_of_end.extend([-1, -1])
+        self.split.append(index)
+        return right_index
 
 
 def split_touching_strands(
@@ -115,8 +129,16 @@ def split_touching_strands(
         for index in range(len(pieces))
         if all(len(members.get(labels[end], ())) == 3 for end in (2 * index, 2 * index + 1))
     ]
+    # A stretch an object cuts off (:mod:`.touching_ends`): a three-way junction at one
+    # end, a free end in the picture at the other.
+    ending = [
+        index
+        for index in range(len(pieces))
+        if sorted(len(members.get(labels[end], ())) for end in (2 * index, 2 * index + 1)) == [0, 3]
+        and not (leaving is not None and leaving[2 * index : 2 * index + 2].any())
+    ]
     four_way = [label for label, ends in members.items() if len(ends) == 4]
-    if not candidates and not four_way:
+    if not candidates and not four_way and not ending:
         return result
     # Every piece's half width (median distance at its joints), once: the shared pieces
     # and the four-way junctions (several per photograph) read them piece by piece.
@@ -128,18 +150,29 @@ def split_touching_strands(
     handled = _split_shared_pieces(
         candidates, result, positions, directions, labels, members, distance, leaving, widths
     )
+    if ending:
+        from service.perception.touching_ends import split_stretches_ending  # imports this
+
+        handled |= split_stretches_ending(
+            ending, result, positions, directions, labels, members, distance, leaving, widths
+        )
     # A touching stretch short enough for the junction zone to take whole leaves no
     # shared piece: one junction of four ends.
     for label in four_way:
         if label in handled:
             continue
         ends = members[label]
-        pairs = _touching_junction_pairs(
+        found = _touching_junction_pairs(
             ends, positions, directions, pieces, distance, leaving, widths
         )
-        if pairs is not None:
+        if found is not None:
+            pairs, parting, short_widths = found
             result.pairs.extend(pairs)
             handled.add(label)
+            if parting is not None:
+                # Strands cut short past the stretch: it may turn round there, out of sight.
+                result.partings.append(parting)
+                result.strand_widths.update(short_widths)
     result.junction_of_end = [-1 if label in handled else label for label in result.junction_of_end]
     result.bridges = _side_bridges(result, len(pieces), distance, widths)
     return result
@@ -260,13 +293,7 @@ def _split_shared_pieces(
             SIDE_BY_SIDE_WIDTH_FRACTION * strands
         ):
             continue
-        left, right = _offset_strands(points, float(widths[index]))
-        right_index = len(result.pieces)
-        result.pieces[index] = left
-        result.pieces.append(right)
-        result.origin.append(index)
-        result.junction_of_end.extend([-1, -1])
-        result.split.append(index)
+        right_index = result.split_in_two(index, *_offset_strands(points, float(widths[index])))
         for end, side in zip(ends, sides, strict=True):
             result.pairs.extend([(side[0], end), (side[1], 2 * right_index + end % 2)])
             result.partings.append((side[0] ^ 1, side[1] ^ 1))
@@ -332,8 +359,10 @@ def _widest(points: np.ndarray, distance: np.ndarray) -> float:
 
 def _touching_junction_pairs(ends, positions, directions, pieces, distance, leaving, widths):
     """The two pairs of ends to join at a four-way junction that is a touching stretch
-    short enough for the junction zone to take it whole, or None. ``widths``: every
-    piece's half width (median distance at its joints).
+    short enough for the junction zone to take it whole, the far ends of a pair of
+    strands an object cuts short past the stretch (:func:`_cut_short_pair`, or None)
+    and those strands' half widths (by piece: the widest their mask gets); or None.
+    ``widths``: every piece's half width (median distance at its joints).
 
     The two strands enter the stretch side by side at one end and leave it side by side
     at the other: the ends fall into two close pairs (the partition whose pairs lie
@@ -376,11 +405,13 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     ):
         return None
     # Strands, not the scraps thinning leaves where a blob bulges (as for a shared piece).
-    lengths = [polyline_length(pieces[end // 2]) for end in ends]
-    if any(
-        length_k < 2 * strands and (leaving is None or not leaving[end ^ 1])
-        for end, length_k in zip(ends, lengths, strict=True)
-    ):
+    short = {
+        end
+        for end in ends
+        if polyline_length(pieces[end // 2]) < 2 * strands
+        and (leaving is None or not leaving[end ^ 1])
+    }
+    if short and not _cut_short_pair(short, (pair_a, pair_b), pieces, distance, widths):
         return None
     line = np.array([middle_a, middle_b])
     if _narrowest(line, distance, _middle_of_stretch(length, strands)) < (
@@ -404,7 +435,31 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
         sides.append(pair if offsets[0] < 0 else pair[::-1])
     if any(first // 2 == second // 2 for first, second in zip(*sides, strict=True)):
         return None
-    return [tuple(pair) for pair in zip(*sides, strict=True)]
+    pairs = [tuple(pair) for pair in zip(*sides, strict=True)]
+    if not short:
+        return pairs, None, {}
+    cut = pair_a if short <= set(pair_a) else pair_b
+    short_widths = {end // 2: _widest(pieces[end // 2], distance) for end in short}
+    return pairs, (cut[0] ^ 1, cut[1] ^ 1), short_widths
+
+
+def _cut_short_pair(short, pairs, pieces, distance, widths) -> bool:
+    """Whether the ``short`` ends of a four-way junction's two close ``pairs`` (strands
+    shorter than the stretch is wide) are a doubled-back cable's two strands an object
+    cuts short of its hidden bulb, not the scraps thinning leaves where a blob bulges:
+    of one pair, the other pair's two strands long, and each as wide as those
+    (:data:`.appearance.WIDTH_AGREEMENT`; the widest its mask gets, as
+    :func:`_strand_widths` reads a short strand)."""
+    cut = next((pair for pair in pairs if short <= set(pair)), None)
+    if cut is None:
+        return False
+    other = pairs[1] if pairs[0] == cut else pairs[0]
+    long = float(np.mean([widths[end // 2] for end in other]))
+    for end in short:
+        own = _widest(pieces[end // 2], distance)
+        if min(own, long) < WIDTH_AGREEMENT * max(own, long):
+            return False
+    return True
 
 
 def _middle_of_stretch(length: float, strands: float) -> float:

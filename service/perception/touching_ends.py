@@ -1,0 +1,215 @@
+"""Touching strands that stop where an object hides them (step 6, issue 13).
+
+Where a cable doubled back on itself touches all along up to an object that hides its
+turn, thinning draws one line down the middle of the two strands, from the three-way
+junction where they part to the object's border, and no junction there: the line ends
+in a free end. Where only one strand stops at the object and the other bends away
+beside it, the line runs on from the middle of the two into the strand that goes on.
+Either way the line belongs to both strands along the stretch where the mask is both
+strands wide. :func:`split_stretches_ending` splits such a line into one piece per
+strand, as :func:`.touching.split_touching_strands` splits a line between two
+junctions, and leaves the strands' tips at the object free: whether the cable turns
+round out of sight there is the turn pass's question (:mod:`.turn_joins`), asked of
+the strands' own ends.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from service.perception.appearance import WIDTH_AGREEMENT, cut_or_lopsided
+from service.perception.geometry import arc_lengths, points_along, polyline_length
+from service.perception.touching import (
+    SIDE_BY_SIDE_WIDTH_FRACTION,
+    _end_kind,
+    _offset_strands,
+    _side_offsets,
+)
+
+# A strand running on past the end of the stretch is told from the hook thinning draws
+# into a corner of the object's cut by its length: at least this many times the two
+# strands' half widths together (the hook is at most about one strand's width long).
+RUN_ON_STRETCH_WIDTHS = 2.0
+
+
+def split_stretches_ending(
+    candidates, result, positions, directions, labels, members, distance, leaving, widths
+) -> set[int]:
+    """Split the ``candidates`` (pieces with a three-way junction at one end and a free
+    end in the picture at the other) that are two touching strands from that junction
+    on, into ``result`` (a :class:`.touching.TouchingSplit`); the junctions handled.
+
+    A candidate is split when its junction's two other strands are long (at least
+    :data:`RUN_ON_STRETCH_WIDTHS` times the stretch's width, or going on through another
+    junction or out of the picture)
+    and alike in width (:data:`.appearance.WIDTH_AGREEMENT`: two strands of one cable,
+    not a cable and its shadow), and the mask along the piece,
+    from the junction on, keeps ``SIDE_BY_SIDE_WIDTH_FRACTION`` of their two widths
+    together over a stretch longer than it is wide, then narrows for good. Where it
+    narrows:
+
+    - both strands stop (what is left of the line is no longer than
+      :data:`RUN_ON_STRETCH_WIDTHS` stretch widths, the hook thinning bends into a
+      corner of the cut) when the piece's end is cut by an object's border, straight or
+      at a slant (:func:`.appearance.cut_or_lopsided`), not the round tip of a bulb too
+      tight to leave a hole: each strand is run straight on to the mask's border;
+    - or one strand goes on, as wide as one of the two: the line beyond is its, and
+      joins the offset strand on the side it lies; the other strand is run straight on
+      to the mask's border, where the object cuts it.
+
+    ``widths``: every piece's half width (median distance at its joints).
+    """
+    handled: set[int] = set()
+    pieces = list(result.pieces)
+    mask = distance > 0
+    lengths: dict[int, float] = {}
+    for index in candidates:
+        at_junction = 0 if labels[2 * index] >= 0 else 1
+        end, free = 2 * index + at_junction, 2 * index + 1 - at_junction
+        if labels[end] in handled:
+            continue
+        side = _end_kind(
+            end, index, labels, members, positions, directions, pieces, float(widths[index])
+        )
+        if side is None:
+            continue
+        for other in side:
+            if other // 2 not in lengths:
+                lengths[other // 2] = polyline_length(pieces[other // 2])
+        # Both strands long where they part, at least twice the stretch's width, or
+        # going on through another junction or out of the picture (a scrap there, as
+        # wide as a strand, may be clutter the segmentation joins to a cable: bright
+        # 96001 end to end, 22 px), and alike.
+        if any(
+            lengths[other // 2] < RUN_ON_STRETCH_WIDTHS * 2 * widths[index]
+            and labels[other ^ 1] < 0
+            and not (leaving is not None and leaving[other ^ 1])
+            for other in side
+        ):
+            continue
+        side_widths = [float(widths[other // 2]) for other in side]
+        if min(side_widths) < WIDTH_AGREEMENT * max(side_widths):
+            continue
+        strands = float(sum(side_widths))
+        # From the junction towards the free end.
+        points = np.asarray(pieces[index], np.float64)
+        oriented = points if at_junction == 0 else points[::-1]
+        parting = _where_parting(oriented, distance, strands, float(widths[index]))
+        if parting is None:
+            continue
+        along = arc_lengths(oriented)
+        rest = float(along[-1]) - parting
+        stop = max(parting - 0.5 * strands, 0.0)
+        shared = _up_to(oriented, along, stop)
+        left, right = _offset_strands(shared, strands)
+        if rest <= RUN_ON_STRETCH_WIDTHS * strands:
+            if not cut_or_lopsided(mask, positions[free], directions[free], strands):
+                continue
+            left, right = (_run_on(strand, distance, strands) for strand in (left, right))
+            turn = True
+        else:
+            turn = False
+            beyond = _from(oriented, along, parting + 0.5 * strands)
+            if not _one_strand_wide(beyond, distance, side_widths):
+                continue
+            heading = shared[-1] - shared[max(len(shared) - 3, 0)]
+            offset = _side_offsets(heading, shared[-1], [beyond[0]])[0]
+            if offset < 0:
+                left, right = np.concatenate([left, beyond]), _run_on(right, distance, strands)
+            else:
+                left, right = _run_on(left, distance, strands), np.concatenate([right, beyond])
+        if at_junction == 1:
+            # Back in the piece's own order: the right of the reversed line is the left.
+            left, right = right[::-1], left[::-1]
+        right_index = result.split_in_two(index, left, right)
+        result.pairs.extend([(side[0], end), (side[1], 2 * right_index + at_junction)])
+        result.partings.append((side[0] ^ 1, side[1] ^ 1))
+        # The strands' own half widths: refitted without the mask, their free ends would
+        # have none for the turns' tests of width and cut.
+        result.strand_widths.update({index: side_widths[0], right_index: side_widths[1]})
+        tips = (2 * index + 1 - at_junction, 2 * right_index + 1 - at_junction)
+        result.partings.append(tips)
+        if turn:
+            result.turns.append(tips)
+        handled.add(labels[end])
+    return handled
+
+
+def _where_parting(points, distance, strands: float, half_width: float) -> float | None:
+    """How far along ``points`` (from the junction) the mask, both strands wide
+    (``strands``: their half widths together) from ``half_width`` clear of the
+    junction on, narrows for good; None when it is never both wide over a stretch
+    longer than it is wide, or never narrows, or widens again."""
+    along = arc_lengths(points)
+    samples = np.arange(half_width, float(along[-1]) + 1e-9, 1.0)
+    if not len(samples):
+        return None
+    xs, ys = points_along(points, along, samples).T
+    height, width = distance.shape
+    cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
+    rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
+    wide = distance[rows, cols] >= SIDE_BY_SIDE_WIDTH_FRACTION * strands
+    if wide.all() or not wide[0]:
+        return None
+    first_narrow = int(np.argmin(wide))
+    if wide[first_narrow:].any() or samples[first_narrow] - samples[0] < 2.0 * strands:
+        return None
+    return float(samples[first_narrow])
+
+
+def _up_to(points, along, stop: float) -> np.ndarray:
+    """The line from its start to ``stop`` px along it."""
+    inside = along < stop - 0.5  # no joint within half a pixel of the last point
+    return np.concatenate([points[inside], points_along(points, along, np.array([stop]))])
+
+
+def _from(points, along, start: float) -> np.ndarray:
+    """The line from ``start`` px along it to its end."""
+    inside = along > start + 0.5
+    return np.concatenate([points_along(points, along, np.array([start])), points[inside]])
+
+
+def _one_strand_wide(points, distance, side_widths) -> bool:
+    """Whether the median distance along ``points`` agrees with the mean of the two
+    strands' half widths (``side_widths``) as two pieces of one cable must."""
+    joints = np.rint(np.asarray(points, np.float64)).astype(int)
+    height, width = distance.shape
+    cols = joints[:, 0].clip(0, width - 1)
+    rows = joints[:, 1].clip(0, height - 1)
+    own = float(np.median(distance[rows, cols]))
+    strand = float(np.mean(side_widths))
+    return min(own, strand) >= WIDTH_AGREEMENT * max(own, strand)
+
+
+def _run_on(strand: np.ndarray, distance: np.ndarray, strands: float) -> np.ndarray:
+    """``strand`` run on straight, along its direction over its last half of ``strands``
+    (a strand's width), to the last pixel of the mask ahead (the object's border), up to
+    twice ``strands`` further."""
+    along = arc_lengths(strand)
+    back = points_along(strand, along, np.array([max(float(along[-1]) - 0.5 * strands, 0.0)]))[0]
+    heading = strand[-1] - back
+    length = float(np.hypot(*heading))
+    if length <= 0:
+        return strand
+    steps = strand[-1] + np.arange(1.0, 2.0 * strands, 1.0)[:, None] * (heading / length)
+    height, width = distance.shape
+    cols, rows = np.rint(steps[:, 0]).astype(int), np.rint(steps[:, 1]).astype(int)
+    inside = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height)
+    on = np.zeros(len(steps), bool)
+    on[inside] = distance[rows[inside], cols[inside]] > 0
+    run = len(on) if on.all() else int(np.argmin(on))
+    return np.concatenate([strand, steps[:run]]) if run else strand
+
+
+def keep_turns_free(rule, turns):
+    """``rule`` (a callable ``(pairs, costs, limit)`` -> which joins may be made, or
+    None) that also leaves the ``turns`` (pairs of ends) to the turn pass."""
+    if not turns:
+        return rule
+    turns = {frozenset(pair) for pair in turns}
+
+    def keep(pairs, costs, limit):
+        allowed = np.ones(len(costs), bool) if rule is None else rule(pairs, costs, limit)
+        return allowed & np.array([frozenset(pair) not in turns for pair in pairs.tolist()], bool)
+
+    return keep

@@ -1,0 +1,115 @@
+"""Touching strands that stop where an object hides them (service/perception/touching_ends.py,
+and the four-way junction's strands cut short in touching.py), issue 13."""
+
+import cv2
+import numpy as np
+import pytest
+
+from service.evaluation.synthetic_eval import evaluate_scene
+from service.perception.touching import split_touching_strands
+from service.synthetic.families import make_family_scene
+from tests.perception.test_merging_touching import touching_strands_mask
+
+UPPER_LEFT = [(20, 40), (100, 95.5)]
+LOWER_LEFT = [(20, 160), (100, 104.5)]
+
+
+def _split_stretch_to_free_end(mask, stretch):
+    """:func:`split_touching_strands` of a ``stretch`` piece from a three-way junction
+    (label 0, at its start, with the upper and lower left arms) to a free end."""
+    arms = [
+        np.array([UPPER_LEFT[0], (70, 75), (92, 99)], np.float64),
+        np.array([LOWER_LEFT[0], (70, 125), (92, 101)], np.float64),
+    ]
+    pieces = [np.asarray(stretch, np.float64), *arms]
+    positions = np.array([points[index] for points in pieces for index in (0, -1)])
+    directions = np.array(
+        [points[index] - points[inner] for points in pieces for index, inner in ((0, 1), (-1, -2))]
+    )
+    directions /= np.hypot(directions[:, 0], directions[:, 1])[:, None]
+    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    return split_touching_strands(pieces, positions, directions, [0, -1, -1, 0, -1, 0], distance)
+
+
+def _middle_line(start, stop):
+    """Joints 8 px apart along y = 100 from x = ``start`` to ``stop``."""
+    xs = np.arange(start, stop + 1e-9, 8.0)
+    return np.column_stack([xs, np.full(len(xs), 100.0)])
+
+
+def test_a_stretch_an_object_cuts_off_is_split_and_its_tips_left_to_the_turn_pass():
+    """Two strands touch for 200 px from where they part (left) to an object's straight
+    border (x = 300), which hides where the cable turns round: thinning draws one line
+    down the middle to a free end. Each strand gets its own piece, joined at the
+    junction on its side, run on to the object's border; the two tips are a turn left to
+    the turn pass, not a join across the stretch."""
+    upper = [*UPPER_LEFT, (320, 95.5)]
+    lower = [*LOWER_LEFT, (320, 104.5)]
+    mask = touching_strands_mask(upper, lower, shape=(200, 400))
+    mask[:, 301:] = False
+    split = _split_stretch_to_free_end(mask, np.vstack([_middle_line(108, 292), [(299, 100)]]))
+    assert split.split == [0]
+    left, right = split.pieces[0], split.pieces[3]
+    assert abs(left[:, 1].mean() - 95.5) < 1.5 and abs(right[:, 1].mean() - 104.5) < 1.5
+    assert min(left[-1, 0], right[-1, 0]) >= 298.0
+    assert sorted(sorted(pair) for pair in split.pairs) == [[0, 3], [5, 6]]
+    assert split.turns == [(1, 7)]
+    assert (1, 7) in split.partings
+
+
+def test_a_stretch_ending_in_a_round_bulb_is_left_whole():
+    """The same stretch ending in the round tip of a bulb too tight to leave a hole:
+    no object cuts it, and its line (as close to both strands as a bridge would be) stays."""
+    upper = [*UPPER_LEFT, (300, 95.5)]
+    lower = [*LOWER_LEFT, (300, 104.5)]
+    mask = touching_strands_mask(upper, lower, shape=(200, 400))
+    mask |= cv2.circle(np.zeros(mask.shape, np.uint8), (300, 100), 9, 1, -1) > 0
+    split = _split_stretch_to_free_end(mask, np.vstack([_middle_line(108, 300), [(307, 100)]]))
+    assert split.split == []
+    assert split.turns == []
+
+
+def test_a_stretch_where_one_strand_stops_and_the_other_goes_on_is_split_by_side():
+    """The lower strand stops at an object's border (x = 300) where the stretch ends;
+    the upper one bends away and goes on: thinning's line runs on from the stretch's
+    middle into it. The line past the stretch is the upper strand's; the lower strand
+    is run on to the border, its tip free (a parting with the upper strand's far end)."""
+    upper = [*UPPER_LEFT, (300, 95.5), (380, 40)]
+    lower = [*LOWER_LEFT, (320, 104.5)]
+    mask = touching_strands_mask(upper, lower, shape=(200, 400))
+    mask[100:, 301:] = False
+    stretch = np.vstack([_middle_line(108, 292), [(300, 98), (310, 88), (330, 74.7), (376, 43)]])
+    split = _split_stretch_to_free_end(mask, stretch)
+    assert split.split == [0]
+    upper_strand, lower_strand = split.pieces[0], split.pieces[3]
+    assert tuple(upper_strand[-1]) == (376, 43)
+    assert abs(lower_strand[:, 1].mean() - 104.5) < 1.5 and lower_strand[-1, 0] >= 298.0
+    assert split.turns == []
+    assert (1, 7) in split.partings
+
+
+@pytest.mark.parametrize(
+    ("seed", "frame_right"),
+    [
+        (280073, True),
+        (280155, False),
+        (280147, False),
+        (290103, False),
+        (290112, False),
+        (290145, False),
+        (290167, False),
+    ],
+)
+def test_doubled_back_strands_touching_up_to_an_object_are_one_cable(seed, frame_right):
+    """Tuning scenes where a cable doubled back on itself touches all along up to the
+    object hiding its turn, one line down the middle of both strands (280073), or one
+    strand stops there and the other bends away beside the object (280155, 280147,
+    290103, 290112), or the stretch is short enough for the junction zone to take it
+    whole, its two strands cut short past it (290145, 290167): each cable one chain
+    covering nearly all of it (the cable's other strand was a chain of its own). Where
+    the frame is still wrong, the hidden turn's curve is narrower than the cable's."""
+    score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
+    assert score.frame.n_chains == score.frame.n_cables
+    assert min(score.frame.coverage) > 0.9
+    if frame_right:
+        assert score.frame.correct
