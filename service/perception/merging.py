@@ -40,6 +40,7 @@ from service.perception.bridge_ends import (
     bridge_from_the_fits,
     ends_of_short_pieces_from_partners,
     ends_through_short_pieces,
+    free_ends_beside_crossings,
     partners,
 )
 from service.perception.deadline import Deadline, check
@@ -407,6 +408,7 @@ def choose_joins(
     runs_out: np.ndarray | None = None,
     open_gap: Callable[[int, int], bool] | None = None,
     tips: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None,
+    through_crossings: Callable[[list], list[ChainEnd]] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Decide which chain ends to join.
 
@@ -437,7 +439,10 @@ def choose_joins(
     ends' chord) is left out, however cheap, when ``open_gap(i, j)`` says its bridge runs
     that far over open background that nothing in the image hides
     (:func:`.gap_evidence.open_gap_too_long`); with ``tips``, two cables' own tips stay ends
-    (:func:`.gap_evidence.tips_stay_ends`). In the last step, a partner that
+    (:func:`.gap_evidence.tips_stay_ends`); ``through_crossings`` (given the joins made
+    through junctions) returns the ends to cost the joins across gaps with (a short
+    piece's free end read through its crossing,
+    :func:`.bridge_ends.free_ends_beside_crossings`). In the last step, a partner that
     ``hidden_gap`` does not let an end join across a longer gap is no rival.
 
     Returns
@@ -478,6 +483,8 @@ def choose_joins(
         proposals = _best_matchings(paired, ends, params, radius, colours)
         for i, j, cost in sorted(proposals, key=lambda item: item[2]):
             try_join(i, j, cost)
+        if through_crossings is not None:
+            ends = through_crossings(joins)
 
     # Only pairs within max_gap can be joined (any pair when expected_count asks): the
     # compiled kernel finds them on a grid and costs them, in time that grows with the
@@ -933,6 +940,7 @@ def merge_chains(
         runs_out,
         open_gap,
         keep_turns_free(own_tips_rule(ends, mask, hidden_gap), touching.turns),
+        lambda made: free_ends_beside_crossings(pieces, ends, made, span, junction_of_end),
     )
     turn_bridges: dict[tuple[int, int], np.ndarray] = {}
     if hidden_gap is not None and params.expected_count is None and ends:

@@ -12,6 +12,7 @@ from service.perception.bridge_ends import (
     bridge_from_the_fits,
     ends_clear_of_crossing,
     ends_through_short_pieces,
+    free_ends_beside_crossings,
 )
 from service.perception.geometry import fit_where_skipped
 from service.perception.merging import ChainEnd, assemble_paths, chain_ends
@@ -259,6 +260,29 @@ def test_a_short_piece_beside_a_crossing_on_a_bend_follows_the_bend_into_the_gap
     straight_ends = [replace(end, width=4.0) for end in chain_ends(straight, 40.0)]
     along = ends_through_short_pieces(straight, straight_ends, joins, 40.0, junctions)
     np.testing.assert_allclose(along[2].direction, [-1.0, 0.0], atol=1e-9)
+
+
+def test_a_short_piece_beside_a_crossing_takes_its_free_end_through_the_crossing():
+    # A straight cable along y = 50: a long piece up to a crossing at x = 50, and beyond
+    # it a short piece (60 to 70) whose own fit is tilted 30 degrees by a slanted cut; its
+    # free end is not joined yet. The line from its partner across the crossing and the
+    # circle leaving that partner both run along the cable and outvote its own fit.
+    pieces = [
+        np.array([[0.0, 50.0], [10.0, 50.0], [20.0, 50.0], [30.0, 50.0], [40.0, 50.0]]),
+        np.array([[60.0, 50.0], [65.0, 50.0], [70.0, 50.0]]),
+    ]
+    ends = chain_ends(pieces, 40.0)
+    tilted = np.array([np.cos(np.radians(30.0)), np.sin(np.radians(30.0))])
+    ends[3] = replace(ends[3], direction=tilted)
+    joins = [(1, 2, 0.1)]  # through the crossing
+    junctions = [-1, 0, 0, -1]
+    adjusted = free_ends_beside_crossings(pieces, ends, joins, 40.0, junctions)
+    np.testing.assert_allclose(adjusted[3].direction, [1.0, 0.0], atol=1e-9)
+    assert adjusted[0] is ends[0] and adjusted[2] is ends[2]  # joined or long: kept
+    # Without the crossing (a gap join), or with the free end joined, nothing changes.
+    assert free_ends_beside_crossings(pieces, ends, joins, 40.0, [-1] * 4)[3] is ends[3]
+    both = [*joins, (3, 0, 0.1)]
+    assert free_ends_beside_crossings(pieces, ends, both, 40.0, junctions)[3] is ends[3]
 
 
 def test_a_short_piece_cut_at_a_slant_is_bridged_from_past_its_hook():
