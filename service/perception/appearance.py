@@ -471,9 +471,14 @@ def cut_square(
     (a wedge, read along its bisector, bulges as a tip does). The front is then read
     again along directions turned by :data:`CUT_READ_TURNS` either way: a straight cut
     reads straight along any of them, a round tip bulges along all (its outline is a
-    circle's), so there the middle may bulge by no more than :data:`CUT_BULGE_SHARE`."""
-    if _straight(end_front(mask, position, direction, half_width, skip)):
+    circle's), so there the middle may bulge by no more than :data:`CUT_BULGE_SHARE`.
+    An end whose front reads as a cable's own tip (:func:`own_tip`) is not read again:
+    turned, a tip's bulge of a pixel or two is lost in its reading's pixel steps."""
+    front = end_front(mask, position, direction, half_width, skip)
+    if _straight(front):
         return True
+    if own_tip(front, half_width):
+        return False
     direction = np.asarray(direction, np.float64)
     for turn in CUT_READ_TURNS:
         for sign in (-1.0, 1.0):
