@@ -356,6 +356,9 @@ CUT_BULGE_SHARE = 0.15
 # (by 0.37 half widths for a difference of 0.58, 0.50 for 0.92; the limit there is 0.27
 # and 0.33).
 CUT_SLANT_BULGE_SHARE = 0.2
+# Turns (degrees, either way) of the directions a cut's front is read again along
+# where the end's fitted direction reads no straight cut (:func:`cut_square`).
+CUT_READ_TURNS = (10.0, 20.0)
 # A front is lopsided (no cable's own tip) when one side line runs on past the other by
 # more than this share of the half width: a round tip read 15 degrees off its axis is
 # lopsided by about 0.37 of it.
@@ -493,8 +496,34 @@ def cut_square(
     middle bulging past the sides by at most :data:`CUT_BULGE_SHARE` of the half width
     (plus :data:`CUT_SLANT_BULGE_SHARE` of the two sides' difference: a slanted cut),
     as where an object's border crosses the cable, and unlike a cable's own rounded or
-    tapering tip. False when the front cannot be read."""
-    return _straight(end_front(mask, position, direction, half_width, skip))
+    tapering tip. False when the front cannot be read.
+
+    Where an object's corner or a disc's rim cuts the cable at a steep slant, the
+    skeleton hooks into the sharp corner and the end's fitted direction points into it
+    (a wedge, read along its bisector, bulges as a tip does). The front is then read
+    again along directions turned by :data:`CUT_READ_TURNS` either way: a straight cut
+    reads straight along any of them, a round tip bulges along all (its outline is a
+    circle's), so there the middle may bulge by no more than :data:`CUT_BULGE_SHARE`.
+    An end whose front reads as a cable's own tip (:func:`own_tip`) is not read again:
+    turned, a tip's bulge of a pixel or two is lost in its reading's pixel steps."""
+    front = end_front(mask, position, direction, half_width, skip)
+    if _straight(front):
+        return True
+    if own_tip(front, half_width):
+        return False
+    direction = np.asarray(direction, np.float64)
+    for turn in CUT_READ_TURNS:
+        for sign in (-1.0, 1.0):
+            cosine, sine = np.cos(np.radians(sign * turn)), np.sin(np.radians(sign * turn))
+            turned = np.array(
+                [
+                    cosine * direction[0] - sine * direction[1],
+                    sine * direction[0] + cosine * direction[1],
+                ]
+            )
+            if _flat(end_front(mask, position, turned, half_width, skip)):
+                return True
+    return False
 
 
 def cut_or_lopsided(
@@ -509,8 +538,9 @@ def cut_or_lopsided(
     other by more than :data:`TIP_LOPSIDED_SHARE` of the half width, as where an
     object's border or corner cuts a cable at a slant along its bend. A cable's round
     or tapering tip is symmetric about its axis. False when the front cannot be read."""
-    front = end_front(mask, position, direction, half_width, skip)
-    return _straight(front) or _lopsided(front)
+    if cut_square(mask, position, direction, half_width, skip):
+        return True
+    return _lopsided(end_front(mask, position, direction, half_width, skip))
 
 
 def own_tip(front: np.ndarray | None, half_width: float) -> bool:
@@ -533,6 +563,10 @@ def own_tip(front: np.ndarray | None, half_width: float) -> bool:
 
 def _lopsided(front: np.ndarray | None) -> bool:
     return front is not None and bool(abs(front[0] - front[2]) > TIP_LOPSIDED_SHARE)
+
+
+def _flat(front: np.ndarray | None) -> bool:
+    return front is not None and bool(front[1] - 0.5 * (front[0] + front[2]) <= CUT_BULGE_SHARE)
 
 
 def _straight(front: np.ndarray | None) -> bool:

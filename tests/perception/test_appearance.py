@@ -218,7 +218,8 @@ def test_a_cut_is_read_from_behind_the_tip_its_end_fit_left_out(
     widths behind it. Read from where the fit begins, the cut is square."""
     mask = make_family_scene("occluded", seed).mask
     position, direction = np.array(position), np.array(direction)
-    assert not appearance.cut_square(mask, position, direction, half_width)
+    # Read along the fitted direction only (cut_square also reads turned directions).
+    assert not appearance._straight(appearance.end_front(mask, position, direction, half_width))
     assert appearance.cut_square(mask, position, direction, half_width, skip)
 
 
@@ -329,3 +330,36 @@ def test_a_curve_out_of_view_all_the_way_lies_under_the_object_at_every_sample()
     assert not appearance.out_of_view(image, mask, swing, ends, 3.5)
     open_image, open_mask, _, _ = gap_scene(None)
     assert not appearance.out_of_view(open_image, open_mask, curve, ends, 3.5)
+
+
+@pytest.mark.parametrize(
+    ("seed", "position", "direction", "half_width", "skip"),
+    [
+        (280104, [583.1, 507.5], [0.988, 0.154], 8.0, 20.4),
+        (280146, [245.0, 220.0], [-0.904, -0.428], 5.0, 10.3),
+    ],
+)
+def test_a_steep_cut_read_into_its_sharp_corner_is_cut(seed, position, direction, half_width, skip):
+    """Ends of `occluded` tuning scenes where an object of the background's colour cuts
+    the cable at a steep slant: the end's fitted direction points into the sharp corner,
+    and read along it the wedge bulges as a round tip does. Read along a direction
+    turned by up to 20 degrees, the cut is straight."""
+    mask = make_family_scene("occluded", seed).mask
+    position, direction = np.array(position), np.array(direction) / np.hypot(*direction)
+    front = appearance.end_front(mask, position, direction, half_width, skip)
+    assert not appearance._straight(front)
+    assert appearance.cut_square(mask, position, direction, half_width, skip)
+
+
+@pytest.mark.parametrize("tilt", [-25.0, -20.0, 20.0, 25.0])
+@pytest.mark.parametrize("half_width", [4, 6, 8])
+def test_a_round_tip_read_well_off_its_axis_is_not_cut(tilt, half_width):
+    """Read again along turned directions (:data:`.appearance.CUT_READ_TURNS`), a cable's
+    own round tip still bulges along every one: it is not cut."""
+    mask = _cable_end_mask("round", half_width=half_width)
+    angle = np.radians(tilt)
+    direction = np.array([np.cos(angle), np.sin(angle)])
+    for skip in (0.0, 10.0):
+        assert not appearance.cut_square(
+            mask, np.array([78.0, 50.0]), direction, half_width + 0.5, skip
+        )
