@@ -488,13 +488,9 @@ def ends_of_short_pieces_from_partners(
         near, far = (i, j) if short[0] else (j, i)
         if partner[near ^ 1] >= 0:  # joined at both ends: ends_through_short_pieces
             continue
-        chord = ends[near].position - ends[far].position
-        length = float(np.hypot(*chord))
-        if length < 1e-9:
+        if float(np.hypot(*(ends[near].position - ends[far].position))) < 1e-9:
             continue
-        chord = chord / length
-        leaving = ends[far].direction
-        arriving = 2.0 * float(leaving @ chord) * chord - leaving
+        arriving = _arriving_on_circle(ends[far], ends[near].position)
         adjusted[near] = replace(ends[near], direction=-arriving)
     return adjusted
 
