@@ -187,29 +187,6 @@ def _thin_bright_class(hist: np.ndarray, threshold: float, mask: np.ndarray) -> 
     return BLOCK * BLOCK * np.count_nonzero(core) <= THIN_FOREGROUND_SHARE * area
 
 
-# Cables in view, each cut into a few pieces by what lies over it and by the picture's
-# edge, make a handful of pieces, dozens at most (the scene families: at most 7; mbest's
-# photographs: 1-2); the light strokes of a busy print, a carpet's or a fabric's pattern
-# make a hundred (the painted backgrounds: 81-146).
-MAX_PIECES = 40
-# The pieces are counted on every other row and column: a cable 6 px wide or wider stays
-# one 8-connected piece there, at a quarter of the cost.
-PIECES_STRIDE = 2
-
-
-def _few_pieces(mask: np.ndarray) -> bool:
-    """Is the mask a few pieces, as cables are, not the many pieces of a bright pattern?
-
-    A brightness split of a busy background (light strokes of paint, a carpet's or a
-    fabric's fibres on a darker ground) is thin as cables are, but it falls apart into
-    a hundred short pieces scattered over the picture; the cue is then not the cables',
-    and their contrast (:func:`segment_cables`) is the better one.
-    """
-    sparse = np.ascontiguousarray(mask[::PIECES_STRIDE, ::PIECES_STRIDE]).view(np.uint8)
-    count = cv2.connectedComponents(sparse, connectivity=8)[0] - 1
-    return count <= MAX_PIECES
-
-
 def segment_auto(
     image_bgr: np.ndarray,
     min_component_area: int = 0,
@@ -289,7 +266,7 @@ def _segment_by_brightness(
     mask = _segmentation_kernels.threshold_and_clean(
         brightness, low, threshold, weak_count, int(min_component_area), int(max_hole_area)
     ).view(np.bool_)
-    if thin_only and not (_thin_bright_class(hist, threshold, mask) and _few_pieces(mask)):
+    if thin_only and not _thin_bright_class(hist, threshold, mask):
         return None
     return mask, brightness, low
 

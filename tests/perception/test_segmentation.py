@@ -7,8 +7,6 @@ import pytest
 from schemas import DetectParams, SegmentationMethod
 from service.perception import InvalidInputError, _segmentation_kernels, detect_full
 from service.perception.segmentation import (
-    MAX_PIECES,
-    _few_pieces,
     _histogram,
     as_bgr,
     clean_mask,
@@ -29,21 +27,6 @@ def test_auto_segmentation_finds_a_bright_cable_on_a_dark_background():
     cv2.line(truth, (10, 50), (150, 50), 1, 7)
     dice = 2 * (mask & (truth > 0)).sum() / (mask.sum() + truth.sum())
     assert dice > 0.95
-
-
-def test_a_bright_pattern_of_many_pieces_is_not_taken_for_cables():
-    """Three cables cut by an occluder are a few pieces; a print's strokes are many."""
-    cables = np.zeros((360, 640), bool)
-    for row in (60, 180, 300):
-        cables[row - 4 : row + 4, 20:620] = True
-    cables[:, 300:340] = False
-    assert _few_pieces(cables)
-    rng = np.random.default_rng(0)
-    strokes = np.zeros((360, 640), np.uint8)
-    for _ in range(2 * MAX_PIECES):
-        x, y = int(rng.integers(20, 600)), int(rng.integers(20, 330))
-        cv2.line(strokes, (x, y), (x + 20, y + int(rng.integers(-10, 10))), 1, 5)
-    assert not _few_pieces(strokes > 0)
 
 
 def test_auto_segmentation_uses_colour_when_brightness_does_not_separate():
