@@ -37,6 +37,7 @@ import cv2
 import numpy as np
 
 from service.perception import _appearance_kernels
+from service.perception.geometry import rotated
 
 # The end stretch starts this many radii in from the end, is at most this many radii
 # long and stops as far from the piece's other end (a cut, a junction, an occluder's rim).
@@ -507,20 +508,18 @@ def cut_square(
     An end whose front reads as a cable's own tip (:func:`own_tip`) is not read again:
     turned, a tip's bulge of a pixel or two is lost in its reading's pixel steps."""
     front = end_front(mask, position, direction, half_width, skip)
+    return _cut_square_from(front, mask, position, direction, half_width, skip)
+
+
+def _cut_square_from(front, mask, position, direction, half_width, skip) -> bool:
+    """:func:`cut_square` with the front along ``direction`` already read."""
     if _straight(front):
         return True
     if own_tip(front, half_width):
         return False
-    direction = np.asarray(direction, np.float64)
     for turn in CUT_READ_TURNS:
         for sign in (-1.0, 1.0):
-            cosine, sine = np.cos(np.radians(sign * turn)), np.sin(np.radians(sign * turn))
-            turned = np.array(
-                [
-                    cosine * direction[0] - sine * direction[1],
-                    sine * direction[0] + cosine * direction[1],
-                ]
-            )
+            turned = rotated(direction, np.radians(sign * turn))
             if _flat(end_front(mask, position, turned, half_width, skip)):
                 return True
     return False
@@ -538,9 +537,8 @@ def cut_or_lopsided(
     other by more than :data:`TIP_LOPSIDED_SHARE` of the half width, as where an
     object's border or corner cuts a cable at a slant along its bend. A cable's round
     or tapering tip is symmetric about its axis. False when the front cannot be read."""
-    if cut_square(mask, position, direction, half_width, skip):
-        return True
-    return _lopsided(end_front(mask, position, direction, half_width, skip))
+    front = end_front(mask, position, direction, half_width, skip)
+    return _cut_square_from(front, mask, position, direction, half_width, skip) or _lopsided(front)
 
 
 def own_tip(front: np.ndarray | None, half_width: float) -> bool:
@@ -566,6 +564,7 @@ def _lopsided(front: np.ndarray | None) -> bool:
 
 
 def _flat(front: np.ndarray | None) -> bool:
+    """The middle line runs on past the sides' mean by at most a cut's bulge."""
     return front is not None and bool(front[1] - 0.5 * (front[0] + front[2]) <= CUT_BULGE_SHARE)
 
 

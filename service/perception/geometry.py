@@ -187,6 +187,15 @@ def distances_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarra
     return np.sqrt((gap * gap).sum(axis=2)).min(axis=1)
 
 
+def rotated(direction: np.ndarray, angle: float) -> np.ndarray:
+    """The 2-D ``direction`` turned by ``angle`` radians (counter-clockwise in x, y)."""
+    direction = np.asarray(direction, np.float64)
+    cos, sin = np.cos(angle), np.sin(angle)
+    return np.array(
+        [cos * direction[0] - sin * direction[1], sin * direction[0] + cos * direction[1]]
+    )
+
+
 def polyline_length(points: np.ndarray) -> float:
     """Arc length of a polyline."""
     if len(points) < 2:

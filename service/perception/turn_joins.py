@@ -42,6 +42,7 @@ from functools import partial
 import numpy as np
 
 from service.perception.appearance import EndColours, ends_alike
+from service.perception.geometry import rotated
 from service.perception.pairing import Components, cheapest_pairing
 
 NEAR_U_TURN = 0.75 * np.pi
@@ -218,8 +219,8 @@ def hidden_turn_curves(
     near = apart <= BULB_REACH_RADII * cable_radius and fitted_turn >= BULB_MIN_TURN
     curves = []
     for tilt_first, tilt_last in DIRECTION_TILTS if near else DIRECTION_TILTS[:1]:
-        first = _rotated(leaving, tilt_first)
-        last = _rotated(arriving, tilt_last)
+        first = rotated(leaving, tilt_first)
+        last = rotated(arriving, tilt_last)
         turn = float(np.arctan2(*_cross_dot(first, last)))
         if abs(turn) < 1e-6:
             continue
@@ -319,14 +320,6 @@ def _cached(curves: Iterator[np.ndarray], tried: list[np.ndarray]) -> Iterator[n
     for curve in curves:
         tried.append(curve)
         yield curve
-
-
-def _rotated(direction: np.ndarray, angle: float) -> np.ndarray:
-    direction = np.asarray(direction, np.float64)
-    cos, sin = np.cos(angle), np.sin(angle)
-    return np.array(
-        [cos * direction[0] - sin * direction[1], sin * direction[0] + cos * direction[1]]
-    )
 
 
 def bulb_turns(
