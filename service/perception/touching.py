@@ -24,12 +24,14 @@ import numpy as np
 from service.perception import _merging_kernels
 from service.perception.appearance import WIDTH_AGREEMENT
 from service.perception.geometry import arc_lengths, points_along, polyline_length
-
-# Two strands lie side by side along a piece when its mask never narrows below this
-# fraction of their two widths together: where two cables cross, even at a shallow
-# angle, the mask narrows to one cable's width (half of the two), while strands that
-# touch all along keep both widths (all of it).
-SIDE_BY_SIDE_WIDTH_FRACTION = 0.75
+from service.perception.strand_sides import (
+    SIDE_BY_SIDE_WIDTH_FRACTION,
+    end_kind,
+    offset_strands,
+    point_in,
+    side_offsets,
+)
+from service.perception.touching_ends import split_stretches_ending
 
 
 @dataclass
@@ -151,8 +153,6 @@ def split_touching_strands(
         candidates, result, positions, directions, labels, members, distance, leaving, widths
     )
     if ending:
-        from service.perception.touching_ends import split_stretches_ending  # imports this
-
         handled |= split_stretches_ending(
             ending, result, positions, directions, labels, members, distance, leaving, widths
         )
@@ -266,7 +266,7 @@ def _split_shared_pieces(
             continue
         # Per end, its junction's two other strands, left one first.
         sides = [
-            _end_kind(
+            end_kind(
                 end, index, labels, members, positions, directions, pieces, float(widths[index])
             )
             for end in ends
@@ -293,7 +293,7 @@ def _split_shared_pieces(
             SIDE_BY_SIDE_WIDTH_FRACTION * strands
         ):
             continue
-        right_index = result.split_in_two(index, *_offset_strands(points, float(widths[index])))
+        right_index = result.split_in_two(index, *offset_strands(points, float(widths[index])))
         for end, side in zip(ends, sides, strict=True):
             result.pairs.extend([(side[0], end), (side[1], 2 * right_index + end % 2)])
             result.partings.append((side[0] ^ 1, side[1] ^ 1))
@@ -373,7 +373,7 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     cross, even at a shallow angle, it narrows to one cable's there, at the crossing.
     Strands that touch all along cannot cross there, so each keeps its side:
     the left end of one pair joins the left end of the other (read as
-    :func:`_end_kind` reads a junction's sides), not the one straight across, as the
+    :func:`end_kind` reads a junction's sides), not the one straight across, as the
     cheapest matching of a crossing would.
     """
     ends = list(ends)
@@ -426,10 +426,10 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
         # starts at one point, each bending toward the other's side); where the points
         # there do not tell, from the ends.
         origin = 0.5 * (positions[pair[0]] + positions[pair[1]])
-        points = [_point_in(pieces, end, strands) for end in pair]
-        offsets = _side_offsets(axis, origin, points)
+        points = [point_in(pieces, end, strands) for end in pair]
+        offsets = side_offsets(axis, origin, points)
         if offsets[0] * offsets[1] >= 0:
-            offsets = _side_offsets(axis, origin, [positions[end] for end in pair])
+            offsets = side_offsets(axis, origin, [positions[end] for end in pair])
             if offsets[0] * offsets[1] >= 0:
                 return None
         sides.append(pair if offsets[0] < 0 else pair[::-1])
@@ -476,55 +476,6 @@ def _middle_of_stretch(length: float, strands: float) -> float:
     return max(strands, length / 3.0)
 
 
-def _end_kind(end, index, labels, members, positions, directions, pieces, reach):
-    """What one end of piece ``index`` meets: the two other strands of a three-way
-    junction, left one first; or None (anything else).
-
-    The sides are read from where the other strands' ends lie; where that does not
-    tell (both on one side of the line, as the two ends of the bulb a doubled-back
-    cable turns round through, which thinning starts together at the junction), from
-    the points ``reach`` (the stretch's half width) along them, clear of the junction.
-    """
-    label = labels[end]
-    others = [member for member in members[label] if member // 2 != index]
-    if len(members[label]) != 3 or len(others) != 2:
-        return None
-    heading = -directions[end] if end % 2 == 0 else directions[end]
-    offsets = _side_offsets(heading, positions[end], [positions[other] for other in others])
-    if offsets[0] * offsets[1] >= 0:
-        offsets = _side_offsets(
-            heading, positions[end], [_point_in(pieces, other, reach) for other in others]
-        )
-        if offsets[0] * offsets[1] >= 0:
-            # Both on one side of the end's line: on a stretch bending into the
-            # junction the end's fit lags the bend and tilts that line. Two strands
-            # parting side by side still lie a strand's width apart across it (the
-            # stretch's half width, ``reach``); the one further left is on the left.
-            if abs(offsets[0] - offsets[1]) < 0.5 * reach:
-                return None
-            return others if offsets[0] < offsets[1] else others[::-1]
-    return others if offsets[0] < 0 else others[::-1]
-
-
-def _side_offsets(heading, origin, points) -> list[float]:
-    """Signed offsets of ``points`` from the line through ``origin`` along ``heading``
-    (negative: on its left)."""
-    return [
-        float(heading[0] * (point[1] - origin[1])) - float(heading[1] * (point[0] - origin[0]))
-        for point in points
-    ]
-
-
-def _point_in(pieces, end, reach: float) -> np.ndarray:
-    """The point ``reach`` along piece ``end // 2`` from that end (at most half the piece)."""
-    points = np.asarray(pieces[end // 2], np.float64)
-    if end % 2:
-        points = points[::-1]
-    along = arc_lengths(points)
-    at = min(reach, 0.5 * float(along[-1]))
-    return points_along(points, along, np.array([at]))[0]
-
-
 def _narrowest(
     points: np.ndarray, distance: np.ndarray, half_width: float, short_at_middle: bool = False
 ) -> float:
@@ -544,17 +495,6 @@ def _narrowest(
     cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
     rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
     return float(distance[rows, cols].min())
-
-
-def _offset_strands(points: np.ndarray, half_width: float) -> tuple[np.ndarray, np.ndarray]:
-    """The piece's line moved half its half width to the left and to the right (the
-    sides :func:`_end_kind` orders by)."""
-    points = np.asarray(points, np.float64)
-    tangents = np.gradient(points, axis=0)
-    tangents /= np.maximum(np.hypot(tangents[:, 0], tangents[:, 1]), 1e-9)[:, None]
-    left = np.column_stack([tangents[:, 1], -tangents[:, 0]])
-    shift = 0.5 * max(half_width - 0.5, 0.0)
-    return points + shift * left, points - shift * left
 
 
 def split_where_leaving_together(
@@ -761,7 +701,7 @@ def absorb_shared_pieces(
     2)``, start then end of every piece, pointing out of it), the strands are paired
     across the crossing by their sides: two strands that cross swap sides, so the strand
     on the left of the shared line where they meet is the one on its right where they
-    part (read as :func:`_end_kind` reads a touching stretch's sides, whose strands keep
+    part (read as :func:`end_kind` reads a touching stretch's sides, whose strands keep
     them). The ends' fits near a shallow crossing follow the line down both strands'
     middle, and their directions, bent toward it, cannot tell the pairs apart.
 
@@ -825,7 +765,7 @@ def absorb_shared_pieces(
             }
             reach = float(widths[index]) if widths is not None else radius
             sides = [
-                _end_kind(end, index, labels, members, positions, directions, pieces, reach)
+                end_kind(end, index, labels, members, positions, directions, pieces, reach)
                 for end in (2 * index, 2 * index + 1)
             ]
             if None not in sides:

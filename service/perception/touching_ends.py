@@ -19,11 +19,11 @@ import numpy as np
 
 from service.perception.appearance import WIDTH_AGREEMENT, cut_or_lopsided
 from service.perception.geometry import arc_lengths, points_along, polyline_length
-from service.perception.touching import (
+from service.perception.strand_sides import (
     SIDE_BY_SIDE_WIDTH_FRACTION,
-    _end_kind,
-    _offset_strands,
-    _side_offsets,
+    end_kind,
+    offset_strands,
+    side_offsets,
 )
 
 # A strand running on past the end of the stretch is told from the hook thinning draws
@@ -68,7 +68,7 @@ def split_stretches_ending(
         end, free = 2 * index + at_junction, 2 * index + 1 - at_junction
         if labels[end] in handled:
             continue
-        side = _end_kind(
+        side = end_kind(
             end, index, labels, members, positions, directions, pieces, float(widths[index])
         )
         if side is None:
@@ -101,7 +101,7 @@ def split_stretches_ending(
         rest = float(along[-1]) - parting
         stop = max(parting - 0.5 * strands, 0.0)
         shared = _up_to(oriented, along, stop)
-        left, right = _offset_strands(shared, strands)
+        left, right = offset_strands(shared, strands)
         if rest <= RUN_ON_STRETCH_WIDTHS * strands:
             if not cut_or_lopsided(mask, positions[free], directions[free], strands):
                 continue
@@ -113,7 +113,7 @@ def split_stretches_ending(
             if not _one_strand_wide(beyond, distance, side_widths):
                 continue
             heading = shared[-1] - shared[max(len(shared) - 3, 0)]
-            offset = _side_offsets(heading, shared[-1], [beyond[0]])[0]
+            offset = side_offsets(heading, shared[-1], [beyond[0]])[0]
             if offset < 0:
                 left, right = np.concatenate([left, beyond]), _run_on(right, distance, strands)
             else:
