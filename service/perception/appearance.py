@@ -255,7 +255,7 @@ def gap_hidden(
     radius : float
         Cable half width (px).
     """
-    background = _background_beside(image_bgr, mask, ends, radius)
+    background = background_beside(image_bgr, mask, ends, radius)
     if background is None:
         return False
     colour, spread = background
@@ -299,7 +299,7 @@ def _off_mask(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return points[~mask[rows, cols]]
 
 
-def _background_beside(
+def background_beside(
     image_bgr: np.ndarray, mask: np.ndarray, ends: tuple, radius: float
 ) -> tuple[np.ndarray, float] | None:
     """The open background beside two ends' cables just behind the ends
@@ -321,15 +321,23 @@ def _background_beside(
 
 
 def out_of_view(
-    image_bgr: np.ndarray, mask: np.ndarray, curve: np.ndarray, ends: tuple, radius: float
+    image_bgr: np.ndarray,
+    mask: np.ndarray,
+    curve: np.ndarray,
+    ends: tuple,
+    radius: float,
+    background: tuple[np.ndarray, float] | None = None,
 ) -> bool:
     """Whether a cable along ``curve`` would be out of view all the way: every sample of
     the curve off the foreground differs from the open background beside the two
     ``ends``' cables (:func:`gap_hidden`'s colour and tolerance), so that something lies
     over each. A curve that runs out past the object that hides the turn onto open
     background, where the cable would be seen, is not; nor is one with too few samples
-    off the foreground, or ends with too little background beside them, to tell."""
-    background = _background_beside(image_bgr, mask, ends, radius)
+    off the foreground, or ends with too little background beside them, to tell.
+    ``background``: :func:`background_beside` of the two ends, when already read (the
+    same for every curve tried between them)."""
+    if background is None:
+        background = background_beside(image_bgr, mask, ends, radius)
     if background is None:
         return False
     colour, spread = background

@@ -16,6 +16,7 @@ import numpy as np
 
 from service.perception.appearance import (
     EndColours,
+    background_beside,
     cut_or_lopsided,
     cut_square,
     end_front,
@@ -258,8 +259,19 @@ def turn_evidence(image, mask, ends, colours, radius, partings=()) -> tuple:
 def turn_out_of_view(image, mask, ends, radius) -> Callable[[int, int, np.ndarray], bool]:
     """Whether a cable turning from end ``i`` to end ``j`` along a curve would be out of
     view all the way (:func:`.appearance.out_of_view`), as a callable ``(i, j, curve)``
-    for the turns under objects (:func:`.turn_joins.turn_joins`' ``out_of_view``)."""
-    return lambda i, j, curve: out_of_view(image, mask, curve, (ends[i], ends[j]), radius)
+    for the turns under objects (:func:`.turn_joins.turn_joins`' ``out_of_view``). The
+    background beside a pair of ends is read once for all the curves tried between them."""
+    backgrounds: dict[tuple[int, int], tuple | None] = {}
+
+    def hidden(i: int, j: int, curve: np.ndarray) -> bool:
+        pair = (ends[i], ends[j])
+        if (i, j) not in backgrounds:
+            backgrounds[i, j] = background_beside(image, mask, pair, radius)
+        if backgrounds[i, j] is None:
+            return False
+        return out_of_view(image, mask, curve, pair, radius, backgrounds[i, j])
+
+    return hidden
 
 
 def strands_turn_out_of_sight(a, b, curve: np.ndarray, mask: np.ndarray, radius: float) -> bool:
