@@ -82,15 +82,14 @@ def find_intersections(chains: list[np.ndarray]) -> list[tuple[int, int, int, in
 def _profile_maps(lines: list[tuple[np.ndarray, np.ndarray, float]]):
     """The ``float32`` sampling maps of all the lines, one after the other in one row
     (each line's samples 1 px apart), and where each line's samples start and stop."""
-    offsets = [np.arange(-half, half + 0.5, 1.0) for _, _, half in lines]
-    counts = [len(steps) for steps in offsets]
-    bounds = np.cumsum([0, *counts])
-    centres = np.repeat(np.array([centre for centre, _, _ in lines]), counts, axis=0)
-    directions = np.repeat(np.array([direction for _, direction, _ in lines]), counts, axis=0)
-    points = centres + np.concatenate(offsets)[:, None] * directions
-    map_x = points[:, 0].astype(np.float32).reshape(1, -1)
-    map_y = points[:, 1].astype(np.float32).reshape(1, -1)
-    return map_x, map_y, bounds
+    # Each line's points as the centre plus each step along the direction, line by line.
+    points = [
+        centre + np.arange(-half, half + 0.5, 1.0)[:, None] * direction
+        for centre, direction, half in lines
+    ]
+    bounds = np.cumsum([0, *(len(line) for line in points)])
+    maps = np.concatenate(points).T.astype(np.float32, order="C")
+    return maps[:1], maps[1:], bounds
 
 
 def _variations(image_lab: np.ndarray, map_x: np.ndarray, map_y: np.ndarray, bounds) -> list[float]:

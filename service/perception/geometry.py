@@ -165,6 +165,21 @@ def points_along(points: np.ndarray, arcs: np.ndarray, at: np.ndarray) -> np.nda
     return np.column_stack([x, y])
 
 
+def median(values: np.ndarray):
+    """``np.median`` of a 1-D float array of at least one value, none of them NaN, without
+    its overhead (its partition and mean, done directly).
+
+    The middle value, or the mean of the two middle ones in the array's own type (a
+    ``float32`` sum halved in ``float32``, as ``np.mean`` of two takes it); the same
+    value ``np.median`` gives, for a fraction of its cost on the few values a chain has.
+    """
+    half = values.size // 2
+    if values.size % 2:
+        return np.partition(values, half)[half]
+    middle = np.partition(values, (half - 1, half))
+    return (middle[half - 1] + middle[half]) / values.dtype.type(2)
+
+
 def rigid_fit(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The rotation and translation taking ``source`` onto ``target`` (paired points, least
     squares): ``(source_mean, rotation, target_mean)``, so a point ``p`` goes to

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from schemas import DetectParams, GapCurve
-from service.perception import _merging_kernels
+from service.perception import _merging_kernels, _pruning_kernels
 from service.perception.appearance import (
     EndColours,
     colour_penalty,
@@ -199,7 +199,8 @@ def chain_ends(
         )
     # Both fits of every piece in one compiled loop (geometry.end_fit's, end by end); a
     # short piece's fit stops short of its other end's narrow tip (its length is needed).
-    lengths = np.array([polyline_length(points) for points in pieces])
+    # (Every piece's polyline_length in one call: the same sums, in NumPy's order.)
+    lengths = _pruning_kernels.chain_lengths(joints, starts[1:])
     positions, directions, curvatures, skips = _merging_kernels.fit_chain_ends(
         joints,
         starts,
@@ -828,11 +829,14 @@ def merge_chains(
     if mask is not None:
         ends = ends_of_stubs(pieces, ends, mask, radius)  # a stub's skeleton runs across it
     check(deadline, "merging")
+    # Every end's position and direction as arrays, once (until touching strands split).
+    end_positions = np.array([end.position for end in ends], np.float64).reshape(-1, 2)
+    end_directions = np.array([end.direction for end in ends], np.float64).reshape(-1, 2)
     at_border = None
     if zones is not None or mask is not None:
         at_border = points_out_of_picture(
-            np.array([end.position for end in ends]).reshape(-1, 2),
-            np.array([end.direction for end in ends]).reshape(-1, 2),
+            end_positions,
+            end_directions,
             (zones if zones is not None else mask).shape,
             radius + BORDER_MARGIN_PX,
         )
@@ -840,8 +844,8 @@ def merge_chains(
     if mask is not None and ends:
         leaving = runs_out = _merging_kernels.runs_to_border(
             np.ascontiguousarray(mask, np.bool_),
-            np.array([end.position for end in ends], np.float64),
-            np.array([end.direction for end in ends], np.float64),
+            end_positions,
+            end_directions,
             BORDER_REACH_RADII * radius + BORDER_REACH_PX,
             BORDER_MARGIN_PX,
         )
@@ -851,7 +855,7 @@ def merge_chains(
     if zones is not None and ends:
         # The piece was cut at its junction: an end belongs there though its fit,
         # extrapolated over a tip bending into the zone, ends a few px outside it.
-        fitted = np.array([end.position for end in ends], np.float64)
+        fitted = end_positions
         tips = np.array([(points[0], points[-1]) for points in pieces], np.float64)
         both = _grown_zone_labels(np.concatenate([fitted, tips.reshape(-1, 2)]), zones)
         junction_of_end = np.where(both[: len(ends)] >= 0, both[: len(ends)], both[len(ends) :])
@@ -862,8 +866,8 @@ def merge_chains(
     if distance is not None and pieces:
         touching = split_touching_strands(
             pieces,
-            np.array([end.position for end in ends], np.float64),
-            np.array([end.direction for end in ends], np.float64),
+            end_positions,
+            end_directions,
             junction_of_end,
             distance,
             leaving,
@@ -873,6 +877,8 @@ def merge_chains(
         # and its far ends meet the picture's border where the shared piece's did.
         pieces = touching.pieces
         ends = _ends_of_split_pieces(ends, pieces, touching, span)
+        end_positions = np.array([end.position for end in ends], np.float64).reshape(-1, 2)
+        end_directions = np.array([end.direction for end in ends], np.float64).reshape(-1, 2)
         from_ends = np.repeat(np.array(touching.origin), 2) * 2 + np.tile([0, 1], len(pieces))
         at_border = None if at_border is None else at_border[from_ends]
         leaving = None if leaving is None else leaving[from_ends]
@@ -882,8 +888,8 @@ def merge_chains(
         touching.junction_of_end,
         radius,
         distance,
-        np.array([end.position for end in ends], np.float64).reshape(-1, 2),
-        np.array([end.direction for end in ends], np.float64).reshape(-1, 2),
+        end_positions,
+        end_directions,
         leaving,
     )
     colours = None

@@ -33,7 +33,13 @@ from service.perception.deadline import Deadline, check
 from service.perception.end_extension import extend_ends
 from service.perception.errors import InvalidInputError
 from service.perception.fitting import fit_chains, junction_zones
-from service.perception.geometry import arc_lengths, fit_where_skipped, polyline_length, resample
+from service.perception.geometry import (
+    arc_lengths,
+    fit_where_skipped,
+    median,
+    polyline_length,
+    resample,
+)
 from service.perception.merging import (
     Join,
     MergedPath,
@@ -109,27 +115,26 @@ def _finalise_path(path: MergedPath, mask, distance, params: DetectParams, radiu
     span = max(2.0 * params.segment_length, 3.0 * radius)
     vertices, filled = extend_ends(path.vertices, path.filled, mask, radius, span)
     height, width = mask.shape
+    # The last pixel of each axis, (x, y): points are rounded and clipped to the image.
+    last_pixel = np.array([width - 1, height - 1])
     # A filled edge across foreground (a crossing) is seen; across background, hidden.
+    steps = vertices[1:] - vertices[:-1]
     midpoints = 0.5 * (vertices[:-1] + vertices[1:])
-    cols = np.clip(np.rint(midpoints[:, 0]).astype(int), 0, width - 1)
-    rows = np.clip(np.rint(midpoints[:, 1]).astype(int), 0, height - 1)
-    hidden_edge = filled & ~mask[rows, cols]
+    pixels = np.minimum(np.maximum(np.rint(midpoints).astype(int), 0), last_pixel)
+    hidden_edge = filled & ~mask[pixels[:, 1], pixels[:, 0]]
     joints, source_edge = resample(vertices, params.segment_length)
-    edge_lengths = np.linalg.norm(np.diff(vertices, axis=0), axis=1)
+    # What np.linalg.norm(steps, axis=1) adds (two squares) and roots, without its checks.
+    edge_lengths = np.sqrt((steps * steps).sum(axis=1))
     # Inferred where more than half the length of the edges a segment spans is hidden.
     inferred = _pipeline_kernels.inferred_segments(
         source_edge.astype(np.int64),
         np.ascontiguousarray(edge_lengths, np.float64),
         np.ascontiguousarray(hidden_edge, bool),
     )
-    cols = np.clip(np.rint(joints[:, 0]).astype(int), 0, width - 1)
-    rows = np.clip(np.rint(joints[:, 1]).astype(int), 0, height - 1)
-    on_cable = distance[rows, cols] > 0
-    scale = (
-        max(float(np.median(distance[rows, cols][on_cable])) - 0.5, 0.5)
-        if on_cable.any()
-        else radius
-    )
+    pixels = np.minimum(np.maximum(np.rint(joints).astype(int), 0), last_pixel)
+    at_joints = distance[pixels[:, 1], pixels[:, 0]]
+    on_cable = at_joints[at_joints > 0]
+    scale = max(float(median(on_cable)) - 0.5, 0.5) if on_cable.size else radius
     return joints, inferred, scale, chain_radius(joints, mask, radius)
 
 

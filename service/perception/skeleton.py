@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from service.perception import _shared_kernels, _skeleton_kernels
+from service.perception.geometry import median
 
 
 def _branch_count_table() -> np.ndarray:
@@ -197,4 +198,4 @@ def estimate_radius(skeleton: np.ndarray, *, distance: np.ndarray) -> float:
         return 0.0
     # The distance is to the nearest background pixel centre, half a pixel beyond
     # the border.
-    return max(float(np.median(values)) - 0.5, 0.5)
+    return max(float(median(values)) - 0.5, 0.5)

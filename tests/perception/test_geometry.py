@@ -9,6 +9,7 @@ from service.perception.geometry import (
     end_direction,
     end_fit,
     fit_where_skipped,
+    median,
     polyline_length,
     resample,
 )
@@ -93,3 +94,22 @@ def test_arc_length_kernels_equal_the_references_bit_for_bit(seed):
     pixels = rng.integers(0, 500, (40, 2))
     assert polyline_length(pixels) == reference.polyline_length(pixels)
     np.testing.assert_array_equal(arc_lengths(pixels), reference.arc_lengths(pixels))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_median_is_numpys_bit_for_bit(seed):
+    # Odd and even counts, float32 (distances: the two middle values halved in float32)
+    # and float64, ties and values far apart.
+    rng = np.random.default_rng(seed)
+    for count in [*range(1, 12), 63, 64, 1000, 1001]:
+        for dtype in (np.float32, np.float64):
+            for values in (
+                rng.normal(size=count) * rng.uniform(0.1, 1e6),
+                rng.integers(0, 4, count) * 1.4,
+                np.full(count, 2.1969),
+            ):
+                values = values.astype(dtype)
+                kept = values.copy()
+                found, expected = median(values), np.median(values)
+                assert found.dtype == expected.dtype and found == expected
+                np.testing.assert_array_equal(values, kept)  # not reordered
