@@ -328,14 +328,14 @@ def full_blocks(mask, block):
     """1 for each ``block`` x ``block`` square of a 0/1 image more than half of whose
     pixels are set, else 0: ``cv2.resize(mask, (width // block, height // block),
     interpolation=cv2.INTER_AREA) == 1`` for an image a whole number of blocks wide and
-    high and ``block`` 3 or more (OpenCV then takes each square's mean, rounded half to
+    high and ``block`` 3 to 255 (OpenCV then takes each square's mean, rounded half to
     even: a square exactly half set is 0; its 2 x 2 path rounds halves up). Whole rows
     are added at a time, which vectorizes.
     """
     height, width = mask.shape
     rows, cols = height // block, width // block
     # Per column, the set pixels of the block's rows: whole rows added at a time, in
-    # bytes (at most ``block`` each; 64 columns to a vector instruction).
+    # bytes (at most ``block`` each, under 256; 64 columns to a vector instruction).
     column_counts = np.empty(width, np.uint8)
     full = np.empty((rows, cols), np.uint8)
     for block_row in range(rows):

@@ -29,6 +29,15 @@ from service.perception.geometry import (
 _UNFITTED = {"curvature": 0.0, "skip": 0.0, "width": 0.0}
 
 
+def _moved(end, position: np.ndarray, direction: np.ndarray):
+    """``replace(end, position=position, direction=direction)``: the same frozen end
+    (all its other fields kept), made without ``dataclasses.replace``'s look at every
+    field, for the several crossing and gap ends of every frame."""
+    moved = object.__new__(type(end))
+    moved.__dict__.update(end.__dict__, position=position, direction=direction)
+    return moved
+
+
 def partners(count: int, joins: list[tuple[int, int, float]]) -> np.ndarray:
     """The end each of ``count`` ends is joined to, or -1."""
     partner = np.full(count, -1)
@@ -90,7 +99,7 @@ def bridge_from_the_fits(
                 continue
             inner = fit_where_skipped(pieces[end.piece], end.at_start, span, end.skip)
             if inner is not None:
-                adjusted[k] = replace(end, position=inner[0], direction=inner[1])
+                adjusted[k] = _moved(end, inner[0], inner[1])
                 trims[k] = end.skip
     for piece in np.flatnonzero(hooks.reshape(-1, 2).any(axis=1)).tolist():
         pair = slice(2 * piece, 2 * piece + 2)
@@ -254,7 +263,7 @@ def ends_clear_of_crossing(
     if inner is None:
         return None
     position, direction = start_on_the_piece(backwards, skip, span, *inner)
-    return replace(end, position=position, direction=direction), skip
+    return _moved(end, position, direction), skip
 
 
 def short_piece_clear_of_crossing(
@@ -276,7 +285,7 @@ def short_piece_clear_of_crossing(
     position, direction = start_on_the_piece(backwards, skip, span, *inner)
     if position is inner[0]:
         return None
-    return replace(end, position=position, direction=direction), skip
+    return _moved(end, position, direction), skip
 
 
 def widened_tip_length(backwards: np.ndarray, distance: np.ndarray, width: float) -> float:

@@ -173,7 +173,7 @@ def _thin_bright_class(hist: np.ndarray, threshold: float, mask: np.ndarray) -> 
     # On blocks of BLOCK x BLOCK px (a block counts when the mask covers more than half
     # of it), at a sixteenth of the cost: wide regions are wide at any resolution.
     height, width = mask.shape
-    if height % BLOCK == 0 and width % BLOCK == 0 and BLOCK >= 3:
+    if height % BLOCK == 0 and width % BLOCK == 0 and 3 <= BLOCK < 256:
         # OpenCV's area resize by a whole factor is each block's mean: counted directly,
         # without resampling the image (compiled, a third of a ms less per photograph).
         full = _segmentation_kernels.full_blocks(mask.view(np.uint8), BLOCK)
