@@ -758,14 +758,16 @@ def _trimmed(pieces: list[np.ndarray], trims: np.ndarray) -> list[np.ndarray]:
     """The pieces less the joints within ``trims[2 k]`` of piece ``k``'s start and
     ``trims[2 k + 1]`` of its end (at least two joints kept)."""
     result = []
-    for index, points in enumerate(pieces):
-        head, tail = float(trims[2 * index]), float(trims[2 * index + 1])
+    ends = np.asarray(trims, np.float64).reshape(-1, 2).T.tolist()
+    for points, head, tail in zip(pieces, *ends, strict=True):
         if head <= 0 and tail <= 0:
             result.append(points)
             continue
+        # The arc lengths never decrease: the joints kept are one run, found by bisection.
         along = arc_lengths(points)
-        keep = (along >= head) & (along <= along[-1] - tail)
-        result.append(points[keep] if keep.sum() >= 2 else points)
+        first = int(np.searchsorted(along, head, side="left"))
+        stop = int(np.searchsorted(along, along[-1] - tail, side="right"))
+        result.append(points[first:stop].copy() if stop - first >= 2 else points)
     return result
 
 
