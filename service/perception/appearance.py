@@ -392,12 +392,6 @@ CUT_STEP_BACK_SHARE = 0.5
 # end's fitted direction by less than the angle of CUT_AXIS_COS.
 CUT_AXIS_SHARE = 1.0
 CUT_AXIS_COS = float(np.cos(np.radians(45.0)))
-# The front is read along the cable's bend, traced back this many half widths behind it
-# one cross-section per half width (:func:`_bend_behind`); a cable bends no tighter than
-# BEND_MIN_RADII half widths (the turn joins' tightest hidden bend,
-# :data:`.turn_joins.HIDDEN_BEND_RADII`).
-BEND_TRACE_STEPS = 3
-BEND_MIN_RADII = 2.0
 # Two ends are alike in width when the narrower piece is at least this share of the wider.
 WIDTH_AGREEMENT = 0.8
 
@@ -406,40 +400,8 @@ def _front(mask: np.ndarray, start: np.ndarray, direction: np.ndarray, count: in
     """Arc (px, 0.5 px steps) from ``start`` along ``direction`` to the first point off
     ``mask``; NaN when the start is off it, or the mask runs on past ``count`` steps or
     the picture's edge."""
-    points = start[None, :] + (0.5 * np.arange(count))[:, None] * direction[None, :]
-    return _first_off(mask, points)
-
-
-def _front_on_bend(
-    mask: np.ndarray,
-    start: np.ndarray,
-    tangent: np.ndarray,
-    curvature: float,
-    offset: float,
-    count: int,
-) -> float:
-    """As :func:`_front`, along the line ``offset`` px to the left of a centreline that
-    leaves ``start`` along unit ``tangent`` and bends at ``curvature`` (1/px, positive to
-    the left): the arc length along the centreline (0.5 px steps) at which that line,
-    parallel to it, first leaves ``mask``. A cut straight across the bent cable (along a
-    radius of the bend) then reads as far on every line."""
-    steps = 0.5 * np.arange(count)
-    heading = complex(tangent[0], tangent[1])
-    left = 1j * heading
-    origin = complex(start[0], start[1]) + offset * left
-    if abs(curvature) * 0.5 * count < 1e-6:
-        path = origin + steps * heading
-    else:
-        centre = complex(start[0], start[1]) + left / curvature
-        path = centre + (origin - centre) * np.exp(1j * curvature * steps)
-    return _first_off(mask, np.stack([path.real, path.imag], axis=1))
-
-
-def _first_off(mask: np.ndarray, points: np.ndarray) -> float:
-    """Arc (px, points 0.5 px apart) to the first of ``points`` off ``mask``; NaN when the
-    first is off it, or none is off before the picture's edge."""
     height, width = mask.shape
-    count = len(points)
+    points = start[None, :] + (0.5 * np.arange(count))[:, None] * direction[None, :]
     cols = np.rint(points[:, 0]).astype(np.int64)
     rows = np.rint(points[:, 1]).astype(np.int64)
     inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
@@ -521,77 +483,14 @@ def end_front(
             return None
     if not CUT_WIDTH_RANGE[0] * half_width <= local <= CUT_WIDTH_RANGE[1] * half_width:
         return None
-    # On a bend the lines parallel to one straight direction leave through the cable's
-    # sides: the outer one early, the middle one running on across the cable, so a cut
-    # reads as bulging like a tip. Read the front along the bend the cable's own centre
-    # shows behind it instead (:func:`_bend_behind`), where it can be followed: traced
-    # from the first cross-section back, clear of the cut (a slanted cut already takes
-    # one side off the cross-section just behind the front and shifts its centre: a bend
-    # read on a straight cable), carried on along that bend to the front's cross-section.
-    curvature = 0.0
-    bend = _bend_behind(mask, start, direction, half_width, count, cross_section)
-    if bend is not None:
-        behind_centre, behind_direction, bent = bend[:3]
-        on = np.exp(1j * bent * float(np.hypot(*(centre - behind_centre))))
-        tangent = complex(behind_direction[0], behind_direction[1]) * on
-        front_direction = np.array([tangent.real, tangent.imag])
-        front_centre, front_local = cross_section(centre, front_direction)
-        if front_centre is not None and (
-            CUT_WIDTH_RANGE[0] * half_width <= front_local <= CUT_WIDTH_RANGE[1] * half_width
-        ):
-            centre, direction, curvature, local = front_centre, front_direction, bent, front_local
+    normal = np.array([-direction[1], direction[0]])
     fronts = [
-        _front_on_bend(mask, centre, direction, curvature, share * local, count)
+        _front(mask, centre + share * local * normal, direction, count)
         for share in (-CUT_PROBE_SHARE, 0.0, CUT_PROBE_SHARE)
     ]
     if np.isnan(fronts).any():
         return None
     return np.array(fronts) / local
-
-
-def _bend_behind(mask, centre, heading, half_width, count, cross_section):
-    """The cable's own centreline just behind its front, traced back from the
-    cross-section at ``centre`` (the cable running along unit ``heading`` there, of
-    ``half_width`` px; ``cross_section(point, direction)`` -> (centre, half width) or
-    (None, 0)): a cross-section every half width, :data:`BEND_TRACE_STEPS` of them,
-    each across the heading the last two centres give. Returns the front's cross-section
-    read across the circle through the first, middle and last centres (its centre,
-    the circle's unit tangent there, its curvature in 1/px, positive to the left of
-    that tangent, no tighter than :data:`BEND_MIN_RADII` half widths, and the half width
-    there), or None where the trace leaves the cable (a cross-section off the mask or not
-    of the cable's width: a crossing, another strand, the cable's own tip)."""
-
-    def of_the_cable(width: float) -> bool:
-        return CUT_WIDTH_RANGE[0] * half_width <= width <= CUT_WIDTH_RANGE[1] * half_width
-
-    centres = [complex(centre[0], centre[1])]
-    for _ in range(BEND_TRACE_STEPS):
-        point = centres[-1] - half_width * complex(heading[0], heading[1])
-        found, width = cross_section(np.array([point.real, point.imag]), heading)
-        if found is None or not of_the_cable(width):
-            return None
-        centres.append(complex(found[0], found[1]))
-        step = centres[-2] - centres[-1]
-        if abs(step) < 1e-9:
-            return None
-        heading = np.array([step.real, step.imag]) / abs(step)
-    front, middle, last = centres[0], centres[len(centres) // 2], centres[-1]
-    # The signed curvature of the circle through the three (2 sin(angle) / chord).
-    turn = ((middle - last).conjugate() * (front - middle)).imag
-    sides = abs(middle - last) * abs(front - middle) * abs(front - last)
-    if sides < 1e-9:
-        return None
-    tightest = 1.0 / (BEND_MIN_RADII * half_width)
-    curvature = float(np.clip(2.0 * turn / sides, -tightest, tightest))
-    # The tangent at the front: the chord from the middle centre, turned by half the
-    # arc's turn over it.
-    chord = front - middle
-    tangent = chord / abs(chord) * np.exp(0.5j * curvature * abs(chord))
-    direction = np.array([tangent.real, tangent.imag])
-    found, width = cross_section(np.array([front.real, front.imag]), direction)
-    if found is None or not of_the_cable(width):
-        return None
-    return found, direction, curvature, width
 
 
 def cut_square(
