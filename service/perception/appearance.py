@@ -674,8 +674,9 @@ def cut_square(
 
     Where the cable bends just behind the front, its straight lines leave through the
     cable's side and a cut straight across the bent cable bulges, or reads as a round
-    tip: a front that reads straight along the bend (:func:`end_fronts`) is cut too. A
-    cable's own tip is round whichever way the cable bends."""
+    tip: a front that reads flat along the bend (:func:`end_fronts`; :func:`_flat`, the
+    slant's allowance being for lines that leave through the side of a bend) is cut
+    too. A cable's own tip is round whichever way the cable bends."""
     fronts = end_fronts(mask, position, direction, half_width, skip)
     return _cut_square_from(fronts, mask, position, direction, half_width, skip)
 
@@ -684,7 +685,7 @@ def _cut_square_from(fronts, mask, position, direction, half_width, skip) -> boo
     """:func:`cut_square` with the fronts along ``direction`` and along the bend
     (:func:`end_fronts`) already read."""
     front, bent = fronts
-    if _straight(front) or _straight(bent):
+    if _straight(front) or _flat(bent):
         return True
     if own_tip(front, half_width):
         return False
@@ -724,13 +725,13 @@ def reads_own_tip(
 ) -> bool:
     """Whether a chain end (``position``, outward unit ``direction``) of a cable of
     ``half_width`` px ends in the cable's own round tip (:func:`own_tip`) read straight,
-    and, where the cable bends just behind it, not cut straight across or lopsided read
-    along that bend (:func:`end_fronts`): a cut straight across a bent cable reads round
+    and, where the cable bends just behind it, neither flat nor lopsided read along that
+    bend (:func:`end_fronts`): a cut straight across a bent cable reads round
     only along straight lines, which leave through the cable's side, while a cable's
     own tip is round whichever way the cable bends. (Read along a bend, a tip's pixel
     steps may leave it a little lopsided, no cut's front.)"""
     front, bent = end_fronts(mask, position, direction, half_width, skip)
-    return own_tip(front, half_width) and not (_straight(bent) or _lopsided(bent))
+    return own_tip(front, half_width) and not (_flat(bent) or _lopsided(bent))
 
 
 def own_tip(front: np.ndarray | None, half_width: float) -> bool:
