@@ -716,21 +716,17 @@ def cut_or_lopsided(
     )
 
 
-def reads_own_tip(
-    mask: np.ndarray,
-    position: np.ndarray,
-    direction: np.ndarray,
-    half_width: float,
-    skip: float = 0.0,
+def own_tip_both_ways(
+    fronts: tuple[np.ndarray | None, np.ndarray | None], half_width: float
 ) -> bool:
-    """Whether a chain end (``position``, outward unit ``direction``) of a cable of
+    """Whether a chain end whose ``fronts`` (:func:`end_fronts`) were read on a cable of
     ``half_width`` px ends in the cable's own round tip (:func:`own_tip`) read straight,
     and, where the cable bends just behind it, neither flat nor lopsided read along that
-    bend (:func:`end_fronts`): a cut straight across a bent cable reads round
+    bend: a cut straight across a bent cable reads round
     only along straight lines, which leave through the cable's side, while a cable's
     own tip is round whichever way the cable bends. (Read along a bend, a tip's pixel
     steps may leave it a little lopsided, no cut's front.)"""
-    front, bent = end_fronts(mask, position, direction, half_width, skip)
+    front, bent = fronts
     return own_tip(front, half_width) and not (_flat(bent) or _lopsided(bent))
 
 
