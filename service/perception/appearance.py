@@ -392,6 +392,16 @@ CUT_STEP_BACK_SHARE = 0.5
 # end's fitted direction by less than the angle of CUT_AXIS_COS.
 CUT_AXIS_SHARE = 1.0
 CUT_AXIS_COS = float(np.cos(np.radians(45.0)))
+# Where the cable bends at its end, the front is read again along that bend
+# (:func:`_front_along_bend`), traced back from the first cross-section one cross-section
+# per half width, BEND_TRACE_STEPS of them; a cable bends no tighter than BEND_MIN_RADII
+# half widths (the turn joins' tightest hidden bend, :data:`.turn_joins.HIDDEN_BEND_RADII`).
+# Only a bend whose lines part from straight ones by at least TIP_MIN_BULGE_PX over
+# BEND_READ_REACH half widths (from a half width behind the front to a tip's bulge past
+# it) is read: a gentler one reads the straight front again, in new pixel steps.
+BEND_TRACE_STEPS = 3
+BEND_MIN_RADII = 2.0
+BEND_READ_REACH = 2.0
 # Two ends are alike in width when the narrower piece is at least this share of the wider.
 WIDTH_AGREEMENT = 0.8
 
@@ -400,8 +410,38 @@ def _front(mask: np.ndarray, start: np.ndarray, direction: np.ndarray, count: in
     """Arc (px, 0.5 px steps) from ``start`` along ``direction`` to the first point off
     ``mask``; NaN when the start is off it, or the mask runs on past ``count`` steps or
     the picture's edge."""
-    height, width = mask.shape
     points = start[None, :] + (0.5 * np.arange(count))[:, None] * direction[None, :]
+    return _first_off(mask, points)
+
+
+def _front_on_bend(
+    mask: np.ndarray,
+    start: np.ndarray,
+    tangent: np.ndarray,
+    curvature: float,
+    offset: float,
+    count: int,
+) -> float:
+    """As :func:`_front`, along the line ``offset`` px to the left of a centreline that
+    leaves ``start`` along unit ``tangent`` and bends at ``curvature`` (1/px, positive
+    to the left, as :func:`.geometry.end_fit`'s): the arc length along the centreline
+    (0.5 px steps) at which that line, parallel to it, first leaves ``mask``. A cut
+    straight across the bent cable (along a radius of the bend) reads as far on every
+    line."""
+    steps = 0.5 * np.arange(count)
+    heading = complex(tangent[0], tangent[1])
+    left = 1j * heading
+    origin = complex(start[0], start[1]) + offset * left
+    centre = complex(start[0], start[1]) + left / curvature
+    path = centre + (origin - centre) * np.exp(1j * curvature * steps)
+    return _first_off(mask, np.stack([path.real, path.imag], axis=1))
+
+
+def _first_off(mask: np.ndarray, points: np.ndarray) -> float:
+    """Arc (px, ``points`` 0.5 px apart) to the first of them off ``mask``; NaN when the
+    first is off it, or none is off before the picture's edge."""
+    height, width = mask.shape
+    count = len(points)
     cols = np.rint(points[:, 0]).astype(np.int64)
     rows = np.rint(points[:, 1]).astype(np.int64)
     inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
@@ -436,6 +476,31 @@ def end_front(
     front is read along the cable's own axis between that cross-section and the one
     just behind the front (:data:`CUT_AXIS_SHARE`, :data:`CUT_AXIS_COS`) rather than the
     fitted direction, which a bend just before the cut turns off the cable."""
+    reading = _front_reading(mask, position, direction, half_width, skip)
+    return None if reading is None else _straight_front(mask, reading)
+
+
+def end_fronts(
+    mask: np.ndarray,
+    position: np.ndarray,
+    direction: np.ndarray,
+    half_width: float,
+    skip: float = 0.0,
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The end's front read as :func:`end_front` does, and again along the cable's own
+    bend just behind it (:func:`_front_along_bend`; None where it bends too gently to
+    matter, or where either cannot be read)."""
+    reading = _front_reading(mask, position, direction, half_width, skip)
+    if reading is None:
+        return None, None
+    return _straight_front(mask, reading), _front_along_bend(mask, reading, half_width)
+
+
+def _front_reading(mask, position, direction, half_width, skip):
+    """:func:`end_front`'s march up to the front: the first cross-section's centre, the
+    centre, direction and half width of the one just behind the front, the march's
+    length in 0.5 px steps and the cross-section reader; None where the front cannot
+    be read."""
     direction = np.asarray(direction, np.float64)
     count = int(np.ceil(2.0 * ((CUT_AHEAD_RADII + 2.0) * half_width + float(skip)))) + 1
 
@@ -483,6 +548,13 @@ def end_front(
             return None
     if not CUT_WIDTH_RANGE[0] * half_width <= local <= CUT_WIDTH_RANGE[1] * half_width:
         return None
+    return start, centre, direction, local, count, cross_section
+
+
+def _straight_front(mask, reading) -> np.ndarray | None:
+    """The front along straight lines from the cross-section just behind it
+    (``reading``, :func:`_front_reading`)."""
+    _, centre, direction, local, count, _ = reading
     normal = np.array([-direction[1], direction[0]])
     fronts = [
         _front(mask, centre + share * local * normal, direction, count)
@@ -491,6 +563,90 @@ def end_front(
     if np.isnan(fronts).any():
         return None
     return np.array(fronts) / local
+
+
+def _front_along_bend(mask, reading, half_width) -> np.ndarray | None:
+    """The front read along the cable's own bend (``reading``, :func:`_front_reading`).
+
+    On a bend, lines parallel to one straight direction leave through the cable's
+    sides: the outer one early, the middle one running on across the cable, so a cut
+    straight across the bent cable reads as bulging like a tip (or, the outer line
+    cut short, like a cable's own round tip). Lines parallel to the bent centreline
+    reach the cut on every line, while a cable's own tip stays round read along any
+    bend. The bend is the one the cable's centre shows behind the front
+    (:func:`_bend_behind`), traced from the first cross-section back, clear of the cut
+    (a slanted cut takes one side off the cross-section just behind the front and
+    shifts its centre: a bend read on a straight cable), and carried on along that
+    bend to the front's cross-section. None where the bend is too gentle to part the
+    lines from straight ones (:data:`BEND_READ_REACH`), or the front cannot be read
+    along it."""
+    start, centre, direction, _, count, cross_section = reading
+    bend = _bend_behind(start, direction, half_width, cross_section)
+    if bend is None:
+        return None
+    behind_centre, behind_direction, curvature = bend
+    if 0.5 * abs(curvature) * (BEND_READ_REACH * half_width) ** 2 < TIP_MIN_BULGE_PX:
+        return None
+    carried = np.exp(1j * curvature * float(np.hypot(*(centre - behind_centre))))
+    tangent = complex(behind_direction[0], behind_direction[1]) * carried
+    front_direction = np.array([tangent.real, tangent.imag])
+    front_centre, local = cross_section(centre, front_direction)
+    if front_centre is None or not _of_the_cable(local, half_width):
+        return None
+    fronts = [
+        _front_on_bend(mask, front_centre, front_direction, curvature, share * local, count)
+        for share in (-CUT_PROBE_SHARE, 0.0, CUT_PROBE_SHARE)
+    ]
+    if np.isnan(fronts).any():
+        return None
+    return np.array(fronts) / local
+
+
+def _of_the_cable(local: float, half_width: float) -> bool:
+    """Whether a cross-section's half width ``local`` is the cable's own
+    (:data:`CUT_WIDTH_RANGE`)."""
+    return CUT_WIDTH_RANGE[0] * half_width <= local <= CUT_WIDTH_RANGE[1] * half_width
+
+
+def _bend_behind(centre, heading, half_width, cross_section):
+    """The cable's own bend behind the cross-section at ``centre`` (the cable running
+    along unit ``heading`` there, of ``half_width`` px; ``cross_section(point,
+    direction)`` -> (centre, half width) or (None, 0)): a cross-section every half
+    width back, :data:`BEND_TRACE_STEPS` of them, each across the heading the last two
+    centres give. Returns the first centre, the unit tangent there and the signed
+    curvature (1/px, positive to the left of that tangent, no tighter than
+    :data:`BEND_MIN_RADII` half widths) of the circle through the first, middle and last
+    centres (the first read again across that tangent); None where the trace leaves the
+    cable (a cross-section off the mask or not of the cable's width: a crossing, another
+    strand, the cable's own tip)."""
+    centres = [complex(centre[0], centre[1])]
+    for _ in range(BEND_TRACE_STEPS):
+        point = centres[-1] - half_width * complex(heading[0], heading[1])
+        found, width = cross_section(np.array([point.real, point.imag]), heading)
+        if found is None or not _of_the_cable(width, half_width):
+            return None
+        centres.append(complex(found[0], found[1]))
+        step = centres[-2] - centres[-1]
+        if abs(step) < 1e-9:
+            return None
+        heading = np.array([step.real, step.imag]) / abs(step)
+    front, middle, last = centres[0], centres[len(centres) // 2], centres[-1]
+    # The signed curvature of the circle through the three (2 sin(angle) / chord).
+    turn = ((middle - last).conjugate() * (front - middle)).imag
+    sides = abs(middle - last) * abs(front - middle) * abs(front - last)
+    if sides < 1e-9:
+        return None
+    tightest = 1.0 / (BEND_MIN_RADII * half_width)
+    curvature = float(np.clip(2.0 * turn / sides, -tightest, tightest))
+    # The tangent at the first centre: the chord from the middle one, turned by half the
+    # arc's turn over it.
+    chord = front - middle
+    tangent = chord / abs(chord) * np.exp(0.5j * curvature * abs(chord))
+    direction = np.array([tangent.real, tangent.imag])
+    found, width = cross_section(np.array([front.real, front.imag]), direction)
+    if found is None or not _of_the_cable(width, half_width):
+        return None
+    return found, direction, curvature
 
 
 def cut_square(
@@ -514,14 +670,22 @@ def cut_square(
     reads straight along any of them, a round tip bulges along all (its outline is a
     circle's), so there the middle may bulge by no more than :data:`CUT_BULGE_SHARE`.
     An end whose front reads as a cable's own tip (:func:`own_tip`) is not read again:
-    turned, a tip's bulge of a pixel or two is lost in its reading's pixel steps."""
-    front = end_front(mask, position, direction, half_width, skip)
-    return _cut_square_from(front, mask, position, direction, half_width, skip)
+    turned, a tip's bulge of a pixel or two is lost in its reading's pixel steps.
+
+    Where the cable bends just behind the front, its straight lines leave through the
+    cable's side and a cut straight across the bent cable bulges, or reads as a round
+    tip: a front that reads flat along the bend (:func:`end_fronts`; :func:`_flat`, the
+    slant's allowance being for lines that leave through the side of a bend) is cut
+    too. A cable's own tip is round whichever way the cable bends."""
+    fronts = end_fronts(mask, position, direction, half_width, skip)
+    return _cut_square_from(fronts, mask, position, direction, half_width, skip)
 
 
-def _cut_square_from(front, mask, position, direction, half_width, skip) -> bool:
-    """:func:`cut_square` with the front along ``direction`` already read."""
-    if _straight(front):
+def _cut_square_from(fronts, mask, position, direction, half_width, skip) -> bool:
+    """:func:`cut_square` with the fronts along ``direction`` and along the bend
+    (:func:`end_fronts`) already read."""
+    front, bent = fronts
+    if _straight(front) or _flat(bent):
         return True
     if own_tip(front, half_width):
         return False
@@ -544,9 +708,26 @@ def cut_or_lopsided(
     straight across (:func:`cut_square`), or lopsided, one side running on past the
     other by more than :data:`TIP_LOPSIDED_SHARE` of the half width, as where an
     object's border or corner cuts a cable at a slant along its bend. A cable's round
-    or tapering tip is symmetric about its axis. False when the front cannot be read."""
-    front = end_front(mask, position, direction, half_width, skip)
-    return _cut_square_from(front, mask, position, direction, half_width, skip) or _lopsided(front)
+    or tapering tip is symmetric about its axis, read straight or along the cable's
+    bend (:func:`end_fronts`). False when the front cannot be read."""
+    fronts = end_fronts(mask, position, direction, half_width, skip)
+    return _cut_square_from(fronts, mask, position, direction, half_width, skip) or any(
+        _lopsided(front) for front in fronts
+    )
+
+
+def own_tip_both_ways(
+    fronts: tuple[np.ndarray | None, np.ndarray | None], half_width: float
+) -> bool:
+    """Whether a chain end whose ``fronts`` (:func:`end_fronts`) were read on a cable of
+    ``half_width`` px ends in the cable's own round tip (:func:`own_tip`) read straight,
+    and, where the cable bends just behind it, neither flat nor lopsided read along that
+    bend: a cut straight across a bent cable reads round
+    only along straight lines, which leave through the cable's side, while a cable's
+    own tip is round whichever way the cable bends. (Read along a bend, a tip's pixel
+    steps may leave it a little lopsided, no cut's front.)"""
+    front, bent = fronts
+    return own_tip(front, half_width) and not (_flat(bent) or _lopsided(bent))
 
 
 def own_tip(front: np.ndarray | None, half_width: float) -> bool:

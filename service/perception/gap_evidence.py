@@ -19,11 +19,11 @@ from service.perception.appearance import (
     background_beside,
     cut_or_lopsided,
     cut_square,
-    end_front,
+    end_fronts,
     ends_alike,
     gap_hidden,
     out_of_view,
-    own_tip,
+    own_tip_both_ways,
 )
 from service.perception.geometry import polyline_length
 
@@ -113,7 +113,7 @@ TIP_STRAIGHT_SHARE = 1.0 / 3.0
 def tips_stay_ends(ends, pairs, costs, limit, mask, hidden) -> np.ndarray:
     """Which candidate joins (``pairs`` of indices into ``ends``, :class:`.merging.ChainEnd`,
     at ``costs``) may be made: all but those, at most ``limit`` dear (dearer ones are
-    never made), that join two cables' own tips (:func:`.appearance.own_tip`, fronts
+    never made), that join two cables' own tips (:func:`.appearance.own_tip_both_ways`, fronts
     read on ``mask``) across a gap that ``hidden(i, j)`` finds nothing in the image
     lying over.
 
@@ -130,8 +130,8 @@ def tips_stay_ends(ends, pairs, costs, limit, mask, hidden) -> np.ndarray:
     def is_tip(index: int) -> bool:
         if index not in tips:
             end = ends[index]
-            front = end_front(mask, end.position, end.direction, end.width, end.skip)
-            tips[index] = own_tip(front, end.width)
+            fronts = end_fronts(mask, end.position, end.direction, end.width, end.skip)
+            tips[index] = own_tip_both_ways(fronts, end.width)
         return tips[index]
 
     for row in np.flatnonzero((costs > TIP_STRAIGHT_SHARE * limit) & (costs <= limit)).tolist():

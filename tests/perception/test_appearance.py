@@ -363,3 +363,46 @@ def test_a_round_tip_read_well_off_its_axis_is_not_cut(tilt, half_width):
         assert not appearance.cut_square(
             mask, np.array([78.0, 50.0]), direction, half_width + 0.5, skip
         )
+
+
+@pytest.mark.parametrize(
+    ("seed", "position", "direction", "half_width", "skip"),
+    [
+        (290020, [794.8033, 248.4157], [-0.47668, 0.87908], 7.9907, 21.0147),
+        (290099, [569.3788, 422.2561], [-0.74576, 0.66621], 5.3938, 4.8938),
+    ],
+)
+def test_a_cut_across_a_bent_cable_is_read_along_its_bend(
+    seed, position, direction, half_width, skip
+):
+    """Ends of `loops` tuning scenes where an object of the background's colour cuts the
+    cable where it bends (4 to 6 radii): along straight lines the outer line leaves
+    through the cable's side, and the front reads as bulging (290020) or as a cable's
+    own round tip (290099). Read along the bend the cable's centre shows behind it, it
+    is flat: cut, no own tip."""
+    mask = make_family_scene("loops", seed).mask
+    position, direction = np.array(position), np.array(direction)
+    front, bent = appearance.end_fronts(mask, position, direction, half_width, skip)
+    assert not appearance._straight(front)
+    assert appearance._flat(bent)
+    assert appearance.cut_square(mask, position, direction, half_width, skip)
+    assert not appearance.own_tip_both_ways((front, bent), half_width)
+
+
+@pytest.mark.parametrize(
+    ("seed", "position", "direction", "half_width", "skip"),
+    [
+        (290088, [707.0, 395.0], [-0.486, 0.874], 5.79, 5.29),
+        (290129, [726.15, 20.46], [-0.953, -0.302], 7.0, 6.5),
+    ],
+)
+def test_a_cables_own_tip_on_a_bend_stays_a_tip(seed, position, direction, half_width, skip):
+    """Cables' own tips in `loops` tuning scenes whose centre bends behind them (radii of
+    43 and 54 px read): read along that bend they are a little lopsided in their pixel
+    steps, but neither flat nor lopsided past a cut's share, so they stay own tips."""
+    mask = make_family_scene("loops", seed).mask
+    position, direction = np.array(position), np.array(direction)
+    fronts = appearance.end_fronts(mask, position, direction, half_width, skip)
+    assert fronts[1] is not None
+    assert appearance.own_tip_both_ways(fronts, half_width)
+    assert not appearance.cut_square(mask, position, direction, half_width, skip)
