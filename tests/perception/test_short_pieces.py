@@ -1,8 +1,11 @@
 """The ends of stubs, pieces shorter than the cable is wide
 (:mod:`service.perception.short_pieces`)."""
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
+import pytest
 
 from service.perception.appearance import EndColours
 from service.perception.merging import ChainEnd, chain_ends
@@ -47,6 +50,21 @@ def test_a_stub_cut_at_a_slant_points_along_its_sides_not_its_skeleton():
     assert start.curvature == end.curvature == 0.0
 
 
+def test_a_stub_shorter_than_wide_takes_the_width_across_its_sides():
+    # Between cuts 10 px apart the distance transform reads at most half that: the
+    # stub's width is read across its sides, 16 px (8 + the half pixel a distance
+    # transform counts past the border), and only ever raised.
+    cable = np.array([np.cos(0.9), np.sin(0.9)])
+    cut = np.array([np.cos(2.6), np.sin(2.6)])
+    mask = _stub_mask(cable, 8.0, cut, 5.0)
+    skeleton = np.array([[93.0, 103.0], [100.0, 100.0], [107.0, 97.0]])
+    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    ends = chain_ends([skeleton], 40.0, distance=distance)
+    assert ends[0].width < 6.0
+    (start, end) = ends_of_stubs([skeleton], ends, mask, 8.0)
+    assert start.width == end.width == pytest.approx(8.5, abs=0.75)
+
+
 def test_a_stub_touching_another_piece_or_a_longer_piece_keeps_its_ends():
     cable = np.array([np.cos(0.9), np.sin(0.9)])
     cut = np.array([np.cos(2.6), np.sin(2.6)])
@@ -87,7 +105,15 @@ def test_a_scrap_joined_through_its_crossing_takes_that_strands_colour_and_width
     assert hues.known.tolist() == [True, True, False, True, True, True]
     np.testing.assert_allclose(hues.colour[3], red)
     assert seen[3].width == 6.0 and seen[2].width == 3.5
+    # The strand goes on straight through the crossing: the scrap's cut end points as
+    # the strand does, on its line.
+    np.testing.assert_allclose(seen[3].direction, ends[1].direction)
     assert seen[:3] == ends[:3] and seen[4:] == ends[4:]
+    bent = list(ends)
+    bent[3] = replace(ends[3], position=np.array([10.0, 3.0]), direction=np.array([0.8, -0.6]))
+    seen, _ = scraps_through_junctions(bent, colours, joins, junction_of_end, pieces, 5.0)
+    np.testing.assert_allclose(seen[3].position, [10.0, 0.0])
+    np.testing.assert_allclose(seen[3].direction, [1.0, 0.0])
     assert not colours.known[3]  # the inputs are left as they were
     # Not joined at its junction, joined across a gap, or a piece long enough to have
     # a colour of its own: no change.
