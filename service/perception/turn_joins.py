@@ -91,7 +91,6 @@ def natural_turn(
     min_radius: float,
     step: float = 1.0,
     turn: float | None = None,
-    widest: bool = False,
 ) -> np.ndarray | None:
     """The natural curve (Keipour et al.'s gap curve) of a turn no tighter than a cable
     takes: from ``start`` straight along ``leaving``, one arc of radius at least
@@ -125,7 +124,7 @@ def natural_turn(
         return None
     best = None
     for reading in readings:
-        shape = _arc_shape(offset, leaving, arriving, reading, min_radius, widest)
+        shape = _arc_shape(offset, leaving, arriving, reading, min_radius)
         if shape is not None and (best is None or shape[0] < best[0]):
             best = (*shape, reading)
     if best is None:
@@ -145,10 +144,10 @@ def natural_turn(
     return np.concatenate(parts)
 
 
-def _arc_shape(offset, leaving, arriving, turn, min_radius, widest=False):
+def _arc_shape(offset, leaving, arriving, turn, min_radius):
     """(length, first straight, radius, last straight) of the natural curve of one way
-    round (``turn``, signed, radians) with the tightest arc of at least ``min_radius``
-    (with ``widest``, the widest arc that fits, one straight of length 0), or None."""
+    round (``turn``, signed, radians) with the tightest arc of at least ``min_radius``,
+    or None."""
     side = np.sign(turn) * np.array([-leaving[1], leaving[0]])  # towards the turn
     # The arc of radius R moves R (sin |turn| leaving + (1 - cos |turn|) side).
     per_radius = np.sin(abs(turn)) * leaving + (1.0 - np.cos(abs(turn))) * side
@@ -170,7 +169,7 @@ def _arc_shape(offset, leaving, arriving, turn, min_radius, widest=False):
                 return None
         if low > high:
             return None
-        radius = high if widest and np.isfinite(high) else low
+        radius = low
         first, last = (straight - radius * shrink).tolist()
     if radius < min_radius or first < -1e-6 or last < -1e-6:
         return None
@@ -230,10 +229,9 @@ def hidden_turn_curves(
             readings.append(turn - np.copysign(2 * np.pi, turn))
         for reading in readings:
             tightest = HIDDEN_BEND_RADII[0] * cable_radius
-            for widest in (False, True):
-                curve = natural_turn(start, first, end, last, tightest, step, reading, widest)
-                if curve is not None:
-                    curves.append((len(curve), curve))
+            curve = natural_turn(start, first, end, last, tightest, step, reading)
+            if curve is not None:
+                curves.append((len(curve), curve))
             if near:
                 bends = [radii * cable_radius for radii in HIDDEN_BEND_RADII]
                 for length, segments in _bulb_shapes(start, first, end, last, reading, bends):

@@ -169,12 +169,6 @@ def test_natural_turns_keep_to_the_bend_limit():
     quarter = natural_turn([0, 50], up, [30, 0], right, 10.0)
     assert _bend(quarter) == pytest.approx(10, rel=0.05)
     assert quarter[0] == pytest.approx([0, 50]) and quarter[-1] == pytest.approx([30, 0])
-    # Or the widest arc that fits, spreading the turn as an elastic cable does: 30 px,
-    # as far as the shorter leg reaches, and no longer a curve.
-    wide = natural_turn([0, 50], up, [30, 0], right, 10.0, widest=True)
-    assert _bend(wide) == pytest.approx(30, rel=0.05)
-    assert wide[0] == pytest.approx([0, 50]) and wide[-1] == pytest.approx([30, 0])
-    assert len(wide) < len(quarter)
     # A turn away from the other end, and no turn at all, have no natural turn.
     assert natural_turn([0, 30], up, [30, 0], -right, 10.0) is None
     assert natural_turn([0, 0], right, [50, 0], right, 10.0) is None
