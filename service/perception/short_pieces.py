@@ -40,7 +40,9 @@ def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius
     direction is a narrower minimum, but not the cable's width. The stub's two ends lie
     where its middle line (the line along that direction through the blob's centre)
     leaves the blob; the start end points back along the skeleton's first-to-last
-    joint, as before. Their curvature is 0: a stub shows no bend.
+    joint, as before. Their curvature is 0: a stub shows no bend. Their half width is
+    the mask's across the sides through the blob's middle (:func:`_width_across`) where
+    that is wider than the distance transform's reading, which the cuts bound.
 
     Parameters
     ----------
@@ -101,7 +103,7 @@ def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius
             continue
         first, last = float(along[on_line].min()), float(along[on_line].max())
         start, end = ends[2 * piece], ends[2 * piece + 1]
-        half_width = max(start.width, _width_across(mask, middle, axis, reach))
+        half_width = max(start.width, _width_across(mask, middle, axis, float(reach)))
         adjusted[2 * piece] = replace(
             start,
             position=middle + first * axis,
