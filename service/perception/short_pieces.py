@@ -219,16 +219,7 @@ def scraps_through_junctions(
             ):
                 continue
             colour[far], spread[far] = colours.colour[other], colours.spread[other]
-            # The strand goes on straight through its crossing: the scrap's few joints,
-            # bent by the other strand and the cut, hold no direction of their own.
-            heading = ends[other].direction
-            along = float((ends[far].position - ends[other].position) @ heading)
-            adjusted[far] = replace(
-                ends[far],
-                width=ends[other].width,
-                direction=heading.copy(),
-                position=ends[other].position + along * heading,
-            )
+            adjusted[far] = replace(ends[far], width=ends[other].width)
     return adjusted, EndColours(colour, spread)
 
 
