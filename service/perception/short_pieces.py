@@ -20,7 +20,6 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from service.perception import _pipeline_kernels
 from service.perception.appearance import SCRAP_RADII, EndColours
 from service.perception.geometry import polyline_length
 
@@ -40,9 +39,7 @@ def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius
     direction is a narrower minimum, but not the cable's width. The stub's two ends lie
     where its middle line (the line along that direction through the blob's centre)
     leaves the blob; the start end points back along the skeleton's first-to-last
-    joint, as before. Their curvature is 0: a stub shows no bend. Their half width is
-    the mask's across the sides through the blob's middle (:func:`_width_across`) where
-    that is wider than the distance transform's reading, which the cuts bound.
+    joint, as before. Their curvature is 0: a stub shows no bend.
 
     Parameters
     ----------
@@ -103,40 +100,13 @@ def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius
             continue
         first, last = float(along[on_line].min()), float(along[on_line].max())
         start, end = ends[2 * piece], ends[2 * piece + 1]
-        half_width = max(start.width, _width_across(mask, middle, axis, float(reach)))
         adjusted[2 * piece] = replace(
-            start,
-            position=middle + first * axis,
-            direction=-axis,
-            curvature=0.0,
-            width=half_width,
+            start, position=middle + first * axis, direction=-axis, curvature=0.0
         )
         adjusted[2 * piece + 1] = replace(
-            end,
-            position=middle + last * axis,
-            direction=axis.copy(),
-            curvature=0.0,
-            width=half_width,
+            end, position=middle + last * axis, direction=axis.copy(), curvature=0.0
         )
     return adjusted
-
-
-def _width_across(mask: np.ndarray, middle: np.ndarray, axis: np.ndarray, limit: float) -> float:
-    """The stub's half width in the distance transform's measure: half the mask's width
-    across ``axis`` through ``middle`` (:func:`._pipeline_kernels.sides_across`, border
-    to border) plus the half pixel a distance transform counts past the border to the
-    next background pixel's centre; 0 where either side has no border within ``limit``.
-
-    The distance transform inside a stub seen between two objects measures to the
-    nearest of its sides and its cuts: where the cuts are closer together than the
-    cable is wide, or slant, no joint lies a half width from both, and the stub reads
-    thinner than its cable (6.6 px for a cable of 8.6). Across its sides it reads the
-    cable's own width, however close the cuts."""
-    joints = np.ascontiguousarray([middle - axis, middle + axis], np.float64)
-    left, right = _pipeline_kernels.sides_across(joints, np.ascontiguousarray(mask, bool), limit)[2]
-    if not (np.isfinite(left) and np.isfinite(right)):
-        return 0.0
-    return 0.5 * float(left + right) + 0.5
 
 
 def _side_direction(pixels: np.ndarray, full_width: float) -> np.ndarray | None:

@@ -54,21 +54,6 @@ def test_a_stub_cut_at_a_slant_points_along_its_sides_not_its_skeleton():
     assert start.curvature == end.curvature == 0.0
 
 
-def test_a_stub_shorter_than_wide_takes_the_width_across_its_sides():
-    # Between cuts 10 px apart the distance transform reads at most half that: the
-    # stub's width is read across its sides, 16 px (8 + the half pixel a distance
-    # transform counts past the border), and only ever raised.
-    cable = np.array([np.cos(0.9), np.sin(0.9)])
-    cut = np.array([np.cos(2.6), np.sin(2.6)])
-    mask = _stub_mask(cable, 8.0, cut, 5.0)
-    skeleton = np.array([[93.0, 103.0], [100.0, 100.0], [107.0, 97.0]])
-    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
-    ends = chain_ends([skeleton], 40.0, distance=distance)
-    assert ends[0].width < 6.0
-    (start, end) = ends_of_stubs([skeleton], ends, mask, 8.0)
-    assert start.width == end.width == pytest.approx(8.5, abs=0.75)
-
-
 def test_a_stub_touching_another_piece_or_a_longer_piece_keeps_its_ends():
     cable = np.array([np.cos(0.9), np.sin(0.9)])
     cut = np.array([np.cos(2.6), np.sin(2.6)])
