@@ -61,6 +61,7 @@ from service.perception.short_pieces import (
     ends_of_stubs,
     scraps_through_junctions,
     short_piece_widths,
+    widths_clear_of_crossings,
 )
 from service.perception.touching import (
     TouchingSplit,
@@ -828,6 +829,10 @@ def merge_chains(
     ends = chain_ends(
         pieces, span, skip=radius, distance=distance, full_width=full_width, bend_aware=at_crossing
     )
+    if distance is not None and zones is not None:
+        ends = widths_clear_of_crossings(
+            pieces, ends, distance, zones, at_crossing, 2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS
+        )
     if mask is not None:
         ends = ends_of_stubs(pieces, ends, mask, radius)  # a stub's skeleton runs across it
     check(deadline, "merging")

@@ -1,12 +1,19 @@
 """The ends of stubs, pieces shorter than the cable is wide
 (:mod:`service.perception.short_pieces`)."""
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
+import pytest
 
 from service.perception.appearance import EndColours
 from service.perception.merging import ChainEnd, chain_ends
-from service.perception.short_pieces import ends_of_stubs, scraps_through_junctions
+from service.perception.short_pieces import (
+    ends_of_stubs,
+    scraps_through_junctions,
+    widths_clear_of_crossings,
+)
 
 
 def _stub_mask(cable: np.ndarray, half_width: float, cut: np.ndarray, half_length: float):
@@ -101,3 +108,27 @@ def test_a_scrap_joined_through_its_crossing_takes_that_strands_colour_and_width
     )
     assert not same.known[3]
     assert scraps_through_junctions(ends, None, joins, junction_of_end, pieces, 5.0)[1] is None
+
+
+def test_a_short_piece_cut_at_a_crossing_takes_its_width_clear_of_the_junction():
+    # Piece 0: six joints from a crossing (junction zone round x = 4) to an object's cut
+    # (x = 30); the other strand widens the mask in the zone, the cut narrows the tip.
+    distance = np.full((60, 60), 6.5, np.float32)
+    distance[:, :9] = 9.2
+    distance[:, 27:] = 2.0
+    zones = np.zeros((60, 60), bool)
+    zones[28:33, 2:6] = True
+    xs = np.array([4.0, 10.0, 15.0, 20.0, 25.0, 30.0])
+    piece = np.column_stack([xs, np.full(6, 30.0)])
+    ends = [_end(0, True, 8.0), _end(0, False, 8.0), _end(1, True, 8.0), _end(1, False, 8.0)]
+    at_crossing = np.array([True, False, False, False])
+    pieces = [piece, piece.copy()]
+    out = widths_clear_of_crossings(pieces, ends, distance, zones, at_crossing, 11)
+    assert out[0].width == out[1].width == pytest.approx(6.5)
+    assert out[2:] == ends[2:]  # not at a crossing
+    # Only ever lowered; a long piece, or one with fewer than two joints clear, keeps it.
+    assert widths_clear_of_crossings(pieces, ends, distance, zones, at_crossing, 6) == ends
+    narrow = [replace(end, width=5.0) for end in ends]
+    assert widths_clear_of_crossings(pieces, narrow, distance, zones, at_crossing, 11) == narrow
+    zones[28:33, 2:20] = True
+    assert widths_clear_of_crossings(pieces, ends, distance, zones, at_crossing, 11) == ends
