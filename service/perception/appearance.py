@@ -421,7 +421,6 @@ def end_front(
     direction: np.ndarray,
     half_width: float,
     skip: float = 0.0,
-    axis_behind: bool = False,
 ) -> np.ndarray | None:
     """The front of a chain end (``position``, outward unit ``direction``) of a cable
     of ``half_width`` px, as :func:`cut_square` reads it: how far the foreground runs on
@@ -436,9 +435,7 @@ def end_front(
     that is further: closer in, a cut at a slant has already taken one side off. The
     front is read along the cable's own axis between that cross-section and the one
     just behind the front (:data:`CUT_AXIS_SHARE`, :data:`CUT_AXIS_COS`) rather than the
-    fitted direction, which a bend just before the cut turns off the cable. With
-    ``axis_behind``, that axis runs instead from the first cross-section's centre back
-    to one :data:`CUT_AXIS_SHARE` half widths further behind (:func:`_cut_square_from`)."""
+    fitted direction, which a bend just before the cut turns off the cable."""
     direction = np.asarray(direction, np.float64)
     count = int(np.ceil(2.0 * ((CUT_AHEAD_RADII + 2.0) * half_width + float(skip)))) + 1
 
@@ -478,11 +475,6 @@ def end_front(
     # before the cut, the lines along it leave through the cable's side. The cable's own
     # axis there runs from the first cross-section's centre to this one's.
     axis = centre - start
-    if axis_behind:
-        further, _ = cross_section(behind - CUT_AXIS_SHARE * half_width * direction)
-        if further is None:
-            return None
-        axis = start - further
     apart = float(np.hypot(*axis))
     if apart >= CUT_AXIS_SHARE * half_width and float(axis @ direction) > apart * CUT_AXIS_COS:
         direction = axis / apart
@@ -528,18 +520,8 @@ def cut_square(
 
 
 def _cut_square_from(front, mask, position, direction, half_width, skip) -> bool:
-    """:func:`cut_square` with the front along ``direction`` already read.
-
-    Where it reads no straight cut, the front is read again along the cable's own axis
-    behind the end (``end_front``'s ``axis_behind``): a fitted direction far off the
-    cable (the hook thinning draws into a slanted cut's corner, 30 degrees and more)
-    sends the lines along it out through the cable's side right behind the front, so
-    the axis up to the front cannot be read, and a straight cut read along it bulges as
-    a tip does. A cable's own round tip bulges along every direction, its own axis
-    too."""
+    """:func:`cut_square` with the front along ``direction`` already read."""
     if _straight(front):
-        return True
-    if _straight(end_front(mask, position, direction, half_width, skip, axis_behind=True)):
         return True
     if own_tip(front, half_width):
         return False
