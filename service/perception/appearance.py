@@ -546,7 +546,11 @@ def cut_or_lopsided(
     object's border or corner cuts a cable at a slant along its bend. A cable's round
     or tapering tip is symmetric about its axis. False when the front cannot be read."""
     front = end_front(mask, position, direction, half_width, skip)
-    return _cut_square_from(front, mask, position, direction, half_width, skip) or _lopsided(front)
+    return (
+        _cut_square_from(front, mask, position, direction, half_width, skip)
+        or _lopsided(front)
+        or _wedge(front, half_width)
+    )
 
 
 def own_tip(front: np.ndarray | None, half_width: float) -> bool:
@@ -565,6 +569,18 @@ def own_tip(front: np.ndarray | None, half_width: float) -> bool:
         abs(front[0] - front[2]) * half_width <= TIP_READING_PX
         and TIP_MIN_BULGE_PX <= bulge <= CAP_BULGE_SHARE * half_width + TIP_READING_PX
     )
+
+
+def _wedge(front: np.ndarray | None, half_width: float) -> bool:
+    """The middle runs on past the sides by more than a round cap's bulge
+    (:data:`CAP_BULGE_SHARE`) plus the pixel steps of the middle's reading and of the
+    sides' (:data:`TIP_READING_PX` each): no half disc, but a wedge, as where an object's
+    corner cuts a strand bending into a turn and the lines to its sides leave through the
+    strand's flanks before the cut."""
+    if front is None:
+        return False
+    bulge = (front[1] - 0.5 * (front[0] + front[2])) * half_width
+    return bool(bulge > CAP_BULGE_SHARE * half_width + 2.0 * TIP_READING_PX)
 
 
 def _lopsided(front: np.ndarray | None) -> bool:
