@@ -709,10 +709,13 @@ def cut_or_lopsided(
     other by more than :data:`TIP_LOPSIDED_SHARE` of the half width, as where an
     object's border or corner cuts a cable at a slant along its bend. A cable's round
     or tapering tip is symmetric about its axis, read straight or along the cable's
-    bend (:func:`end_fronts`). False when the front cannot be read."""
+    bend (:func:`end_fronts`); or a wedge read straight (:func:`_wedge`), bulging past
+    any round cap. False when the front cannot be read."""
     fronts = end_fronts(mask, position, direction, half_width, skip)
-    return _cut_square_from(fronts, mask, position, direction, half_width, skip) or any(
-        _lopsided(front) for front in fronts
+    return (
+        _cut_square_from(fronts, mask, position, direction, half_width, skip)
+        or any(_lopsided(front) for front in fronts)
+        or _wedge(fronts[0], half_width)
     )
 
 
@@ -746,6 +749,18 @@ def own_tip(front: np.ndarray | None, half_width: float) -> bool:
         abs(front[0] - front[2]) * half_width <= TIP_READING_PX
         and TIP_MIN_BULGE_PX <= bulge <= CAP_BULGE_SHARE * half_width + TIP_READING_PX
     )
+
+
+def _wedge(front: np.ndarray | None, half_width: float) -> bool:
+    """The middle runs on past the sides by more than a round cap's bulge
+    (:data:`CAP_BULGE_SHARE`) plus the pixel steps of the middle's reading and of the
+    sides' (:data:`TIP_READING_PX` each): no half disc, but a wedge, as where an object's
+    corner cuts a strand bending into a turn and the lines to its sides leave through the
+    strand's flanks before the cut."""
+    if front is None:
+        return False
+    bulge = (front[1] - 0.5 * (front[0] + front[2])) * half_width
+    return bool(bulge > CAP_BULGE_SHARE * half_width + 2.0 * TIP_READING_PX)
 
 
 def _lopsided(front: np.ndarray | None) -> bool:

@@ -24,29 +24,33 @@ def end_kind(end, index, labels, members, positions, directions, pieces, reach):
     """What one end of piece ``index`` meets: the two other strands of a three-way
     junction, left one first; or None (anything else).
 
-    The sides are read from where the other strands' ends lie; where that does not
-    tell (both on one side of the line, as the two ends of the bulb a doubled-back
-    cable turns round through, which thinning starts together at the junction), from
-    the points ``reach`` (the stretch's half width) along them, clear of the junction.
+    The sides are read on the other strands clear of the junction, at the points
+    ``reach`` (the stretch's half width) along them, as :mod:`.touching` reads a
+    junction of four ends: thinning bends the strands' tips toward each other where they
+    meet, and the ends' fits, extrapolated over those tips, may swap them (the two ends
+    of the bulb a doubled-back cable turns round through, which thinning starts together
+    at the junction, each bending toward the other's side). Where those points do not
+    tell (both on one side of the end's line), from where the other strands' ends lie.
     """
     label = labels[end]
     others = [member for member in members[label] if member // 2 != index]
     if len(members[label]) != 3 or len(others) != 2:
         return None
     heading = -directions[end] if end % 2 == 0 else directions[end]
-    offsets = side_offsets(heading, positions[end], [positions[other] for other in others])
+    offsets = side_offsets(
+        heading, positions[end], [point_in(pieces, other, reach) for other in others]
+    )
     if offsets[0] * offsets[1] >= 0:
-        offsets = side_offsets(
-            heading, positions[end], [point_in(pieces, other, reach) for other in others]
-        )
-        if offsets[0] * offsets[1] >= 0:
-            # Both on one side of the end's line: on a stretch bending into the
-            # junction the end's fit lags the bend and tilts that line. Two strands
-            # parting side by side still lie a strand's width apart across it (the
-            # stretch's half width, ``reach``); the one further left is on the left.
-            if abs(offsets[0] - offsets[1]) < 0.5 * reach:
-                return None
-            return others if offsets[0] < offsets[1] else others[::-1]
+        at_tips = side_offsets(heading, positions[end], [positions[other] for other in others])
+        if at_tips[0] * at_tips[1] < 0:
+            return others if at_tips[0] < 0 else others[::-1]
+        # Both on one side of the end's line: on a stretch bending into the junction
+        # the end's fit lags the bend and tilts that line. Two strands parting side by
+        # side still lie a strand's width apart across it (the stretch's half width,
+        # ``reach``); the one further left is on the left.
+        if abs(offsets[0] - offsets[1]) < 0.5 * reach:
+            return None
+        return others if offsets[0] < offsets[1] else others[::-1]
     return others if offsets[0] < 0 else others[::-1]
 
 

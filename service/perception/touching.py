@@ -276,13 +276,25 @@ def _split_shared_pieces(
         for other in (other for side in sides for other in side):
             if other // 2 not in lengths:
                 lengths[other // 2] = polyline_length(pieces[other // 2])
-        # Each junction's two other strands' half widths, the short ones' by their mask.
+        # Each junction's two other strands' half widths, the short ones' by their mask,
+        # held to the strands beside them or, failing that, to the other junction's.
         short_widths: dict[int, float] = {}
+        long_sides = [
+            _long_strands(side, lengths, widths, 2 * widths[index], leaving) for side in sides
+        ]
         strand_widths = [
             _strand_widths(
-                side, pieces, lengths, widths, 2 * widths[index], distance, leaving, short_widths
+                side,
+                pieces,
+                lengths,
+                widths,
+                2 * widths[index],
+                distance,
+                leaving,
+                short_widths,
+                long_sides[1 - at],
             )
-            for side in sides
+            for at, side in enumerate(sides)
         ]
         if None in strand_widths:
             continue
@@ -302,22 +314,36 @@ def _split_shared_pieces(
     return handled
 
 
-def _strand_widths(side, pieces, lengths, widths, stretch_width, distance, leaving, short_widths):
+def _short(other, lengths, stretch_width, leaving) -> bool:
+    """Whether the strand ending at ``other`` is shorter than the stretch is wide
+    (``stretch_width``) and does not leave the picture."""
+    return lengths[other // 2] < stretch_width and (leaving is None or not leaving[other ^ 1])
+
+
+def _long_strands(side, lengths, widths, stretch_width, leaving) -> list[float] | None:
+    """The half widths (``widths``: medians of their joints) of a junction's two other
+    strands (ends ``side``) when neither is short (:func:`_short`), else None."""
+    if any(_short(other, lengths, stretch_width, leaving) for other in side):
+        return None
+    return [float(widths[other // 2]) for other in side]
+
+
+def _strand_widths(
+    side, pieces, lengths, widths, stretch_width, distance, leaving, short_widths, beyond=None
+):
     """The half widths of a junction's two other strands (ends ``side``), or None when
     one is a scrap, not a strand (:func:`_cable_wide_pair`). A strand shorter than the
     stretch is wide (``stretch_width``) that does not leave the picture is short: its
     half width is the widest its mask gets (:func:`_widest`; the median of its few
     joints falls in the hook an object's slanted cut leaves), put in ``short_widths``
-    (by piece); the others' their median (``widths``)."""
-    short = [
-        lengths[other // 2] < stretch_width and (leaving is None or not leaving[other ^ 1])
-        for other in side
-    ]
+    (by piece); the others' their median (``widths``). ``beyond``: the half widths of
+    the two long strands at the stretch's other junction, or None."""
+    short = [_short(other, lengths, stretch_width, leaving) for other in side]
     side_widths = [
         _widest(pieces[other // 2], distance) if is_short else float(widths[other // 2])
         for other, is_short in zip(side, short, strict=True)
     ]
-    if any(short) and not _cable_wide_pair(side_widths, short):
+    if any(short) and not _cable_wide_pair(side_widths, short, beyond):
         return None
     short_widths.update(
         (other // 2, width)
@@ -327,7 +353,9 @@ def _strand_widths(side, pieces, lengths, widths, stretch_width, distance, leavi
     return side_widths
 
 
-def _cable_wide_pair(side_widths: list[float], short: list[bool]) -> bool:
+def _cable_wide_pair(
+    side_widths: list[float], short: list[bool], beyond: list[float] | None = None
+) -> bool:
     """Whether a junction's two other strands, one or both shorter than the stretch is
     wide (``short``), are two strands of one cable's width, not a strand and a scrap.
 
@@ -337,9 +365,24 @@ def _cable_wide_pair(side_widths: list[float], short: list[bool]) -> bool:
     bulges (a cable segmented with its shadow: ariadne simple/00004 end to end, the
     shadow half the cable's width) are narrower than the strand they part from. So a
     short strand counts when the two agree in width as two pieces of one cable must
-    (:data:`.appearance.WIDTH_AGREEMENT`); two short ones are both scraps or both
+    (:data:`.appearance.WIDTH_AGREEMENT`).
+
+    Where the object cuts both strands a little past the junction, both are short, or
+    the one a little longer reads narrow (the median of its few joints falls in its
+    cut's hook): the two strands at the stretch's other junction, long (``beyond``, when
+    given), are the same two strands of the one cable, and each short strand counts when
+    it agrees in width with those (as a junction of four ends holds its strands cut
+    short, :func:`_cut_short_pair`). Without them, two short ones are both scraps or both
     strands, and are not told apart here.
     """
+    if beyond:
+        long = float(np.mean(beyond))
+        if all(
+            min(width, long) >= WIDTH_AGREEMENT * max(width, long)
+            for width, is_short in zip(side_widths, short, strict=True)
+            if is_short
+        ):
+            return True
     if all(short):
         return False
     narrow, wide = sorted(side_widths)

@@ -170,12 +170,16 @@ def _from(points, along, start: float) -> np.ndarray:
 
 
 def _one_strand_wide(points, distance, side_widths) -> bool:
-    """Whether the median distance along ``points`` agrees with the mean of the two
-    strands' half widths (``side_widths``) as two pieces of one cable must."""
-    joints = np.rint(np.asarray(points, np.float64)).astype(int)
+    """Whether the median distance along ``points`` (every pixel of the line, not its
+    few joints: on a line a few joints long, the one at a cut's narrow tip would be the
+    median) agrees with the mean of the two strands' half widths (``side_widths``) as
+    two pieces of one cable must."""
+    points = np.asarray(points, np.float64)
+    along = arc_lengths(points)
+    xs, ys = points_along(points, along, np.arange(0.0, float(along[-1]) + 1e-9, 1.0)).T
     height, width = distance.shape
-    cols = joints[:, 0].clip(0, width - 1)
-    rows = joints[:, 1].clip(0, height - 1)
+    cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
+    rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
     own = float(np.median(distance[rows, cols]))
     strand = float(np.mean(side_widths))
     return min(own, strand) >= WIDTH_AGREEMENT * max(own, strand)
