@@ -546,7 +546,7 @@ def _front_reading(mask, position, direction, half_width, skip):
         centre, local = cross_section(centre, direction)
         if centre is None:
             return None
-    if not CUT_WIDTH_RANGE[0] * half_width <= local <= CUT_WIDTH_RANGE[1] * half_width:
+    if not _of_the_cable(local, half_width):
         return None
     return start, centre, direction, local, count, cross_section
 
@@ -725,9 +725,9 @@ def own_tip_both_ways(
     """Whether a chain end whose ``fronts`` (:func:`end_fronts`) were read on a cable of
     ``half_width`` px ends in the cable's own round tip (:func:`own_tip`) read straight,
     and, where the cable bends just behind it, neither flat nor lopsided read along that
-    bend: a cut straight across a bent cable reads round
-    only along straight lines, which leave through the cable's side, while a cable's
-    own tip is round whichever way the cable bends. (Read along a bend, a tip's pixel
+    bend: a cut straight across a bent cable reads round only along straight lines,
+    which leave through the cable's side, while a cable's own tip is round whichever
+    way the cable bends. (Read along a bend, a tip's pixel
     steps may leave it a little lopsided, no cut's front.)"""
     front, bent = fronts
     return own_tip(front, half_width) and not (_flat(bent) or _lopsided(bent))
