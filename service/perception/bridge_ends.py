@@ -402,7 +402,11 @@ def ends_through_short_pieces(
         if junction_of_end is not None:
             for side in (0, 1):
                 own, other = 2 * piece + side, 2 * piece + 1 - side
-                if _gap_beside_crossing(own, other, partner, junction_of_end):
+                if _gaps_on_both_sides(own, other, partner, junction_of_end):
+                    directions[side] = _through_both_tips(
+                        ends[partner[own]].position, ends[own].position, ends[other].position
+                    )
+                elif _gap_beside_crossing(own, other, partner, junction_of_end):
                     readings = (
                         _arriving_on_circle(ends[partner[other]], ends[own].position),
                         -_arriving_on_circle(ends[partner[own]], ends[own].position),
@@ -423,6 +427,34 @@ def _gap_beside_crossing(own: int, other: int, partner: np.ndarray, junction_of_
         and junction_of_end[other] >= 0
         and junction_of_end[other] == junction_of_end[through]
     )
+
+
+def _gaps_on_both_sides(own: int, other: int, partner: np.ndarray, junction_of_end) -> bool:
+    """Whether both ends of a piece, ``own`` and ``other``, are joined across gaps (no
+    end of either join in a junction): a stretch of cable seen between two objects."""
+    return all(junction_of_end[k] < 0 for k in (own, other, partner[own], partner[other]))
+
+
+def _through_both_tips(near: np.ndarray, tip: np.ndarray, other_tip: np.ndarray) -> np.ndarray:
+    """The outward direction at ``tip`` of the circle through a short piece's two tips
+    (``tip``, ``other_tip``) and its partner's end ``near`` across the gap at ``tip``
+    (the line through them when the three are in line), pointing on toward ``near``."""
+    chord_near, chord_other = near - tip, other_tip - tip
+    cross = float(chord_near[0] * chord_other[1] - chord_near[1] * chord_other[0])
+    along = near - other_tip
+    if abs(cross) < 1e-9:
+        length = float(np.hypot(*along))
+        return along / length if length > 1e-9 else along
+    # The centre relative to ``tip`` (two chords' perpendicular bisectors meet there).
+    squared_near, squared_other = chord_near @ chord_near, chord_other @ chord_other
+    centre = np.array(
+        [
+            chord_other[1] * squared_near - chord_near[1] * squared_other,
+            chord_near[0] * squared_other - chord_other[0] * squared_near,
+        ]
+    ) / (2.0 * cross)
+    tangent = np.array([-centre[1], centre[0]]) / float(np.hypot(*centre))
+    return tangent if tangent @ along >= 0 else -tangent
 
 
 def _arriving_on_circle(leaving, position: np.ndarray) -> np.ndarray:
