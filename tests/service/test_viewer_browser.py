@@ -215,7 +215,7 @@ def test_too_large_busy_and_unauthorized_read_as_messages(browser, scene_file) -
     with running_server(small) as base:
         page, _ = open_viewer(browser, base)
         page.set_input_files("input[type=file]", str(scene_file))
-        expect(message_of(page)).to_contain_text("413")
+        expect(message_of(page)).to_contain_text("413", timeout=TIMEOUT_MS)
         expect(message_of(page)).to_contain_text("megapixels")
         assert canvas_is_drawn(page, "image-canvas")  # the image, dimmed, with the message
         page.close()
@@ -234,7 +234,7 @@ def test_too_large_busy_and_unauthorized_read_as_messages(browser, scene_file) -
             wait_until(lambda: controls.calls == 1, "the worker to be taken")
             page, _ = open_viewer(browser, base)
             page.set_input_files("input[type=file]", str(scene_file))
-            expect(message_of(page)).to_contain_text("503")
+            expect(message_of(page)).to_contain_text("503", timeout=TIMEOUT_MS)
             expect(message_of(page)).to_contain_text("retry")
             controls.gate.set()
             assert held.result().status_code == 200
@@ -244,7 +244,7 @@ def test_too_large_busy_and_unauthorized_read_as_messages(browser, scene_file) -
         page, _ = open_viewer(browser, base)
         expect(page.locator("#token-form")).to_be_visible()
         page.set_input_files("input[type=file]", str(scene_file))
-        expect(message_of(page)).to_contain_text("401")
+        expect(message_of(page)).to_contain_text("401", timeout=TIMEOUT_MS)
         page.fill("[data-testid=token-input]", TOKEN)
         page.click("#token-form button")
         expected = detect_over_http(base, scene_file, Authorization=f"Bearer {TOKEN}")
