@@ -32,6 +32,7 @@ ends agree in colour and width.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache, partial
 
 import cv2
 import numpy as np
@@ -490,10 +491,20 @@ def end_fronts(
     """The end's front read as :func:`end_front` does, and again along the cable's own
     bend just behind it (:func:`_front_along_bend`; None where it bends too gently to
     matter, or where either cannot be read)."""
+    front, bent = _fronts_on_demand(mask, position, direction, half_width, skip)
+    return front, bent()
+
+
+def _fronts_on_demand(mask, position, direction, half_width, skip):
+    """:func:`end_fronts`, the reading along the bend left until it is asked for (a
+    callable of no arguments, read once): most ends are decided on the straight front,
+    and tracing the bend reads four more cross-sections and three more lines."""
     reading = _front_reading(mask, position, direction, half_width, skip)
     if reading is None:
-        return None, None
-    return _straight_front(mask, reading), _front_along_bend(mask, reading, half_width)
+        return None, lambda: None
+    return _straight_front(mask, reading), cache(
+        partial(_front_along_bend, mask, reading, half_width)
+    )
 
 
 def _front_reading(mask, position, direction, half_width, skip):
@@ -677,15 +688,14 @@ def cut_square(
     tip: a front that reads flat along the bend (:func:`end_fronts`; :func:`_flat`, the
     slant's allowance being for lines that leave through the side of a bend) is cut
     too. A cable's own tip is round whichever way the cable bends."""
-    fronts = end_fronts(mask, position, direction, half_width, skip)
-    return _cut_square_from(fronts, mask, position, direction, half_width, skip)
+    front, bent = _fronts_on_demand(mask, position, direction, half_width, skip)
+    return _cut_square_from(front, bent, mask, position, direction, half_width, skip)
 
 
-def _cut_square_from(fronts, mask, position, direction, half_width, skip) -> bool:
-    """:func:`cut_square` with the fronts along ``direction`` and along the bend
-    (:func:`end_fronts`) already read."""
-    front, bent = fronts
-    if _straight(front) or _flat(bent):
+def _cut_square_from(front, bent, mask, position, direction, half_width, skip) -> bool:
+    """:func:`cut_square` with the front along ``direction`` read and the one along the
+    bend to be read on demand (``bent()``, :func:`_fronts_on_demand`)."""
+    if _straight(front) or _flat(bent()):
         return True
     if own_tip(front, half_width):
         return False
@@ -711,12 +721,27 @@ def cut_or_lopsided(
     or tapering tip is symmetric about its axis, read straight or along the cable's
     bend (:func:`end_fronts`); or a wedge read straight (:func:`_wedge`), bulging past
     any round cap. False when the front cannot be read."""
-    fronts = end_fronts(mask, position, direction, half_width, skip)
+    front, bent = _fronts_on_demand(mask, position, direction, half_width, skip)
+    # The straight front's own tests first: they need neither the bend nor turned readings.
     return (
-        _cut_square_from(fronts, mask, position, direction, half_width, skip)
-        or any(_lopsided(front) for front in fronts)
-        or _wedge(fronts[0], half_width)
+        _lopsided(front)
+        or _wedge(front, half_width)
+        or _cut_square_from(front, bent, mask, position, direction, half_width, skip)
+        or _lopsided(bent())
     )
+
+
+def reads_own_tip(
+    mask: np.ndarray,
+    position: np.ndarray,
+    direction: np.ndarray,
+    half_width: float,
+    skip: float = 0.0,
+) -> bool:
+    """:func:`own_tip_both_ways` of the end's fronts (:func:`end_fronts`), the front
+    along the bend read only for an end whose straight front reads as its own tip."""
+    front, bent = _fronts_on_demand(mask, position, direction, half_width, skip)
+    return own_tip(front, half_width) and own_tip_both_ways((front, bent()), half_width)
 
 
 def own_tip_both_ways(

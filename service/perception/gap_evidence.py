@@ -19,11 +19,10 @@ from service.perception.appearance import (
     background_beside,
     cut_or_lopsided,
     cut_square,
-    end_fronts,
     ends_alike,
     gap_hidden,
     out_of_view,
-    own_tip_both_ways,
+    reads_own_tip,
 )
 from service.perception.geometry import polyline_length
 
@@ -130,8 +129,7 @@ def tips_stay_ends(ends, pairs, costs, limit, mask, hidden) -> np.ndarray:
     def is_tip(index: int) -> bool:
         if index not in tips:
             end = ends[index]
-            fronts = end_fronts(mask, end.position, end.direction, end.width, end.skip)
-            tips[index] = own_tip_both_ways(fronts, end.width)
+            tips[index] = reads_own_tip(mask, end.position, end.direction, end.width, end.skip)
         return tips[index]
 
     for row in np.flatnonzero((costs > TIP_STRAIGHT_SHARE * limit) & (costs <= limit)).tolist():

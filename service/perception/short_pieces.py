@@ -20,6 +20,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
+from service.perception import _merging_kernels
 from service.perception.appearance import SCRAP_RADII, EndColours
 from service.perception.geometry import polyline_length
 
@@ -255,14 +256,19 @@ def widths_clear_of_crossings(
     ]
     if not flagged:
         return ends
-    size = 2 * reach + 1
-    grown = cv2.dilate(zones.astype(np.uint8), np.ones((size, size), np.uint8)) > 0
+    # One look round each joint (the compiled test the tips get, tips_in_junctions), not
+    # the whole picture's zones grown.
+    zones_u8 = np.ascontiguousarray(
+        zones.view(np.uint8) if zones.dtype == np.bool_ else zones.astype(np.uint8)
+    )
     height, width = distance.shape
     ends = list(ends)
     for k in flagged:
         joints = np.rint(pieces[k]).astype(np.int64)
         rows, cols = joints[:, 1].clip(0, height - 1), joints[:, 0].clip(0, width - 1)
-        clear = ~grown[rows, cols]
+        clear = ~_merging_kernels.on_grown_zones(
+            zones_u8, np.ascontiguousarray(pieces[k], np.float64), reach
+        )
         clear[[0, -1]] = False  # a tip joint: cut or in the crossing
         if clear.sum() < 2:
             continue
