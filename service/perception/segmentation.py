@@ -28,7 +28,7 @@ import numpy as np
 
 from schemas import DetectParams, SegmentationMethod
 from service.perception import _segmentation_kernels
-from service.perception.cable_segmentation import segment_cables
+from service.perception.cable_segmentation import mask_everywhere, segment_cables
 from service.perception.deadline import Deadline
 from service.perception.errors import InvalidInputError
 from service.perception.segmenter import Segmenter, run_segmenter
@@ -214,7 +214,9 @@ def _segment_auto(
 ) -> tuple[np.ndarray, np.ndarray | None, float]:
     """:func:`segment_auto`, and the brightness and weak threshold when brightness made it."""
     found = _segment_by_brightness(image_bgr, min_component_area, max_hole_area, thin_only=True)
-    if found is not None:
+    # A thin bright class all over the picture is a painting's light strokes: cable
+    # contrast tells the cables from them.
+    if found is not None and not mask_everywhere(found[0]):
         return found
     mask = segment_cables(image_bgr, min_component_area, max_hole_area, deadline=deadline)
     return mask, None, 0.0
