@@ -424,8 +424,8 @@ def mask_everywhere(mask: np.ndarray) -> bool:
     the synthetic families on dark tables, 0.10-0.58 on mbest, 0.90-0.98 on painted grounds.
     """
     height, width = mask.shape
-    if min(height, width) < MIN_LEVEL_SIDE * FINEST_STEP:
-        # Too small for the finest level's windows: nothing to compare a ground with.
+    if min(height, width) < 2 * WIDE_WINDOW * FINEST_STEP:
+        # Under two wide windows across: a cable or two lie near all of it.
         return False
     blocks = cv2.resize(
         mask.view(np.uint8),
