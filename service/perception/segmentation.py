@@ -161,8 +161,9 @@ def _thin_bright_class(hist: np.ndarray, threshold: float, mask: np.ndarray) -> 
 
     Cables are thin: the bright class covers at most :data:`CABLES_SHARE` of the
     image, and at most :data:`THIN_FOREGROUND_SHARE` of the mask lies where a square
-    wider than the widest cable fits inside it. A sheet of paper, a lit table top or the
-    light half of a busy print fails one or the other.
+    wider than the widest cable fits inside it, and it does not lie all over the picture
+    (:func:`~service.perception.cable_segmentation.mask_everywhere`). A sheet of paper, a
+    lit table top, the light half of a busy print or a painting's light strokes fails one.
     """
     above = float(hist[int(threshold) + 1 :].sum())
     if above > CABLES_SHARE * mask.size:
@@ -182,6 +183,10 @@ def _thin_bright_class(hist: np.ndarray, threshold: float, mask: np.ndarray) -> 
             mask.view(np.uint8), (width // BLOCK, height // BLOCK), interpolation=cv2.INTER_AREA
         )
         full = (blocks == 1).view(np.uint8)
+    if mask_everywhere(mask, full, BLOCK):
+        # A thin bright class all over the picture is a painting's light strokes: cable
+        # contrast tells the cables from them.
+        return False
     side = MAX_CABLE_WIDTH // BLOCK + 1
     core = cv2.erode(full, np.ones((side, side), np.uint8))
     return BLOCK * BLOCK * np.count_nonzero(core) <= THIN_FOREGROUND_SHARE * area
@@ -214,9 +219,7 @@ def _segment_auto(
 ) -> tuple[np.ndarray, np.ndarray | None, float]:
     """:func:`segment_auto`, and the brightness and weak threshold when brightness made it."""
     found = _segment_by_brightness(image_bgr, min_component_area, max_hole_area, thin_only=True)
-    # A thin bright class all over the picture is a painting's light strokes: cable
-    # contrast tells the cables from them.
-    if found is not None and not mask_everywhere(found[0]):
+    if found is not None:
         return found
     mask = segment_cables(image_bgr, min_component_area, max_hole_area, deadline=deadline)
     return mask, None, 0.0
