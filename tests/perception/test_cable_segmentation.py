@@ -573,7 +573,7 @@ def test_a_diagonal_line_ends_at_its_last_seed():
 
 
 def painted(shape=(400, 640), seed=0, ground=(60, 110, 150), light_only=False):
-    """A painting: many thin strokes (1-3 px, wandering) of many colours all over a ground."""
+    """A painting: many thin strokes (2-4 px, wandering) of many colours all over a ground."""
     rng = np.random.default_rng(seed)
     image = np.full((*shape, 3), ground, np.float32)
     for _ in range(shape[0] * shape[1] // 800):
@@ -581,7 +581,7 @@ def painted(shape=(400, 640), seed=0, ground=(60, 110, 150), light_only=False):
         start = rng.uniform(0, 1, 2) * shape[::-1]
         points = start + np.cumsum(4.0 * np.column_stack([np.cos(heading), np.sin(heading)]), 0)
         colour = [235, 235, 235] if light_only else rng.uniform(20, 235, 3).tolist()
-        thickness = int(rng.integers(1, 4))
+        thickness = int(rng.integers(2, 5))
         cv2.polylines(image, [points.astype(np.int32)], False, colour, thickness, cv2.LINE_AA)
     return cv2.GaussianBlur(image, (0, 0), 0.7)
 
@@ -605,7 +605,7 @@ def test_on_a_ground_painted_with_strokes_the_strokes_are_left_out():
     assert lines_everywhere(seeds & (best_level == contrast.used_levels[0]))
     mask = contrast.mask
     assert (mask & truth).sum() / truth.sum() > 0.9  # the cables
-    assert (mask & ~truth).sum() / mask.sum() < 0.1  # little of the painting
+    assert (mask & ~truth).sum() / mask.sum() < 0.05  # little of the painting (main: 0.12)
 
 
 def test_a_few_cables_are_not_lines_everywhere():
