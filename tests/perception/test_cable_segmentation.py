@@ -572,11 +572,12 @@ def test_a_diagonal_line_ends_at_its_last_seed():
     assert not back[0] and back[1:].all()
 
 
-def painted(shape=(400, 640), seed=0, ground=(60, 110, 150), light_only=False):
-    """A painting: many thin strokes (2-4 px, wandering) of many colours all over a ground."""
+def painted(shape=(400, 640), seed=0, ground=(60, 110, 150), light_only=False, area=800):
+    """A painting: thin strokes (2-4 px, wandering; one per ``area`` px) of many colours, or
+    light ones only, all over a ground."""
     rng = np.random.default_rng(seed)
     image = np.full((*shape, 3), ground, np.float32)
-    for _ in range(shape[0] * shape[1] // 800):
+    for _ in range(shape[0] * shape[1] // area):
         heading = rng.uniform(0, 2 * np.pi) + np.cumsum(rng.normal(0, 0.35, 30))
         start = rng.uniform(0, 1, 2) * shape[::-1]
         points = start + np.cumsum(4.0 * np.column_stack([np.cos(heading), np.sin(heading)]), 0)
@@ -618,7 +619,8 @@ def test_a_few_cables_are_not_lines_everywhere():
 
 def test_auto_leaves_brightness_for_a_paintings_light_strokes():
     shape = (400, 640)
-    image = painted(shape, ground=(40, 45, 50), light_only=True)
+    # Sparse enough for a thin bright class: main took brightness here.
+    image = painted(shape, ground=(40, 45, 50), light_only=True, area=1500)
     band = np.zeros(shape, np.uint8)
     cv2.polylines(band, [np.array([(20, 200), (300, 150), (620, 220)], np.int32)], False, 1, 14)
     image[band > 0] = (40, 40, 200)
