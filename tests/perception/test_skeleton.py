@@ -128,13 +128,13 @@ def test_distance_transform_equals_opencv(seed):
 
 
 def test_a_short_blob_of_spurs_keeps_its_longest_path_and_a_cable_its_spurs_cut():
-    # A stretch of cable between two round objects: a blob 16 px wide and about 30
+    # A stretch of cable between two round objects: a blob 16 px wide and about 20
     # long whose thinning is a short middle with forks at the cut corners, every
     # branch shorter than a spur. Beside it a long band with a ragged spur.
     mask = np.zeros((120, 240), np.uint8)
-    cv2.line(mask, (20, 40), (50, 46), 1, 16)
+    cv2.line(mask, (20, 40), (40, 44), 1, 16)
     cv2.circle(mask, (8, 38), 14, 0, -1)
-    cv2.circle(mask, (62, 50), 14, 0, -1)
+    cv2.circle(mask, (52, 48), 14, 0, -1)
     cv2.line(mask, (20, 90), (220, 90), 1, 11)
     mask[80:84, 120:123] = 1  # a bump on the band's side: a spur
     mask = mask.astype(bool)
