@@ -63,6 +63,7 @@ from service.perception.skeleton import (
     distance_transform,
     estimate_radius,
     remove_spurs,
+    short_blobs_kept,
     skeletonize,
 )
 
@@ -255,7 +256,8 @@ def detect_full(
     radius = max(estimate_radius(skeleton, distance=distance), 1.0)
     spur_length = 2.5 * radius if params.spur_length is None else params.spur_length
     if spur_length > 0:
-        skeleton = remove_spurs(skeleton, spur_length)
+        # A blob that thins to nothing but spurs is a short piece, not a side branch.
+        skeleton = short_blobs_kept(skeleton, remove_spurs(skeleton, spur_length), spur_length)
     watch.lap("skeleton")
     check(deadline, "skeleton")
 

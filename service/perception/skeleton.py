@@ -13,6 +13,7 @@ distances.
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from service.perception import _shared_kernels, _skeleton_kernels
@@ -199,3 +200,77 @@ def estimate_radius(skeleton: np.ndarray, *, distance: np.ndarray) -> float:
     # The distance is to the nearest background pixel centre, half a pixel beyond
     # the border.
     return max(float(median(values)) - 0.5, 0.5)
+
+
+def short_blobs_kept(skeleton: np.ndarray, pruned: np.ndarray, spur_length: float) -> np.ndarray:
+    """``pruned`` (``skeleton`` after :func:`remove_spurs`) with the longest path back in
+    every component of ``skeleton`` that spur removal left shorter than a spur.
+
+    Spur removal cuts the branches that run from a tip to a junction in fewer than
+    ``spur_length`` px, each as a side branch of a longer line. A blob no longer than a
+    few cable widths (a stretch of cable seen between two objects, cut at both ends)
+    thins to a star: a short middle line with a fork at each cut corner, every branch
+    shorter than a spur. Removing them all leaves the blob a pixel or none, and the
+    piece of cable it shows is lost: a star of spurs is no side branch of anything,
+    but a short component in its own right, which the size filter of the segmentation
+    has already let through. Its longest path (tip to tip) is its line; the direction
+    of a piece that short is read from the blob's sides (:func:`.short_pieces.ends_of_stubs`).
+
+    Each window looked at is the one round a removed pixel at twice a spur's length:
+    a component of spurs fits in it, and one that reaches its border is longer (as is,
+    conservatively, one reaching the picture's edge).
+    """
+    lost = skeleton & ~pruned
+    points = cv2.findNonZero(lost.view(np.uint8))
+    if points is None:
+        return pruned
+    height, width = skeleton.shape
+    reach = int(np.ceil(2.0 * spur_length)) + 1
+    done = np.zeros_like(lost)
+    kept = pruned
+    for x, y in points.reshape(-1, 2).tolist():
+        if done[y, x]:
+            continue
+        x0, y0 = max(x - reach, 0), max(y - reach, 0)
+        x1, y1 = min(x + reach + 1, width), min(y + reach + 1, height)
+        window = skeleton[y0:y1, x0:x1]
+        _, labels = cv2.connectedComponents(window.view(np.uint8), connectivity=8)
+        component = labels == labels[y - y0, x - x0]
+        done[y0:y1, x0:x1] |= component
+        # Reaching the window's border (or the picture's: left as it is) is a longer line.
+        edge = component[[0, -1]].any() or component[:, [0, -1]].any()
+        if edge or np.count_nonzero(component & pruned[y0:y1, x0:x1]) >= spur_length:
+            continue  # a longer line: its spurs stay cut
+        path = _longest_path(np.argwhere(component))
+        if kept is pruned:
+            kept = pruned.copy()
+        kept[path[:, 0] + y0, path[:, 1] + x0] = True
+    return kept
+
+
+def _longest_path(pixels: np.ndarray) -> np.ndarray:
+    """The (row, col) pixels of the longest path, in 8-connected steps, through the
+    8-connected set ``pixels`` ((N, 2) row, col): from the pixel farthest from any
+    one to the pixel farthest from it (exact on a tree, as a thinned blob is)."""
+    index = {(int(r), int(c)): k for k, (r, c) in enumerate(pixels.tolist())}
+    steps = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
+
+    def walk(start: int) -> tuple[int, list[int]]:
+        parent = {start: -1}
+        queue, head = [start], 0
+        while head < len(queue):
+            r, c = pixels[queue[head]].tolist()
+            head += 1
+            for dr, dc in steps:
+                k = index.get((r + dr, c + dc))
+                if k is not None and k not in parent:
+                    parent[k] = queue[head - 1]
+                    queue.append(k)
+        return queue[-1], parent
+
+    far, _ = walk(0)
+    other, parent = walk(far)
+    path = [other]
+    while parent[path[-1]] >= 0:
+        path.append(parent[path[-1]])
+    return pixels[path]

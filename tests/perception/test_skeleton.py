@@ -8,6 +8,7 @@ from service.perception.skeleton import (
     distance_transform,
     estimate_radius,
     remove_spurs,
+    short_blobs_kept,
     skeletonize,
 )
 from tests.perception.cases import INPUTS, thick_polylines
@@ -124,3 +125,29 @@ def test_distance_transform_equals_opencv(seed):
         np.testing.assert_array_equal(
             distance_transform(image > 0), cv2.distanceTransform(image, cv2.DIST_L2, 5)
         )
+
+
+def test_a_short_blob_of_spurs_keeps_its_longest_path_and_a_cable_its_spurs_cut():
+    # A stretch of cable between two round objects: a blob 16 px wide and about 20
+    # long whose thinning is a short middle with forks at the cut corners, every
+    # branch shorter than a spur. Beside it a long band with a ragged spur.
+    mask = np.zeros((120, 240), np.uint8)
+    cv2.line(mask, (20, 40), (40, 44), 1, 16)
+    cv2.circle(mask, (8, 38), 14, 0, -1)
+    cv2.circle(mask, (52, 48), 14, 0, -1)
+    cv2.line(mask, (20, 90), (220, 90), 1, 11)
+    mask[80:84, 120:123] = 1  # a bump on the band's side: a spur
+    mask = mask.astype(bool)
+    skeleton = skeletonize(mask)
+    spur = 20.0
+    pruned = remove_spurs(skeleton, spur)
+    kept = short_blobs_kept(skeleton, pruned, spur)
+    blob = np.zeros_like(mask)
+    blob[:70] = True
+    assert np.count_nonzero(pruned & blob) < spur  # spur removal leaves the blob almost nothing
+    path = np.argwhere(kept & blob)
+    extent = np.hypot(*(path.max(0) - path.min(0)))
+    assert extent >= 15  # tip to tip across the blob
+    counts = reference.branch_counts(kept & blob)
+    assert (counts >= 3).sum() == 0 and (counts == 1).sum() == 2  # one line
+    assert np.array_equal(kept & ~blob, pruned & ~blob)  # the band's spur stays cut
