@@ -286,7 +286,7 @@ def _side_bridge(start, end, away_from, half_width: float, distance: np.ndarray)
         across = -across
     along = np.linspace(0.0, length, int(np.ceil(length)) + 1)
     points = start + along[:, None] * axis
-    steps = np.arange(0.0, 4.0 * half_width, 0.5)
+    steps = np.arange(0.0, 2.0 * half_width + 1.0, 0.5)
     scanned = points[:, None, :] + steps[None, :, None] * across
     height, width = distance.shape
     cols, rows = np.rint(scanned[..., 0]).astype(int), np.rint(scanned[..., 1]).astype(int)
