@@ -594,9 +594,7 @@ def _narrowest(
     return float(distance[rows, cols].min())
 
 
-def _narrowest_across(
-    line: np.ndarray, distance: np.ndarray, clear: float, reach: float
-) -> float:
+def _narrowest_across(line: np.ndarray, distance: np.ndarray, clear: float, reach: float) -> float:
     """The least half width of the mask across a straight ``line`` (two points), ``clear``
     px clear of its ends; 0 when nothing is left.
 
