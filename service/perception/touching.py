@@ -267,9 +267,11 @@ def _side_bridge(start, end, away_from, half_width: float, distance: np.ndarray)
     its own half width in from the mask's border on its side, wherever the other strand
     is. So every point of the chord between the tips is moved across the chord to
     ``half_width`` (the distance transform's, to the background pixels' centres) from
-    the first background pixel on its side, found within four half widths (left where
-    none is). The moves are smoothed along the chord over about a strand's width (a
-    running median): a pixel's step of the border is not the strand's.
+    the first background pixel on its side, found within the two strands' width of the
+    chord (two half widths and a pixel: the chord runs between the stretch's middle and
+    the strand's; left where none is, as where another cable crossing there widens the
+    mask, doubled_back 310129). The moves are smoothed along the chord over about a
+    strand's width (a running median): a pixel's step of the border is not the strand's.
 
     Returns
     -------

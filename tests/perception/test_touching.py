@@ -198,3 +198,74 @@ def _split_stretch_between_arms(mask, shared, arms):
     distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
     labels = [0, 1, -1, 0, -1, 0, 1, -1, 1, -1]
     return split_touching_strands(pieces, positions, directions, labels, distance)
+
+
+def _arc(centre, radius, start, stop, count=60):
+    """Points along a circle (degrees), as a polyline."""
+    angles = np.radians(np.linspace(start, stop, count))
+    return [
+        (centre[0] + radius * np.cos(angle), centre[1] + radius * np.sin(angle)) for angle in angles
+    ]
+
+
+def test_a_bending_stretch_is_read_across_its_chord_not_along_it():
+    """Two strands 9 px wide, 6 px apart, touching along a 20-degree arc of radius 180
+    px (a doubled-back cable's neck bending into its bulb): the chord between the
+    stretch's two ends runs 2.7 px off the ridge down its middle, and the distance
+    along the chord's middle third falls below 3/4 of the two strands' half widths
+    (doubled_back 310053 read 8.59 against 8.62). Across the chord, within one strand's
+    half width, the mask keeps both widths; a shallow crossing still reads one cable's
+    width wherever it is read."""
+    from service.perception.touching import _narrowest, _narrowest_across
+
+    centre, strands = (120.0, 250.0), 9.0
+    inner, outer = _arc(centre, 177.0, 260, 280), _arc(centre, 183.0, 260, 280)
+    mask = touching_strands_mask(
+        np.rint(inner).astype(int).tolist(), np.rint(outer).astype(int).tolist(), shape=(120, 240)
+    )
+    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    chord = np.array([_arc(centre, 180.0, 260, 260, 1)[0], _arc(centre, 180.0, 280, 280, 1)[0]])
+    clear = float(np.hypot(*(chord[1] - chord[0]))) / 3.0
+    assert _narrowest(chord, distance, clear) < 0.75 * strands
+    assert _narrowest_across(chord, distance, clear, 0.5 * strands) >= 0.75 * strands
+    first, second = [(20, 80), (220, 120)], [(20, 120), (220, 80)]
+    crossing = touching_strands_mask(first, second, shape=(200, 240))
+    distance = cv2.distanceTransform(crossing.astype(np.uint8), cv2.DIST_L2, 5)
+    line = np.array([(90.0, 100.0), (150.0, 100.0)])
+    assert _narrowest_across(line, distance, 10.0, 0.5 * strands) < 0.75 * strands
+
+
+def test_a_cable_crossing_where_touching_strands_part_is_taken_out_of_their_junction():
+    """Five ends in one junction zone: a stretch two strands wide (piece 2, half width
+    9) parting into two strands (pieces 3 and 4), and a cable (pieces 0 and 1) crossing
+    right there. The crossing cable runs straight through and agrees in width with
+    itself; the upper strand runs straight on into the stretch too, but the stretch is
+    both strands wide (doubled_back 310129)."""
+    from service.perception.touching import _straight_through
+
+    positions = np.array(
+        [
+            (0, 0),
+            (100, 80),
+            (130, 120),
+            (200, 200),
+            (0, 0),
+            (95, 100),
+            (0, 0),
+            (110, 96),
+            (0, 0),
+            (112, 108),
+        ],
+        np.float64,
+    )
+    directions = np.zeros_like(positions)
+    directions[1] = (0.6, 0.8)  # the crossing cable's upper end, pointing down across
+    directions[2] = (-0.6, -0.8)  # its lower end, pointing up
+    directions[5] = (1.0, 0.0)  # the stretch's end, pointing right along it
+    directions[7] = (-1.0, 0.0)  # the upper strand, straight on from the stretch
+    directions[9] = (-0.96, -0.28)  # the lower strand, bending away
+    widths = np.array([4.5, 4.5, 9.0, 4.5, 4.5])
+    ends = [1, 2, 5, 7, 9]
+    assert _straight_through(ends, positions, directions, widths) == (1, 2)
+    widths[2] = 4.5  # a strand of one width: two straight pairs, none taken
+    assert _straight_through(ends, positions, directions, widths) is None
