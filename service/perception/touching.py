@@ -513,7 +513,7 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     if short and not _cut_short_pair(short, (pair_a, pair_b), pieces, distance, widths):
         return None
     line = np.array([middle_a, middle_b])
-    if _narrowest_across(line, distance, _middle_of_stretch(length, strands), 0.5 * strands) < (
+    if _narrowest(line, distance, _middle_of_stretch(length, strands)) < (
         SIDE_BY_SIDE_WIDTH_FRACTION * strands
     ):
         return None
@@ -594,38 +594,6 @@ def _narrowest(
     cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
     rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
     return float(distance[rows, cols].min())
-
-
-def _narrowest_across(line: np.ndarray, distance: np.ndarray, clear: float, reach: float) -> float:
-    """The least half width of the mask across a straight ``line`` (two points), ``clear``
-    px clear of its ends; 0 when nothing is left.
-
-    The half width across the line at a point is the distance transform's ridge there:
-    its largest value on the line's normal within ``reach`` px to either side. The line
-    from one pair of a four-way junction's ends to the other is a chord of the stretch;
-    where the stretch bends, the chord runs a pixel or two off the ridge down its middle
-    (a doubled-back cable's neck curving into its bulb: 310053), and the distance there
-    falls short of the mask's half width. ``reach`` is one strand's half width: the ridge
-    of two touching strands lies between their middles, each that far from it. Where two
-    cables cross, the mask across is one cable wide at the crossing, wherever it is read.
-    """
-    start, stop = np.asarray(line, np.float64)
-    length = float(np.hypot(*(stop - start)))
-    if length <= 2 * clear:
-        return 0.0
-    axis = (stop - start) / length
-    normal = np.array([-axis[1], axis[0]])
-    samples = np.arange(clear, length - clear + 1e-9, 1.0)
-    offsets = np.arange(-math.floor(reach), math.floor(reach) + 1, 1.0)
-    points = (
-        start[None, None, :]
-        + samples[:, None, None] * axis[None, None, :]
-        + offsets[None, :, None] * normal[None, None, :]
-    )
-    height, width = distance.shape
-    cols = np.clip(np.rint(points[..., 0]).astype(int), 0, width - 1)
-    rows = np.clip(np.rint(points[..., 1]).astype(int), 0, height - 1)
-    return float(distance[rows, cols].max(axis=1).min())
 
 
 def split_where_leaving_together(

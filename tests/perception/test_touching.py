@@ -200,41 +200,6 @@ def _split_stretch_between_arms(mask, shared, arms):
     return split_touching_strands(pieces, positions, directions, labels, distance)
 
 
-def _arc(centre, radius, start, stop, count=60):
-    """Points along a circle (degrees), as a polyline."""
-    angles = np.radians(np.linspace(start, stop, count))
-    return [
-        (centre[0] + radius * np.cos(angle), centre[1] + radius * np.sin(angle)) for angle in angles
-    ]
-
-
-def test_a_bending_stretch_is_read_across_its_chord_not_along_it():
-    """Two strands 9 px wide, 6 px apart, touching along a 20-degree arc of radius 180
-    px (a doubled-back cable's neck bending into its bulb): the chord between the
-    stretch's two ends runs 2.7 px off the ridge down its middle, and the distance
-    along the chord's middle third falls below 3/4 of the two strands' half widths
-    (doubled_back 310053 read 8.59 against 8.62). Across the chord, within one strand's
-    half width, the mask keeps both widths; a shallow crossing still reads one cable's
-    width wherever it is read."""
-    from service.perception.touching import _narrowest, _narrowest_across
-
-    centre, strands = (120.0, 250.0), 9.0
-    inner, outer = _arc(centre, 177.0, 260, 280), _arc(centre, 183.0, 260, 280)
-    mask = touching_strands_mask(
-        np.rint(inner).astype(int).tolist(), np.rint(outer).astype(int).tolist(), shape=(120, 240)
-    )
-    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
-    chord = np.array([_arc(centre, 180.0, 260, 260, 1)[0], _arc(centre, 180.0, 280, 280, 1)[0]])
-    clear = float(np.hypot(*(chord[1] - chord[0]))) / 3.0
-    assert _narrowest(chord, distance, clear) < 0.75 * strands
-    assert _narrowest_across(chord, distance, clear, 0.5 * strands) >= 0.75 * strands
-    first, second = [(20, 80), (220, 120)], [(20, 120), (220, 80)]
-    crossing = touching_strands_mask(first, second, shape=(200, 240))
-    distance = cv2.distanceTransform(crossing.astype(np.uint8), cv2.DIST_L2, 5)
-    line = np.array([(90.0, 100.0), (150.0, 100.0)])
-    assert _narrowest_across(line, distance, 10.0, 0.5 * strands) < 0.75 * strands
-
-
 def test_a_cable_crossing_where_touching_strands_part_is_taken_out_of_their_junction():
     """Five ends in one junction zone: a stretch two strands wide (piece 2, half width
     9) parting into two strands (pieces 3 and 4), and a cable (pieces 0 and 1) crossing
