@@ -140,7 +140,8 @@ def split_touching_strands(
         and not (leaving is not None and leaving[2 * index : 2 * index + 2].any())
     ]
     four_way = [label for label, ends in members.items() if len(ends) == 4]
-    if not candidates and not four_way and not ending:
+    crowded = [label for label, ends in members.items() if len(ends) in (5, 6)]
+    if not candidates and not four_way and not ending and not crowded:
         return result
     # Every piece's half width (median distance at its joints), once: the shared pieces
     # and the four-way junctions (several per photograph) read them piece by piece.
@@ -149,6 +150,25 @@ def split_touching_strands(
         np.ascontiguousarray(np.concatenate(pieces), dtype=np.float64),
         np.cumsum([0] + [len(points) for points in pieces]).astype(np.int64),
     )
+    # A cable crossing right where a touching stretch's strands meet or part: the two
+    # junction zones merge into one of five or six ends. The crossing cable runs
+    # straight through; without it the stretch's junction is read as any other, and
+    # the crossing's two ends are left to the junction's pairing.
+    through: dict[int, tuple[int, int]] = {}
+    for label in crowded:
+        pair = _straight_through(members[label], positions, directions, widths)
+        if pair is not None:
+            through[label] = pair
+            members[label] = [end for end in members[label] if end not in pair]
+            for end in pair:
+                labels[end] = -1
+    if through:
+        candidates = [
+            index
+            for index in range(len(pieces))
+            if all(len(members.get(labels[end], ())) == 3 for end in (2 * index, 2 * index + 1))
+        ]
+        four_way = [label for label, ends in members.items() if len(ends) == 4]
     handled = _split_shared_pieces(
         candidates, result, positions, directions, labels, members, distance, leaving, widths
     )
@@ -173,9 +193,43 @@ def split_touching_strands(
                 # Strands cut short past the stretch: it may turn round there, out of sight.
                 result.partings.append(parting)
                 result.strand_widths.update(short_widths)
-    result.junction_of_end = [-1 if label in handled else label for label in result.junction_of_end]
+    kept = {end for label, pair in through.items() if label in handled for end in pair}
+    result.junction_of_end = [
+        -1 if label in handled and end not in kept else label
+        for end, label in enumerate(result.junction_of_end)
+    ]
     result.bridges = _side_bridges(result, len(pieces), distance, widths)
     return result
+
+
+def _straight_through(ends, positions, directions, widths) -> tuple[int, int] | None:
+    """The one pair of a junction's ``ends`` (of two pieces) that a cable runs straight
+    through, or None (none, or more than one).
+
+    A cable crossing the junction zone keeps its line: each of the two ends faces the
+    other, each tip lies on the other end's line within that strand's half width
+    (``widths``, per piece), and the two agree in width as two pieces of one cable must
+    (:data:`.appearance.WIDTH_AGREEMENT`): a strand running straight on into the line
+    two touching strands share meets a piece of both their widths. The tips of a
+    doubled-back cable's strands where they meet in the zone are bent by thinning and
+    fail it one way or the other.
+    """
+    found = []
+    for k, first in enumerate(ends):
+        for second in ends[k + 1 :]:
+            near, far = sorted((float(widths[first // 2]), float(widths[second // 2])))
+            if first // 2 == second // 2 or near < WIDTH_AGREEMENT * far:
+                continue
+            gap = positions[second] - positions[first]
+            if float(directions[first] @ gap) <= 0 or float(directions[second] @ gap) >= 0:
+                continue
+            if all(
+                abs(side_offsets(directions[end], positions[end], [positions[other]])[0])
+                <= float(widths[end // 2])
+                for end, other in ((first, second), (second, first))
+            ):
+                found.append((first, second))
+    return found[0] if len(found) == 1 else None
 
 
 def _side_bridges(result: TouchingSplit, count: int, distance: np.ndarray, widths) -> dict:
@@ -213,9 +267,11 @@ def _side_bridge(start, end, away_from, half_width: float, distance: np.ndarray)
     its own half width in from the mask's border on its side, wherever the other strand
     is. So every point of the chord between the tips is moved across the chord to
     ``half_width`` (the distance transform's, to the background pixels' centres) from
-    the first background pixel on its side, found within four half widths (left where
-    none is). The moves are smoothed along the chord over about a strand's width (a
-    running median): a pixel's step of the border is not the strand's.
+    the first background pixel on its side, found within the two strands' width of the
+    chord (two half widths and a pixel: the chord runs between the stretch's middle and
+    the strand's; left where none is, as where another cable crossing there widens the
+    mask, doubled_back 310129). The moves are smoothed along the chord over about a
+    strand's width (a running median): a pixel's step of the border is not the strand's.
 
     Returns
     -------
@@ -232,7 +288,7 @@ def _side_bridge(start, end, away_from, half_width: float, distance: np.ndarray)
         across = -across
     along = np.linspace(0.0, length, int(np.ceil(length)) + 1)
     points = start + along[:, None] * axis
-    steps = np.arange(0.0, 4.0 * half_width, 0.5)
+    steps = np.arange(0.0, 2.0 * half_width + 1.0, 0.5)
     scanned = points[:, None, :] + steps[None, :, None] * across
     height, width = distance.shape
     cols, rows = np.rint(scanned[..., 0]).astype(int), np.rint(scanned[..., 1]).astype(int)

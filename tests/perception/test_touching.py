@@ -198,3 +198,39 @@ def _split_stretch_between_arms(mask, shared, arms):
     distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
     labels = [0, 1, -1, 0, -1, 0, 1, -1, 1, -1]
     return split_touching_strands(pieces, positions, directions, labels, distance)
+
+
+def test_a_cable_crossing_where_touching_strands_part_is_taken_out_of_their_junction():
+    """Five ends in one junction zone: a stretch two strands wide (piece 2, half width
+    9) parting into two strands (pieces 3 and 4), and a cable (pieces 0 and 1) crossing
+    right there. The crossing cable runs straight through and agrees in width with
+    itself; the upper strand runs straight on into the stretch too, but the stretch is
+    both strands wide (doubled_back 310129)."""
+    from service.perception.touching import _straight_through
+
+    positions = np.array(
+        [
+            (0, 0),
+            (100, 80),
+            (130, 120),
+            (200, 200),
+            (0, 0),
+            (95, 100),
+            (0, 0),
+            (110, 96),
+            (0, 0),
+            (112, 108),
+        ],
+        np.float64,
+    )
+    directions = np.zeros_like(positions)
+    directions[1] = (0.6, 0.8)  # the crossing cable's upper end, pointing down across
+    directions[2] = (-0.6, -0.8)  # its lower end, pointing up
+    directions[5] = (1.0, 0.0)  # the stretch's end, pointing right along it
+    directions[7] = (-1.0, 0.0)  # the upper strand, straight on from the stretch
+    directions[9] = (-0.96, -0.28)  # the lower strand, bending away
+    widths = np.array([4.5, 4.5, 9.0, 4.5, 4.5])
+    ends = [1, 2, 5, 7, 9]
+    assert _straight_through(ends, positions, directions, widths) == (1, 2)
+    widths[2] = 4.5  # a strand of one width: two straight pairs, none taken
+    assert _straight_through(ends, positions, directions, widths) is None
