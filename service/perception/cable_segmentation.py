@@ -152,8 +152,6 @@ TEXTURE_COVER = 0.75
 picture (:func:`lines_everywhere`). Measured, the share near them: 0.02-0.38 on the ten
 synthetic families with plain grounds, 0.19-0.58 on ariadne and 0.04-0.33 on mbest (a
 dense harness on a 640 x 480 photograph), 0.68-0.95 on painted grounds."""
-TEXTURE_BLOCK = 4
-"""A bright class is judged for texture (:func:`mask_everywhere`) on blocks this wide (px)."""
 SLIT_HALF_WIDTH = 1.5
 """An enclosed gap none of whose pixels lies farther than this (px) from the mask, at most
 2 px wide, is a slit in a cable (:func:`fill_slits`)."""
@@ -410,46 +408,6 @@ def lines_everywhere(finest: np.ndarray) -> bool:
         return False
     free = (~finest).view(np.uint8)
     near = cv2.distanceTransform(free, cv2.DIST_L2, 3) <= BACKGROUND_WINDOW / 2
-    return bool(np.count_nonzero(near) > TEXTURE_COVER * near.size)
-
-
-def mask_everywhere(
-    mask: np.ndarray, blocks: np.ndarray | None = None, block: int = TEXTURE_BLOCK
-) -> bool:
-    """Whether a mask of thin bright lines is the picture's ground (a painting's light
-    strokes), not cables: more than :data:`TEXTURE_COVER` of the picture lies within
-    :data:`SIDE_SURFACE_DISTANCE` finest-level px of it (half the wide background window:
-    the whole mask, not its centre lines, and cut into specks where a stroke dims, so
-    judged over the wider reach), on blocks of ``block`` px for speed.
-
-    Measured, the share near the mask on pictures whose bright class is thin: 0.02-0.67 on
-    the synthetic families on dark tables, 0.10-0.58 on mbest, 0.90-0.98 on painted grounds.
-
-    Parameters
-    ----------
-    mask : ndarray of bool
-        ``(H, W)``.
-    blocks : ndarray of uint8, optional
-        The mask on blocks of ``block`` px, 1 where it covers more than half of a block,
-        when the caller has it already (the brightness path's thinness test).
-    block : int
-        The blocks' side (px).
-
-    Returns
-    -------
-    bool
-    """
-    height, width = mask.shape
-    if min(height, width) < 2 * WIDE_WINDOW * FINEST_STEP:
-        # Under two wide windows across: a cable or two lie near all of it.
-        return False
-    if blocks is None:
-        blocks = cv2.resize(
-            mask.view(np.uint8), (width // block, height // block), interpolation=cv2.INTER_AREA
-        )
-    free = (blocks == 0).view(np.uint8)
-    reach = SIDE_SURFACE_DISTANCE * FINEST_STEP / block
-    near = cv2.distanceTransform(free, cv2.DIST_L2, 3) <= reach
     return bool(np.count_nonzero(near) > TEXTURE_COVER * near.size)
 
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from schemas import DetectParams, SegmentationMethod
 from service.perception import _segmentation_kernels
-from service.perception.cable_segmentation import mask_everywhere, segment_cables
+from service.perception.cable_segmentation import segment_cables
 from service.perception.deadline import Deadline
 from service.perception.errors import InvalidInputError
 from service.perception.segmenter import Segmenter, run_segmenter
@@ -161,9 +161,10 @@ def _thin_bright_class(hist: np.ndarray, threshold: float, mask: np.ndarray) -> 
 
     Cables are thin: the bright class covers at most :data:`CABLES_SHARE` of the
     image, and at most :data:`THIN_FOREGROUND_SHARE` of the mask lies where a square
-    wider than the widest cable fits inside it, and it does not lie all over the picture
-    (:func:`~service.perception.cable_segmentation.mask_everywhere`). A sheet of paper, a
-    lit table top, the light half of a busy print or a painting's light strokes fails one.
+    wider than the widest cable fits inside it. A sheet of paper, a lit table top or the
+    light half of a busy print fails one or the other. (A bright class lying all over the
+    picture is no sign of a painting: a tray full of cables, or ``dlo bench --rings``' grid
+    of rings, lies all over it too.)
     """
     above = float(hist[int(threshold) + 1 :].sum())
     if above > CABLES_SHARE * mask.size:
@@ -183,10 +184,6 @@ def _thin_bright_class(hist: np.ndarray, threshold: float, mask: np.ndarray) -> 
             mask.view(np.uint8), (width // BLOCK, height // BLOCK), interpolation=cv2.INTER_AREA
         )
         full = (blocks == 1).view(np.uint8)
-    if mask_everywhere(mask, full, BLOCK):
-        # A thin bright class all over the picture is a painting's light strokes: cable
-        # contrast tells the cables from them.
-        return False
     side = MAX_CABLE_WIDTH // BLOCK + 1
     core = cv2.erode(full, np.ones((side, side), np.uint8))
     return BLOCK * BLOCK * np.count_nonzero(core) <= THIN_FOREGROUND_SHARE * area
