@@ -147,11 +147,6 @@ cables 2.5 to 3.5 px wide."""
 MIN_ELONGATION = 3.0
 """A component is at least this many of its widths long (by the measure of
 :func:`keep_cable_like`, a disc or a square is 2.3 widths long)."""
-TEXTURE_COVER = 0.75
-"""A ground is textured with lines when its finest lines lie near three quarters of the
-picture (:func:`lines_everywhere`). Measured, the share near them: 0.02-0.38 on the ten
-synthetic families with plain grounds, 0.19-0.58 on ariadne and 0.04-0.33 on mbest (a
-dense harness on a 640 x 480 photograph), 0.68-0.95 on painted grounds."""
 SLIT_HALF_WIDTH = 1.5
 """An enclosed gap none of whose pixels lies farther than this (px) from the mask, at most
 2 px wide, is a slit in a cable (:func:`fill_slits`)."""
@@ -268,10 +263,7 @@ def cable_contrast(
     check(deadline, STAGE)
     mask = np.zeros((height, width), bool)
     if seeds.any():
-        # On a painted ground the finest level's lines are the painting's strokes: a run
-        # of line no wider than the lines that level is made for is the ground's.
-        textured = lines_everywhere(seeds & (best_level == used[0]))
-        seeds = _long_seed_runs(ratio, seeds, LINE_WIDTH if textured else 0.0)
+        seeds = _long_seed_runs(ratio, seeds)
     if seeds.any():
         lines = seed_lines((height, width), levels, best_level, seeds)
         lines = _without_shadows(lines, seeds, height / seeds.shape[0])
@@ -385,33 +377,7 @@ def _seeds(on_grid: list[np.ndarray], used: list[int]) -> tuple[np.ndarray, np.n
     return best, best_level, cue > threshold
 
 
-def lines_everywhere(finest: np.ndarray) -> bool:
-    """Whether the picture's ground is itself lines (a painting, a print of strokes).
-
-    A ground is the same everywhere; a few cables are not. When more than
-    :data:`TEXTURE_COVER` of the picture lies within half a background window
-    (:data:`BACKGROUND_WINDOW`, at the finest level) of a seed of the finest level, the
-    lines of that width are the ground's texture, not cables: cables cover under a fifth
-    of a window (:data:`BACKGROUND_FACTOR`), and even a picture full of them leaves many
-    windows free of any.
-
-    Parameters
-    ----------
-    finest : ndarray of bool
-        The seeds of the finest used level, on the finest grid.
-
-    Returns
-    -------
-    bool
-    """
-    if not finest.any():
-        return False
-    free = (~finest).view(np.uint8)
-    near = cv2.distanceTransform(free, cv2.DIST_L2, 3) <= BACKGROUND_WINDOW / 2
-    return bool(np.count_nonzero(near) > TEXTURE_COVER * near.size)
-
-
-def _long_seed_runs(ratio: np.ndarray, seeds: np.ndarray, min_width: float = 0.0) -> np.ndarray:
+def _long_seed_runs(ratio: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     """The seeds on runs of line at least :data:`MIN_ELONGATION` of their widths long.
 
     A cable is a line over its whole length; a fleck of paint, a blob of texture or a
@@ -419,19 +385,10 @@ def _long_seed_runs(ratio: np.ndarray, seeds: np.ndarray, min_width: float = 0.0
     finest grid where the ratio is at least :data:`RUN_RATIO` of the seeds' lowest (a
     faint cable whose ratio wavers about the seeds' threshold, or a tight loop whose ratio
     is high only where the segments fit the curve, is one run, not many); its width and
-    length are measured as :func:`keep_cable_like` measures a component's. Runs narrower
-    than ``min_width`` (grid px), and seeds whose line is no wider than that (within half
-    a pixel) where they lie, are dropped too: on a ground of painted lines
-    (:func:`lines_everywhere`) those are the ground's strokes, alone or crossing.
+    length are measured as :func:`keep_cable_like` measures a component's.
     """
     line = ((ratio >= RUN_RATIO * ratio[seeds].min()) | seeds).view(np.uint8)
     distance = _shared_kernels.distance_transform(line)
-    if min_width > 0:
-        # Where strokes cross they form one run wider than each: each seed is also judged
-        # by the line's own half width near it (the distance ridge within REACH grid px).
-        near = 2 * int(REACH) + 1
-        ridge = cv2.dilate(distance.astype(np.float32), np.ones((near, near), np.uint8))
-        seeds = seeds & (2.0 * ridge > min_width + 0.5)
     labels, area, width = _cable_segmentation_kernels.component_widths(line, distance)
     # A band w px wide has pixel distances 1 .. w / 2 to the background: four times their
     # mean is w + 2 on a grid this coarse.
@@ -439,7 +396,7 @@ def _long_seed_runs(ratio: np.ndarray, seeds: np.ndarray, min_width: float = 0.0
     # The seeds are the evidence, the weaker pixels only join them: a run's seeds must
     # cover that length themselves.
     seed_area = np.bincount(labels[seeds], minlength=area.size)
-    keep = (seed_area >= MIN_ELONGATION * width**2) & (width >= min_width)
+    keep = seed_area >= MIN_ELONGATION * width**2
     keep[0] = False
     return seeds & keep[labels]
 

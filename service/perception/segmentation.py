@@ -162,9 +162,7 @@ def _thin_bright_class(hist: np.ndarray, threshold: float, mask: np.ndarray) -> 
     Cables are thin: the bright class covers at most :data:`CABLES_SHARE` of the
     image, and at most :data:`THIN_FOREGROUND_SHARE` of the mask lies where a square
     wider than the widest cable fits inside it. A sheet of paper, a lit table top or the
-    light half of a busy print fails one or the other. (A bright class lying all over the
-    picture is no sign of a painting: a tray full of cables, or ``dlo bench --rings``' grid
-    of rings, lies all over it too.)
+    light half of a busy print fails one or the other.
     """
     above = float(hist[int(threshold) + 1 :].sum())
     if above > CABLES_SHARE * mask.size:
