@@ -107,6 +107,11 @@ OPEN_GAP_RADII = 25.0
 # than other ends: a join costing at most this share of the looser limit (half the
 # threshold, merging.MUTUAL_COST_FACTOR being 1.5), the cable running straight on.
 TIP_STRAIGHT_SHARE = 1.0 / 3.0
+# One cable's own tip and an end that shows no cut are joined over open background only
+# as the greedy rule joins them, at most this share of the looser limit (the threshold
+# itself): dearer joins are the mutual rule's, made for a cable bending out of sight
+# under an object, which would have cut at least one of the two ends.
+ONE_TIP_SHARE = 2.0 / 3.0
 
 
 def tips_stay_ends(ends, pairs, costs, limit, mask, hidden) -> np.ndarray:
@@ -121,8 +126,11 @@ def tips_stay_ends(ends, pairs, costs, limit, mask, hidden) -> np.ndarray:
     would have cut it straight, concave or at a slant. Two cables of one colour whose
     tips lie close are two cables, unless the cable runs straight on between them (a
     join at most :data:`TIP_STRAIGHT_SHARE` of ``limit`` dear: a stretch the segmentation
-    lost, as across a highlight). Both ends must read so: a cut across a strand bending
-    into a turn under an object can read round on one of them."""
+    lost, as across a highlight). Both ends must read so, or, for a join dearer than
+    :data:`ONE_TIP_SHARE` of ``limit`` (the mutual rule's, for a bend under an object),
+    one, the other showing no cut either (not :func:`.appearance.cut_or_lopsided`): a
+    cut across a strand bending into a turn under an object can read round on one of
+    them, but an object hiding a stretch of cable cuts at least one of its two ends."""
     keep = np.ones(len(costs), bool)
     tips: dict[int, bool] = {}
 
@@ -136,6 +144,10 @@ def tips_stay_ends(ends, pairs, costs, limit, mask, hidden) -> np.ndarray:
         i, j = pairs[row].tolist()
         if is_tip(i) and is_tip(j):
             keep[row] = hidden(i, j)
+        elif (is_tip(i) or is_tip(j)) and costs[row] > ONE_TIP_SHARE * limit:
+            other = ends[j if is_tip(i) else i]
+            if not cut_or_lopsided(mask, other.position, other.direction, other.width, other.skip):
+                keep[row] = hidden(i, j)
     return keep
 
 

@@ -679,6 +679,19 @@ def test_cables_of_one_colour_whose_own_tips_lie_close_come_out_apart(seed):
     assert score.frame.correct, score.frame.coverage
 
 
+@pytest.mark.parametrize("seed", [330016, 330052])
+def test_a_round_tip_and_an_end_that_shows_no_cut_stay_apart_over_open_background(seed):
+    """Tuning scenes of `same_colour`: a cable's round tip 40-60 px from another cable's
+    end over open background (in 330052 a tip read wide on its bend, in 330016 a cable
+    running along the picture's bottom edge), the join bending sharply (costs 0.74-0.87).
+    Nothing shows over the gap and neither end is cut, while an object hiding a stretch
+    of cable cuts at least one of its two ends: two cables' ends (one chain for two
+    cables before)."""
+    scene = make_family_scene("same_colour", seed)
+    score, _ = evaluate_scene(scene, seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
+
+
 def _ends_by_the_top_edge():
     """A piece of cable lying along the picture's top edge (y = 5, radius 5) from its
     right edge to x = 300, where an object cuts it; the cable comes out again at
