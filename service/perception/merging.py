@@ -58,6 +58,7 @@ from service.perception.gap_evidence import (
 from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
 from service.perception.short_pieces import (
+    ends_along_straight_sides,
     ends_of_stubs,
     scraps_through_junctions,
     short_piece_widths,
@@ -991,6 +992,10 @@ def merge_chains(
     inner_ends = ends_of_short_pieces_from_partners(
         pieces, inner_ends, joins, span, junction_of_end
     )
+    if mask is not None:
+        inner_ends = ends_along_straight_sides(
+            pieces, inner_ends, joins, junction_of_end, mask, span, curve_given
+        )
     bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span, junction_of_end)
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)
     paths = [p for p in assembled if p.pieces[0] not in dropped]

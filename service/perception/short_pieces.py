@@ -115,6 +115,12 @@ def _side_direction(pixels: np.ndarray, full_width: float) -> np.ndarray | None:
     apart: of the local minima of the blob's extent across a direction (of the pixels
     ``pixels``, each a unit square), the one nearest ``full_width`` by ratio; None for
     a blob with no minimum (round)."""
+    reading = _side_reading(pixels, full_width)
+    return None if reading is None else reading[0]
+
+
+def _side_reading(pixels: np.ndarray, full_width: float) -> tuple[np.ndarray, float] | None:
+    """:func:`_side_direction` and the blob's extent across it (px), or None."""
     angles = np.arange(SIDE_DIRECTIONS) * (np.pi / SIDE_DIRECTIONS)
     normals = np.stack([-np.sin(angles), np.cos(angles)], axis=1)
     projections = pixels @ normals.T
@@ -126,7 +132,110 @@ def _side_direction(pixels: np.ndarray, full_width: float) -> np.ndarray | None:
     if len(minima) == 0:
         return None
     best = minima[np.argmin(np.abs(np.log(extents[minima] / full_width)))]
-    return np.array([np.cos(angles[best]), np.sin(angles[best])])
+    return np.array([np.cos(angles[best]), np.sin(angles[best])]), float(extents[best])
+
+
+def _own_blob(points: np.ndarray, mask: np.ndarray, margin: float) -> np.ndarray | None:
+    """The pixels (x, y) of the connected part of ``mask`` that holds every joint of
+    ``points``, when it lies within ``margin`` px of the joints' bounding box (or runs
+    off the picture there); None when a joint is off the mask, the joints lie on
+    different parts, or the part runs on beyond that box (a longer stretch of mask: the
+    piece is not all of it)."""
+    height, width = mask.shape[:2]
+    low = np.floor(points.min(0) - margin).astype(np.int64)
+    high = np.ceil(points.max(0) + margin).astype(np.int64) + 1
+    x0, y0 = max(int(low[0]), 0), max(int(low[1]), 0)
+    x1, y1 = min(int(high[0]), width), min(int(high[1]), height)
+    window = np.ascontiguousarray(mask[y0:y1, x0:x1], np.uint8)
+    _, labels = cv2.connectedComponents(window, connectivity=8)
+    joints = np.rint(points).astype(np.int64)
+    inside = (joints[:, 0] >= x0) & (joints[:, 0] < x1) & (joints[:, 1] >= y0) & (joints[:, 1] < y1)
+    if not inside.all():
+        return None
+    own = labels[joints[:, 1] - y0, joints[:, 0] - x0]
+    if own.min() == 0 or (own != own[0]).any():
+        return None
+    blob = labels == own[0]
+    # A window side inside the picture that the blob reaches: it runs on beyond.
+    if (blob[0].any() and y0 > 0) or (blob[-1].any() and y1 < height):
+        return None
+    if (blob[:, 0].any() and x0 > 0) or (blob[:, -1].any() and x1 < width):
+        return None
+    ys, xs = np.nonzero(blob)
+    return np.stack([xs + x0, ys + y0], axis=1).astype(np.float64)
+
+
+# A blob's two sides are straight and parallel when its narrowest extent is its cable's
+# full width to within the pixel steps of two straight borders drawn at a slant, a pixel
+# each (a bend over the blob's length adds its sagitta).
+STRAIGHT_SIDES_PX = 2.0
+
+
+def ends_along_straight_sides(
+    pieces: list[np.ndarray],
+    ends: list,
+    joins: list[tuple[int, int, float]],
+    junction_of_end: list[int],
+    mask: np.ndarray,
+    shorter_than: float,
+    curve_given: frozenset[int] = frozenset(),
+) -> list:
+    """Ends for bridging, with a short piece joined at one end only pointing along its
+    own straight sides.
+
+    A piece seen between an object and the picture's edge (or its own free tip) is
+    joined across the object's gap at one end only. Its skeleton is too short to give
+    the cable's direction: thinning bends it toward the cut's corners and toward the
+    border's, 10-40 degrees off; nor does its partner's bend, carried on along a
+    circle, where the hidden stretch bends otherwise (measured on tuning scenes:
+    either is more than 8 degrees off in one end of six). Its blob's outline holds
+    the direction: where the blob's narrowest extent is its cable's full width
+    (``2 width + 1``) to within :data:`STRAIGHT_SIDES_PX`, its two long sides are the
+    cable's, straight and parallel, and the cable runs between them (8 degrees off in
+    one end of a hundred). The end then points along them, out of the piece through
+    the end, and lies where the blob's middle line leaves it on that side (a tip
+    thinning bent toward a corner is taken back to the middle).
+
+    Only a piece shorter than ``2 shorter_than`` (twice the end-fit span; longer ones
+    fit their own ends), whose blob is its own (:func:`_own_blob`: no crossing, no
+    cable touching it), joined across a gap (no junction at either end) at one end and
+    at its other not at all, of known width, and not an end whose bridge is a curve
+    found elsewhere (``curve_given``). The joins are left as they were.
+    """
+    partner = np.full(len(ends), -1)
+    for i, j, _ in joins:
+        partner[i], partner[j] = j, i
+    adjusted = list(ends)
+    for own, other in enumerate(partner.tolist()):
+        if other < 0 or partner[own ^ 1] >= 0 or own in curve_given:
+            continue
+        if junction_of_end[own] >= 0 or junction_of_end[other] >= 0:
+            continue
+        end = ends[own]
+        points = pieces[end.piece]
+        if end.width <= 0 or len(points) < 2 or polyline_length(points) >= 2.0 * shorter_than:
+            continue
+        full_width = 2.0 * end.width + 1.0
+        pixels = _own_blob(points, mask, 2.0 * full_width)
+        if pixels is None:
+            continue
+        reading = _side_reading(pixels, full_width)
+        if reading is None or reading[1] > full_width + STRAIGHT_SIDES_PX:
+            continue
+        axis = reading[0]
+        outwards = points[0] - points[-1] if end.at_start else points[-1] - points[0]
+        if axis @ outwards < 0:
+            axis = -axis
+        middle = pixels.mean(0)
+        along = (pixels - middle) @ axis
+        across = (pixels - middle) @ np.array([-axis[1], axis[0]])
+        on_line = np.abs(across) <= 1.0
+        if not on_line.any():
+            continue
+        adjusted[own] = replace(
+            end, position=middle + float(along[on_line].max()) * axis, direction=axis
+        )
+    return adjusted
 
 
 def scraps_through_junctions(
