@@ -100,6 +100,11 @@ def bridge_from_the_fits(
             points = pieces[end.piece]
             fit_span = span_holding_joints(points, end.at_start, span, end.skip, ends[k ^ 1].skip)
             inner = fit_where_skipped(points, end.at_start, fit_span, end.skip)
+            if inner is not None and fit_span > span:
+                # The widened fit reaches further in, where the piece may bend: where it
+                # misses the piece at its start, the bridge starts on the piece.
+                backwards = points if end.at_start else points[::-1]
+                inner = start_on_the_piece(backwards, end.skip, span, *inner)
             if inner is not None:
                 adjusted[k] = _moved(end, inner[0], inner[1])
                 trims[k] = end.skip
@@ -131,7 +136,9 @@ def span_holding_joints(
     end is left at its tip with the chord through the hook it was to skip, tens of
     degrees off a slanted cut. The span is widened to the fourth joint past the skip, as
     long as that stays clear of the other end's skipped tip (``far_skip``); otherwise
-    ``span`` is returned unchanged.
+    ``span`` is returned unchanged. (Reaching further in, the widened fit may span a
+    bend: :func:`bridge_from_the_fits` then starts on the piece where the fit misses it,
+    :func:`start_on_the_piece`.)
 
     Parameters
     ----------
