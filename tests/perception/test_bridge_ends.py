@@ -412,3 +412,25 @@ def test_a_gap_end_one_joint_short_of_its_fit_is_bridged_along_its_cable():
     assert np.abs(path.vertices[:, 1] - 60.0).max() < 1e-6
     (before,) = assemble_paths(pieces, ends, joins, "smooth")
     assert np.abs(before.vertices[:, 1] - 60.0).max() >= 5.0
+
+
+def test_a_widened_fit_that_misses_a_bending_piece_starts_the_bridge_on_it():
+    """The piece runs straight along y = 60 for two joints before its hooked tip and
+    turns 60 degrees further in (``side_by_side`` 330002): the fit widened to a fourth
+    joint spans the turn and lands off the piece, pointing off it. The bridge starts on
+    the piece instead, along its straight stretch."""
+    turn = np.radians(60.0)
+    inwards = 10.3 * np.arange(8.0, 0.0, -1.0)
+    bent = np.column_stack([92.7 - inwards * np.cos(turn), 60.0 + inwards * np.sin(turn)])
+    straight = np.array([[92.7, 60.0], [103.0, 60.0], [113.3, 60.0], [116.3, 65.0]])
+    points = np.vstack([bent, straight])
+    beyond = np.column_stack([176.0 + 10.0 * np.arange(12), np.full(12, 60.0)])
+    pieces = [points, beyond]
+    ends = chain_ends(pieces, 40.0, skip=6.1)
+    span = bridge_ends.span_holding_joints(points, False, 40.0, 6.1, ends[0].skip)
+    widened = fit_where_skipped(points, False, span, 6.1)
+    assert abs(widened[0][1] - 60.0) > bridge_ends.FIT_MISS_PX
+    inner, trims = bridge_from_the_fits(pieces, ends, [(1, 2, 0.0)], 40.0, [-1] * 4)
+    assert trims[1] == pytest.approx(6.1)
+    assert abs(inner[1].position[1] - 60.0) < 1e-9
+    np.testing.assert_allclose(inner[1].direction, [1.0, 0.0], atol=1e-9)
