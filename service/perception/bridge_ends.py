@@ -97,7 +97,14 @@ def bridge_from_the_fits(
                 if nominal_skip is not None and end.skip > nominal_skip and k not in curve_given:
                     hooks[k] = end.skip
                 continue
-            inner = fit_where_skipped(pieces[end.piece], end.at_start, span, end.skip)
+            points = pieces[end.piece]
+            fit_span = span_holding_joints(points, end.at_start, span, end.skip, ends[k ^ 1].skip)
+            inner = fit_where_skipped(points, end.at_start, fit_span, end.skip)
+            if inner is not None and fit_span > span:
+                # The widened fit reaches further in, where the piece may bend: where it
+                # misses the piece at its start, the bridge starts on the piece.
+                backwards = points if end.at_start else points[::-1]
+                inner = start_on_the_piece(backwards, end.skip, span, *inner)
             if inner is not None:
                 adjusted[k] = _moved(end, inner[0], inner[1])
                 trims[k] = end.skip
@@ -112,6 +119,52 @@ def bridge_from_the_fits(
             adjusted[2 * piece + k] = replace(adjusted[2 * piece + k], position=position)
             trims[2 * piece + k] = trim
     return adjusted, trims
+
+
+# The end fit is a quadratic: it needs this many joints (``_geometry_kernels.end_fit``).
+FIT_JOINTS = 4
+
+
+def span_holding_joints(
+    points: np.ndarray, at_start: bool, span: float, skip: float, far_skip: float
+) -> float:
+    """The arc length an end's fit must span, past its skipped tip, to hold
+    :data:`FIT_JOINTS` joints.
+
+    Joints lie a segment's length apart, so whether ``span`` holds four of them past
+    ``skip`` depends on where the first one falls: one joint short, the fit fails and the
+    end is left at its tip with the chord through the hook it was to skip, tens of
+    degrees off a slanted cut. The span is widened to the fourth joint past the skip, as
+    long as that stays clear of the other end's skipped tip (``far_skip``); otherwise
+    ``span`` is returned unchanged. (Reaching further in, the widened fit may span a
+    bend: :func:`bridge_from_the_fits` then starts on the piece where the fit misses it,
+    :func:`start_on_the_piece`.)
+
+    Parameters
+    ----------
+    points : ndarray
+        ``(N, 2)`` joints of the piece.
+    at_start : bool
+        The end at ``points[0]`` or at ``points[-1]``.
+    span, skip, far_skip : float
+        The fit's usual span, the arc length it leaves out at this end, and that left
+        out at the other end.
+
+    Returns
+    -------
+    float
+        ``span``, or the wider span that reaches the fourth joint past ``skip``.
+    """
+    along = arc_lengths(points[::-1] if not at_start else points)
+    past = along[along >= skip]
+    if len(past) < FIT_JOINTS:
+        return span
+    needed = float(past[FIT_JOINTS - 1]) - skip
+    if needed <= span or skip + needed > float(along[-1]) - far_skip:
+        return span
+    # A hair more than the fourth joint's arc length: the fit takes the joints whose arc
+    # length is at most skip + span, summed in its own order.
+    return needed + 1e-6
 
 
 def _beyond_hooks(

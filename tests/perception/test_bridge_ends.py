@@ -371,3 +371,66 @@ def test_a_line_joint_where_the_other_narrow_tip_ends_is_past_it():
     inner, trims = bridge_from_the_fits(pieces, ends, joins, 40.0, [-1] * 4, nominal_skip=4.0)
     np.testing.assert_allclose(inner[2].position, [104.0, 50.0])
     assert trims[2] > 0.0
+
+
+def _slant_cut_piece():
+    """A straight cable along y = 60, its joints 10.3 px apart from x = 0 to 113.3, and a
+    last joint 5.8 px on, bent 5 px sideways (thinning's hook toward the far corner of a
+    slanted cut), the way ``occluded`` 330103's piece ends."""
+    along = np.column_stack([10.3 * np.arange(12), np.full(12, 60.0)])
+    return np.vstack([along, [[116.3, 65.0]]])
+
+
+def test_a_fit_one_joint_short_is_widened_to_four_joints():
+    # Skipping 6.1 px at the hooked tip, a 40 px span past it holds only three joints
+    # (15.7, 26.0 and 36.3 px in): the quadratic cannot be fitted there.
+    points = _slant_cut_piece()
+    assert fit_where_skipped(points, False, 40.0, 6.1) is None
+    span = bridge_ends.span_holding_joints(points, False, 40.0, 6.1, 0.0)
+    assert 40.0 < span < 41.0
+    position, direction = fit_where_skipped(points, False, span, 6.1)
+    np.testing.assert_allclose(direction, [1.0, 0.0], atol=1e-9)
+    assert abs(position[1] - 60.0) < 1e-9
+    # A span that already holds four joints, or a piece too short to hold them clear
+    # of its other end's skipped tip, is left as it is.
+    assert bridge_ends.span_holding_joints(points, False, 45.0, 6.1, 0.0) == 45.0
+    assert bridge_ends.span_holding_joints(points[7:], False, 40.0, 6.1, 6.0) == 40.0
+
+
+def test_a_gap_end_one_joint_short_of_its_fit_is_bridged_along_its_cable():
+    """Before, the end whose fit failed stayed at its hooked tip, 5 px off the cable and
+    pointing along the chord through the hook: the bridge across a 60 px gap along
+    y = 60 started off the hidden cable. Now it starts on the cable, along it."""
+    beyond = np.column_stack([176.0 + 10.0 * np.arange(12), np.full(12, 60.0)])
+    pieces = [_slant_cut_piece(), beyond]
+    ends = chain_ends(pieces, 40.0, skip=6.1)
+    joins = [(1, 2, 0.0)]
+    inner, trims = bridge_from_the_fits(pieces, ends, joins, 40.0, [-1] * 4)
+    assert trims[1] == pytest.approx(6.1)
+    np.testing.assert_allclose(inner[1].direction, [1.0, 0.0], atol=1e-9)
+    (path,) = assemble_paths(pieces, inner, joins, "smooth", trims)
+    assert np.abs(path.vertices[:, 1] - 60.0).max() < 1e-6
+    (before,) = assemble_paths(pieces, ends, joins, "smooth")
+    assert np.abs(before.vertices[:, 1] - 60.0).max() >= 5.0
+
+
+def test_a_widened_fit_that_misses_a_bending_piece_starts_the_bridge_on_it():
+    """The piece runs straight along y = 60 for two joints before its hooked tip and
+    turns 60 degrees further in (``side_by_side`` 330002): the fit widened to a fourth
+    joint spans the turn and lands off the piece, pointing off it. The bridge starts on
+    the piece instead, along its straight stretch."""
+    turn = np.radians(60.0)
+    inwards = 10.3 * np.arange(8.0, 0.0, -1.0)
+    bent = np.column_stack([92.7 - inwards * np.cos(turn), 60.0 + inwards * np.sin(turn)])
+    straight = np.array([[92.7, 60.0], [103.0, 60.0], [113.3, 60.0], [116.3, 65.0]])
+    points = np.vstack([bent, straight])
+    beyond = np.column_stack([176.0 + 10.0 * np.arange(12), np.full(12, 60.0)])
+    pieces = [points, beyond]
+    ends = chain_ends(pieces, 40.0, skip=6.1)
+    span = bridge_ends.span_holding_joints(points, False, 40.0, 6.1, ends[0].skip)
+    widened = fit_where_skipped(points, False, span, 6.1)
+    assert abs(widened[0][1] - 60.0) > bridge_ends.FIT_MISS_PX
+    inner, trims = bridge_from_the_fits(pieces, ends, [(1, 2, 0.0)], 40.0, [-1] * 4)
+    assert trims[1] == pytest.approx(6.1)
+    assert abs(inner[1].position[1] - 60.0) < 1e-9
+    np.testing.assert_allclose(inner[1].direction, [1.0, 0.0], atol=1e-9)
