@@ -825,8 +825,8 @@ def ends_on_bends(
 
 
 def _read_on_bends(bent: list[ChainEnd], evidence) -> tuple[list[ChainEnd], tuple] | None:
-    """The ends read on their bends with the turn tests over them, or None when no
-    end reads differently there (:func:`.turn_joins.turn_joins`' ``on_bends``)."""
+    """The ends read on their bends with the turn tests over them
+    (:func:`.turn_joins.turn_joins`' ``on_bends``), or None without ends."""
     return (bent, evidence(bent)) if bent else None
 
 

@@ -24,6 +24,12 @@ join is made here only on the image's evidence, after every other join
   far enough apart to turn round in one arc, is bridged as any gap is (the cuts say
   nothing of the curve's shape, :mod:`.bridge_ends`);
 - the two pieces agree in colour and width (:func:`.appearance.ends_alike`);
+- a pair no curve of the ends' usual readings passes on is tried again from the
+  ends read over a quarter of the end-fit span (``on_bends``,
+  :func:`.merging.ends_on_bends`): a strand cut on the turn's own tight bend, where
+  the usual fit lags the bend by tens of degrees, its tip off the cable and its cut
+  read askew. A turn found only so is bridged along the curve found (the usual fits,
+  from which a gap's bridge starts, are the ones off the bend);
 - neither end has a better partner: the turns and every free pair of alike ends the
   merging step could have joined without evidence are paired together by the cheapest
   matching, each end left free at an explicit cost (:func:`.pairing.cheapest_pairing`),
@@ -569,31 +575,25 @@ def turn_joins(
             # the evidence holds on a curve of the turn's (a gap cut at a slant).
             rivals[i, j] = pair_cost
         cable = 0.5 * (ends[i].width + ends[j].width) or radius
-        a, b = ends[i], ends[j]
-        # From where each end's fit begins: over a cut's hook the fit's extrapolation
-        # may leave the cable (the bridge starts there too,
-        # :func:`.bridge_ends.bridge_from_the_fits`).
-        curves = hidden_turn_curves(
-            a.position - a.skip * a.direction,
-            a.direction,
-            b.position - b.skip * b.direction,
-            -b.direction,
-            cable,
-        )
-        readings = [(a, b, curves, evidence, along_curve)]
-        if on_bends is not None:
-            bent_a, bent_b = on_bends[0][i], on_bends[0][j]
-            if bent_a is not a or bent_b is not b:
-                readings.append((bent_a, bent_b, None, on_bends[1], (True,) * len(evidence)))
-        for a, b, curves, tests, shapes in readings:
-            if curves is None:
-                curves = hidden_turn_curves(
-                    a.position - a.skip * a.direction,
-                    a.direction,
-                    b.position - b.skip * b.direction,
-                    -b.direction,
-                    cable,
-                )
+        # The ends as fitted, then, where either reads differently on its bend, as read
+        # there (a cut on the turn's own tight bend), with the tests over those readings
+        # and the turn bridged along its curve (the usual fits are off the bend).
+        readings = [(ends[i], ends[j], evidence, along_curve)]
+        if on_bends is not None and (
+            on_bends[0][i] is not ends[i] or on_bends[0][j] is not ends[j]
+        ):
+            readings.append((on_bends[0][i], on_bends[0][j], on_bends[1], (True,) * len(evidence)))
+        for a, b, tests, shapes in readings:
+            # From where each end's fit begins: over a cut's hook the fit's extrapolation
+            # may leave the cable (the bridge starts there too,
+            # :func:`.bridge_ends.bridge_from_the_fits`).
+            curves = hidden_turn_curves(
+                a.position - a.skip * a.direction,
+                a.direction,
+                b.position - b.skip * b.direction,
+                -b.direction,
+                cable,
+            )
             if _turn_found(
                 i,
                 j,
