@@ -824,6 +824,28 @@ def ends_on_bends(
     return read
 
 
+def within_picture(
+    tests: tuple[Callable[[int, int, np.ndarray], bool], ...], shape: tuple[int, ...]
+) -> tuple[Callable[[int, int, np.ndarray], bool], ...]:
+    """``tests`` of a turn's curve (``(i, j, curve) -> bool``) that pass only on curves
+    inside a picture of ``shape``: past its edge nothing need hide a cable, and the
+    edge cuts every cable that leaves the picture square. Two cables leaving it side
+    by side, read over a short span near the edge (:func:`ends_on_bends`), look like
+    one turning round beyond it (ariadne simple 00014, true mask)."""
+    height, width = shape[:2]
+
+    def inside(curve: np.ndarray) -> bool:
+        return bool(
+            (curve.min(axis=0) >= 0.0).all()
+            and curve[:, 0].max() <= width - 1
+            and curve[:, 1].max() <= height - 1
+        )
+
+    return tuple(
+        (lambda i, j, curve, test=test: inside(curve) and test(i, j, curve)) for test in tests
+    )
+
+
 def _read_on_bends(bent: list[ChainEnd], evidence) -> tuple[list[ChainEnd], tuple] | None:
     """The ends read on their bends with the turn tests over them
     (:func:`.turn_joins.turn_joins`' ``on_bends``), or None without ends."""
@@ -1040,7 +1062,10 @@ def merge_chains(
             turn_out_of_view(image, mask, seen, radius),
             _read_on_bends(
                 ends_on_bends(pieces, seen, span, radius, distance, full_width, zones),
-                lambda bent: turn_evidence(image, mask, bent, hues, radius, set(touching.partings)),
+                lambda bent: within_picture(
+                    turn_evidence(image, mask, bent, hues, radius, set(touching.partings)),
+                    mask.shape,
+                ),
             ),
         )
     check(deadline, "merging")

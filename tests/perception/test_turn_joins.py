@@ -10,7 +10,7 @@ import pytest
 from schemas import DetectParams
 from service.evaluation.synthetic_eval import evaluate_scene
 from service.perception.gap_evidence import strands_turn_out_of_sight
-from service.perception.merging import chain_ends, ends_on_bends, merge_chains
+from service.perception.merging import chain_ends, ends_on_bends, merge_chains, within_picture
 from service.perception.pairing import cheapest_pairing
 from service.perception.turn_joins import (
     bends_as_a_cable,
@@ -290,3 +290,15 @@ def test_ends_on_bends_read_a_bent_end_over_the_shorter_span_only():
     # The bend's last stretch heads back (-x); the usual fit lags it.
     assert read[1].direction[0] < ends[1].direction[0]
     assert read[1].direction[0] < -0.9
+
+
+def test_turn_tests_within_the_picture_fail_on_curves_past_its_edge():
+    """Two cables leaving the picture's left edge side by side, read over a short span,
+    look like one turning round beyond it (ariadne simple 00014): a curve past the
+    edge passes no test, one inside passes as the test itself does."""
+    tests = within_picture((lambda i, j, curve: True,), (100, 200))
+    inside = np.column_stack([np.linspace(10.0, 50.0, 20), np.full(20, 40.0)])
+    past = inside - np.array([20.0, 0.0])
+    assert tests[0](0, 1, inside)
+    assert not tests[0](0, 1, past)
+    assert not within_picture((lambda i, j, curve: False,), (100, 200))[0](0, 1, inside)
