@@ -1062,8 +1062,10 @@ def merge_chains(
             turn_out_of_view(image, mask, seen, radius),
             _read_on_bends(
                 ends_on_bends(pieces, seen, span, radius, distance, full_width, zones),
+                # Objects and cuts only: the parting strands' test reads no cut, and a
+                # cable's own round tip curls over so short a span (side_by_side 350008).
                 lambda bent: within_picture(
-                    turn_evidence(image, mask, bent, hues, radius, set(touching.partings)),
+                    turn_evidence(image, mask, bent, hues, radius),
                     mask.shape,
                 ),
             ),

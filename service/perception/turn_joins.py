@@ -28,8 +28,11 @@ join is made here only on the image's evidence, after every other join
   ends read over a quarter of the end-fit span (``on_bends``,
   :func:`.merging.ends_on_bends`): a strand cut on the turn's own tight bend, where
   the usual fit lags the bend by tens of degrees, its tip off the cable and its cut
-  read askew. A turn found only so is bridged along the curve found (the usual fits,
-  from which a gap's bridge starts, are the ones off the bend);
+  read askew. Only the tests for an object and for cuts apply there (a cable's own
+  round tip, read over so short a span, curls, and the parting strands' test reads
+  no cut), and on curves inside the picture. A turn found only so is bridged along
+  the curve found (the usual fits, from which a gap's bridge starts, are the ones off
+  the bend);
 - neither end has a better partner: the turns and every free pair of alike ends the
   merging step could have joined without evidence are paired together by the cheapest
   matching, each end left free at an explicit cost (:func:`.pairing.cheapest_pairing`),

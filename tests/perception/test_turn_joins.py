@@ -302,3 +302,15 @@ def test_turn_tests_within_the_picture_fail_on_curves_past_its_edge():
     assert tests[0](0, 1, inside)
     assert not tests[0](0, 1, past)
     assert not within_picture((lambda i, j, curve: False,), (100, 200))[0](0, 1, inside)
+
+
+def test_two_cables_own_tips_are_not_a_turn_on_their_bend_readings():
+    """Tuning scene 350008 of the side_by_side family, true mask: two cables parting
+    from a stretch where they touch end in their own round tips side by side. Read
+    over a quarter of the fit span, the tips curl, and the parting strands' test (no
+    cut read, only where the curve leaves and meets the mask) passed on a curve
+    between them: the bend readings are tested for objects and cuts only."""
+    score, _ = evaluate_scene(
+        make_family_scene("side_by_side", 350008), 350008, mask_from_labels=True
+    )
+    assert score.frame.correct, score.frame.coverage
