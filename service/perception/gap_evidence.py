@@ -23,6 +23,7 @@ from service.perception.appearance import (
     gap_hidden,
     out_of_view,
     reads_own_tip,
+    unlike_background,
 )
 from service.perception.geometry import polyline_length
 
@@ -53,6 +54,7 @@ def cut_ends_alike(
     colours: EndColours | None,
     radius: float,
     cut_needed: int = 2,
+    image: np.ndarray | None = None,
 ) -> bool:
     """Whether the free ends ``a`` (end ``i``) and ``b`` (end ``j``, both
     :class:`.merging.ChainEnd`), joined by ``curve`` at most :data:`CUT_GAP_RADII` long
@@ -79,7 +81,9 @@ def cut_ends_alike(
     """
     if colours is None:
         return False
-    if polyline_length(curve) > CUT_GAP_RADII * cable_radius(radius, a.width, b.width):
+    if open_length(curve, mask, image, (a, b), radius) > CUT_GAP_RADII * cable_radius(
+        radius, a.width, b.width
+    ):
         return False
     if not ends_alike(colours, i, j, (a.width, b.width)):
         return False
@@ -193,6 +197,28 @@ def open_gap_too_long(curve, mask, limit, hidden) -> bool:
     return float(steps[off].sum()) > limit and not hidden()
 
 
+def open_length(curve, mask, image, ends, radius) -> float:
+    """How much of a gap's ``curve`` ((x, y) samples about 1 px apart) a cable along it
+    would have to be hidden by something of the background's own colour: the px of it
+    off the foreground ``mask`` (inside the picture), less, with ``image``, those where
+    the image shows something over the curve (unlike the open background beside the
+    two ``ends``' cables, :func:`.appearance.unlike_background`).
+
+    The curve from two ends' fits runs first over the pieces' own tips, on the
+    foreground; and an object seen over part of a gap explains that part, however long.
+    What is left is what an object of the background's colour must hide."""
+    curve = np.asarray(curve, np.float64)
+    if len(curve) < 2:
+        return 0.0
+    inside, seen = _samples_on_mask(curve, mask)
+    open_ground = inside & ~seen
+    if image is not None and open_ground.any():
+        open_ground[open_ground] = ~unlike_background(image, mask, curve[open_ground], ends, radius)
+    steps = np.hypot(*np.diff(curve, axis=0).T)
+    # A step counts as open when the sample it reaches is.
+    return float(steps[open_ground[1:]].sum())
+
+
 def _samples_on_mask(curve: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per (x, y) sample of ``curve``: whether its pixel is inside the picture, and
     whether it is on ``mask`` (False outside the picture)."""
@@ -255,9 +281,11 @@ def turn_evidence(image, mask, ends, colours, radius, partings=()) -> tuple:
     """
     return (
         lambda i, j, curve: gap_hidden(image, mask, curve, (ends[i], ends[j]), radius),
-        lambda i, j, curve: cut_ends_alike(ends[i], ends[j], i, j, curve, mask, colours, radius),
         lambda i, j, curve: cut_ends_alike(
-            ends[i], ends[j], i, j, curve, mask, colours, radius, TURN_CUT_ENDS
+            ends[i], ends[j], i, j, curve, mask, colours, radius, image=image
+        ),
+        lambda i, j, curve: cut_ends_alike(
+            ends[i], ends[j], i, j, curve, mask, colours, radius, TURN_CUT_ENDS, image
         ),
         lambda i, j, curve: (
             ((i, j) in partings or (j, i) in partings)
