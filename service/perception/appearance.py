@@ -118,10 +118,11 @@ def end_colours(
     end_piece = np.array([end.piece for end in ends], np.int64)
     end_at_start = np.array([end.at_start for end in ends], np.bool_)
     image = np.ascontiguousarray(image_bgr, dtype=np.uint8)
+    widths = np.array([getattr(end, "width", 0.0) for end in ends], np.float64)
 
     def stretch(skip):
         return _stretch_colours(
-            image, joints, starts, end_piece, end_at_start, skip, radius, distance
+            image, joints, starts, end_piece, end_at_start, skip, radius, distance, widths
         )
 
     colour, spread, lengths = stretch(STRETCH_SKIP_RADII * radius)
@@ -145,7 +146,9 @@ def end_colours(
     return EndColours(colour, spread)
 
 
-def _stretch_colours(image, joints, starts, end_piece, end_at_start, skip, radius, distance):
+def _stretch_colours(
+    image, joints, starts, end_piece, end_at_start, skip, radius, distance, widths=None
+):
     """Median colour and scatter of every end's stretch from ``skip`` on, and the
     length of its piece (see :func:`end_colours`)."""
     samples, bounds, pixels, lengths = _appearance_kernels.end_samples(
@@ -157,7 +160,11 @@ def _stretch_colours(image, joints, starts, end_piece, end_at_start, skip, radiu
     limit = WIDE_FACTOR * (radius + 0.5)
     wide = np.zeros(len(samples), np.bool_)
     if distance is not None and len(samples):
-        wide = distance[pixels[:, 0], pixels[:, 1]] > limit
+        # Each end against its own cable's width where that is wider than the
+        # picture's typical one: a thick cable is no blob.
+        own = np.maximum(radius, np.asarray(widths, np.float64)) if widths is not None else None
+        per_sample = limit if own is None else np.repeat(WIDE_FACTOR * (own + 0.5), np.diff(bounds))
+        wide = distance[pixels[:, 0], pixels[:, 1]] > per_sample
     colour, spread = _appearance_kernels.colour_medians(
         np.ascontiguousarray(lab), bounds, wide, MIN_SAMPLES, int(np.ceil(limit))
     )
