@@ -406,3 +406,42 @@ def test_a_cables_own_tip_on_a_bend_stays_a_tip(seed, position, direction, half_
     assert fronts[1] is not None
     assert appearance.own_tip_both_ways(fronts, half_width)
     assert not appearance.cut_square(mask, position, direction, half_width, skip)
+
+
+def test_a_thick_cables_end_keeps_its_colour_against_its_own_width():
+    """A cable twice as thick as the picture's typical one is no blob segmented with the
+    cables: its samples are judged wide against its own width (occluded 330162: a thick
+    purple cable beside thin ones had no colour at either end, so its gap under an
+    object of the background's colour was never joined)."""
+    image = np.full((80, 220, 3), 60, np.uint8)
+    cv2.line(image, (10, 40), (200, 40), (200, 60, 140), 17)  # a thick purple cable
+    mask = np.zeros(image.shape[:2], np.uint8)
+    cv2.line(mask, (10, 40), (200, 40), 1, 17)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    pieces = [np.column_stack([np.linspace(20, 190, 35), np.full(35, 40.0)])]
+    radius = 3.5  # the picture's typical (thin) cable
+    ends = [
+        ChainEnd(0, at_start, np.zeros(2), np.zeros(2), width=8.5) for at_start in (True, False)
+    ]
+    assert appearance.end_colours(image, pieces, ends, radius, distance).known.all()
+    # Read against the typical width alone (an end of unknown width) it has none.
+    unknown = [ChainEnd(0, at_start, np.zeros(2), np.zeros(2)) for at_start in (True, False)]
+    assert not appearance.end_colours(image, pieces, unknown, radius, distance).known.any()
+
+
+def test_only_the_open_stretch_of_a_gap_counts_as_what_the_ground_must_hide():
+    """Of a gap's curve, what an object of the background's own colour would have to
+    hide is the stretch off the mask that looks like the open background: not the
+    pieces' own tips the curve starts on, nor the part under an object seen over it."""
+    from service.perception.gap_evidence import open_length
+
+    image, mask, curve, ends = gap_scene((60, 140, 60), box=(130, 178))
+    # 91 px off the mask (the pieces' round caps reach x 83 and 177); the box shows
+    # over x 130-178.
+    assert open_length(curve, mask, None, ends, 3.5) == 91.0
+    assert 40.0 <= open_length(curve, mask, image, ends, 3.5) <= 48.0
+    open_image, _, _, _ = gap_scene(None)
+    assert open_length(curve, mask, open_image, ends, 3.5) == 91.0
+    # The curve started 20 px back on the first piece: no more open.
+    longer = np.vstack([np.column_stack([np.arange(58.0, 78.0), np.full(20, 50.0)]), curve])
+    assert open_length(longer, mask, None, ends, 3.5) == 91.0
