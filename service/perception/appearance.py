@@ -118,11 +118,10 @@ def end_colours(
     end_piece = np.array([end.piece for end in ends], np.int64)
     end_at_start = np.array([end.at_start for end in ends], np.bool_)
     image = np.ascontiguousarray(image_bgr, dtype=np.uint8)
-    widths = np.array([getattr(end, "width", 0.0) for end in ends], np.float64)
 
     def stretch(skip):
         return _stretch_colours(
-            image, joints, starts, end_piece, end_at_start, skip, radius, distance, widths
+            image, joints, starts, end_piece, end_at_start, skip, radius, distance
         )
 
     colour, spread, lengths = stretch(STRETCH_SKIP_RADII * radius)
@@ -146,9 +145,7 @@ def end_colours(
     return EndColours(colour, spread)
 
 
-def _stretch_colours(
-    image, joints, starts, end_piece, end_at_start, skip, radius, distance, widths=None
-):
+def _stretch_colours(image, joints, starts, end_piece, end_at_start, skip, radius, distance):
     """Median colour and scatter of every end's stretch from ``skip`` on, and the
     length of its piece (see :func:`end_colours`)."""
     samples, bounds, pixels, lengths = _appearance_kernels.end_samples(
@@ -160,11 +157,7 @@ def _stretch_colours(
     limit = WIDE_FACTOR * (radius + 0.5)
     wide = np.zeros(len(samples), np.bool_)
     if distance is not None and len(samples):
-        # Each end against its own cable's width where that is wider than the
-        # picture's typical one: a thick cable is no blob.
-        own = np.maximum(radius, np.asarray(widths, np.float64)) if widths is not None else None
-        per_sample = limit if own is None else np.repeat(WIDE_FACTOR * (own + 0.5), np.diff(bounds))
-        wide = distance[pixels[:, 0], pixels[:, 1]] > per_sample
+        wide = distance[pixels[:, 0], pixels[:, 1]] > limit
     colour, spread = _appearance_kernels.colour_medians(
         np.ascontiguousarray(lab), bounds, wide, MIN_SAMPLES, int(np.ceil(limit))
     )

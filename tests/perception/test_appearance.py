@@ -408,27 +408,6 @@ def test_a_cables_own_tip_on_a_bend_stays_a_tip(seed, position, direction, half_
     assert not appearance.cut_square(mask, position, direction, half_width, skip)
 
 
-def test_a_thick_cables_end_keeps_its_colour_against_its_own_width():
-    """A cable twice as thick as the picture's typical one is no blob segmented with the
-    cables: its samples are judged wide against its own width (occluded 330162: a thick
-    purple cable beside thin ones had no colour at either end, so its gap under an
-    object of the background's colour was never joined)."""
-    image = np.full((80, 220, 3), 60, np.uint8)
-    cv2.line(image, (10, 40), (200, 40), (200, 60, 140), 17)  # a thick purple cable
-    mask = np.zeros(image.shape[:2], np.uint8)
-    cv2.line(mask, (10, 40), (200, 40), 1, 17)
-    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
-    pieces = [np.column_stack([np.linspace(20, 190, 35), np.full(35, 40.0)])]
-    radius = 3.5  # the picture's typical (thin) cable
-    ends = [
-        ChainEnd(0, at_start, np.zeros(2), np.zeros(2), width=8.5) for at_start in (True, False)
-    ]
-    assert appearance.end_colours(image, pieces, ends, radius, distance).known.all()
-    # Read against the typical width alone (an end of unknown width) it has none.
-    unknown = [ChainEnd(0, at_start, np.zeros(2), np.zeros(2)) for at_start in (True, False)]
-    assert not appearance.end_colours(image, pieces, unknown, radius, distance).known.any()
-
-
 def test_only_the_open_stretch_of_a_gap_counts_as_what_the_ground_must_hide():
     """Of a gap's curve, what an object of the background's own colour would have to
     hide is the stretch off the mask that looks like the open background: not the

@@ -77,12 +77,11 @@ def test_stubs_by_the_edge_and_gaps_with_a_tip_nearby_come_out_whole(family, see
     assert score.frame.correct, score.frame.coverage
 
 
-@pytest.mark.parametrize("seed", [330008, 330076, 330162])
-def test_gaps_partly_under_seen_objects_and_thick_cables_come_out_whole(seed):
+@pytest.mark.parametrize("seed", [330008, 330076])
+def test_gaps_partly_under_seen_objects_come_out_whole(seed):
     """Tuning scenes (occluded, true mask): a gap under an object of the background's
     colour and a grey box beside it, over 19 radii in all but most of it under the box
     (330008); a bend under a grey box whose turn curves start on the pieces' own tips
-    (330076); a thick cable's gap under an object of the background's colour, its ends'
-    colours read against its own width (330162). Each cable one chain."""
+    (330076). Each cable one chain."""
     score, _ = evaluate_scene(make_family_scene("occluded", seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
