@@ -285,6 +285,20 @@ def gap_hidden(
     )
 
 
+def unlike_background(
+    image_bgr: np.ndarray, mask: np.ndarray, points: np.ndarray, ends: tuple, radius: float
+) -> np.ndarray:
+    """Per (x, y) point (off the foreground ``mask``), whether the image there differs
+    from the open background beside the two ``ends``' cables as :func:`gap_hidden`
+    reads it (something seen over it); all False when that background cannot be read."""
+    points = np.asarray(points, np.float64).reshape(-1, 2)
+    background = background_beside(image_bgr, mask, ends, radius)
+    if background is None or not len(points):
+        return np.zeros(len(points), bool)
+    colour, spread = background
+    return _lab_distance(_lab_means(image_bgr, points), colour) > COLOUR_TOLERANCE + 2 * spread
+
+
 def _off_mask(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """The (x, y) ``points`` inside the picture that lie off the foreground ``mask``."""
     height, width = mask.shape

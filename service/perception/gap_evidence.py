@@ -23,6 +23,7 @@ from service.perception.appearance import (
     gap_hidden,
     out_of_view,
     reads_own_tip,
+    unlike_background,
 )
 from service.perception.geometry import polyline_length
 
@@ -33,6 +34,13 @@ from service.perception.geometry import polyline_length
 # more at each end stand for the ends' fits stopping short of the object's border and
 # the curve running wider than the hidden stretch (as in OPEN_GAP_RADII).
 CUT_GAP_RADII = 19.0
+# Or, measured on the curve's open stretch alone (:func:`open_length`: off the
+# foreground and under nothing the image shows), up to this many: the longest run of
+# cable an occluder of the issue's (15 radii long, up to 8 wide) hides, along its
+# diagonal. The curve from two ends' fits starts on the pieces' own tips, and an object
+# seen over part of the gap explains that part: two objects side by side, one of the
+# background's colour, or a turn whose curve starts where the ends' fits begin.
+OPEN_HIDDEN_RADII = 17.0
 # An end near the picture's edge leaves the picture when it points out of it by at least
 # this sine (15 degrees off the edge's own line).
 BORDER_OUT_SINE = 0.26
@@ -53,10 +61,13 @@ def cut_ends_alike(
     colours: EndColours | None,
     radius: float,
     cut_needed: int = 2,
+    image: np.ndarray | None = None,
 ) -> bool:
     """Whether the free ends ``a`` (end ``i``) and ``b`` (end ``j``, both
     :class:`.merging.ChainEnd`), joined by ``curve`` at most :data:`CUT_GAP_RADII` long
-    (in :func:`cable_radius`: a thick cable's hidden stretch is longer in pixels), are
+    (in :func:`cable_radius`: a thick cable's hidden stretch is longer in pixels), or
+    whose open stretch (:func:`open_length`, read on ``image`` when given) is at most
+    :data:`OPEN_HIDDEN_RADII`, are
     both cut (the foreground stops
     right ahead of each, :func:`.appearance.cut_square`) and look like one cable's
     (:func:`.appearance.ends_alike`: both of a known, agreeing colour and of one width).
@@ -79,7 +90,10 @@ def cut_ends_alike(
     """
     if colours is None:
         return False
-    if polyline_length(curve) > CUT_GAP_RADII * cable_radius(radius, a.width, b.width):
+    cable = cable_radius(radius, a.width, b.width)
+    if polyline_length(curve) > CUT_GAP_RADII * cable and (
+        open_length(curve, mask, image, (a, b), radius) > OPEN_HIDDEN_RADII * cable
+    ):
         return False
     if not ends_alike(colours, i, j, (a.width, b.width)):
         return False
@@ -193,6 +207,30 @@ def open_gap_too_long(curve, mask, limit, hidden) -> bool:
     return float(steps[off].sum()) > limit and not hidden()
 
 
+def open_length(curve, mask, image, ends, radius) -> float:
+    """How much of a gap's ``curve`` ((x, y) samples about 1 px apart) a cable along it
+    would have to be hidden by something of the background's own colour: the px of it
+    off the foreground ``mask`` (or outside the picture), less, with ``image``, those where
+    the image shows something over the curve (unlike the open background beside the
+    two ``ends``' cables, :func:`.appearance.unlike_background`).
+
+    The curve from two ends' fits runs first over the pieces' own tips, on the
+    foreground; and an object seen over part of a gap explains that part, however long.
+    What is left is what an object of the background's colour must hide."""
+    curve = np.asarray(curve, np.float64)
+    if len(curve) < 2:
+        return 0.0
+    inside, seen = _samples_on_mask(curve, mask)
+    # Outside the picture nothing is seen over the curve either: open.
+    open_ground = ~seen
+    judged = inside & ~seen
+    if image is not None and judged.any():
+        open_ground[judged] = ~unlike_background(image, mask, curve[judged], ends, radius)
+    steps = np.hypot(*np.diff(curve, axis=0).T)
+    # A step counts as open when the sample it reaches is.
+    return float(steps[open_ground[1:]].sum())
+
+
 def _samples_on_mask(curve: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per (x, y) sample of ``curve``: whether its pixel is inside the picture, and
     whether it is on ``mask`` (False outside the picture)."""
@@ -255,9 +293,11 @@ def turn_evidence(image, mask, ends, colours, radius, partings=()) -> tuple:
     """
     return (
         lambda i, j, curve: gap_hidden(image, mask, curve, (ends[i], ends[j]), radius),
-        lambda i, j, curve: cut_ends_alike(ends[i], ends[j], i, j, curve, mask, colours, radius),
         lambda i, j, curve: cut_ends_alike(
-            ends[i], ends[j], i, j, curve, mask, colours, radius, TURN_CUT_ENDS
+            ends[i], ends[j], i, j, curve, mask, colours, radius, image=image
+        ),
+        lambda i, j, curve: cut_ends_alike(
+            ends[i], ends[j], i, j, curve, mask, colours, radius, TURN_CUT_ENDS, image
         ),
         lambda i, j, curve: (
             ((i, j) in partings or (j, i) in partings)

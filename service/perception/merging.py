@@ -1004,7 +1004,7 @@ def merge_chains(
                 )
             if gap_hidden(image, mask, curve, (a, b), radius):
                 return True
-            return cut_ends_alike(a, b, i, j, curve, mask, colours, radius)
+            return cut_ends_alike(a, b, i, j, curve, mask, colours, radius, image=image)
 
     open_gap = None
     if hidden_gap is not None:

@@ -406,3 +406,21 @@ def test_a_cables_own_tip_on_a_bend_stays_a_tip(seed, position, direction, half_
     assert fronts[1] is not None
     assert appearance.own_tip_both_ways(fronts, half_width)
     assert not appearance.cut_square(mask, position, direction, half_width, skip)
+
+
+def test_only_the_open_stretch_of_a_gap_counts_as_what_the_ground_must_hide():
+    """Of a gap's curve, what an object of the background's own colour would have to
+    hide is the stretch off the mask that looks like the open background: not the
+    pieces' own tips the curve starts on, nor the part under an object seen over it."""
+    from service.perception.gap_evidence import open_length
+
+    image, mask, curve, ends = gap_scene((60, 140, 60), box=(130, 178))
+    # 91 px off the mask (the pieces' round caps reach x 83 and 177); the box shows
+    # over x 130-178.
+    assert open_length(curve, mask, None, ends, 3.5) == 91.0
+    assert 40.0 <= open_length(curve, mask, image, ends, 3.5) <= 48.0
+    open_image, _, _, _ = gap_scene(None)
+    assert open_length(curve, mask, open_image, ends, 3.5) == 91.0
+    # The curve started 20 px back on the first piece: no more open.
+    longer = np.vstack([np.column_stack([np.arange(58.0, 78.0), np.full(20, 50.0)]), curve])
+    assert open_length(longer, mask, None, ends, 3.5) == 91.0

@@ -75,3 +75,13 @@ def test_stubs_by_the_edge_and_gaps_with_a_tip_nearby_come_out_whole(family, see
     object with another cable's round tip nearby over open background. One chain each."""
     score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
+
+
+@pytest.mark.parametrize("seed", [330008, 330076])
+def test_gaps_partly_under_seen_objects_come_out_whole(seed):
+    """Tuning scenes (occluded, true mask): a gap under an object of the background's
+    colour and a grey box beside it, over 19 radii in all but most of it under the box
+    (330008); a bend under a grey box whose turn curves start on the pieces' own tips
+    (330076). Each cable one chain."""
+    score, _ = evaluate_scene(make_family_scene("occluded", seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
