@@ -70,7 +70,7 @@ def bridge_from_the_fits(
     (:func:`_beyond_hooks`), unless the end is in ``curve_given``: its bridge is a curve
     found elsewhere (a turn out of sight, :mod:`.turn_joins`), which starts where that
     curve does. Returns the ends and the arc lengths to trim per end (for
-    :func:`assemble_paths`).
+    :func:`.paths.assemble_paths`).
     """
     adjusted = list(ends)
     trims = np.zeros(len(ends))

@@ -15,20 +15,21 @@ straight one; two ends of clearly different colour (:mod:`.appearance`) cost mor
 end whose cable runs on to the picture's border, and any gap whose curve would run
 outside the picture, is a cable leaving the picture, never a gap to bridge.
 
-Each gap is filled with the curve ``DetectParams.gap_curve`` names (:func:`gap_curve`):
-by default "smooth", a cubic along both end directions that spreads the turn over the
-whole gap as an elastic cable bends; or the paper's "natural" curve, straight along the
-end directions and then one arc of constant curvature.
+Each gap is filled with the curve ``DetectParams.gap_curve`` names
+(:func:`.paths.gap_curve`): by default "smooth", a cubic along both end directions that
+spreads the turn over the whole gap as an elastic cable bends; or the paper's "natural"
+curve, straight along the end directions and then one arc of constant curvature. The
+joined pieces and their bridges are strung into paths by :func:`.paths.assemble_paths`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from schemas import DetectParams, GapCurve
+from schemas import DetectParams
 from service.perception import _merging_kernels, _pruning_kernels
 from service.perception.appearance import (
     EndColours,
@@ -41,7 +42,6 @@ from service.perception.bridge_ends import (
     ends_of_short_pieces_from_partners,
     ends_through_short_pieces,
     free_ends_beside_crossings,
-    partners,
 )
 from service.perception.deadline import Deadline, check
 from service.perception.gap_evidence import (
@@ -55,8 +55,9 @@ from service.perception.gap_evidence import (
     turn_evidence,
     turn_out_of_view,
 )
-from service.perception.geometry import arc_lengths, polyline_length
+from service.perception.geometry import polyline_length
 from service.perception.pairing import Components, cheapest_pairing
+from service.perception.paths import MergedPath, assemble_paths, gap_curve
 from service.perception.short_pieces import (
     ends_along_straight_sides,
     ends_of_stubs,
@@ -109,19 +110,6 @@ class ChainEnd:
     curvature: float = 0.0
     skip: float = 0.0
     width: float = 0.0
-
-
-@dataclass
-class MergedPath:
-    """A merged DLO as a dense polyline before resampling.
-
-    ``filled[k]`` is True when edge ``k`` (vertices ``k`` to ``k + 1``) was drawn by
-    the merging step across a gap rather than taken from a fitted piece.
-    """
-
-    vertices: np.ndarray
-    filled: np.ndarray
-    pieces: list[int] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -280,61 +268,6 @@ def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> 
             float(params.max_gap),
             float(radius),
         )
-    )
-
-
-def gap_curve(
-    start: np.ndarray,
-    leaving: np.ndarray,
-    end: np.ndarray,
-    arriving: np.ndarray,
-    step: float = 1.0,
-    shape: GapCurve | str = GapCurve.smooth,
-) -> np.ndarray:
-    """The curve that bridges a gap between two chain ends.
-
-    With ``shape="natural"`` (Keipour et al.), it leaves ``start`` along ``leaving``,
-    goes straight while that still helps, turns with one constant rate (the gentlest
-    arc tangent to both end directions), and arrives at ``end`` heading along
-    ``arriving``. When the two end rays do not meet ahead of both ends (an S-shaped or
-    backward gap), no single arc fits, and a cubic Bezier with tangents along both
-    directions is used instead.
-
-    With ``shape="smooth"``, it is a cubic Bezier along both end directions whose
-    handles would trace a circular arc between symmetric ends: the turning is spread
-    over the whole gap instead of following a straight stretch, as an elastic cable
-    bends. It is the default of :class:`schemas.DetectParams` (``gap_curve``): on
-    generated scenes its bridges follow hidden stretches more closely.
-
-    Parameters
-    ----------
-    start, end : ndarray
-        ``[x, y]`` of the two ends.
-    leaving, arriving : ndarray
-        Unit headings at ``start`` and at ``end``.
-    step : float
-        Spacing of the returned samples.
-    shape : {"smooth", "natural"}
-        Default "smooth", as ``DetectParams.gap_curve``.
-
-    Returns
-    -------
-    ndarray
-        ``(M, 2)`` samples from ``start`` to ``end`` inclusive.
-    """
-    # Compiled: a frame bridges hundreds of gaps and crossings. The plain versions are
-    # the references in tests/perception/references/merging.py.
-    kernel = (
-        _merging_kernels.smooth_curve_kernel
-        if GapCurve(shape) is GapCurve.smooth
-        else _merging_kernels.natural_curve_kernel
-    )
-    return kernel(
-        np.asarray(start, np.float64),
-        np.asarray(leaving, np.float64),
-        np.asarray(end, np.float64),
-        np.asarray(arriving, np.float64),
-        float(step),
     )
 
 
@@ -693,87 +626,6 @@ def _grown_zone_labels(positions: np.ndarray, zones: np.ndarray, reach: int = 3)
         np.ascontiguousarray(zones_u8), positions, int(reach)
     )
     return labels
-
-
-def assemble_paths(
-    pieces: list[np.ndarray],
-    ends: list[ChainEnd],
-    joins: list[tuple[int, int, float]],
-    curve: GapCurve | str = GapCurve.smooth,
-    trims: np.ndarray | None = None,
-    bridges: dict[tuple[int, int], np.ndarray] | None = None,
-) -> list[MergedPath]:
-    """Walk every group of joined pieces from one free end to the other; each join is
-    bridged by :func:`gap_curve` of the given ``curve`` shape, or by the curve
-    ``bridges[i, j]`` (from end ``i`` to end ``j``) where given: the shape a turn out
-    of sight was found hidden along (:mod:`.turn_joins`), or a strand's own side of a
-    stretch where it touches another (:mod:`.touching`). ``trims[e]`` (optional)
-    is the arc length left out of end ``e``'s piece at that end, where its bridge
-    starts further in."""
-    partner = partners(len(ends), joins)
-    if trims is not None:
-        pieces = _trimmed(pieces, trims)
-    visited = np.zeros(len(pieces), bool)
-    paths = []
-    for first_end in range(len(ends)):
-        piece = first_end // 2
-        if visited[piece] or partner[first_end] != -1:
-            continue
-        vertices, filled, order = [], [], []
-        entry = first_end
-        while True:
-            piece = entry // 2
-            visited[piece] = True
-            order.append(piece)
-            points = pieces[piece] if entry % 2 == 0 else pieces[piece][::-1]
-            filled.append(np.zeros(len(points) - 1, bool))
-            vertices.append(points)
-            exit_end = entry ^ 1
-            next_entry = partner[exit_end]
-            if next_entry == -1:
-                break
-            bridge = _given_bridge(bridges, exit_end, next_entry)
-            if bridge is None:
-                bridge = gap_curve(
-                    ends[exit_end].position,
-                    ends[exit_end].direction,
-                    ends[next_entry].position,
-                    -ends[next_entry].direction,
-                    shape=curve,
-                )
-            vertices.append(bridge[1:-1])
-            filled.append(np.ones(len(bridge) - 1, bool))
-            entry = next_entry
-        paths.append(MergedPath(np.concatenate(vertices), np.concatenate(filled), pieces=order))
-    return paths
-
-
-def _given_bridge(bridges, start: int, end: int) -> np.ndarray | None:
-    """The curve ``bridges`` holds from end ``start`` to end ``end`` (either way)."""
-    if not bridges:
-        return None
-    if (start, end) in bridges:
-        return bridges[start, end]
-    if (end, start) in bridges:
-        return bridges[end, start][::-1]
-    return None
-
-
-def _trimmed(pieces: list[np.ndarray], trims: np.ndarray) -> list[np.ndarray]:
-    """The pieces less the joints within ``trims[2 k]`` of piece ``k``'s start and
-    ``trims[2 k + 1]`` of its end (at least two joints kept)."""
-    result = []
-    ends = np.asarray(trims, np.float64).reshape(-1, 2).T.tolist()
-    for points, head, tail in zip(pieces, *ends, strict=True):
-        if head <= 0 and tail <= 0:
-            result.append(points)
-            continue
-        # The arc lengths never decrease: the joints kept are one run, found by bisection.
-        along = arc_lengths(points)
-        first = int(np.searchsorted(along, head, side="left"))
-        stop = int(np.searchsorted(along, along[-1] - tail, side="right"))
-        result.append(points[first:stop].copy() if stop - first >= 2 else points)
-    return result
 
 
 def ends_on_bends(

@@ -42,14 +42,13 @@ from service.perception.geometry import (
 )
 from service.perception.merging import (
     Join,
-    MergedPath,
     chain_ends,
     choose_joins,
-    gap_curve,
     join_cost,
     merge_chains,
     tips_in_junctions,
 )
+from service.perception.paths import MergedPath, gap_curve
 from service.perception.pruning import prune_overlaps
 from service.perception.segmentation import (
     as_bgr,

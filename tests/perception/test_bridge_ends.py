@@ -15,7 +15,8 @@ from service.perception.bridge_ends import (
     free_ends_beside_crossings,
 )
 from service.perception.geometry import fit_where_skipped
-from service.perception.merging import ChainEnd, assemble_paths, chain_ends
+from service.perception.merging import ChainEnd, chain_ends
+from service.perception.paths import assemble_paths
 from tests.perception.references import bridge_ends as reference
 
 

@@ -7,7 +7,7 @@ choice of joins costing every pair of chain ends (the code the grid of
 import cv2
 import numpy as np
 
-from service.perception import _geometry_kernels, _merging_kernels, merging
+from service.perception import _geometry_kernels, _merging_kernels, merging, paths
 from service.perception.appearance import colour_penalty
 from service.perception.geometry import angle_between, end_fit, polyline_length
 from service.perception.pairing import Components
@@ -379,7 +379,7 @@ def choose_joins(
             limit = merging.MUTUAL_COST_FACTOR * params.merge_cost_threshold
             if not unlimited and picture is not None and cost <= limit:
                 a, b = ends[i], ends[j]
-                curve = merging.gap_curve(
+                curve = paths.gap_curve(
                     a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
                 )
                 height, width = picture
