@@ -81,9 +81,6 @@ BORDER_REACH_RADII = 6.0
 BORDER_REACH_PX = 2.0
 END_FIT_SPAN_PX = 40.0
 END_FIT_SPAN_RADII = 6.0
-# The share of the end-fit span a turn's cut end is read over again on its bend
-# (:func:`ends_on_bends`).
-BEND_SPAN_SHARE = 0.25
 # Thinning stops about a radius from the edge of the picture; an end this much
 # further in still counts as at the edge.
 BORDER_MARGIN_PX = 2.0
@@ -628,82 +625,6 @@ def _grown_zone_labels(positions: np.ndarray, zones: np.ndarray, reach: int = 3)
     return labels
 
 
-def ends_on_bends(
-    pieces: list[np.ndarray],
-    ends: list[ChainEnd],
-    span: float,
-    skip: float,
-    distance: np.ndarray | None,
-    full_width: float,
-    zones: np.ndarray | None,
-) -> list[ChainEnd]:
-    """``ends`` read again over a span short enough for the bend each lies on.
-
-    A cable that turns round under an object is often cut on its tight bend into the
-    turn itself: fitted over the usual span, a quadratic lags that bend by tens of
-    degrees and its tip lies off the cable, and the cut is read askew. Read as a loop's
-    end at its own crossing is (``_geometry_kernels.bend_aware_fit``: the span halved
-    while it turns by more than a quarter turn), the end follows the bend's last
-    stretch. Only for the turns under objects (:mod:`.turn_joins`): a cut's hook on a
-    gentler bend needs the long fit.
-
-    Returns
-    -------
-    list of ChainEnd
-        Per end, the end itself (the same object) where the shorter span reads it as
-        the usual fit does, or where an earlier step replaced the usual fit (a stub's
-        ends, a strand split off a touching stretch); else the end read on its bend.
-    """
-    if not pieces or len(ends) != 2 * len(pieces):
-        return ends
-    at_crossing = None if zones is None else tips_in_junctions(pieces, zones)
-    usual = chain_ends(pieces, span, skip, distance, full_width, at_crossing)
-    bent = chain_ends(pieces, BEND_SPAN_SHARE * span, skip, distance, full_width, at_crossing)
-    read = []
-    for end, plain, on_bend in zip(ends, usual, bent, strict=True):
-        as_fitted = np.allclose(plain.position, end.position) and np.allclose(
-            plain.direction, end.direction
-        )
-        if as_fitted and not np.allclose(on_bend.direction, plain.direction):
-            end = replace(
-                end,
-                position=on_bend.position,
-                direction=on_bend.direction,
-                curvature=on_bend.curvature,
-                skip=on_bend.skip,
-            )
-        read.append(end)
-    return read
-
-
-def within_picture(
-    tests: tuple[Callable[[int, int, np.ndarray], bool], ...], shape: tuple[int, ...]
-) -> tuple[Callable[[int, int, np.ndarray], bool], ...]:
-    """``tests`` of a turn's curve (``(i, j, curve) -> bool``) that pass only on curves
-    inside a picture of ``shape``: past its edge nothing need hide a cable, and the
-    edge cuts every cable that leaves the picture square. Two cables leaving it side
-    by side, read over a short span near the edge (:func:`ends_on_bends`), look like
-    one turning round beyond it (ariadne simple 00014, true mask)."""
-    height, width = shape[:2]
-
-    def inside(curve: np.ndarray) -> bool:
-        return bool(
-            (curve.min(axis=0) >= 0.0).all()
-            and curve[:, 0].max() <= width - 1
-            and curve[:, 1].max() <= height - 1
-        )
-
-    return tuple(
-        (lambda i, j, curve, test=test: inside(curve) and test(i, j, curve)) for test in tests
-    )
-
-
-def _read_on_bends(bent: list[ChainEnd], evidence) -> tuple[list[ChainEnd], tuple] | None:
-    """The ends read on their bends with the turn tests over them
-    (:func:`.turn_joins.turn_joins`' ``on_bends``), or None without ends."""
-    return (bent, evidence(bent)) if bent else None
-
-
 def merge_chains(
     pieces: list[np.ndarray],
     params: DetectParams,
@@ -912,15 +833,6 @@ def merge_chains(
             turn_bridges,
             TURN_EVIDENCE_ALONG_CURVE,
             turn_out_of_view(image, mask, seen, radius),
-            _read_on_bends(
-                ends_on_bends(pieces, seen, span, radius, distance, full_width, zones),
-                # Objects and cuts only: the parting strands' test reads no cut, and a
-                # cable's own round tip curls over so short a span (side_by_side 350008).
-                lambda bent: within_picture(
-                    turn_evidence(image, mask, bent, hues, radius),
-                    mask.shape,
-                ),
-            ),
         )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.

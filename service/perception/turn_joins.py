@@ -24,15 +24,6 @@ join is made here only on the image's evidence, after every other join
   far enough apart to turn round in one arc, is bridged as any gap is (the cuts say
   nothing of the curve's shape, :mod:`.bridge_ends`);
 - the two pieces agree in colour and width (:func:`.appearance.ends_alike`);
-- a pair no curve of the ends' usual readings passes on is tried again from the
-  ends read over a quarter of the end-fit span (``on_bends``,
-  :func:`.merging.ends_on_bends`): a strand cut on the turn's own tight bend, where
-  the usual fit lags the bend by tens of degrees, its tip off the cable and its cut
-  read askew. Only the tests for an object and for cuts apply there (a cable's own
-  round tip, read over so short a span, curls, and the parting strands' test reads
-  no cut), and on curves inside the picture. A turn found only so is bridged along
-  the curve found (the usual fits, from which a gap's bridge starts, are the ones off
-  the bend);
 - neither end has a better partner: the turns and every free pair of alike ends the
   merging step could have joined without evidence are paired together by the cheapest
   matching, each end left free at an explicit cost (:func:`.pairing.cheapest_pairing`),
@@ -487,7 +478,6 @@ def turn_joins(
     bridges: dict[tuple[int, int], np.ndarray] | None = None,
     along_curve: Sequence[bool] = (True,),
     out_of_view: Callable[[int, int, np.ndarray], bool] | None = None,
-    on_bends: tuple[list, Sequence[Callable[[int, int, np.ndarray], bool]]] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -534,12 +524,6 @@ def turn_joins(
         Whether a cable along the curve would be hidden all the way from end ``i`` to
         end ``j`` (nowhere over open background): of the curves the first test passes
         on, the shortest such is the bridge (:func:`_likeliest_shape`).
-    on_bends : (list of ChainEnd, sequence of callable) or None
-        The ends read again over a span short enough for the bend each lies on (a cut
-        end on the tight bend into the turn itself, where the usual fit lags the bend
-        by tens of degrees and its tip lies off the cable), with the tests of
-        ``evidence`` over those readings: a pair no curve of the usual readings passes
-        on, one of whose ends reads differently there, is tried again from them.
 
     Returns
     -------
@@ -578,39 +562,40 @@ def turn_joins(
             # the evidence holds on a curve of the turn's (a gap cut at a slant).
             rivals[i, j] = pair_cost
         cable = 0.5 * (ends[i].width + ends[j].width) or radius
-        # The ends as fitted, then, where either reads differently on its bend, as read
-        # there (a cut on the turn's own tight bend), with the tests over those readings
-        # and the turn bridged along its curve (the usual fits are off the bend).
-        readings = [(ends[i], ends[j], evidence, along_curve)]
-        if on_bends is not None and (
-            on_bends[0][i] is not ends[i] or on_bends[0][j] is not ends[j]
-        ):
-            readings.append((on_bends[0][i], on_bends[0][j], on_bends[1], (True,) * len(evidence)))
-        for a, b, tests, shapes in readings:
-            # From where each end's fit begins: over a cut's hook the fit's extrapolation
-            # may leave the cable (the bridge starts there too,
-            # :func:`.bridge_ends.bridge_from_the_fits`).
-            curves = hidden_turn_curves(
-                a.position - a.skip * a.direction,
-                a.direction,
-                b.position - b.skip * b.direction,
-                -b.direction,
-                cable,
-            )
-            if _turn_found(
-                i,
-                j,
-                a,
-                b,
-                curves,
-                tests,
-                cable,
-                pair_cost,
-                shapes,
-                out_of_view,
-                turns,
-                hidden_curves,
-            ):
+        a, b = ends[i], ends[j]
+        # From where each end's fit begins: over a cut's hook the fit's extrapolation
+        # may leave the cable (the bridge starts there too,
+        # :func:`.bridge_ends.bridge_from_the_fits`).
+        curves = hidden_turn_curves(
+            a.position - a.skip * a.direction,
+            a.direction,
+            b.position - b.skip * b.direction,
+            -b.direction,
+            cable,
+        )
+        # The strongest evidence any curve has picks the bridge: a curve an object
+        # is seen over before the shortest one the ends' cuts allow.
+        tried: list[np.ndarray] = []
+        for strength, test in enumerate(evidence):
+            passing = (curve for curve in _cached(curves, tried) if test(i, j, curve))
+            found = next(passing, None)
+            if found is not None:
+                # Where an object is seen over the turn, the cable lies under it all
+                # the way round, not out past its rim on open background.
+                hidden_all_along = None
+                if strength == 0 and out_of_view is not None:
+                    hidden_all_along = partial(out_of_view, i, j)
+                found = _likeliest_shape(found, passing, cable, hidden_all_along)
+                turns[i, j] = pair_cost
+                # The ends' cuts say only that the gap is short enough for an object of
+                # the background's own colour to hide: a turn seen on them alone is
+                # bridged as any gap is (from where the fits begin, a short piece along
+                # its partner, :mod:`.bridge_ends`), unless its strands lie too close to
+                # turn round in one arc (a bulb, which only the turn's curve follows).
+                apart = float(np.hypot(*(a.position - b.position)))
+                shaped = strength < len(along_curve) and along_curve[strength]
+                if shaped or apart < 2.0 * HIDDEN_BEND_RADII[0] * cable:
+                    hidden_curves[i, j] = found
                 break
     if not turns:
         return []
@@ -627,52 +612,6 @@ def turn_joins(
                 if bridges is not None and (i, j) in hidden_curves:
                     bridges[i, j] = hidden_curves[i, j]
     return sorted(made, key=lambda item: item[2])
-
-
-def _turn_found(
-    i: int,
-    j: int,
-    a,
-    b,
-    curves: Iterator[np.ndarray],
-    evidence: Sequence[Callable[[int, int, np.ndarray], bool]],
-    cable: float,
-    pair_cost: float,
-    along_curve: Sequence[bool],
-    out_of_view: Callable[[int, int, np.ndarray], bool] | None,
-    turns: dict[tuple[int, int], float],
-    hidden_curves: dict[tuple[int, int], np.ndarray],
-) -> bool:
-    """Whether the image says something hides a cable along one of ``curves`` from end
-    ``a`` (index ``i``) to end ``b`` (``j``), by any test of ``evidence``; if so the
-    pair is recorded in ``turns`` and, where its bridge follows the curve, the curve
-    the strongest passing test passes on in ``hidden_curves`` (:func:`turn_joins`)."""
-    # The strongest evidence any curve has picks the bridge: a curve an object is seen
-    # over before the shortest one the ends' cuts allow.
-    tried: list[np.ndarray] = []
-    for strength, test in enumerate(evidence):
-        passing = (curve for curve in _cached(curves, tried) if test(i, j, curve))
-        found = next(passing, None)
-        if found is None:
-            continue
-        # Where an object is seen over the turn, the cable lies under it all the way
-        # round, not out past its rim on open background.
-        hidden_all_along = None
-        if strength == 0 and out_of_view is not None:
-            hidden_all_along = partial(out_of_view, i, j)
-        found = _likeliest_shape(found, passing, cable, hidden_all_along)
-        turns[i, j] = pair_cost
-        # The ends' cuts say only that the gap is short enough for an object of the
-        # background's own colour to hide: a turn seen on them alone is bridged as any
-        # gap is (from where the fits begin, a short piece along its partner,
-        # :mod:`.bridge_ends`), unless its strands lie too close to turn round in one
-        # arc (a bulb, which only the turn's curve follows).
-        apart = float(np.hypot(*(a.position - b.position)))
-        shaped = strength < len(along_curve) and along_curve[strength]
-        if shaped or apart < 2.0 * HIDDEN_BEND_RADII[0] * cable:
-            hidden_curves[i, j] = found
-        return True
-    return False
 
 
 def _components(ends: list, joins: list[tuple[int, int, float]]) -> Components:

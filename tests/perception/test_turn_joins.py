@@ -10,7 +10,7 @@ import pytest
 from schemas import DetectParams
 from service.evaluation.synthetic_eval import evaluate_scene
 from service.perception.gap_evidence import strands_turn_out_of_sight
-from service.perception.merging import chain_ends, ends_on_bends, merge_chains, within_picture
+from service.perception.merging import merge_chains
 from service.perception.pairing import cheapest_pairing
 from service.perception.turn_joins import (
     bends_as_a_cable,
@@ -263,54 +263,3 @@ def _dense(points: np.ndarray) -> np.ndarray:
         for first, second in pairwise(points)
     ]
     return np.concatenate([*parts, points[-1:]])
-
-
-def test_a_loop_cut_on_its_bend_is_joined_from_the_ends_read_on_the_bend():
-    """Tuning scene 330063 of the loops family, true mask: an object of the background's
-    own colour hides part of a loop just below its crossing, cutting one strand on the
-    loop's tight bend. Fitted over the usual span, that end lags the bend and the cut
-    reads askew: no turn curve passed, two chains. Read over a quarter of the span
-    (:func:`.merging.ends_on_bends`), the turn is found and bridged along its curve."""
-    score, _ = evaluate_scene(make_family_scene("loops", 330063), 330063, mask_from_labels=True)
-    assert score.frame.correct, score.frame.coverage
-
-
-def test_ends_on_bends_read_a_bent_end_over_the_shorter_span_only():
-    """A piece that runs straight and then bends by a half turn over its last 30 px: its
-    bent end is read again along the bend's last stretch (the same object is kept for
-    the straight end, which the shorter span reads alike)."""
-    straight = np.column_stack([np.arange(0.0, 100.0, 5.0), np.full(20, 50.0)])
-    angles = np.linspace(0.0, np.pi, 7)[1:]
-    bend = np.column_stack([95.0 + 10.0 * np.sin(angles), 40.0 + 10.0 * np.cos(angles)])
-    piece = np.vstack([straight, bend])
-    ends = chain_ends([piece], 40.0, skip=0.0)
-    read = ends_on_bends([piece], ends, 40.0, 0.0, None, 0.0, None)
-    assert read[0] is ends[0]
-    assert read[1] is not ends[1]
-    # The bend's last stretch heads back (-x); the usual fit lags it.
-    assert read[1].direction[0] < ends[1].direction[0]
-    assert read[1].direction[0] < -0.9
-
-
-def test_turn_tests_within_the_picture_fail_on_curves_past_its_edge():
-    """Two cables leaving the picture's left edge side by side, read over a short span,
-    look like one turning round beyond it (ariadne simple 00014): a curve past the
-    edge passes no test, one inside passes as the test itself does."""
-    tests = within_picture((lambda i, j, curve: True,), (100, 200))
-    inside = np.column_stack([np.linspace(10.0, 50.0, 20), np.full(20, 40.0)])
-    past = inside - np.array([20.0, 0.0])
-    assert tests[0](0, 1, inside)
-    assert not tests[0](0, 1, past)
-    assert not within_picture((lambda i, j, curve: False,), (100, 200))[0](0, 1, inside)
-
-
-def test_two_cables_own_tips_are_not_a_turn_on_their_bend_readings():
-    """Tuning scene 350008 of the side_by_side family, true mask: two cables parting
-    from a stretch where they touch end in their own round tips side by side. Read
-    over a quarter of the fit span, the tips curl, and the parting strands' test (no
-    cut read, only where the curve leaves and meets the mask) passed on a curve
-    between them: the bend readings are tested for objects and cuts only."""
-    score, _ = evaluate_scene(
-        make_family_scene("side_by_side", 350008), 350008, mask_from_labels=True
-    )
-    assert score.frame.correct, score.frame.coverage
