@@ -259,14 +259,12 @@ def gap_hidden(
     background = background_beside(image_bgr, mask, ends, radius)
     if background is None:
         return False
-    colour, spread = background
 
     def mostly_unlike(points):
         points = _off_mask(points, mask)
         if len(points) < MIN_GAP_SAMPLES:
             return False
-        distance = _lab_distance(_lab_means(image_bgr, points), colour)
-        return bool(np.mean(distance > COLOUR_TOLERANCE + 2 * spread) > 0.5)
+        return bool(np.mean(_unlike(image_bgr, points, background)) > 0.5)
 
     curve = np.asarray(curve, np.float64)
     clear = GAP_END_CLEAR_RADII * radius
@@ -295,6 +293,14 @@ def unlike_background(
     background = background_beside(image_bgr, mask, ends, radius)
     if background is None or not len(points):
         return np.zeros(len(points), bool)
+    return _unlike(image_bgr, points, background)
+
+
+def _unlike(image_bgr: np.ndarray, points: np.ndarray, background: tuple) -> np.ndarray:
+    """Per (x, y) point, whether the image there differs from ``background`` (its
+    median Lab colour and scatter, :func:`background_beside`) by more than
+    :data:`COLOUR_TOLERANCE` plus twice the scatter, as two ends' colours do in
+    :func:`colour_penalty`."""
     colour, spread = background
     return _lab_distance(_lab_means(image_bgr, points), colour) > COLOUR_TOLERANCE + 2 * spread
 
