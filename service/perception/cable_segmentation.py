@@ -263,7 +263,8 @@ def cable_contrast(
     check(deadline, STAGE)
     mask = np.zeros((height, width), bool)
     if seeds.any():
-        seeds = _long_seed_runs(ratio, seeds)
+        widest_line = LINE_WIDTH * max(levels[index].step for index in used) / levels[0].step
+        seeds = _long_seed_runs(ratio, seeds, widest_line)
     if seeds.any():
         lines = seed_lines((height, width), levels, best_level, seeds)
         lines = _without_shadows(lines, seeds, height / seeds.shape[0])
@@ -290,7 +291,7 @@ def cable_contrast(
             int(min_component_area),
             int(max_hole_area),
         ).view(np.bool_)
-        mask = keep_cable_like(fill_slits(mask))
+        mask = keep_cable_like(fill_slits(mask), widest_line * levels[0].step)
     return CableContrast(mask, ratio, best_level, seeds, levels, used)
 
 
@@ -377,7 +378,7 @@ def _seeds(on_grid: list[np.ndarray], used: list[int]) -> tuple[np.ndarray, np.n
     return best, best_level, cue > threshold
 
 
-def _long_seed_runs(ratio: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+def _long_seed_runs(ratio: np.ndarray, seeds: np.ndarray, widest_line: float) -> np.ndarray:
     """The seeds on runs of line at least :data:`MIN_ELONGATION` of their widths long.
 
     A cable is a line over its whole length; a fleck of paint, a blob of texture or a
@@ -385,20 +386,66 @@ def _long_seed_runs(ratio: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     finest grid where the ratio is at least :data:`RUN_RATIO` of the seeds' lowest (a
     faint cable whose ratio wavers about the seeds' threshold, or a tight loop whose ratio
     is high only where the segments fit the curve, is one run, not many); its width and
-    length are measured as :func:`keep_cable_like` measures a component's.
+    length are measured as :func:`keep_cable_like` measures a component's, on the grid
+    mirrored at the picture's border (:func:`mirrored_at_border`): a run the border cuts
+    goes on beyond it unseen, and the picture shows only part of its length. (Measured
+    as seen, a cable leaving the picture a few widths past an object or a crossing lost
+    that whole stretch: segmentation pass 8.) ``widest_line`` is the widest line the
+    used levels find, in grid px (:func:`mirror_margin`).
     """
     line = ((ratio >= RUN_RATIO * ratio[seeds].min()) | seeds).view(np.uint8)
-    distance = _shared_kernels.distance_transform(line)
-    labels, area, width = _cable_segmentation_kernels.component_widths(line, distance)
+    pad = mirror_margin(line.shape, widest_line)
+    line_seen, seeds_seen = (mirrored_at_border(grid, pad) for grid in (line, seeds))
+    distance = _shared_kernels.distance_transform(line_seen)
+    labels, area, width = _cable_segmentation_kernels.component_widths(line_seen, distance)
     # A band w px wide has pixel distances 1 .. w / 2 to the background: four times their
     # mean is w + 2 on a grid this coarse.
     width = np.maximum(width - 2.0, 1.0)
     # The seeds are the evidence, the weaker pixels only join them: a run's seeds must
     # cover that length themselves.
-    seed_area = np.bincount(labels[seeds], minlength=area.size)
+    seed_area = np.bincount(labels[seeds_seen], minlength=area.size)
     keep = seed_area >= MIN_ELONGATION * width**2
     keep[0] = False
-    return seeds & keep[labels]
+    height, width_px = line.shape
+    return seeds & keep[labels[pad : pad + height, pad : pad + width_px]]
+
+
+def mirror_margin(shape: tuple[int, int], widest_line: float) -> int:
+    """How far (grid px) to mirror a grid at its border for :func:`_long_seed_runs`.
+
+    A run of a line ``w`` wide that the border cuts after a visible length of at least
+    half :data:`MIN_ELONGATION` widths passes when mirrored; one seen over
+    :data:`MIN_ELONGATION` widths passes as it is. So the mirror need reach no farther
+    than half that length of the widest line, and never past the grid's own size.
+    """
+    margin = int(np.ceil(0.5 * MIN_ELONGATION * widest_line))
+    return max(0, min(margin, min(shape) - 1))
+
+
+def mirrored_at_border(grid: np.ndarray, margin: int) -> np.ndarray:
+    """``grid`` with ``margin`` px of its own mirror image added beyond each side.
+
+    The picture's border is taken as a mirror (the edge pixel repeated, as
+    ``cv2.BORDER_REFLECT``): a line cut by the border runs on beyond it as far again as
+    it is seen, while a fleck the border cuts in half is made whole again, no longer, and
+    a fleck clear of the border is unchanged.
+
+    Parameters
+    ----------
+    grid : ndarray of bool or uint8
+        ``(H, W)``.
+    margin : int
+        At most ``min(H, W)``.
+
+    Returns
+    -------
+    ndarray
+        ``(H + 2 margin, W + 2 margin)``, of ``grid``'s dtype; ``grid`` itself at rows
+        and columns ``margin`` on.
+    """
+    if margin == 0:
+        return grid
+    return np.pad(grid, margin, mode="symmetric")
 
 
 def _within_scale_band(levels: list[Level], best_level: np.ndarray, seeds: np.ndarray) -> list[int]:
@@ -860,20 +907,26 @@ def fill_slits(mask: np.ndarray) -> np.ndarray:
     return filled
 
 
-def keep_cable_like(mask: np.ndarray) -> np.ndarray:
+def keep_cable_like(mask: np.ndarray, widest_line: float = 0.0) -> np.ndarray:
     """Drop the components of a mask that do not look like cables.
 
     A component's width is four times its mean distance to the background (a band of
     width w has distances spread evenly over 0..w/2), and its length its area over its
     width. Kept: components at least :data:`MIN_ELONGATION` widths long and no thinner
-    than the typical width (the area-weighted median) over :data:`SCALE_BAND`.
+    than the typical width (the area-weighted median) over :data:`SCALE_BAND`. Measured
+    on the mask mirrored at the picture's border (:func:`mirrored_at_border`, as far as
+    :func:`mirror_margin` asks for lines up to ``widest_line`` px wide; 0: as seen): a
+    cable the border cuts a few widths past an object is judged by more than the
+    stretch the picture shows.
     """
     if not mask.any():
         return mask
-    distance = _shared_kernels.distance_transform(mask.view(np.uint8))
-    labels, area, width = _cable_segmentation_kernels.component_widths(
-        mask.view(np.uint8), distance
-    )
+    margin = mirror_margin(mask.shape, widest_line)
+    seen = np.ascontiguousarray(mirrored_at_border(mask.view(np.uint8), margin))
+    distance = _shared_kernels.distance_transform(seen)
+    labels, area, width = _cable_segmentation_kernels.component_widths(seen, distance)
+    height, width_px = mask.shape
+    labels = labels[margin : margin + height, margin : margin + width_px]
     elongation = area / np.maximum(width, 1.0) ** 2
     order = np.argsort(width[1:]) + 1
     cumulative = np.cumsum(area[order])
