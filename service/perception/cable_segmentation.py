@@ -440,15 +440,16 @@ def weaker_lines_of_a_seeds_colour(
 
     Otsu's threshold splits the ratios of the whole picture: where the cables on white
     paper are strong lines, it is raised above a stretch of the same cable over a darker
-    table strip or past a crossing, whose ratio is still a three-sigma line
-    (:data:`MIN_RATIO`) but under the threshold; the seeds ended there and the mask with
-    them (segmentation pass 8: `bright` 330030, 330052). Hysteresis, as in an edge
-    detector: a pixel of a seed's run (:func:`_long_seed_runs`) whose ratio is at least
-    :data:`MIN_RATIO` is taken, where
+    table strip, past a crossing or along its highlight, whose ratio is still a
+    three-sigma line (:data:`MIN_RATIO`) but under the threshold; the seeds ended there
+    and the mask with them (segmentation pass 8: `bright` 330030, 330052, 330036).
+    Hysteresis, as in an edge detector: a pixel of a seed's run (:func:`_long_seed_runs`)
+    whose ratio is at least :data:`MIN_RATIO` is taken, where
 
-    - no seed has it within reach (:data:`REACH` px of its level): beside a seed the
-      cable is judged already, and a weaker line there is its rim or the shadow beside
-      it, which would only move the mask's border outward;
+    - no seed has it within reach (:data:`REACH` px of its level), or, within a seed's
+      reach, it runs along that seed's line between the same sides
+      (:func:`along_the_seeds_line`: the cable's highlight, not its shadow or a ground
+      of its colour beside it);
     - its line is the seed's cable by colour: nearer the colour of the nearest seed's
       line on the same run than half way to each colour round it (its two sides and its
       background), the half-way border of :func:`_extent` and
@@ -475,11 +476,10 @@ def weaker_lines_of_a_seeds_colour(
         The grid pixels taken (none of them a seed).
     """
     weaker = (runs > 0) & ~seeds & (ratio >= MIN_RATIO)
-    # Beside a seed the cable is judged already (within reach of its line).
     grid_step = shape[0] / seeds.shape[0]
     steps = np.array([level.step for level in levels])[best_level]
     off_seeds = cv2.distanceTransform((~seeds).view(np.uint8), cv2.DIST_L2, 3)
-    weaker &= off_seeds * grid_step > REACH * steps
+    beside_a_seed = weaker & (off_seeds * grid_step <= REACH * steps)
     taken = np.zeros(seeds.shape, bool)
     if not weaker.any():
         return taken
@@ -510,10 +510,51 @@ def weaker_lines_of_a_seeds_colour(
     colour = lines.colours[weak].astype(np.float64)
     from_seed = np.linalg.norm(colour[:, 0] - seed_colour, axis=1)
     seed_contrast = np.linalg.norm(colour[:, 1:] - seed_colour[:, None], axis=2).min(axis=1)
+    nearest = found[np.arange(weak.size), first]
+    beside = np.zeros(lines.steps.size, bool)
+    beside[lines.of_grid[beside_a_seed[rows, cols]]] = True
+    along = along_the_seeds_line(lines, weak, nearest, seed_colour)
     of_the_cable = np.zeros(lines.steps.size, bool)
-    of_the_cable[weak[has_seed & (from_seed < 0.5 * seed_contrast)]] = True
+    of_the_cable[weak[has_seed & (from_seed < 0.5 * seed_contrast) & (~beside[weak] | along)]] = (
+        True
+    )
     taken[rows, cols] = weaker[rows, cols] & of_the_cable[lines.of_grid]
     return taken
+
+
+def along_the_seeds_line(
+    lines: SeedLines, weak: np.ndarray, nearest: np.ndarray, seed_colour: np.ndarray
+) -> np.ndarray:
+    """Which weaker lines run along their nearest seed's line, between the same sides.
+
+    A weaker line within a seed's reach is either the same cable seen on another track
+    of its profile (its highlight, lighter than the seed's line, where the segment angle
+    falls between two of :data:`N_ORIENTATIONS`: segmentation pass 7) or something beside
+    the cable (its shadow, a ground of its colour). Along the cable its direction is the
+    seed's, within one angle step, and the colours :data:`OFFSET` px to either side of it
+    are the seed's sides: each nearer the seed's side than half way from that side to the
+    seed's line (the half-way border of :func:`_extent`). Beside the cable, the cable
+    itself is one of its sides.
+
+    Parameters
+    ----------
+    lines : SeedLines
+    weak, nearest : ndarray of int64
+        ``(M,)``: the weaker lines and, for each, its nearest seed's line.
+    seed_colour : ndarray
+        ``(M, 3)``: the colour of that seed's line.
+
+    Returns
+    -------
+    ndarray of bool
+        ``(M,)``.
+    """
+    turn = np.abs(np.angle(np.exp(2j * (lines.angles[weak] - lines.angles[nearest])))) / 2.0
+    seed_sides = lines.colours[nearest, 1:3].astype(np.float64)
+    own_sides = lines.colours[weak, 1:3].astype(np.float64)
+    side_contrast = np.linalg.norm(seed_sides - seed_colour[:, None], axis=2)
+    same_sides = (np.linalg.norm(own_sides - seed_sides, axis=2) < 0.5 * side_contrast).all(axis=1)
+    return (turn <= np.pi / N_ORIENTATIONS + 1e-6) & same_sides
 
 
 def mirror_margin(shape: tuple[int, int], widest_line: float) -> int:

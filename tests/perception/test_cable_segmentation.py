@@ -634,3 +634,41 @@ def test_a_cable_over_the_table_strip_keeps_its_weaker_stretch(seed, box, share_
     found = mask[y0:y1, x0:x1]
     assert np.count_nonzero(found & truth) >= 0.8 * np.count_nonzero(truth)
     assert not (found & ~truth).any()
+
+
+def test_a_dark_cables_highlight_beside_its_seeds_is_part_of_it():
+    """Within a seed's reach a weaker line that runs along the seed's line between the same
+    sides is the cable's highlight (segmentation pass 8: `bright` 330036, a grey cable whose
+    mask was a thin strip over 60 px, 1439 of these 1939 px found before, 1889 after)."""
+    from service.synthetic.families import make_family_scene
+
+    scene = make_family_scene("bright", 330036)
+    mask = segment_cables(scene.image)
+    truth = scene.mask[150:210, 770:850].astype(bool)
+    found = mask[150:210, 770:850]
+    assert np.count_nonzero(found & truth) >= 0.95 * np.count_nonzero(truth)
+    assert not (found & ~truth).any()
+
+
+def test_along_the_seeds_line_tells_a_highlight_from_a_shadow_beside_the_cable():
+    """The highlight has the seed's sides (the paper) on both its sides; a shadow line
+    beside the cable has the cable on one side; a line across the seed's is neither."""
+    from service.perception.cable_segmentation import along_the_seeds_line
+
+    paper, cable = [80.0, 0.0, 2.0], [30.0, 2.0, 0.0]
+    highlight, shadow = [55.0, 1.0, 1.0], [60.0, 0.0, 2.0]
+    colours = np.array(
+        [
+            [cable, paper, paper, paper],  # the seed's line
+            [highlight, paper, paper, paper],  # its highlight, along it
+            [shadow, cable, paper, paper],  # the shadow beside it
+            [highlight, paper, paper, paper],  # a line across it
+        ],
+        np.float32,
+    )
+    angles = np.array([0.0, np.pi / 16, 0.0, np.pi / 2])
+    n = angles.size
+    lines = SeedLines(np.zeros(n), np.zeros(n), angles, np.full(n, 2.0), colours, np.arange(n))
+    weak = np.array([1, 2, 3])
+    along = along_the_seeds_line(lines, weak, np.zeros(3, np.int64), np.tile(cable, (3, 1)))
+    assert along.tolist() == [True, False, False]
