@@ -22,7 +22,11 @@ backgrounds, for dark and bright cables together:
    :data:`SCALE_BAND` from the one that holds most of the lines' length are dropped
    (a wooden board's edge, a strip of paper margin).
 4. **Seeds.** Pixels whose ratio is above Otsu's threshold of the ratios (and above
-   :data:`MIN_RATIO` whatever Otsu says) are seeds; each gets its cable's colour and the
+   :data:`MIN_RATIO` whatever Otsu says) are seeds, on runs of line long for their
+   width (measured mirrored at the picture's border: :func:`mirrored_at_border`);
+   weaker pixels of such a run, still three-sigma lines, out of reach of its seeds and
+   of their colour, join them (:func:`weaker_lines_of_a_seeds_colour`: a cable over a
+   darker table strip). Each gets its cable's colour and the
    colours round it (both sides, the background). Seeds on shadows cables cast (the
    surface's tint at a lower lightness, or that tint moved part of the way towards the
    cable beside it: :func:`tinted_by_a_neighbour`), on
@@ -147,6 +151,10 @@ cables 2.5 to 3.5 px wide."""
 MIN_ELONGATION = 3.0
 """A component is at least this many of its widths long (by the measure of
 :func:`keep_cable_like`, a disc or a square is 2.3 widths long)."""
+NEAREST_SEEDS = 16
+"""A weaker line is judged against the nearest seed on its own run among this many
+nearest seeds (:func:`weaker_lines_of_a_seeds_colour`): a few level pixels' worth of a
+cable's seeds, enough to reach past a crossing cable's."""
 SLIT_HALF_WIDTH = 1.5
 """An enclosed gap none of whose pixels lies farther than this (px) from the mask, at most
 2 px wide, is a slit in a cable (:func:`fill_slits`)."""
@@ -263,8 +271,13 @@ def cable_contrast(
     check(deadline, STAGE)
     mask = np.zeros((height, width), bool)
     if seeds.any():
-        seeds = _long_seed_runs(ratio, seeds)
+        widest_line = LINE_WIDTH * max(levels[index].step for index in used) / levels[0].step
+        seeds, runs = _long_seed_runs(ratio, seeds, widest_line)
     if seeds.any():
+        strong = seeds
+        seeds = seeds | weaker_lines_of_a_seeds_colour(
+            (height, width), levels, best_level, ratio, seeds, runs
+        )
         lines = seed_lines((height, width), levels, best_level, seeds)
         lines = _without_shadows(lines, seeds, height / seeds.shape[0])
         lines = lines.take(~transitions(lines.colours))
@@ -272,10 +285,11 @@ def cable_contrast(
         lines = lines.take(
             ~of_a_side_surface(lines.colours, side_surfaces((height, width), levels, lines))
         )
+        of_a_seed = lines_of_grid_pixels(lines, seeds, strong)
         seeds = seeds.copy()
         seeds[np.nonzero(seeds)] = lines.of_grid >= 0
         check(deadline, STAGE)
-        candidates = _extent(lab8, lines, seeds)
+        candidates = _extent(lab8, lines, seeds, of_a_seed)
         check(deadline, STAGE)
         # Seeds hold the mask together: a candidate counts when it touches a seed.
         seeds_full = cv2.resize(
@@ -290,7 +304,7 @@ def cable_contrast(
             int(min_component_area),
             int(max_hole_area),
         ).view(np.bool_)
-        mask = keep_cable_like(fill_slits(mask))
+        mask = keep_cable_like(fill_slits(mask), widest_line * levels[0].step)
     return CableContrast(mask, ratio, best_level, seeds, levels, used)
 
 
@@ -377,28 +391,208 @@ def _seeds(on_grid: list[np.ndarray], used: list[int]) -> tuple[np.ndarray, np.n
     return best, best_level, cue > threshold
 
 
-def _long_seed_runs(ratio: np.ndarray, seeds: np.ndarray) -> np.ndarray:
-    """The seeds on runs of line at least :data:`MIN_ELONGATION` of their widths long.
+def _long_seed_runs(
+    ratio: np.ndarray, seeds: np.ndarray, widest_line: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The seeds on runs of line at least :data:`MIN_ELONGATION` of their widths long,
+    and the runs they lie on (a label per grid pixel, 0 off those runs).
 
     A cable is a line over its whole length; a fleck of paint, a blob of texture or a
     short stroke is a line over a few widths at most. A run is a connected stretch of the
     finest grid where the ratio is at least :data:`RUN_RATIO` of the seeds' lowest (a
     faint cable whose ratio wavers about the seeds' threshold, or a tight loop whose ratio
     is high only where the segments fit the curve, is one run, not many); its width and
-    length are measured as :func:`keep_cable_like` measures a component's.
+    length are measured as :func:`keep_cable_like` measures a component's, on the grid
+    mirrored at the picture's border (:func:`mirrored_at_border`): a run the border cuts
+    goes on beyond it unseen, and the picture shows only part of its length. (Measured
+    as seen, a cable leaving the picture a few widths past an object or a crossing lost
+    that whole stretch: segmentation pass 8.) ``widest_line`` is the widest line the
+    used levels find, in grid px (:func:`mirror_margin`).
     """
     line = ((ratio >= RUN_RATIO * ratio[seeds].min()) | seeds).view(np.uint8)
-    distance = _shared_kernels.distance_transform(line)
-    labels, area, width = _cable_segmentation_kernels.component_widths(line, distance)
+    pad = mirror_margin(line.shape, widest_line)
+    line_seen, seeds_seen = (mirrored_at_border(grid, pad) for grid in (line, seeds))
+    distance = _shared_kernels.distance_transform(line_seen)
+    labels, area, width = _cable_segmentation_kernels.component_widths(line_seen, distance)
     # A band w px wide has pixel distances 1 .. w / 2 to the background: four times their
     # mean is w + 2 on a grid this coarse.
     width = np.maximum(width - 2.0, 1.0)
     # The seeds are the evidence, the weaker pixels only join them: a run's seeds must
     # cover that length themselves.
-    seed_area = np.bincount(labels[seeds], minlength=area.size)
+    seed_area = np.bincount(labels[seeds_seen], minlength=area.size)
     keep = seed_area >= MIN_ELONGATION * width**2
     keep[0] = False
-    return seeds & keep[labels]
+    height, width_px = line.shape
+    labels = labels[pad : pad + height, pad : pad + width_px]
+    runs = np.where(keep[labels], labels, 0)
+    return seeds & (runs > 0), runs
+
+
+def weaker_lines_of_a_seeds_colour(
+    shape: tuple[int, int],
+    levels: list[Level],
+    best_level: np.ndarray,
+    ratio: np.ndarray,
+    seeds: np.ndarray,
+    runs: np.ndarray,
+) -> np.ndarray:
+    """The grid pixels of weaker line on a seed's run that are of that seed's cable.
+
+    Otsu's threshold splits the ratios of the whole picture: where the cables on white
+    paper are strong lines, it is raised above a stretch of the same cable over a darker
+    table strip, past a crossing or along its highlight, whose ratio is still a
+    three-sigma line (:data:`MIN_RATIO`) but under the threshold; the seeds ended there
+    and the mask with them (segmentation pass 8: `bright` 330030, 330052, 330036).
+    Hysteresis, as in an edge detector: a pixel of a seed's run (:func:`_long_seed_runs`)
+    whose ratio is at least :data:`MIN_RATIO` is taken, where
+
+    - no seed has it within reach (:data:`REACH` px of its level), or, within a seed's
+      reach, it runs along that seed's line between the same sides
+      (:func:`along_the_seeds_line`: the cable's highlight, not its shadow or a ground
+      of its colour beside it);
+    - its line is the seed's cable by colour: nearer the colour of the nearest seed's
+      line on the same run than half way to each colour round it (its two sides and its
+      background), the half-way border of :func:`_extent` and
+      :func:`of_a_side_surface`. A stroke of a table's print or an edge that touches a
+      cable's run has the colours round it.
+
+    Their lines judge no cable's end ahead of them (:func:`_extent`).
+
+    Parameters
+    ----------
+    shape : tuple of int
+        The image's ``(H, W)``.
+    levels : list of Level
+    best_level, ratio : ndarray
+        Per grid pixel, its best level and ratio (:func:`_seeds`).
+    seeds : ndarray of bool
+        The seeds on long runs.
+    runs : ndarray of int64
+        Their runs' labels (:func:`_long_seed_runs`).
+
+    Returns
+    -------
+    ndarray of bool
+        The grid pixels taken (none of them a seed).
+    """
+    weaker = (runs > 0) & ~seeds & (ratio >= MIN_RATIO)
+    grid_step = shape[0] / seeds.shape[0]
+    steps = np.array([level.step for level in levels])[best_level]
+    off_seeds = cv2.distanceTransform((~seeds).view(np.uint8), cv2.DIST_L2, 3)
+    beside_a_seed = weaker & (off_seeds * grid_step <= REACH * steps)
+    taken = np.zeros(seeds.shape, bool)
+    if not weaker.any():
+        return taken
+    both = seeds | weaker
+    lines = seed_lines(shape, levels, best_level, both)
+    rows, cols = np.nonzero(both)
+    # A line is a seed's when any seed of the grid falls in its level pixel.
+    strong = np.zeros(lines.steps.size, bool)
+    strong[lines.of_grid[seeds[rows, cols]]] = True
+    run_of_line = np.zeros(lines.steps.size, np.int64)
+    run_of_line[lines.of_grid] = runs[rows, cols]
+    weak = np.flatnonzero(~strong)
+    if weak.size == 0:
+        return taken
+    # Imported here, as in tinted_by_a_neighbour: only the contrast path pays for scipy.
+    from scipy.spatial import cKDTree
+
+    centres = np.stack([lines.centres_x, lines.centres_y], axis=1)
+    strong_index = np.flatnonzero(strong)
+    near = min(NEAREST_SEEDS, strong_index.size)
+    _, found = cKDTree(centres[strong_index]).query(centres[weak], k=near)
+    found = strong_index[np.asarray(found).reshape(weak.size, near)]
+    # The nearest of those on the weak line's own run (none: not taken).
+    same_run = run_of_line[found] == run_of_line[weak][:, None]
+    first = np.argmax(same_run, axis=1)
+    has_seed = same_run[np.arange(weak.size), first]
+    seed_colour = lines.colours[found[np.arange(weak.size), first], 0].astype(np.float64)
+    colour = lines.colours[weak].astype(np.float64)
+    from_seed = np.linalg.norm(colour[:, 0] - seed_colour, axis=1)
+    seed_contrast = np.linalg.norm(colour[:, 1:] - seed_colour[:, None], axis=2).min(axis=1)
+    nearest = found[np.arange(weak.size), first]
+    beside = np.zeros(lines.steps.size, bool)
+    beside[lines.of_grid[beside_a_seed[rows, cols]]] = True
+    along = along_the_seeds_line(lines, weak, nearest, seed_colour)
+    of_the_cable = np.zeros(lines.steps.size, bool)
+    of_the_cable[weak[has_seed & (from_seed < 0.5 * seed_contrast) & (~beside[weak] | along)]] = (
+        True
+    )
+    taken[rows, cols] = weaker[rows, cols] & of_the_cable[lines.of_grid]
+    return taken
+
+
+def along_the_seeds_line(
+    lines: SeedLines, weak: np.ndarray, nearest: np.ndarray, seed_colour: np.ndarray
+) -> np.ndarray:
+    """Which weaker lines run along their nearest seed's line, between the same sides.
+
+    A weaker line within a seed's reach is either the same cable seen on another track
+    of its profile (its highlight, lighter than the seed's line, where the segment angle
+    falls between two of :data:`N_ORIENTATIONS`: segmentation pass 7) or something beside
+    the cable (its shadow, a ground of its colour). Along the cable its direction is the
+    seed's, within one angle step, and the colours :data:`OFFSET` px to either side of it
+    are the seed's sides: each nearer the seed's side than half way from that side to the
+    seed's line (the half-way border of :func:`_extent`). Beside the cable, the cable
+    itself is one of its sides.
+
+    Parameters
+    ----------
+    lines : SeedLines
+    weak, nearest : ndarray of int64
+        ``(M,)``: the weaker lines and, for each, its nearest seed's line.
+    seed_colour : ndarray
+        ``(M, 3)``: the colour of that seed's line.
+
+    Returns
+    -------
+    ndarray of bool
+        ``(M,)``.
+    """
+    turn = np.abs(np.angle(np.exp(2j * (lines.angles[weak] - lines.angles[nearest])))) / 2.0
+    seed_sides = lines.colours[nearest, 1:3].astype(np.float64)
+    own_sides = lines.colours[weak, 1:3].astype(np.float64)
+    side_contrast = np.linalg.norm(seed_sides - seed_colour[:, None], axis=2)
+    same_sides = (np.linalg.norm(own_sides - seed_sides, axis=2) < 0.5 * side_contrast).all(axis=1)
+    return (turn <= np.pi / N_ORIENTATIONS + 1e-6) & same_sides
+
+
+def mirror_margin(shape: tuple[int, int], widest_line: float) -> int:
+    """How far (grid px) to mirror a grid at its border for :func:`_long_seed_runs`.
+
+    A run of a line ``w`` wide that the border cuts after a visible length of at least
+    half :data:`MIN_ELONGATION` widths passes when mirrored; one seen over
+    :data:`MIN_ELONGATION` widths passes as it is. So the mirror need reach no farther
+    than half that length of the widest line, and never past the grid's own size.
+    """
+    margin = int(np.ceil(0.5 * MIN_ELONGATION * widest_line))
+    return max(0, min(margin, min(shape) - 1))
+
+
+def mirrored_at_border(grid: np.ndarray, margin: int) -> np.ndarray:
+    """``grid`` with ``margin`` px of its own mirror image added beyond each side.
+
+    The picture's border is taken as a mirror (the edge pixel repeated, as
+    ``cv2.BORDER_REFLECT``): a line cut by the border runs on beyond it as far again as
+    it is seen, while a fleck the border cuts in half is made whole again, no longer, and
+    a fleck clear of the border is unchanged.
+
+    Parameters
+    ----------
+    grid : ndarray of bool or uint8
+        ``(H, W)``.
+    margin : int
+        At most ``min(H, W)``.
+
+    Returns
+    -------
+    ndarray
+        ``(H + 2 margin, W + 2 margin)``, of ``grid``'s dtype; ``grid`` itself at rows
+        and columns ``margin`` on.
+    """
+    if margin == 0:
+        return grid
+    return np.pad(grid, margin, mode="symmetric")
 
 
 def _within_scale_band(levels: list[Level], best_level: np.ndarray, seeds: np.ndarray) -> list[int]:
@@ -746,7 +940,9 @@ def tinted_by_a_neighbour(lines: SeedLines, reach: np.ndarray) -> np.ndarray:
     return found
 
 
-def _extent(lab8: np.ndarray, lines: SeedLines, seeds: np.ndarray) -> np.ndarray:
+def _extent(
+    lab8: np.ndarray, lines: SeedLines, seeds: np.ndarray, ends: np.ndarray | None = None
+) -> np.ndarray:
     """Image pixels near a seed whose colour is near the seed's cable colour.
 
     A pixel counts when any seed within reach says so, not only the nearest: where two
@@ -754,12 +950,24 @@ def _extent(lab8: np.ndarray, lines: SeedLines, seeds: np.ndarray) -> np.ndarray
     are still judged by the lower one's own seeds. Where a line of seeds ends, its last
     seeds also judge the line ahead of them at its full width (:data:`END_WIDTH`), out to
     the length of their segment: there the segment ran past the cable's end and its ratio
-    fell.
+    fell. Only the lines where ``ends`` (default: all) are judged ahead, and where they
+    end among those alone: the ratio of a weaker line taken by
+    :func:`weaker_lines_of_a_seeds_colour` did not fall because a segment ran past the
+    cable's end, and its end is no cable's end (past it lie a cable's bare wires, a
+    ferrule, the shadow beside it).
     """
-    ahead = [
-        np.where(line_goes_on(lines, seeds, sign, lab8.shape[0]), 0.0, HALF_LENGTH * lines.steps)
-        for sign in (1.0, -1.0)
-    ]
+    if ends is None:
+        ends = np.ones(lines.steps.size, bool)
+    judged = lines.take(ends)
+    ahead = []
+    for sign in (1.0, -1.0):
+        reach_ahead = np.zeros(lines.steps.size)
+        reach_ahead[ends] = np.where(
+            line_goes_on(judged, seeds & _grid_of(lines, seeds, ends), sign, lab8.shape[0]),
+            0.0,
+            HALF_LENGTH * judged.steps,
+        )
+        ahead.append(reach_ahead)
     return _cable_segmentation_kernels.colour_class_within_reach(
         lab8,
         lines.centres_y,
@@ -773,6 +981,28 @@ def _extent(lab8: np.ndarray, lines: SeedLines, seeds: np.ndarray) -> np.ndarray
         float(OFFSET),
         lines.colours,
     )
+
+
+def lines_of_grid_pixels(lines: SeedLines, grid: np.ndarray, pick: np.ndarray) -> np.ndarray:
+    """Which of ``lines`` hold a pixel of ``grid`` where ``pick`` (both ``(H, W)`` bool,
+    ``grid`` the seeds ``lines`` were gathered from, ``pick`` within it)."""
+    rows, cols = np.nonzero(grid)
+    held = np.zeros(lines.steps.size, bool)
+    line = lines.of_grid[pick[rows, cols]]
+    held[line[line >= 0]] = True
+    return held
+
+
+def _grid_of(lines: SeedLines, seeds: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """The grid seeds (``seeds``, those of ``lines``) that belong to the lines ``which``."""
+    rows, cols = np.nonzero(seeds)
+    grid = np.zeros(seeds.shape, bool)
+    line = lines.of_grid
+    # ``seeds`` holds exactly the grid seeds ``lines`` keeps, in the order of its of_grid
+    # entries that are not -1.
+    kept = line[line >= 0]
+    grid[rows, cols] = which[kept]
+    return grid
 
 
 def line_goes_on(lines: SeedLines, seeds: np.ndarray, sign: float, height: int) -> np.ndarray:
@@ -860,20 +1090,26 @@ def fill_slits(mask: np.ndarray) -> np.ndarray:
     return filled
 
 
-def keep_cable_like(mask: np.ndarray) -> np.ndarray:
+def keep_cable_like(mask: np.ndarray, widest_line: float = 0.0) -> np.ndarray:
     """Drop the components of a mask that do not look like cables.
 
     A component's width is four times its mean distance to the background (a band of
     width w has distances spread evenly over 0..w/2), and its length its area over its
     width. Kept: components at least :data:`MIN_ELONGATION` widths long and no thinner
-    than the typical width (the area-weighted median) over :data:`SCALE_BAND`.
+    than the typical width (the area-weighted median) over :data:`SCALE_BAND`. Measured
+    on the mask mirrored at the picture's border (:func:`mirrored_at_border`, as far as
+    :func:`mirror_margin` asks for lines up to ``widest_line`` px wide; 0: as seen): a
+    cable the border cuts a few widths past an object is judged by more than the
+    stretch the picture shows.
     """
     if not mask.any():
         return mask
-    distance = _shared_kernels.distance_transform(mask.view(np.uint8))
-    labels, area, width = _cable_segmentation_kernels.component_widths(
-        mask.view(np.uint8), distance
-    )
+    margin = mirror_margin(mask.shape, widest_line)
+    seen = np.ascontiguousarray(mirrored_at_border(mask.view(np.uint8), margin))
+    distance = _shared_kernels.distance_transform(seen)
+    labels, area, width = _cable_segmentation_kernels.component_widths(seen, distance)
+    height, width_px = mask.shape
+    labels = labels[margin : margin + height, margin : margin + width_px]
     elongation = area / np.maximum(width, 1.0) ** 2
     order = np.argsort(width[1:]) + 1
     cumulative = np.cumsum(area[order])
