@@ -16,13 +16,8 @@ from service.bench.rings import rings_image
 from service.perception import _cable_segmentation_kernels, detect
 from service.perception.cable_segmentation import (
     BACKGROUND_WINDOW,
-    HALF_LENGTH,
     JND,
-    N_ORIENTATIONS,
-    OFFSET,
-    REACH,
     WIDE_WINDOW,
-    SeedLines,
     _on_grid,
     _seeds,
     _sparse_median,
@@ -35,6 +30,7 @@ from service.perception.cable_segmentation import (
     tinted_by_a_neighbour,
 )
 from service.perception.deadline import Deadline, DeadlineExceeded
+from service.perception.seed_lines import HALF_LENGTH, N_ORIENTATIONS, OFFSET, REACH, SeedLines
 from service.perception.segmentation import segment, segment_with_cue
 from service.synthetic import make_scene
 from tests.perception.references import cable_segmentation as reference
@@ -549,7 +545,7 @@ def test_a_diagonal_line_ends_at_its_last_seed():
     """On the finest grid the point ahead of a diagonal line's last seed lies next to the
     seed's own grid pixel: that seed is not the line going on (the lower cable at a
     crossing was cut short of the upper one while it counted)."""
-    from service.perception.cable_segmentation import SeedLines, line_goes_on
+    from service.perception.cable_segmentation import line_goes_on
 
     seeds = np.zeros((50, 50), bool)
     diagonal = np.arange(10, 21)
@@ -653,7 +649,7 @@ def test_a_dark_cables_highlight_beside_its_seeds_is_part_of_it():
 def test_along_the_seeds_line_tells_a_highlight_from_a_shadow_beside_the_cable():
     """The highlight has the seed's sides (the paper) on both its sides; a shadow line
     beside the cable has the cable on one side; a line across the seed's is neither."""
-    from service.perception.cable_segmentation import along_the_seeds_line
+    from service.perception.seed_lines import along_the_seeds_line
 
     paper, cable = [80.0, 0.0, 2.0], [30.0, 2.0, 0.0]
     highlight, shadow = [55.0, 1.0, 1.0], [60.0, 0.0, 2.0]
