@@ -1,0 +1,168 @@
+"""Objects lying on the cables that a brightness threshold keeps with them.
+
+Thresholding brightness keeps everything brighter than the background: a box, a lid or a
+roll of tape lying on a cable is kept whole, joined to the cable that runs under it. Its
+skeleton then draws lines through the object (a star, a cross) that fitting and merging
+take for cable. Such an object is not a line of one width: it is a compact blob, much wider
+than the cables that run into it. Two cables lying side by side or crossing at a shallow
+angle make a region at most twice one cable's half width across (the widest disc inside
+two crossing strips of half width ``w`` has radius ``2 w / (1 + sin(angle / 2))``), so a
+blob whose inscribed disc is clearly wider than that, and which is not itself a long band,
+is an object. It is taken out of the mask, leaving the cable cut at its border, as an
+object of the background's colour leaves it.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from service.perception import _segmentation_kernels
+
+# An object's inscribed radius is at least this many half widths of the widest line that
+# leaves it (and of the picture's typical line): two lines together make up to 2, and the
+# pixel grid and the cables' soft rims add up to a quarter more.
+WIDER_THAN_LINES = 2.5
+# An object is compact: its area is at most this many squares of its inscribed radius (a
+# disc is pi, a square 4, a rectangle six times as long as it is wide 24). A long band
+# that wide is a thick cable or a lit edge, not an object lying on a cable.
+COMPACT_AREA = 24.0
+# Below this typical half width (px) the mask holds no line to compare with.
+MIN_HALF_WIDTH = 1.0
+
+
+def _distance(mask: np.ndarray) -> np.ndarray:
+    """Euclidean distance of each mask pixel to the nearest pixel off the mask."""
+    return cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+
+
+def _ridge(distance: np.ndarray) -> np.ndarray:
+    """Pixels whose distance is a maximum of its 3 x 3 neighbourhood: a line's middle."""
+    return (distance >= cv2.dilate(distance, np.ones((3, 3), np.uint8))) & (
+        distance >= MIN_HALF_WIDTH
+    )
+
+
+def typical_half_width(distance: np.ndarray) -> float:
+    """The median distance to the border along the mask's middle lines (0 when none).
+
+    Cables are long and objects few, so their middle lines are mostly the cables'.
+    """
+    values = distance[_ridge(distance)]
+    return float(np.median(values)) if values.size else 0.0
+
+
+def object_blobs(mask: np.ndarray) -> np.ndarray:
+    """The parts of a foreground mask that are objects, not lines.
+
+    A candidate is the union of every disc inside the mask of radius
+    :data:`WIDER_THAN_LINES` typical half widths (the mask's opening by such a disc:
+    nothing of a line of cables, crossing or lying together, survives it). Each
+    connected candidate is an object when its own inscribed radius is also
+    :data:`WIDER_THAN_LINES` times the half width of the widest line next to it (a
+    thicker cable than the picture's typical one is compared with itself) and it is
+    compact (:data:`COMPACT_AREA`).
+
+    Parameters
+    ----------
+    mask : ndarray of bool
+        ``(H, W)`` foreground mask.
+
+    Returns
+    -------
+    ndarray of bool
+        ``(H, W)``, True on the pixels of the objects found.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mask = np.zeros((80, 160), bool)
+    >>> mask[37:43, :] = True            # a cable 6 px wide ...
+    >>> mask[20:60, 60:100] = True       # ... under a box 40 px square
+    >>> blobs = object_blobs(mask)
+    >>> bool(blobs[40, 80]), bool(blobs[40, 10]), bool(blobs[40, 150])
+    (True, False, False)
+    """
+    mask = np.ascontiguousarray(mask, dtype=bool)
+    found = np.zeros(mask.shape, bool)
+    distance = _distance(mask)
+    typical = typical_half_width(distance)
+    if typical < MIN_HALF_WIDTH:
+        return found
+    reach = WIDER_THAN_LINES * typical
+    core = distance >= reach
+    if not core.any():
+        return found
+    # The opening: every mask pixel within ``reach`` of a centre of such a disc.
+    candidates = mask & (_distance(~core) < reach)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(
+        candidates.view(np.uint8), connectivity=8
+    )
+    # The lines left once every candidate is out: their half widths, beside each one.
+    rest = mask & ~candidates
+    rest_distance = _distance(rest)
+    rest_ridge = _ridge(rest_distance)
+    height, width = mask.shape
+    for label in range(1, count):
+        left, top, box_width, box_height, area = (int(v) for v in stats[label])
+        blob = labels[top : top + box_height, left : left + box_width] == label
+        radius = float(distance[top : top + box_height, left : left + box_width][blob].max())
+        if area > COMPACT_AREA * radius * radius:
+            continue
+        margin = int(np.ceil(radius)) + 2
+        y0, y1 = max(top - margin, 0), min(top + box_height + margin, height)
+        x0, x1 = max(left - margin, 0), min(left + box_width + margin, width)
+        own = labels[y0:y1, x0:x1] == label
+        beside = (_distance(~own) <= radius) & rest_ridge[y0:y1, x0:x1]
+        widest = float(rest_distance[y0:y1, x0:x1][beside].max()) if beside.any() else 0.0
+        if radius < WIDER_THAN_LINES * widest:
+            continue
+        found[y0:y1, x0:x1] |= own
+    if found.any():
+        found |= _corners(mask & ~found, found & core, reach, typical)
+    return found
+
+
+def _corners(rest: np.ndarray, cores: np.ndarray, reach: float, typical: float) -> np.ndarray:
+    """What the objects' corners leave of the mask beside the lines that run into them.
+
+    The discs of the opening do not reach an object's corners: a right angle keeps a
+    thin wedge, up to ``sqrt(2) * reach`` from the discs' centres and at most
+    ``0.17 * reach`` thick, which stays on the mask hung on the side of the cable
+    where that runs in close to the corner. Within that reach of the objects' cores,
+    what an opening by a disc of half the typical half width removes (the cable's own
+    width, and its cut's square front, survive it) is taken with the object.
+    """
+    near = _distance(~cores) <= np.sqrt(2.0) * reach + 1.0
+    side = 2 * int(np.ceil(0.5 * typical)) + 1
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (side, side))
+    opened = cv2.morphologyEx(rest.view(np.uint8), cv2.MORPH_OPEN, disc).view(np.bool_)
+    return rest & near & ~opened
+
+
+def without_objects(mask: np.ndarray, min_component_area: int) -> np.ndarray:
+    """The mask less the objects lying on the cables (:func:`object_blobs`).
+
+    What an object leaves behind that is no cable (its corners, which the disc of the
+    opening does not reach) is removed with the specks: components under
+    ``min_component_area`` px.
+
+    Parameters
+    ----------
+    mask : ndarray of bool
+        ``(H, W)`` foreground mask.
+    min_component_area : int
+        As :func:`service.perception.segmentation.clean_mask`.
+
+    Returns
+    -------
+    ndarray of bool
+        A new mask; ``mask`` is returned itself when it holds no object.
+    """
+    blobs = object_blobs(mask)
+    if not blobs.any():
+        return mask
+    cleaned = np.ascontiguousarray(mask & ~blobs).view(np.uint8)
+    if min_component_area > 0:
+        _segmentation_kernels.remove_small_components(cleaned, int(min_component_area))
+    return cleaned.view(np.bool_)
