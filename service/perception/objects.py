@@ -27,6 +27,8 @@ WIDER_THAN_LINES = 2.5
 # disc is pi, a square 4, a rectangle six times as long as it is wide 24). A long band
 # that wide is a thick cable or a lit edge, not an object lying on a cable.
 COMPACT_AREA = 24.0
+# A disc this many half widths of the widest line beside an object fits in no line.
+LINE_MARGIN = 1.25
 # Below this typical half width (px) the mask holds no line to compare with.
 MIN_HALF_WIDTH = 1.0
 
@@ -117,27 +119,42 @@ def object_blobs(mask: np.ndarray) -> np.ndarray:
         widest = float(rest_distance[y0:y1, x0:x1][beside].max()) if beside.any() else 0.0
         if radius < WIDER_THAN_LINES * widest:
             continue
-        found[y0:y1, x0:x1] |= own
-    if found.any():
-        found |= _corners(mask & ~found, found & core, reach, typical)
+        line = max(widest, typical)
+        found[y0:y1, x0:x1] |= _with_corners(own, mask[y0:y1, x0:x1], reach, line)
     return found
 
 
-def _corners(rest: np.ndarray, cores: np.ndarray, reach: float, typical: float) -> np.ndarray:
-    """What the objects' corners leave of the mask beside the lines that run into them.
+def _with_corners(blob: np.ndarray, mask: np.ndarray, reach: float, widest: float) -> np.ndarray:
+    """An object's outline: its blob, with the corners the opening's disc rounded off.
 
-    The discs of the opening do not reach an object's corners: a right angle keeps a
-    thin wedge, up to ``sqrt(2) * reach`` from the discs' centres and at most
-    ``0.17 * reach`` thick, which stays on the mask hung on the side of the cable
-    where that runs in close to the corner. Within that reach of the objects' cores,
-    what an opening by a disc of half the typical half width removes (the cable's own
-    width, and its cut's square front, survive it) is taken with the object.
+    The disc of radius ``reach`` rolling inside a right-angled corner stays up to
+    ``(sqrt(2) - 1) * reach`` short of it, a wedge left on the mask, hung on the side of
+    a cable that runs in close to the corner. A smaller disc, a quarter wider than the
+    widest line beside the object (which no line can hold), rolls further into the
+    corners; what it reaches within that distance of the blob is the object's too.
+
+    Parameters
+    ----------
+    blob : ndarray of bool
+        ``(H, W)`` the object's part the opening's disc reached.
+    mask : ndarray of bool
+        ``(H, W)`` the foreground mask around it.
+    reach : float
+        The opening disc's radius (px).
+    widest : float
+        The half width of the widest line beside the object (px).
+
+    Returns
+    -------
+    ndarray of bool
+        ``(H, W)``, the blob and its corners.
     """
-    near = _distance(~cores) <= np.sqrt(2.0) * reach + 1.0
-    side = 2 * int(np.ceil(0.5 * typical)) + 1
+    radius = LINE_MARGIN * widest
+    side = 2 * int(np.ceil(radius)) + 1
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (side, side))
-    opened = cv2.morphologyEx(rest.view(np.uint8), cv2.MORPH_OPEN, disc).view(np.bool_)
-    return rest & near & ~opened
+    rolled = cv2.morphologyEx(mask.view(np.uint8), cv2.MORPH_OPEN, disc).view(np.bool_)
+    near = _distance(~blob) <= (np.sqrt(2.0) - 1.0) * reach + 1.0
+    return blob | (rolled & near)
 
 
 def without_objects(mask: np.ndarray, min_component_area: int) -> np.ndarray:
