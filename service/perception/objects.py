@@ -24,9 +24,11 @@ from service.perception import _segmentation_kernels
 # pixel grid and the cables' soft rims add up to a quarter more.
 WIDER_THAN_LINES = 2.5
 # An object is compact: its area is at most this many squares of its inscribed radius (a
-# disc is pi, a square 4, a rectangle six times as long as it is wide 24). A long band
-# that wide is a thick cable or a lit edge, not an object lying on a cable.
+# disc is pi, a square 4, a rectangle six times as long as it is wide 24), and its
+# length at most this many (that rectangle's 12). A long band that wide is a thick
+# cable or a lit edge, not an object lying on a cable.
 COMPACT_AREA = 24.0
+COMPACT_LENGTH = 12.0
 # A disc this many half widths of the widest line beside an object fits in no line.
 LINE_MARGIN = 1.25
 # Below this typical half width (px) the mask holds no line to compare with.
@@ -63,7 +65,7 @@ def object_blobs(mask: np.ndarray) -> np.ndarray:
     connected candidate is an object when its own inscribed radius is also
     :data:`WIDER_THAN_LINES` times the half width of the widest line next to it (a
     thicker cable than the picture's typical one is compared with itself) and it is
-    compact (:data:`COMPACT_AREA`).
+    compact (:data:`COMPACT_AREA`, :data:`COMPACT_LENGTH`).
 
     Parameters
     ----------
@@ -110,6 +112,11 @@ def object_blobs(mask: np.ndarray) -> np.ndarray:
         blob = labels[top : top + box_height, left : left + box_width] == label
         radius = float(distance[top : top + box_height, left : left + box_width][blob].max())
         if area > COMPACT_AREA * radius * radius:
+            continue
+        # Nor longer: a thick cable that a round object lies on is a long band with
+        # a wide place in it.
+        (_, _), (long_side, short_side), _ = cv2.minAreaRect(cv2.findNonZero(blob.view(np.uint8)))
+        if max(long_side, short_side) > COMPACT_LENGTH * radius:
             continue
         margin = int(np.ceil(radius)) + 2
         y0, y1 = max(top - margin, 0), min(top + box_height + margin, height)
