@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from service.perception import _segmentation_kernels
+from service.perception.skeleton import distance_transform
 
 # An object's inscribed radius is at least this many half widths of the widest line that
 # leaves it (and of the picture's typical line): two lines together make up to 2, and the
@@ -36,8 +37,9 @@ MIN_HALF_WIDTH = 1.0
 
 
 def _distance(mask: np.ndarray) -> np.ndarray:
-    """Euclidean distance of each mask pixel to the nearest pixel off the mask."""
-    return cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    """Distance of each mask pixel to the nearest pixel off the mask (OpenCV's 5 x 5
+    chamfer, within 2 % of the Euclidean: plenty for widths compared 2.5 times over)."""
+    return cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 5)
 
 
 def _ridge(distance: np.ndarray) -> np.ndarray:
@@ -50,9 +52,20 @@ def _ridge(distance: np.ndarray) -> np.ndarray:
 def typical_half_width(distance: np.ndarray) -> float:
     """The median distance to the border along the mask's middle lines (0 when none).
 
-    Cables are long and objects few, so their middle lines are mostly the cables'.
+    Cables are long and objects few, so their middle lines are mostly the cables'. The
+    middle lines are :func:`_ridge`'s, found at the mask's own pixels only (a few per
+    cent of a photograph) rather than over the whole picture.
     """
-    values = distance[_ridge(distance)]
+    height, width = distance.shape
+    flat = distance.reshape(-1)
+    indices = np.flatnonzero(flat >= MIN_HALF_WIDTH)
+    rows, cols = np.divmod(indices, width)
+    indices = indices[(rows > 0) & (rows < height - 1) & (cols > 0) & (cols < width - 1)]
+    values = flat[indices]
+    ridge = np.ones(values.size, bool)
+    for offset in (-width - 1, -width, -width + 1, -1, 1, width - 1, width, width + 1):
+        ridge &= values >= flat[indices + offset]
+    values = values[ridge]
     return float(np.median(values)) if values.size else 0.0
 
 
@@ -89,7 +102,8 @@ def object_blobs(mask: np.ndarray) -> np.ndarray:
     """
     mask = np.ascontiguousarray(mask, dtype=bool)
     found = np.zeros(mask.shape, bool)
-    distance = _distance(mask)
+    # The same values, compiled, over the foreground only.
+    distance = distance_transform(mask)
     typical = typical_half_width(distance)
     if typical < MIN_HALF_WIDTH:
         return found
@@ -97,37 +111,42 @@ def object_blobs(mask: np.ndarray) -> np.ndarray:
     core = distance >= reach
     if not core.any():
         return found
-    # The opening: every mask pixel within ``reach`` of a centre of such a disc.
-    candidates = mask & (_distance(~core) < reach)
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(
-        candidates.view(np.uint8), connectivity=8
+    # Each disc centre's region is worked on in a window around it: the opening's
+    # discs, the lines beside them within the blob's radius, and room for the
+    # distances there to see the mask beyond.
+    count, core_labels, stats, _ = cv2.connectedComponentsWithStats(
+        core.view(np.uint8), connectivity=8
     )
-    # The lines left once every candidate is out: their half widths, beside each one.
-    rest = mask & ~candidates
-    rest_distance = _distance(rest)
-    rest_ridge = _ridge(rest_distance)
     height, width = mask.shape
     for label in range(1, count):
-        left, top, box_width, box_height, area = (int(v) for v in stats[label])
-        blob = labels[top : top + box_height, left : left + box_width] == label
-        radius = float(distance[top : top + box_height, left : left + box_width][blob].max())
+        left, top, box_width, box_height, _ = (int(v) for v in stats[label])
+        centres = core_labels[top : top + box_height, left : left + box_width] == label
+        radius = float(distance[top : top + box_height, left : left + box_width][centres].max())
+        margin = int(np.ceil(2.0 * reach + radius)) + 2
+        y0, y1 = max(top - margin, 0), min(top + box_height + margin, height)
+        x0, x1 = max(left - margin, 0), min(left + box_width + margin, width)
+        window = mask[y0:y1, x0:x1]
+        # The opening: every mask pixel within ``reach`` of a centre of such a disc.
+        candidates = window & (_distance(~core[y0:y1, x0:x1]) < reach)
+        _, blob_labels = cv2.connectedComponents(candidates.view(np.uint8), connectivity=8)
+        mine = core_labels[y0:y1, x0:x1] == label
+        blob = blob_labels == blob_labels[mine][0]
+        area = int(np.count_nonzero(blob))
         if area > COMPACT_AREA * radius * radius:
             continue
         # Nor longer: a thick cable that a round object lies on is a long band with
         # a wide place in it.
-        (_, _), (long_side, short_side), _ = cv2.minAreaRect(cv2.findNonZero(blob.view(np.uint8)))
-        if max(long_side, short_side) > COMPACT_LENGTH * radius:
+        (_, _), sides, _ = cv2.minAreaRect(cv2.findNonZero(blob.view(np.uint8)))
+        if max(sides) > COMPACT_LENGTH * radius:
             continue
-        margin = int(np.ceil(radius)) + 2
-        y0, y1 = max(top - margin, 0), min(top + box_height + margin, height)
-        x0, x1 = max(left - margin, 0), min(left + box_width + margin, width)
-        own = labels[y0:y1, x0:x1] == label
-        beside = (_distance(~own) <= radius) & rest_ridge[y0:y1, x0:x1]
-        widest = float(rest_distance[y0:y1, x0:x1][beside].max()) if beside.any() else 0.0
+        # The lines left once every candidate is out: the widest beside this one.
+        rest_distance = _distance(window & ~candidates)
+        beside = (_distance(~blob) <= radius) & _ridge(rest_distance)
+        widest = float(rest_distance[beside].max()) if beside.any() else 0.0
         if radius < WIDER_THAN_LINES * widest:
             continue
         line = max(widest, typical)
-        found[y0:y1, x0:x1] |= _with_corners(own, mask[y0:y1, x0:x1], reach, line)
+        found[y0:y1, x0:x1] |= _with_corners(blob, window, reach, line)
     return found
 
 
