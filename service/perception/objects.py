@@ -131,6 +131,11 @@ def object_blobs(mask: np.ndarray) -> np.ndarray:
         _, blob_labels = cv2.connectedComponents(candidates.view(np.uint8), connectivity=8)
         mine = core_labels[y0:y1, x0:x1] == label
         blob = blob_labels == blob_labels[mine][0]
+        # An object's blob lies within ``reach`` of its disc centres; one that runs on
+        # out of the window, further than the centres' own blob could reach, is a band
+        # (a thick cable whose middle, hovering about ``reach``, breaks into pieces).
+        if _leaves_window(blob, (y0, y1, x0, x1), (height, width)):
+            continue
         area = int(np.count_nonzero(blob))
         if area > COMPACT_AREA * radius * radius:
             continue
@@ -139,15 +144,33 @@ def object_blobs(mask: np.ndarray) -> np.ndarray:
         (_, _), sides, _ = cv2.minAreaRect(cv2.findNonZero(blob.view(np.uint8)))
         if max(sides) > COMPACT_LENGTH * radius:
             continue
-        # The lines left once every candidate is out: the widest beside this one.
-        rest_distance = _distance(window & ~candidates)
-        beside = (_distance(~blob) <= radius) & _ridge(rest_distance)
-        widest = float(rest_distance[beside].max()) if beside.any() else 0.0
+        # The lines beside it: the mask's half width (its distance to the border, as
+        # before anything was cut out) on what is left once every candidate is out,
+        # within the blob's radius of it. A cable running in is its own half width
+        # right up to the blob; a thick band going on, cut into blobs where its middle
+        # hovers about ``reach``, is as wide as the blob.
+        beside = (_distance(~blob) <= radius) & window & ~candidates
+        widths = distance[y0:y1, x0:x1][beside]
+        widest = float(widths.max()) if widths.size else 0.0
         if radius < WIDER_THAN_LINES * widest:
             continue
         line = max(widest, typical)
         found[y0:y1, x0:x1] |= _with_corners(blob, window, reach, line)
     return found
+
+
+def _leaves_window(
+    blob: np.ndarray, window: tuple[int, int, int, int], shape: tuple[int, int]
+) -> bool:
+    """Does ``blob`` reach a side of its window that is not the picture's border?"""
+    y0, y1, x0, x1 = window
+    height, width = shape
+    return bool(
+        (y0 > 0 and blob[0].any())
+        or (y1 < height and blob[-1].any())
+        or (x0 > 0 and blob[:, 0].any())
+        or (x1 < width and blob[:, -1].any())
+    )
 
 
 def _with_corners(blob: np.ndarray, mask: np.ndarray, reach: float, widest: float) -> np.ndarray:
