@@ -42,19 +42,13 @@ def _distance(mask: np.ndarray) -> np.ndarray:
     return cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 5)
 
 
-def _ridge(distance: np.ndarray) -> np.ndarray:
-    """Pixels whose distance is a maximum of its 3 x 3 neighbourhood: a line's middle."""
-    return (distance >= cv2.dilate(distance, np.ones((3, 3), np.uint8))) & (
-        distance >= MIN_HALF_WIDTH
-    )
-
-
 def typical_half_width(distance: np.ndarray) -> float:
     """The median distance to the border along the mask's middle lines (0 when none).
 
-    Cables are long and objects few, so their middle lines are mostly the cables'. The
-    middle lines are :func:`_ridge`'s, found at the mask's own pixels only (a few per
-    cent of a photograph) rather than over the whole picture.
+    Cables are long and objects few, so their middle lines are mostly the cables'. A
+    middle line's pixel is one no farther from the border than any of its eight
+    neighbours; they are looked for at the mask's own pixels only (a few per cent of a
+    photograph), not over the whole picture.
     """
     height, width = distance.shape
     flat = distance.reshape(-1)
@@ -77,8 +71,10 @@ def object_blobs(mask: np.ndarray) -> np.ndarray:
     nothing of a line of cables, crossing or lying together, survives it). Each
     connected candidate is an object when its own inscribed radius is also
     :data:`WIDER_THAN_LINES` times the half width of the widest line next to it (a
-    thicker cable than the picture's typical one is compared with itself) and it is
-    compact (:data:`COMPACT_AREA`, :data:`COMPACT_LENGTH`).
+    thicker cable than the picture's typical one is compared with itself), it is
+    compact (:data:`COMPACT_AREA`, :data:`COMPACT_LENGTH`) and it does not run on
+    beyond what its disc centres reach. Its corners, which the disc does not reach,
+    are added (:func:`_with_corners`).
 
     Parameters
     ----------
