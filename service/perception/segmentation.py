@@ -31,6 +31,7 @@ from service.perception import _segmentation_kernels
 from service.perception.cable_segmentation import segment_cables
 from service.perception.deadline import Deadline
 from service.perception.errors import InvalidInputError
+from service.perception.objects import without_objects
 from service.perception.segmenter import Segmenter, run_segmenter
 
 
@@ -215,7 +216,9 @@ def _segment_auto(
     """:func:`segment_auto`, and the brightness and weak threshold when brightness made it."""
     found = _segment_by_brightness(image_bgr, min_component_area, max_hole_area, thin_only=True)
     if found is not None:
-        return found
+        mask, brightness, low = found
+        # A bright object lying on a cable passes the threshold with it.
+        return without_objects(mask, min_component_area), brightness, low
     mask = segment_cables(image_bgr, min_component_area, max_hole_area, deadline=deadline)
     return mask, None, 0.0
 
