@@ -445,3 +445,36 @@ def grow_along_profiles(cue, before, grown, points, seen, avoid_xy, avoid_reach,
                     if before[row, col] == 0 and not cue[row, col] > low:
                         break
                     grown[row, col] = 1
+
+
+# --------------------------------------------------------------------------- objects
+
+
+@njit(cache=True, nogil=True)
+def ridge_values(distance, indices):
+    """The distances at the pixels ``indices`` (flat, increasing) of ``distance`` that
+    are no smaller than any of their eight neighbours, pixels on the image's border
+    left out (:func:`service.perception.objects.typical_half_width`)."""
+    height, width = distance.shape
+    flat = distance.reshape(-1)
+    values = np.empty(indices.size, distance.dtype)
+    n = 0
+    for index in indices:
+        row = index // width
+        col = index - row * width
+        if row == 0 or row == height - 1 or col == 0 or col == width - 1:
+            continue
+        value = flat[index]
+        if (
+            value >= flat[index - width - 1]
+            and value >= flat[index - width]
+            and value >= flat[index - width + 1]
+            and value >= flat[index - 1]
+            and value >= flat[index + 1]
+            and value >= flat[index + width - 1]
+            and value >= flat[index + width]
+            and value >= flat[index + width + 1]
+        ):
+            values[n] = value
+            n += 1
+    return values[:n]

@@ -54,6 +54,7 @@ from service.perception.segmentation import (
     as_bgr,
     clean_mask,
     grow_by_own_thresholds,
+    segment_full,
     segment_with_cue,
     validate_mask,
 )
@@ -234,15 +235,14 @@ def detect_full(
     height, width = shape
 
     # 1. Segmentation (the caller's mask gets the same clean-up as our own).
-    cue, image_low = None, np.inf
+    cue, image_low, distance = None, np.inf, None
     if mask is not None:
         foreground = clean_mask(
             validate_mask(mask, shape), params.min_component_area, params.max_hole_area
         )
     else:
-        foreground, cue, image_low = segment_with_cue(
-            image_bgr, params, segmenter, deadline=deadline
-        )
+        found = segment_full(image_bgr, params, segmenter, deadline=deadline)
+        foreground, cue, image_low, distance = found.mask, found.cue, found.low, found.distance
     watch.lap("segmentation")
     check(deadline, "segmentation")
     if not foreground.any():
@@ -250,8 +250,10 @@ def detect_full(
 
     # 2. Skeletonization, then spurs shorter than a few cable radii are cut.
     skeleton = skeletonize(foreground)
-    # The compiled distance transform: cv2's values, bit for bit, in O(foreground).
-    distance = distance_transform(foreground)
+    # The compiled distance transform: cv2's values, bit for bit, in O(foreground)
+    # (segmentation's own, when the brightness path needed it).
+    if distance is None:
+        distance = distance_transform(foreground)
     radius = max(estimate_radius(skeleton, distance=distance), 1.0)
     spur_length = 2.5 * radius if params.spur_length is None else params.spur_length
     if spur_length > 0:

@@ -23,6 +23,8 @@ Four ways to find the mask (``DetectParams.segmentation``), and the caller's own
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
@@ -33,6 +35,7 @@ from service.perception.deadline import Deadline
 from service.perception.errors import InvalidInputError
 from service.perception.objects import without_objects
 from service.perception.segmenter import Segmenter, run_segmenter
+from service.perception.skeleton import distance_transform
 
 
 def as_bgr(image: np.ndarray) -> np.ndarray:
@@ -204,7 +207,30 @@ def segment_auto(
     light or textured background, dark cables) :func:`segment_cables` finds the cables
     by their contrast with what lies beside them.
     """
-    return _segment_auto(image_bgr, min_component_area, max_hole_area, deadline)[0]
+    return _segment_auto(image_bgr, min_component_area, max_hole_area, deadline).mask
+
+
+@dataclass(frozen=True)
+class Segmentation:
+    """A mask and what the later steps may reuse of its making (:func:`segment_full`).
+
+    Attributes
+    ----------
+    mask : ndarray of bool
+        ``(H, W)`` the foreground.
+    cue : ndarray or None
+        The brightness, when the brightness path made the mask (else ``None``).
+    low : float
+        The weak threshold the brightness was cut at (0 otherwise).
+    distance : ndarray of float32 or None
+        ``skeleton.distance_transform(mask)`` when segmentation computed it for
+        ``mask`` itself (else ``None``).
+    """
+
+    mask: np.ndarray
+    cue: np.ndarray | None = None
+    low: float = 0.0
+    distance: np.ndarray | None = None
 
 
 def _segment_auto(
@@ -212,15 +238,17 @@ def _segment_auto(
     min_component_area: int,
     max_hole_area: int,
     deadline: Deadline | None = None,
-) -> tuple[np.ndarray, np.ndarray | None, float]:
+) -> Segmentation:
     """:func:`segment_auto`, and the brightness and weak threshold when brightness made it."""
     found = _segment_by_brightness(image_bgr, min_component_area, max_hole_area, thin_only=True)
     if found is not None:
         mask, brightness, low = found
         # A bright object lying on a cable passes the threshold with it.
-        return without_objects(mask, min_component_area), brightness, low
+        distance = distance_transform(mask)
+        kept = without_objects(mask, min_component_area, distance)
+        return Segmentation(kept, brightness, low, distance if kept is mask else None)
     mask = segment_cables(image_bgr, min_component_area, max_hole_area, deadline=deadline)
-    return mask, None, 0.0
+    return Segmentation(mask)
 
 
 def segment_brightness(
@@ -334,13 +362,26 @@ def segment_with_cue(
     The brightness is returned (else ``None``) only when the brightness path made the
     mask, so that :func:`grow_by_own_thresholds` can apply the same rule to each cable.
     """
+    found = segment_full(image_bgr, params, segmenter, deadline=deadline)
+    return found.mask, found.cue, found.low
+
+
+def segment_full(
+    image_bgr: np.ndarray,
+    params: DetectParams,
+    segmenter: Segmenter | None = None,
+    *,
+    deadline: Deadline | None = None,
+) -> Segmentation:
+    """:func:`segment_with_cue`, and the mask's distance transform where it was needed
+    to make the mask (the brightness path's objects test), for the skeleton step."""
     area, holes = params.min_component_area, params.max_hole_area
     method = params.segmentation
     if method is SegmentationMethod.auto:
         return _segment_auto(image_bgr, area, holes, deadline)
     if method is SegmentationMethod.brightness:
-        return _segment_brightness(image_bgr, area, holes)
-    return segment(image_bgr, params, segmenter, deadline=deadline), None, 0.0
+        return Segmentation(*_segment_brightness(image_bgr, area, holes))
+    return Segmentation(segment(image_bgr, params, segmenter, deadline=deadline))
 
 
 # Each cable's own threshold is found among the pixels within this many of its radii
