@@ -454,17 +454,21 @@ def grow_along_profiles(cue, before, grown, points, seen, avoid_xy, avoid_reach,
 def ridge_values(distance, indices):
     """The distances at the pixels ``indices`` (flat, increasing) of ``distance`` that
     are no smaller than any of their eight neighbours, pixels on the image's border
-    left out (:func:`service.perception.objects.typical_half_width`)."""
+    left out (:func:`service.perception.objects.typical_half_width`), and the largest
+    distance at any of ``indices`` (0 when none)."""
     height, width = distance.shape
     flat = distance.reshape(-1)
     values = np.empty(indices.size, distance.dtype)
+    largest = 0.0
     n = 0
     for index in indices:
+        value = flat[index]
+        if value > largest:
+            largest = value
         row = index // width
         col = index - row * width
         if row == 0 or row == height - 1 or col == 0 or col == width - 1:
             continue
-        value = flat[index]
         if (
             value >= flat[index - width - 1]
             and value >= flat[index - width]
@@ -477,4 +481,4 @@ def ridge_values(distance, indices):
         ):
             values[n] = value
             n += 1
-    return values[:n]
+    return values[:n], largest

@@ -42,8 +42,9 @@ def _distance(mask: np.ndarray) -> np.ndarray:
     return cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 5)
 
 
-def typical_half_width(distance: np.ndarray, mask: np.ndarray) -> float:
-    """The median distance to the border along the mask's middle lines (0 when none).
+def typical_half_width(distance: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+    """The median distance to the border along the mask's middle lines (0 when none),
+    and the largest distance on the mask.
 
     Cables are long and objects few, so their middle lines are mostly the cables'. A
     middle line's pixel is one no farther from the border than any of its eight
@@ -59,9 +60,9 @@ def typical_half_width(distance: np.ndarray, mask: np.ndarray) -> float:
         ``(H, W)``, C-contiguous.
     """
     indices = _shared_kernels.nonzero_flat(mask.view(np.uint8).reshape(-1))
-    values = _segmentation_kernels.ridge_values(np.ascontiguousarray(distance), indices)
+    values, largest = _segmentation_kernels.ridge_values(np.ascontiguousarray(distance), indices)
     values = values[values >= MIN_HALF_WIDTH]
-    return float(np.median(values)) if values.size else 0.0
+    return (float(np.median(values)) if values.size else 0.0), float(largest)
 
 
 def object_blobs(mask: np.ndarray, distance: np.ndarray | None = None) -> np.ndarray:
@@ -104,13 +105,13 @@ def object_blobs(mask: np.ndarray, distance: np.ndarray | None = None) -> np.nda
     if distance is None:
         # The same values, compiled, over the foreground only.
         distance = distance_transform(mask)
-    typical = typical_half_width(distance, mask)
-    if typical < MIN_HALF_WIDTH:
-        return found
+    typical, largest = typical_half_width(distance, mask)
     reach = WIDER_THAN_LINES * typical
-    core = distance >= reach
-    if not core.any():
+    # No disc of the opening fits anywhere: the common case, decided without a pass
+    # over the whole picture.
+    if typical < MIN_HALF_WIDTH or largest < reach:
         return found
+    core = distance >= reach
     # Each disc centre's region is worked on in a window around it: the opening's
     # discs, the lines beside them within the blob's radius, and room for the
     # distances there to see the mask beyond.
