@@ -43,6 +43,7 @@ from service.perception.bridge_ends import (
     ends_through_short_pieces,
     free_ends_beside_crossings,
 )
+from service.perception.cut_ends import bridges_from_the_cuts
 from service.perception.deadline import Deadline, check
 from service.perception.gap_evidence import (
     TURN_EVIDENCE_ALONG_CURVE,
@@ -849,6 +850,13 @@ def merge_chains(
             pieces, inner_ends, joins, junction_of_end, mask, span, curve_given
         )
     bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span, junction_of_end)
+    if mask is not None:
+        # A gap's bridge leaves the cable where it passes out of sight, not where the
+        # end's fit begins a radius or two before (on a tight bend, 30-60 degrees back).
+        cut_bridges = bridges_from_the_cuts(
+            bridging_ends, joins, junction_of_end, mask, radius, curve_given, params.gap_curve
+        )
+        bridges = {**cut_bridges, **bridges}
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
