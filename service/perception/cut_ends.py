@@ -167,6 +167,7 @@ def bridges_from_the_cuts(
     radius: float,
     given: frozenset[int],
     shape: str = "smooth",
+    turns: frozenset[tuple[int, int]] = frozenset(),
 ) -> dict[tuple[int, int], np.ndarray]:
     """Bridges of the gaps (joins of two ends in no junction, with no curve of their
     own in ``given``) drawn from the cuts: from each bridging end (``ends``, where the
@@ -184,7 +185,9 @@ def bridges_from_the_cuts(
     """
     bridges = {}
     for i, j, _ in joins:
-        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0 or i in given or j in given:
+        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
+            continue
+        if (i in given or j in given) and (i, j) not in turns and (j, i) not in turns:
             continue
         stretches, cuts = [], []
         for k in (i, j):
@@ -200,6 +203,8 @@ def bridges_from_the_cuts(
                 stretches.append(found[0])
                 cuts.append(found[1:])
         if len(stretches[0]) == 1 and len(stretches[1]) == 1:
+            continue
+        if ((i, j) in turns or (j, i) in turns) and min(map(len, stretches)) == 1:
             continue
         (a, leaving), (b, arriving) = cuts
         across = gap_curve(a, leaving, b, -arriving, shape=shape)
