@@ -2,26 +2,27 @@
 
 A gap's bridge starts where each end's fit begins (:func:`.bridge_ends.bridge_from_the_fits`):
 the fit leaves out the cut's hook, so that point lies on the cable, but one or two radii
-before the cut. On a straight cable that costs nothing; on a tight bend (a loop or a
-doubled-back cable turning under an object) the cable turns by 30-60 degrees over that
-stretch, which is seen, and the bridge, drawn from there, has to make that turn as well
-as the hidden one: the curve across a half turn and more falls inside the true bend.
+before the cut. On a straight cable that costs little; on a tight bend (a loop or a
+doubled-back cable turning under an object) the cable turns by 15-60 degrees over that
+stretch, which is seen, and the bridge, drawn from there with the fit's direction,
+makes that turn as well as the hidden one: across a half turn and more the curve falls
+inside the true bend by more than a radius.
 
 So the stretch between where the fit begins and the cut is traced on the mask
-(:func:`traced_to_the_cut`): step by step along the cable, each step put back half the
-cable's width in from its borders (from the one border left where the cut has taken the
-other, or where a touching strand has moved it out), until the middle line leaves the
-mask: there the cable passes under what hides it. The bridge runs along that traced
-stretch and from its end, along the direction the traced stretch's own bend reaches
-there (a quadratic fit over its last few pixels), across the gap
-(:func:`bridges_from_the_cuts`).
+(:func:`middle_line`): step by step along the cable, each step put half the cable's
+width in from its borders (from the one at the cable's own distance where a touching
+strand widens the section), until the section narrows (an object's border has begun to
+cut the cable) or the middle line leaves the mask: there the cable passes out of sight
+(:func:`end_at_the_cut`). The bridge runs along that traced stretch and from its end,
+along the direction a short quadratic fit of the traced middle line gives there, across
+the gap (:func:`bridges_from_the_cuts`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from service.perception.geometry import end_fit, rotated, unit
+from service.perception.geometry import end_fit, polyline_length, rotated, unit
 from service.perception.paths import gap_curve
 
 TRACE_STEP_PX = 1.0
@@ -138,10 +139,11 @@ def end_at_the_cut(
     start) passes out of sight, and its direction there.
 
     The middle line is traced from the end to the cut (:func:`middle_line`, at most
-    ``limit`` px) and back into the piece over :data:`FIT_RADII` radii; the direction at
-    the cut is a quadratic's (:func:`.geometry.end_fit`) over the traced line's last
+    ``limit`` px) and back into the piece over :data:`FIT_RADII` radii; the direction at the
+    cut is a quadratic's (:func:`.geometry.end_fit`) over the traced line's last
     :data:`FIT_RADII` radii: centred on the cable, not on the skeleton's hooked tip, and
-    short enough to follow a tight bend.
+    short enough to follow a tight bend. Where less than half that is traced behind the
+    end, the end's own fit bends on to the cut instead.
 
     Returns
     -------
@@ -149,11 +151,15 @@ def end_at_the_cut(
         The traced stretch from the end to the cut, the cut, its outward direction;
         None where no cut lies ahead within ``limit``, or the end is off the mask.
     """
-    ahead, cut = middle_line(mask, end.position, end.direction, end.curvature, half_width, limit)
+    position = np.asarray(end.position, np.float64)
+    ahead, cut = middle_line(mask, position, end.direction, end.curvature, half_width, limit)
     if not cut or len(ahead) < 2:
         return None
     span = FIT_RADII * half_width
-    behind, _ = middle_line(mask, end.position, -end.direction, -end.curvature, half_width, span)
+    behind, _ = middle_line(mask, position, -end.direction, -end.curvature, half_width, span)
+    if polyline_length(behind) < 0.5 * span:
+        # Too little of the cable traced to fit its direction: the end's fit bends on.
+        return ahead, ahead[-1], rotated(end.direction, end.curvature * polyline_length(ahead))
     line = np.concatenate([behind[::-1], ahead[1:]])
     _, direction, _ = end_fit(line, False, span)
     return ahead, ahead[-1], direction
@@ -171,11 +177,13 @@ def bridges_from_the_cuts(
 ) -> dict[tuple[int, int], np.ndarray]:
     """Bridges of the gaps (joins of two ends in no junction, with no curve of their
     own in ``given``) drawn from the cuts: from each bridging end (``ends``, where the
-    fit begins) along the cable traced to where it leaves the mask
-    (:func:`traced_to_the_cut`, within the tip the fit left out and
-    :data:`REACH_PAST_SKIP_RADII` radii past it), across the gap by
-    :func:`.paths.gap_curve` of ``shape`` between the two cuts, and back along the
-    other end's traced stretch. An end with no cut traced keeps its own start.
+    fit begins) along the cable traced to where it passes out of sight
+    (:func:`end_at_the_cut`, within the tip the fit left out and
+    :data:`REACH_PAST_SKIP_RADII` radii past it; only ends whose fit left a tip out),
+    across the gap by :func:`.paths.gap_curve` of ``shape`` between the two cuts, and
+    back along the other end's traced stretch. An end with no cut traced keeps its own
+    start. The joins in ``turns`` (each as the turn pass keyed it) are bridged so too,
+    though their ends are in ``given``, where both ends reach a cut.
 
     Returns
     -------
@@ -208,5 +216,9 @@ def bridges_from_the_cuts(
             continue
         (a, leaving), (b, arriving) = cuts
         across = gap_curve(a, leaving, b, -arriving, shape=shape)
-        bridges[i, j] = np.concatenate([stretches[0][:-1], across, stretches[1][-2::-1]])
+        curve = np.concatenate([stretches[0][:-1], across, stretches[1][-2::-1]])
+        if (j, i) in turns:
+            bridges[j, i] = curve[::-1]  # the key the turn's own curve has
+        else:
+            bridges[i, j] = curve
     return bridges
