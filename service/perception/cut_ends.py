@@ -27,7 +27,7 @@ from service.perception.paths import gap_curve
 
 TRACE_STEP_PX = 1.0
 """The step (px) along the cable between two traced middle points."""
-SECTION_STEP_PX = 0.5
+SECTION_STEP_PX = 0.25
 """The step (px) at which the mask is read across the cable."""
 CUT_NARROWING_PX = 2.0
 """A section narrower than the cable by more than this (px: a pixel's rounding at either
@@ -148,7 +148,8 @@ def end_at_the_cut(
     Returns
     -------
     (traced, position, direction) or None
-        The traced stretch from the end to the cut, the cut, its outward direction;
+        The traced stretch from the end to the cut, the cut (the fit's end, or the
+        traced stretch's), its outward direction;
         None where no cut lies ahead within ``limit``, or the end is off the mask.
     """
     position = np.asarray(end.position, np.float64)
@@ -161,8 +162,9 @@ def end_at_the_cut(
         # Too little of the cable traced to fit its direction: the end's fit bends on.
         return ahead, ahead[-1], rotated(end.direction, end.curvature * polyline_length(ahead))
     line = np.concatenate([behind[::-1], ahead[1:]])
-    _, direction, _ = end_fit(line, False, span)
-    return ahead, ahead[-1], direction
+    # The fit's own end: the traced points carry a pixel's rounding from step to step.
+    position, direction, _ = end_fit(line, False, span)
+    return ahead, position, direction
 
 
 def bridges_from_the_cuts(
@@ -216,7 +218,12 @@ def bridges_from_the_cuts(
             continue
         (a, leaving), (b, arriving) = cuts
         across = gap_curve(a, leaving, b, -arriving, shape=shape)
-        curve = np.concatenate([stretches[0][:-1], across, stretches[1][-2::-1]])
+        # The seen stretches drawn as the cable bends between the bridge's start and its
+        # cut (the traced points carry a pixel's rounding from step to step).
+        start_a, start_b = (np.asarray(ends[k].position, np.float64) for k in (i, j))
+        seen_a = gap_curve(start_a, ends[i].direction, a, leaving, shape=shape)
+        seen_b = gap_curve(b, -arriving, start_b, -ends[j].direction, shape=shape)
+        curve = np.concatenate([seen_a[:-1], across, seen_b[1:]])
         if (j, i) in turns:
             bridges[j, i] = curve[::-1]  # the key the turn's own curve has
         else:
