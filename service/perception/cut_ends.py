@@ -42,27 +42,23 @@ REACH_PAST_SKIP_RADII = 2.0
 about a radius short of a cut, and a slanted cut's far corner a width further."""
 
 
-def _border_distance(mask: np.ndarray, point: np.ndarray, normal: np.ndarray, reach: float):
-    """Distance (px) from ``point`` along ``normal`` to the first sample off ``mask``,
-    or ``reach`` when none is met."""
-    steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX)
-    samples = np.rint(point[None, :] + steps[:, None] * normal[None, :]).astype(np.int64)
+def _border_distance(
+    mask: np.ndarray, x: float, y: float, dx: float, dy: float, steps: list[float], reach: float
+) -> float:
+    """Distance (px) from ``(x, y)`` along ``(dx, dy)`` to the first of the sample
+    ``steps`` (px, increasing, up to ``reach``) off ``mask``, or ``reach`` when none is."""
     height, width = mask.shape
-    inside = (
-        (samples[:, 0] >= 0)
-        & (samples[:, 0] < width)
-        & (samples[:, 1] >= 0)
-        & (samples[:, 1] < height)
-    )
-    on = np.zeros(len(steps), bool)
-    on[inside] = mask[samples[inside, 1], samples[inside, 0]]
-    off = np.flatnonzero(~on)
-    return float(steps[off[0]] - 0.5 * SECTION_STEP_PX) if len(off) else reach
+    for step in steps:
+        # Python's round, as NumPy's rint, rounds halves to even.
+        column, row = round(x + step * dx), round(y + step * dy)
+        if not (0 <= column < width and 0 <= row < height and mask[row, column]):
+            return step - 0.5 * SECTION_STEP_PX
+    return reach
 
 
-def _on_mask(mask: np.ndarray, point: np.ndarray) -> bool:
-    x, y = (int(v) for v in np.rint(point))
-    return 0 <= x < mask.shape[1] and 0 <= y < mask.shape[0] and bool(mask[y, x])
+def _on_mask(mask: np.ndarray, x: float, y: float) -> bool:
+    column, row = round(x), round(y)
+    return 0 <= column < mask.shape[1] and 0 <= row < mask.shape[0] and bool(mask[row, column])
 
 
 def _recentred(plus: float, minus: float, half_width: float) -> float:
@@ -108,27 +104,31 @@ def middle_line(
     cut : bool
         Whether the trace stopped at a cut before ``limit``.
     """
-    heading = unit(np.asarray(heading, np.float64))
-    points = [np.asarray(start, np.float64)]
-    if not _on_mask(mask, points[0]):
+    # Plain floats, step by step (a trace is a few dozen steps, each a few samples).
+    x, y = (float(value) for value in np.asarray(start, np.float64))
+    hx, hy = (float(value) for value in unit(np.asarray(heading, np.float64)))
+    points = [(x, y)]
+    if not _on_mask(mask, x, y):
         return np.array(points), False
     reach = 2.5 * half_width + 2.0
+    steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX).tolist()
+    cos, sin = float(np.cos(curvature * TRACE_STEP_PX)), float(np.sin(curvature * TRACE_STEP_PX))
     for _ in range(int(limit / TRACE_STEP_PX)):
-        ahead = points[-1] + TRACE_STEP_PX * heading
-        normal = np.array([-heading[1], heading[0]])
-        if _on_mask(mask, ahead):
-            plus = _border_distance(mask, ahead, normal, reach)
-            minus = _border_distance(mask, ahead, -normal, reach)
+        x, y = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
+        nx, ny = -hy, hx
+        if _on_mask(mask, x, y):
+            plus = _border_distance(mask, x, y, nx, ny, steps, reach)
+            minus = _border_distance(mask, x, y, -nx, -ny, steps, reach)
             if plus + minus < 2.0 * half_width - CUT_NARROWING_PX:
                 # The cut begins here, on one side or both: past it, what is left of
                 # the section is no longer centred on the cable.
                 return np.array(points), True
-            shift = _recentred(plus, minus, half_width)
-            ahead = ahead + float(np.clip(shift, -TRACE_STEP_PX, TRACE_STEP_PX)) * normal
-        if not _on_mask(mask, ahead):
+            shift = min(max(_recentred(plus, minus, half_width), -TRACE_STEP_PX), TRACE_STEP_PX)
+            x, y = x + shift * nx, y + shift * ny
+        if not _on_mask(mask, x, y):
             return np.array(points), True
-        points.append(ahead)
-        heading = rotated(heading, curvature * TRACE_STEP_PX)
+        points.append((x, y))
+        hx, hy = cos * hx - sin * hy, sin * hx + cos * hy
     return np.array(points), False
 
 
