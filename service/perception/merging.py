@@ -43,6 +43,7 @@ from service.perception.bridge_ends import (
     ends_through_short_pieces,
     free_ends_beside_crossings,
 )
+from service.perception.cut_ends import bridges_from_the_cuts
 from service.perception.deadline import Deadline, check
 from service.perception.gap_evidence import (
     TURN_EVIDENCE_ALONG_CURVE,
@@ -72,7 +73,7 @@ from service.perception.touching import (
     split_where_leaving_together,
 )
 from service.perception.touching_ends import keep_turns_free
-from service.perception.turn_joins import turn_joins
+from service.perception.turn_joins import HIDDEN_BEND_RADII, turn_joins
 
 # An end whose cable runs on along its direction, within this many radii plus
 # BORDER_REACH_PX, to the picture's border (or within BORDER_MARGIN_PX of it) is a cable
@@ -849,6 +850,28 @@ def merge_chains(
             pieces, inner_ends, joins, junction_of_end, mask, span, curve_given
         )
     bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span, junction_of_end)
+    if mask is not None:
+        # A gap's bridge leaves the cable where it passes out of sight, not where the
+        # end's fit begins a radius or two before (on a tight bend, 30-60 degrees back).
+        # A turn under an object whose strands lie far enough apart to turn round in
+        # one arc: the cuts say where and which way the cable passes out of sight.
+        wide_turns = frozenset(
+            (i, j)
+            for i, j in turn_bridges
+            if np.hypot(*(ends[i].position - ends[j].position))
+            >= 2.0 * HIDDEN_BEND_RADII[0] * (0.5 * (ends[i].width + ends[j].width) or radius)
+        )
+        cut_bridges = bridges_from_the_cuts(
+            bridging_ends,
+            joins,
+            junction_of_end,
+            mask,
+            radius,
+            curve_given,
+            params.gap_curve,
+            wide_turns,
+        )
+        bridges = {**bridges, **cut_bridges}
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
