@@ -70,7 +70,6 @@ from service.perception.seed_lines import (
     REACH,
     Level,
     SeedLines,
-    seed_lines,
     weaker_lines_of_a_seeds_colour,
 )
 
@@ -254,10 +253,9 @@ def cable_contrast(
         seeds, runs = _long_seed_runs(ratio, seeds, widest_line)
     if seeds.any():
         strong = seeds
-        seeds = seeds | weaker_lines_of_a_seeds_colour(
+        seeds, lines = weaker_lines_of_a_seeds_colour(
             (height, width), levels, best_level, ratio, seeds, runs
         )
-        lines = seed_lines((height, width), levels, best_level, seeds)
         lines = _without_shadows(lines, seeds, height / seeds.shape[0])
         lines = lines.take(~transitions(lines.colours))
         lines = lines.take(~between_unlike_sides(lines.colours))

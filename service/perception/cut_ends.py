@@ -182,8 +182,9 @@ def bridges_from_the_cuts(
     fit begins) along the cable traced to where it passes out of sight
     (:func:`end_at_the_cut`, within the tip the fit left out and
     :data:`REACH_PAST_SKIP_RADII` radii past it; only ends whose fit left a tip out),
-    across the gap by :func:`.paths.gap_curve` of ``shape`` between the two cuts, and
-    back along the other end's traced stretch. An end with no cut traced keeps its own
+    across the gap by :func:`.paths.gap_curve` of ``shape`` between the two cuts, and on
+    to the other end's bridging point (the seen stretches drawn as curves from each
+    bridging point to its cut). An end with no cut traced keeps its own
     start. The joins in ``turns`` (each as the turn pass keyed it) are bridged so too,
     though their ends are in ``given``, where both ends reach a cut.
 
@@ -197,26 +198,23 @@ def bridges_from_the_cuts(
     for i, j, _ in joins:
         if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
             continue
-        if (i in given or j in given) and (i, j) not in turns and (j, i) not in turns:
+        turn = (i, j) in turns or (j, i) in turns
+        if (i in given or j in given) and not turn:
             continue
-        stretches, cuts = [], []
+        traced, cuts = [], []
         for k in (i, j):
             end = ends[k]
             half_width = (end.width or radius) + 0.5
             limit = end.skip + REACH_PAST_SKIP_RADII * half_width + 2.0
             # Only an end whose fit left out its tip starts its bridge behind the cut.
             found = end_at_the_cut(mask, end, half_width, limit) if end.skip > 0 else None
-            if found is None:
-                stretches.append(np.asarray(end.position, np.float64)[None])
-                cuts.append((np.asarray(end.position, np.float64), end.direction))
-            else:
-                stretches.append(found[0])
-                cuts.append(found[1:])
-        if len(stretches[0]) == 1 and len(stretches[1]) == 1:
+            traced.append(found is not None)
+            cuts.append((end.position, end.direction) if found is None else found[1:])
+        if not any(traced) or (turn and not all(traced)):
             continue
-        if ((i, j) in turns or (j, i) in turns) and min(map(len, stretches)) == 1:
-            continue
-        (a, leaving), (b, arriving) = cuts
+        (a, leaving), (b, arriving) = (
+            (np.asarray(point, np.float64), heading) for point, heading in cuts
+        )
         across = gap_curve(a, leaving, b, -arriving, shape=shape)
         # The seen stretches drawn as the cable bends between the bridge's start and its
         # cut (the traced points carry a pixel's rounding from step to step).

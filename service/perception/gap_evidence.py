@@ -90,12 +90,14 @@ def cut_ends_alike(
     """
     if colours is None:
         return False
+    if not ends_alike(colours, i, j, (a.width, b.width)):
+        return False
     cable = cable_radius(radius, a.width, b.width)
+    # The open stretch reads the image along the curve: only for ends alike, and only
+    # where the curve is too long for its whole length to count.
     if polyline_length(curve) > CUT_GAP_RADII * cable and (
         open_length(curve, mask, image, (a, b), radius) > OPEN_HIDDEN_RADII * cable
     ):
-        return False
-    if not ends_alike(colours, i, j, (a.width, b.width)):
         return False
     square = [cut_square(mask, end.position, end.direction, end.width, end.skip) for end in (a, b)]
     if all(square):

@@ -163,8 +163,9 @@ def weaker_lines_of_a_seeds_colour(
     ratio: np.ndarray,
     seeds: np.ndarray,
     runs: np.ndarray,
-) -> np.ndarray:
-    """The grid pixels of weaker line on a seed's run that are of that seed's cable.
+) -> tuple[np.ndarray, SeedLines]:
+    """The grid pixels of weaker line on a seed's run that are of that seed's cable,
+    with the seeds, and the lines of them all.
 
     Otsu's threshold splits the ratios of the whole picture: where the cables on white
     paper are strong lines, it is raised above a stretch of the same cable over a darker
@@ -201,17 +202,19 @@ def weaker_lines_of_a_seeds_colour(
 
     Returns
     -------
-    ndarray of bool
-        The grid pixels taken (none of them a seed).
+    grown : ndarray of bool
+        ``seeds`` and the grid pixels taken.
+    lines : SeedLines
+        :func:`seed_lines` of ``grown`` (the lines the weaker pixels were judged on,
+        less those not taken: not read twice).
     """
     weaker = (runs > 0) & ~seeds & (ratio >= MIN_RATIO)
     grid_step = shape[0] / seeds.shape[0]
     steps = np.array([level.step for level in levels])[best_level]
     off_seeds = cv2.distanceTransform((~seeds).view(np.uint8), cv2.DIST_L2, 3)
     beside_a_seed = weaker & (off_seeds * grid_step <= REACH * steps)
-    taken = np.zeros(seeds.shape, bool)
     if not weaker.any():
-        return taken
+        return seeds, seed_lines(shape, levels, best_level, seeds)
     both = seeds | weaker
     lines = seed_lines(shape, levels, best_level, both)
     rows, cols = np.nonzero(both)
@@ -222,7 +225,7 @@ def weaker_lines_of_a_seeds_colour(
     run_of_line[lines.of_grid] = runs[rows, cols]
     weak = np.flatnonzero(~strong)
     if weak.size == 0:
-        return taken
+        return seeds, lines_of_kept(lines, seeds[rows, cols])
     # Imported here, as in tinted_by_a_neighbour: only the contrast path pays for scipy.
     from scipy.spatial import cKDTree
 
@@ -247,8 +250,28 @@ def weaker_lines_of_a_seeds_colour(
     of_the_cable[weak[has_seed & (from_seed < 0.5 * seed_contrast) & (~beside[weak] | along)]] = (
         True
     )
-    taken[rows, cols] = weaker[rows, cols] & of_the_cable[lines.of_grid]
-    return taken
+    taken = weaker[rows, cols] & of_the_cable[lines.of_grid]
+    kept = seeds[rows, cols] | taken
+    grown = np.zeros(seeds.shape, bool)
+    grown[rows[kept], cols[kept]] = True
+    return grown, lines_of_kept(lines, kept)
+
+
+def lines_of_kept(lines: SeedLines, kept: np.ndarray) -> SeedLines:
+    """:func:`seed_lines` of a subset of the grid seeds ``lines`` was made from, taken
+    from ``lines``: ``kept`` per grid seed (in ``np.nonzero`` order). A line's colours are
+    its level pixel's, whichever of its grid seeds remain; a line none remains on goes."""
+    cells = np.zeros(lines.steps.size, bool)
+    cells[lines.of_grid[kept]] = True
+    taken = lines.take(cells)
+    return SeedLines(
+        taken.centres_y,
+        taken.centres_x,
+        taken.angles,
+        taken.steps,
+        taken.colours,
+        taken.of_grid[kept],
+    )
 
 
 def along_the_seeds_line(
