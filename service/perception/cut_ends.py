@@ -176,7 +176,6 @@ def bridges_from_the_cuts(
     given: frozenset[int],
     shape: str = "smooth",
     turns: frozenset[tuple[int, int]] = frozenset(),
-    at_cuts: frozenset[int] = frozenset(),
 ) -> dict[tuple[int, int], np.ndarray]:
     """Bridges of the gaps (joins of two ends in no junction, with no curve of their
     own in ``given``) drawn from the cuts: from each bridging end (``ends``, where the
@@ -187,9 +186,7 @@ def bridges_from_the_cuts(
     to the other end's bridging point (the seen stretches drawn as curves from each
     bridging point to its cut). An end with no cut traced keeps its own
     start. The joins in ``turns`` (each as the turn pass keyed it) are bridged so too,
-    though their ends are in ``given``, where both ends reach a cut: traced, or in
-    ``at_cuts``, already there (a short piece's end at the middle of its cut,
-    :func:`.cut_middles.short_ends_at_cut_middles`).
+    though their ends are in ``given``, where both ends reach a cut.
 
     Returns
     -------
@@ -211,7 +208,7 @@ def bridges_from_the_cuts(
             limit = end.skip + REACH_PAST_SKIP_RADII * half_width + 2.0
             # Only an end whose fit left out its tip starts its bridge behind the cut.
             found = end_at_the_cut(mask, end, half_width, limit) if end.skip > 0 else None
-            traced.append(found is not None or (turn and k in at_cuts))
+            traced.append(found is not None)
             cuts.append((end.position, end.direction) if found is None else found[1:])
         if not any(traced) or (turn and not all(traced)):
             continue

@@ -105,19 +105,15 @@ def short_ends_at_cut_middles(
     radius: float,
     shorter_than: float,
     curve_given: frozenset[int] = frozenset(),
-    turns: frozenset[tuple[int, int]] = frozenset(),
-) -> tuple[list, frozenset[int]]:
+) -> list:
     """``bridging_ends`` with each gap end of a piece shorter than ``shorter_than`` (the
     end fit's span) moved to the middle of the cable where it passes out of sight
     (:func:`cut_middle`), its direction kept.
 
     Only joins across a gap (no junction at either end), and not an end whose bridge is
-    a curve found elsewhere (``curve_given``), unless its join is a turn out of sight in
-    ``turns`` that :func:`.cut_ends.bridges_from_the_cuts` draws from the cuts when both
-    ends reach one (an object over a bend, cutting a short stretch on one side). The
-    cable's half width is the longer piece's of the join (``ends``' fitted widths; a
-    short piece's skeleton runs near its corners, where the mask is narrow), else
-    ``radius``. The joins are left as they were.
+    a curve found elsewhere (``curve_given``). The cable's half width is the longer
+    piece's of the join (``ends``' fitted widths; a short piece's skeleton runs near its
+    corners, where the mask is narrow), else ``radius``. The joins are left as they were.
 
     Parameters
     ----------
@@ -135,23 +131,18 @@ def short_ends_at_cut_middles(
     shorter_than : float
         The end fit's span (px).
     curve_given : frozenset of int
-    turns : frozenset of (int, int)
 
     Returns
     -------
-    bridging_ends : list of ChainEnd
-    at_cuts : frozenset of int
-        The ends moved to their cut's middle.
+    list of ChainEnd
     """
     adjusted = list(bridging_ends)
-    at_cuts = set()
     lengths = {}
     for i, j, _ in joins:
         if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
             continue
-        turn = (i, j) in turns or (j, i) in turns
         for own, other in ((i, j), (j, i)):
-            if own in curve_given and not turn:
+            if own in curve_given:
                 continue
             piece = ends[own].piece
             for k in (piece, ends[other].piece):
@@ -167,5 +158,4 @@ def short_ends_at_cut_middles(
             middle = cut_middle(mask, points, ends[own].at_start, tip, end.direction, half_width)
             if middle is not None:
                 adjusted[own] = replace(end, position=middle)
-                at_cuts.add(own)
-    return adjusted, frozenset(at_cuts)
+    return adjusted

@@ -852,6 +852,13 @@ def merge_chains(
         )
     bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span, junction_of_end)
     if mask is not None:
+        # A short piece's skeleton tip lies in the cut's corner: its bridges leave the
+        # cable's middle at the cut instead.
+        bridging_ends = short_ends_at_cut_middles(
+            pieces, ends, bridging_ends, joins, junction_of_end, mask, radius, span, curve_given
+        )
+        # A gap's bridge leaves the cable where it passes out of sight, not where the
+        # end's fit begins a radius or two before (on a tight bend, 30-60 degrees back).
         # A turn under an object whose strands lie far enough apart to turn round in
         # one arc: the cuts say where and which way the cable passes out of sight.
         wide_turns = frozenset(
@@ -860,22 +867,6 @@ def merge_chains(
             if np.hypot(*(ends[i].position - ends[j].position))
             >= 2.0 * HIDDEN_BEND_RADII[0] * (0.5 * (ends[i].width + ends[j].width) or radius)
         )
-        # A short piece's skeleton tip lies in the cut's corner: its bridges leave the
-        # cable's middle at the cut instead.
-        bridging_ends, at_cuts = short_ends_at_cut_middles(
-            pieces,
-            ends,
-            bridging_ends,
-            joins,
-            junction_of_end,
-            mask,
-            radius,
-            span,
-            curve_given,
-            wide_turns,
-        )
-        # A gap's bridge leaves the cable where it passes out of sight, not where the
-        # end's fit begins a radius or two before (on a tight bend, 30-60 degrees back).
         cut_bridges = bridges_from_the_cuts(
             bridging_ends,
             joins,
@@ -885,7 +876,6 @@ def merge_chains(
             curve_given,
             params.gap_curve,
             wide_turns,
-            at_cuts,
         )
         bridges = {**bridges, **cut_bridges}
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)
