@@ -72,4 +72,3 @@ def test_short_pieces_between_objects_are_bridged_from_their_cut_middles(seed):
     scene = make_family_scene("occluded", seed)
     score, _ = evaluate_scene(scene, seed, mask_from_labels=True)
     assert score.frame.correct
-
