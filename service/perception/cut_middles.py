@@ -47,6 +47,7 @@ def section_middle(
     Examples
     --------
     >>> import numpy as np
+
     A band of rows 6-13 (middle 9.5), read at quarter pixels from a point near its edge:
 
     >>> band = np.zeros((20, 20), bool); band[6:14] = True
