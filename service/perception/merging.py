@@ -44,6 +44,7 @@ from service.perception.bridge_ends import (
     free_ends_beside_crossings,
 )
 from service.perception.cut_ends import bridges_from_the_cuts
+from service.perception.cut_middles import short_ends_at_cut_middles
 from service.perception.deadline import Deadline, check
 from service.perception.gap_evidence import (
     TURN_EVIDENCE_ALONG_CURVE,
@@ -851,6 +852,11 @@ def merge_chains(
         )
     bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span, junction_of_end)
     if mask is not None:
+        # A short piece's skeleton tip lies in the cut's corner: its bridges leave the
+        # cable's middle at the cut instead.
+        bridging_ends = short_ends_at_cut_middles(
+            pieces, ends, bridging_ends, joins, junction_of_end, mask, radius, span, curve_given
+        )
         # A gap's bridge leaves the cable where it passes out of sight, not where the
         # end's fit begins a radius or two before (on a tight bend, 30-60 degrees back).
         # A turn under an object whose strands lie far enough apart to turn round in
