@@ -43,6 +43,7 @@ from service.perception.bridge_ends import (
     ends_through_short_pieces,
     free_ends_beside_crossings,
 )
+from service.perception.crossing_stubs import ends_past_crossings, evidence_ends
 from service.perception.cut_ends import bridges_from_the_cuts
 from service.perception.deadline import Deadline, check
 from service.perception.gap_evidence import (
@@ -765,6 +766,13 @@ def merge_chains(
     if zones is not None or mask is not None:
         picture = (zones if zones is not None else mask).shape[:2]
     hidden_gap = None
+    # A strand crossing another just before it passes out of sight is cut beyond the
+    # crossing: the image's evidence for its end is read there (:mod:`.crossing_stubs`).
+    seen_from = ends
+    if zones is not None and mask is not None and ends:
+        seen_from = ends_past_crossings(
+            pieces, ends, tips_in_junctions(pieces, zones), mask, zones, span
+        )
     if image is not None and mask is not None:
 
         def hidden_gap(i: int, j: int, curve: np.ndarray | None = None) -> bool:
@@ -776,6 +784,7 @@ def merge_chains(
                 curve = gap_curve(
                     a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
                 )
+            a, b = seen_from[i], seen_from[j]
             if gap_hidden(image, mask, curve, (a, b), radius):
                 return True
             return cut_ends_alike(a, b, i, j, curve, mask, colours, radius, image=image)
@@ -826,7 +835,14 @@ def merge_chains(
                 join_cost(ends[i], ends[j], params, radius)
                 + params.colour_weight * float(colour_penalty(hues, [i], [j])[0])
             ),
-            turn_evidence(image, mask, seen, hues, radius, set(touching.partings)),
+            turn_evidence(
+                image,
+                mask,
+                evidence_ends(seen, ends, seen_from),
+                hues,
+                radius,
+                set(touching.partings),
+            ),
             lambda i, j: open_gap_limit(radius, widths[i], widths[j]),
             mutual,
             mutual,
