@@ -74,6 +74,7 @@ from service.perception.touching import (
     split_where_leaving_together,
 )
 from service.perception.touching_ends import keep_turns_free
+from service.perception.traced_cuts import traced_cut_tests
 from service.perception.turn_joins import HIDDEN_BEND_RADII, turn_joins
 
 # An end whose cable runs on along its direction, within this many radii plus
@@ -825,6 +826,7 @@ def merge_chains(
         mutual = MUTUAL_COST_FACTOR * params.merge_cost_threshold
         seen, hues = scraps_through_junctions(ends, colours, joins, junction_of_end, pieces, radius)
         widths = np.array([end.width for end in seen], np.float64)
+        judged = evidence_ends(seen, ends, seen_from)
         joins = joins + turn_joins(
             seen,
             joins,
@@ -835,14 +837,8 @@ def merge_chains(
                 join_cost(ends[i], ends[j], params, radius)
                 + params.colour_weight * float(colour_penalty(hues, [i], [j])[0])
             ),
-            turn_evidence(
-                image,
-                mask,
-                evidence_ends(seen, ends, seen_from),
-                hues,
-                radius,
-                set(touching.partings),
-            ),
+            turn_evidence(image, mask, judged, hues, radius, set(touching.partings))
+            + traced_cut_tests(judged, mask, hues, radius, image),
             lambda i, j: open_gap_limit(radius, widths[i], widths[j]),
             mutual,
             mutual,
