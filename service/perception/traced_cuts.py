@@ -21,6 +21,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from service.perception.appearance import cut_square
 from service.perception.cut_ends import REACH_PAST_SKIP_RADII, end_at_the_cut
 from service.perception.gap_evidence import TURN_CUT_ENDS, cut_ends_alike
 
@@ -57,12 +58,24 @@ def traced_cut_tests(ends, mask, colours, radius, image) -> tuple:
     read at its traced cut (:func:`ends_at_the_cuts`), as callables ``(i, j, curve)``;
     False where neither end reads otherwise than usual (the usual tests said so)."""
     at_cut = ends_at_the_cuts(ends, mask, radius)
+    square: dict[int, bool] = {}
+
+    def cut_square_at(index: int) -> bool:
+        # Whether the end reads square at its traced cut, once per end: the same for
+        # every curve tried, and false on most of them (a cable's own tip).
+        if index not in square:
+            end = at_cut(index)
+            square[index] = bool(cut_square(mask, end.position, end.direction, end.width, end.skip))
+        return square[index]
 
     def test(cut_needed: int):
         def passes(i: int, j: int, curve: np.ndarray) -> bool:
             a, b = at_cut(i), at_cut(j)
             if a is ends[i] and b is ends[j]:
                 return False
+            cuts = [cut_square_at(i), cut_square_at(j)]
+            if not any(cuts) or (cut_needed > 1 and not all(cuts)):
+                return False  # cut_ends_alike would say no on these reads
             return cut_ends_alike(a, b, i, j, curve, mask, colours, radius, cut_needed, image)
 
         return passes
