@@ -43,6 +43,7 @@ from service.perception.bridge_ends import (
     ends_through_short_pieces,
     free_ends_beside_crossings,
 )
+from service.perception.crossing_stubs import ends_past_crossings, evidence_ends
 from service.perception.cut_ends import bridges_from_the_cuts
 from service.perception.cut_middles import short_ends_at_cut_middles
 from service.perception.deadline import Deadline, check
@@ -74,6 +75,7 @@ from service.perception.touching import (
     split_where_leaving_together,
 )
 from service.perception.touching_ends import keep_turns_free
+from service.perception.traced_cuts import traced_cut_tests
 from service.perception.turn_joins import HIDDEN_BEND_RADII, turn_joins
 
 # An end whose cable runs on along its direction, within this many radii plus
@@ -766,6 +768,13 @@ def merge_chains(
     if zones is not None or mask is not None:
         picture = (zones if zones is not None else mask).shape[:2]
     hidden_gap = None
+    # A strand crossing another just before it passes out of sight is cut beyond the
+    # crossing: the image's evidence for its end is read there (:mod:`.crossing_stubs`).
+    seen_from = ends
+    if zones is not None and mask is not None and ends:
+        seen_from = ends_past_crossings(
+            pieces, ends, tips_in_junctions(pieces, zones), mask, zones, span
+        )
     if image is not None and mask is not None:
 
         def hidden_gap(i: int, j: int, curve: np.ndarray | None = None) -> bool:
@@ -777,6 +786,7 @@ def merge_chains(
                 curve = gap_curve(
                     a.position, a.direction, b.position, -b.direction, shape=params.gap_curve
                 )
+            a, b = seen_from[i], seen_from[j]
             if gap_hidden(image, mask, curve, (a, b), radius):
                 return True
             return cut_ends_alike(a, b, i, j, curve, mask, colours, radius, image=image)
@@ -817,6 +827,7 @@ def merge_chains(
         mutual = MUTUAL_COST_FACTOR * params.merge_cost_threshold
         seen, hues = scraps_through_junctions(ends, colours, joins, junction_of_end, pieces, radius)
         widths = np.array([end.width for end in seen], np.float64)
+        judged = evidence_ends(seen, ends, seen_from)
         joins = joins + turn_joins(
             seen,
             joins,
@@ -827,7 +838,8 @@ def merge_chains(
                 join_cost(ends[i], ends[j], params, radius)
                 + params.colour_weight * float(colour_penalty(hues, [i], [j])[0])
             ),
-            turn_evidence(image, mask, seen, hues, radius, set(touching.partings)),
+            turn_evidence(image, mask, judged, hues, radius, set(touching.partings))
+            + traced_cut_tests(judged, mask, hues, radius, image),
             lambda i, j: open_gap_limit(radius, widths[i], widths[j]),
             mutual,
             mutual,

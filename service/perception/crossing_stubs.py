@@ -1,0 +1,167 @@
+"""A strand that crosses another cable and passes out of sight just past the crossing.
+
+Where a cable crosses another and, a few widths further on, runs under an object, the
+stretch seen between the crossing and the object's border is a stub of skeleton
+hanging off the crossing's junction: spur removal takes it (it is shorter than a spur
+from the junction it joins) or the junction zone swallows it. The strand's piece then
+ends in the crossing's zone, and the junction's pairing, having no strand on the far
+side to give it, leaves it free. Its cut, where the object's border crosses the
+cable, lies beyond the crossing, on the stub: read at the end's fitted tip, inside the
+crossing, the foreground runs on ahead (the other cable, then the stub), so the end
+reads as no cut, and the stretch right past it is on the foreground, not under the
+object. A join across the object is then refused for want of the evidence that is
+there to see one stub further on.
+
+:func:`ends_past_crossings` gives such an end, for the tests of the image's evidence
+only (:mod:`.gap_evidence`, :func:`.appearance.gap_hidden`), at the stub's front: where
+the foreground along the strand's own direction stops past the junction zone, when
+the mask there bears no other piece (the stub lost its skeleton: a piece there is a
+strand of its own, with its own end) and the stub is no longer than an end's fit
+reads. The join's cost and its bridge still start from the end itself: the stub lies
+straight along its direction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+
+# The ray along a strand is read in steps of this many px.
+RAY_STEP_PX = 0.5
+
+
+def stub_front(
+    tip: np.ndarray,
+    direction: np.ndarray,
+    mask: np.ndarray,
+    zones: np.ndarray,
+    reach: float,
+) -> tuple[float, float] | None:
+    """Where the foreground along a strand stops past the junction zone its tip lies in.
+
+    Parameters
+    ----------
+    tip : ndarray (2,)
+        The piece's tip joint (x, y), in a junction zone.
+    direction : ndarray (2,)
+        The end's outward unit direction.
+    mask : ndarray (H, W) of bool
+        The foreground.
+    zones : ndarray (H, W) of bool
+        The junction zones.
+    reach : float
+        The longest stub (px past the zone) looked for.
+
+    Returns
+    -------
+    (float, float) or None
+        The distances (px from the tip) at which the ray leaves the zone and at which it
+        leaves the foreground after that; None when it leaves the foreground inside the
+        zone (no stub: the other cable's far side), runs on past ``reach``, or leaves the
+        picture.
+    """
+    height, width = mask.shape
+    entered, exit_at = False, None
+    # Into the zone (the tip may lie a few px short of it), across it and then the stub.
+    for t in np.arange(0.0, 2.0 * reach, RAY_STEP_PX).tolist():
+        if exit_at is not None and t > exit_at + reach:
+            return None
+        x, y = np.rint(tip + t * direction).astype(np.int64)
+        if not (0 <= x < width and 0 <= y < height):
+            return None
+        if not mask[y, x]:
+            return None if exit_at is None else (exit_at, t)
+        if zones[y, x]:
+            entered = True
+        elif entered and exit_at is None:
+            exit_at = t
+    return None
+
+
+def ends_past_crossings(
+    pieces: list[np.ndarray],
+    ends: list,
+    in_junction: np.ndarray,
+    mask: np.ndarray,
+    zones: np.ndarray,
+    reach: float,
+) -> list:
+    """``ends`` with each end whose tip lies in a junction zone and whose strand runs on
+    past it, straight, as a stub bearing no piece, moved to the stub's front (its
+    ``skip`` 0: nothing of a hook to leave out there), for the image's evidence.
+
+    Parameters
+    ----------
+    pieces : list of ndarray
+        ``(K, 2)`` joints of the pieces (x, y).
+    ends : list of ChainEnd
+        Both ends of every piece (piece i: ends 2i, 2i+1), ``direction`` outwards.
+    in_junction : ndarray of bool
+        Per end, whether its piece's tip lies in a junction zone
+        (:func:`.merging.tips_in_junctions`).
+    mask, zones : ndarray (H, W) of bool
+        The foreground and the junction zones.
+    reach : float
+        The longest stub (px past the zone): what an end's fit spans.
+
+    Returns
+    -------
+    list of ChainEnd
+        The ends, those moved replaced; the others the same objects.
+    """
+    moved = list(ends)
+    fronts = []
+    for index, end in enumerate(ends):
+        if index >= len(in_junction) or not in_junction[index]:
+            continue
+        points = pieces[end.piece]
+        tip = np.asarray(points[0] if end.at_start else points[-1], np.float64)
+        direction = np.asarray(end.direction, np.float64)
+        found = stub_front(tip, direction, mask, zones, reach)
+        if found is not None:
+            fronts.append((index, tip, direction, *found))
+    if not fronts:
+        return moved
+    # The pieces drawn one px wide: a stub that kept its skeleton holds a piece.
+    drawn = np.zeros(mask.shape, np.uint8)
+    cv2.polylines(
+        drawn,
+        [np.rint(points).astype(np.int32).reshape(-1, 1, 2) for points in pieces if len(points)],
+        False,
+        1,
+    )
+    height, width = mask.shape
+    for index, tip, direction, exit_at, front in fronts:
+        end = ends[index]
+        half_width = max(float(end.width), 1.0)
+        normal = np.array([-direction[1], direction[0]])
+        if front - exit_at < half_width:
+            continue  # the other cable's far side just past the zone, not a stub
+        offsets = np.arange(-np.ceil(half_width), np.ceil(half_width) + 1.0)
+        # Its outer half: near the zone the crossing cable's own pieces leave it.
+        along = np.arange(0.5 * (exit_at + front), front, RAY_STEP_PX)
+        samples = (
+            tip[None, None, :]
+            + along[:, None, None] * direction[None, None, :]
+            + offsets[None, :, None] * normal[None, None, :]
+        ).reshape(-1, 2)
+        x, y = np.rint(samples).astype(np.int64).T
+        inside = (x >= 0) & (y >= 0) & (x < width) & (y < height)
+        if drawn[y[inside], x[inside]].any():
+            continue
+        # The last foreground sample before the front: the cut's edge.
+        position = tip + (front - RAY_STEP_PX) * direction
+        moved[index] = replace(end, position=position, skip=0.0)
+    return moved
+
+
+def evidence_ends(judged: list, ends: list, moved: list) -> list:
+    """``judged`` (the ends as the turn pass judges them: a scrap's with its strand's
+    colour and width) with each end :func:`ends_past_crossings` moved at its stub's
+    front (``moved[k]`` not ``ends[k]``), for the image's evidence."""
+    return [
+        replace(seen, position=shifted.position, skip=shifted.skip) if shifted is not end else seen
+        for seen, end, shifted in zip(judged, ends, moved, strict=True)
+    ]
