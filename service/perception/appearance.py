@@ -21,7 +21,9 @@ at both its ends; unless neither of its tips is in a junction: then it is a stre
 cable seen between two objects, whose skeleton stops about a radius short of each cut.
 Nor has an end whose colour differs from that of its own piece further
 in: an occluder segmented with the cable, not much wider than it, that the piece runs
-into.
+into; unless the piece is long enough to be read twice further in and the two
+readings agree: then that is its cable's body, and the end (a stripped tip, a
+connector, an object over the end) takes the body's colour.
 
 For gaps, :func:`gap_hidden` tells whether something the image shows lies over one;
 :func:`cut_square` whether an end stops straight across the cable, as where an object's
@@ -103,7 +105,9 @@ def end_colours(
         left with fewer than :data:`MIN_SAMPLES` has an unknown colour (NaN), as has
         every end of a piece shorter than three radii (unless ``free``), and an end
         whose colour differs (a :func:`colour_penalty` above 0) from its piece's
-        further in (the next stretch as long, where the piece is long enough).
+        further in (the next stretch as long, where the piece is long enough), unless
+        a third stretch further in still agrees with the second: then the end takes
+        the second's colour (its cable's body).
     free : ndarray of bool, optional
         Per piece, whether neither of its tips is in a junction zone: such a piece
         shorter than three radii is a stretch of cable seen between two objects, not a
@@ -119,9 +123,9 @@ def end_colours(
     end_at_start = np.array([end.at_start for end in ends], np.bool_)
     image = np.ascontiguousarray(image_bgr, dtype=np.uint8)
 
-    def stretch(skip):
+    def stretch(skip, which=slice(None)):
         return _stretch_colours(
-            image, joints, starts, end_piece, end_at_start, skip, radius, distance
+            image, joints, starts, end_piece[which], end_at_start[which], skip, radius, distance
         )
 
     colour, spread, lengths = stretch(STRETCH_SKIP_RADII * radius)
@@ -142,6 +146,26 @@ def end_colours(
     index = np.arange(count)
     changed = colour_penalty(both, index, index + count) > 0
     colour[changed], spread[changed] = np.nan, np.nan
+    # The cable is still of its body's colour (a stripped tip's copper or a connector
+    # read at the end would leave the end free to join a cable of any colour), but only
+    # where a second reading further in agrees: a body that runs onto an object
+    # segmented with the cable is the object's colour, not the cable's.
+    deep_skip = body_skip + STRETCH_RADII * radius
+    # A stretch stays as far from the piece's other end as it starts from this one
+    # (else it is the whole piece): only a piece that long has a second reading.
+    readable = changed & (lengths - 2.0 * deep_skip >= 1.0)
+    readable &= ~np.isnan(body_spread)
+    if readable.any():
+        which = np.flatnonzero(readable)
+        deep, deep_spread, _ = stretch(deep_skip, which)
+        inner = EndColours(
+            np.concatenate([body[which], deep]),
+            np.concatenate([body_spread[which], deep_spread]),
+        )
+        pair = np.arange(len(which))
+        agree = inner.known[len(which) :] & (colour_penalty(inner, pair, pair + len(which)) == 0)
+        kept = which[agree]
+        colour[kept], spread[kept] = body[kept], body_spread[kept]
     return EndColours(colour, spread)
 
 

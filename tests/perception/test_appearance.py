@@ -68,7 +68,7 @@ def test_colour_penalty_is_zero_for_one_cable_and_grows_with_the_difference():
     assert different == appearance.MAX_COLOUR_STEPS
 
 
-def test_an_end_inside_an_object_segmented_with_the_cables_has_no_colour():
+def test_an_end_inside_an_object_segmented_with_the_cables_has_no_colour_of_the_object():
     """End to end, an occluder of a cable-like colour is segmented with the cable: the
     piece runs on into the object, and its colour there is not the cable's."""
     image = np.full((80, 220, 3), 60, np.uint8)
@@ -90,10 +90,13 @@ def test_an_end_inside_an_object_segmented_with_the_cables_has_no_colour():
     radius = 3.5
     blind = appearance.end_colours(image, pieces, ends, radius)
     seeing = appearance.end_colours(image, pieces, ends, radius, distance)
-    # With the widths the samples stop at the box; without them the end's red is not
-    # its piece's white further in. Either way the end has no colour of its own.
+    # With the widths the samples stop at the box: the end has no colour of its own.
+    # Without them the end's red is not its piece's white further in, which two
+    # readings agree on: the end takes its cable's white, never the box's red.
+    assert list(seeing.known) == [True, False, True, True]
+    assert list(blind.known) == [True, True, True, True]
+    np.testing.assert_allclose(blind.colour[1], blind.colour[0], atol=3)
     for colours in (blind, seeing):
-        assert list(colours.known) == [True, False, True, True]
         assert appearance.colour_penalty(colours, np.array([1]), np.array([2]))[0] == 0.0
     # The cable's own ends keep their colour: white against white.
     np.testing.assert_allclose(seeing.colour[0], seeing.colour[3], atol=3)
@@ -424,3 +427,58 @@ def test_only_the_open_stretch_of_a_gap_counts_as_what_the_ground_must_hide():
     # The curve started 20 px back on the first piece: no more open.
     longer = np.vstack([np.column_stack([np.arange(58.0, 78.0), np.full(20, 50.0)]), curve])
     assert open_length(longer, mask, None, ends, 3.5) == 91.0
+
+
+def stripped_tip_scene(body_end=110, object_from=None):
+    """White paper with a light-blue cable along y = 40 from x 10 to ``body_end``, its
+    copper tip 25 px on, and a black cable from x 175 to 250; optionally a dark-blue
+    object over the light-blue cable from x ``object_from`` to the tip. Returns the
+    image, the two pieces and their four ends."""
+    image = np.full((80, 260, 3), 235, np.uint8)  # white paper
+    cv2.line(image, (10, 40), (body_end, 40), (200, 160, 110), 7)  # light blue (BGR)
+    if object_from is not None:
+        cv2.line(image, (object_from, 40), (body_end, 40), (110, 40, 20), 7)  # dark blue
+    tip = body_end + 25
+    cv2.line(image, (body_end, 40), (tip, 40), (60, 120, 200), 5)  # copper
+    cv2.line(image, (175, 40), (250, 40), (30, 30, 30), 7)  # a black cable
+    pieces = [
+        np.column_stack([np.linspace(12, tip - 1, 25), np.full(25, 40.0)]),
+        np.column_stack([np.linspace(176, 248, 15), np.full(15, 40.0)]),
+    ]
+    ends = [
+        ChainEnd(k, at_start, np.zeros(2), np.zeros(2))
+        for k in range(2)
+        for at_start in (True, False)
+    ]
+    return image, pieces, ends
+
+
+def test_a_stripped_tip_takes_its_cable_s_colour_where_two_readings_agree():
+    """A light-blue cable whose last few millimetres are stripped to copper (ariadne
+    simple 00006 end to end) reads copper at its end. Its body, read twice further in,
+    is light blue both times: the end takes the light blue, so a black cable's end
+    across the paper is clearly another cable's, not a free match."""
+    image, pieces, ends = stripped_tip_scene()
+    colours = appearance.end_colours(image, pieces, ends, 3.5)
+    assert colours.known[1]
+    np.testing.assert_allclose(colours.colour[1], colours.colour[0], atol=3)
+    assert appearance.colour_penalty(colours, np.array([1]), np.array([2]))[0] > 0
+
+
+def test_a_body_the_two_readings_disagree_on_is_not_trusted():
+    """The piece's body runs onto a dark-blue object segmented with the cable (edge
+    330015 end to end): the first reading further in is the object's, the second the
+    cable's. The body's colour is not the cable's, and the end stays unknown."""
+    image, pieces, ends = stripped_tip_scene(object_from=85)
+    colours = appearance.end_colours(image, pieces, ends, 3.5)
+    assert not colours.known[1]
+    assert appearance.colour_penalty(colours, np.array([1]), np.array([2]))[0] == 0.0
+
+
+def test_a_piece_too_short_to_read_twice_leaves_a_changed_end_unknown():
+    """Too short for a second reading further in (its stretch would run to the piece's
+    other end): the body is not trusted."""
+    image, pieces, ends = stripped_tip_scene(body_end=70)
+    colours = appearance.end_colours(image, pieces, ends, 3.5)
+    assert colours.known[0]
+    assert not colours.known[1]

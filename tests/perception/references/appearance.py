@@ -64,7 +64,9 @@ def end_colours(
     """Per end: :func:`stretch_colours` from ``skip``; NaN for every end of a piece
     shorter than ``3 * skip``, and for an end whose colour differs (a colour penalty above
     0) from its piece's next stretch (from ``skip + length``, where the piece is at least
-    ``2 * skip + length + 1`` long)."""
+    ``2 * skip + length + 1`` long), unless the stretch after that (from
+    ``skip + 2 * length``, where the piece is at least ``2 * (skip + 2 * length) + 1``
+    long) is known and alike (a colour penalty of 0) the next: then the next's colour."""
 
     def colours(start):
         return stretch_colours(
@@ -73,6 +75,7 @@ def end_colours(
 
     colour, spread = colours(skip)
     body, body_spread = colours(skip + length)
+    deep, deep_spread = colours(skip + 2 * length)
     for index, end in enumerate(ends):
         total = np.hypot(*np.diff(pieces[end.piece], axis=0).T).sum()
         if total < 3 * skip:
@@ -86,4 +89,13 @@ def end_colours(
         )
         if colour_penalty(both, np.array([0]), np.array([1]))[0] > 0:
             colour[index], spread[index] = np.nan, np.nan
+            if total - 2 * (skip + 2 * length) < 1.0:
+                continue
+            inner = EndColours(
+                np.array([body[index], deep[index]]),
+                np.array([body_spread[index], deep_spread[index]]),
+            )
+            known = not np.isnan(inner.spread).any()
+            if known and colour_penalty(inner, np.array([0]), np.array([1]))[0] == 0:
+                colour[index], spread[index] = body[index], body_spread[index]
     return colour, spread
