@@ -63,21 +63,27 @@ def stub_front(
         picture.
     """
     height, width = mask.shape
-    entered, exit_at = False, None
+    # All the ray's samples at once (a Python loop per step cost ~4 ms a photograph).
+    steps = np.arange(0.0, 2.0 * reach, RAY_STEP_PX)
+    x, y = np.rint(tip[None, :] + steps[:, None] * direction[None, :]).astype(np.int64).T
+    outside = (x < 0) | (y < 0) | (x >= width) | (y >= height)
+    x, y = x.clip(0, width - 1), y.clip(0, height - 1)
+    stops = np.flatnonzero(outside | ~mask[y, x])
+    stop = int(stops[0]) if len(stops) else len(steps)
+    in_zone = zones[y[:stop], x[:stop]]
     # Into the zone (the tip may lie a few px short of it), across it and then the stub.
-    for t in np.arange(0.0, 2.0 * reach, RAY_STEP_PX).tolist():
-        if exit_at is not None and t > exit_at + reach:
-            return None
-        x, y = np.rint(tip + t * direction).astype(np.int64)
-        if not (0 <= x < width and 0 <= y < height):
-            return None
-        if not mask[y, x]:
-            return None if exit_at is None else (exit_at, t)
-        if zones[y, x]:
-            entered = True
-        elif entered and exit_at is None:
-            exit_at = t
-    return None
+    exit_index = None
+    if in_zone.any():
+        after = np.flatnonzero(~in_zone[int(np.argmax(in_zone)) :])
+        if len(after):
+            exit_index = int(np.argmax(in_zone)) + int(after[0])
+    if exit_index is not None:
+        too_far = np.flatnonzero(steps[exit_index + 1 : stop + 1] > steps[exit_index] + reach)
+        if len(too_far):
+            return None  # the stub runs on past reach
+    if stop == len(steps) or outside[stop] or exit_index is None:
+        return None
+    return float(steps[exit_index]), float(steps[stop])
 
 
 def ends_past_crossings(
