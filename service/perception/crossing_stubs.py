@@ -23,6 +23,7 @@ straight along its direction.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import cv2
@@ -86,6 +87,34 @@ def stub_front(
     return float(steps[exit_index]), float(steps[stop])
 
 
+class LazyEnds(Sequence):
+    """A sequence of ends, each made when first asked for and kept.
+
+    The image's evidence is read for the few pairs of ends a join or a turn is weighed
+    between (on a photograph, a handful of the hundreds of ends), so an end is moved
+    only when asked for: the same end object for every ask, as a list would give.
+    """
+
+    def __init__(self, count: int, make: Callable[[int], object]):
+        self._count = count
+        self._make = make
+        self._made: dict[int, object] = {}
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(self._count))]
+        if index < 0:
+            index += self._count
+        if not 0 <= index < self._count:
+            raise IndexError(index)
+        if index not in self._made:
+            self._made[index] = self._make(index)
+        return self._made[index]
+
+
 def ends_past_crossings(
     pieces: list[np.ndarray],
     ends: list,
@@ -93,7 +122,7 @@ def ends_past_crossings(
     mask: np.ndarray,
     zones: np.ndarray,
     reach: float,
-) -> list:
+) -> LazyEnds:
     """``ends`` with each end whose tip lies in a junction zone and whose strand runs on
     past it, straight, as a stub bearing no piece, moved to the stub's front (its
     ``skip`` 0: nothing of a hook to leave out there), for the image's evidence.
@@ -114,37 +143,41 @@ def ends_past_crossings(
 
     Returns
     -------
-    list of ChainEnd
-        The ends, those moved replaced; the others the same objects.
+    LazyEnds
+        The ends, those moved replaced, the others the same objects; each read when
+        first asked for.
     """
-    moved = list(ends)
-    fronts = []
-    for index, end in enumerate(ends):
+    drawn: list[np.ndarray] = []
+
+    def pieces_drawn() -> np.ndarray:
+        # The pieces drawn one px wide (once, when a stub is first found): a stub that
+        # kept its skeleton holds a piece.
+        if not drawn:
+            image = np.zeros(mask.shape, np.uint8)
+            cv2.polylines(
+                image,
+                [np.rint(p).astype(np.int32).reshape(-1, 1, 2) for p in pieces if len(p)],
+                False,
+                1,
+            )
+            drawn.append(image)
+        return drawn[0]
+
+    def moved(index: int):
+        end = ends[index]
         if index >= len(in_junction) or not in_junction[index]:
-            continue
+            return end
         points = pieces[end.piece]
         tip = np.asarray(points[0] if end.at_start else points[-1], np.float64)
         direction = np.asarray(end.direction, np.float64)
         found = stub_front(tip, direction, mask, zones, reach)
-        if found is not None:
-            fronts.append((index, tip, direction, *found))
-    if not fronts:
-        return moved
-    # The pieces drawn one px wide: a stub that kept its skeleton holds a piece.
-    drawn = np.zeros(mask.shape, np.uint8)
-    cv2.polylines(
-        drawn,
-        [np.rint(points).astype(np.int32).reshape(-1, 1, 2) for points in pieces if len(points)],
-        False,
-        1,
-    )
-    height, width = mask.shape
-    for index, tip, direction, exit_at, front in fronts:
-        end = ends[index]
+        if found is None:
+            return end
+        exit_at, front = found
         half_width = max(float(end.width), 1.0)
-        normal = np.array([-direction[1], direction[0]])
         if front - exit_at < half_width:
-            continue  # the other cable's far side just past the zone, not a stub
+            return end  # the other cable's far side just past the zone, not a stub
+        normal = np.array([-direction[1], direction[0]])
         offsets = np.arange(-np.ceil(half_width), np.ceil(half_width) + 1.0)
         # Its outer half: near the zone the crossing cable's own pieces leave it.
         along = np.arange(0.5 * (exit_at + front), front, RAY_STEP_PX)
@@ -154,20 +187,29 @@ def ends_past_crossings(
             + offsets[None, :, None] * normal[None, None, :]
         ).reshape(-1, 2)
         x, y = np.rint(samples).astype(np.int64).T
+        height, width = mask.shape
         inside = (x >= 0) & (y >= 0) & (x < width) & (y < height)
-        if drawn[y[inside], x[inside]].any():
-            continue
+        if pieces_drawn()[y[inside], x[inside]].any():
+            return end
         # The last foreground sample before the front: the cut's edge.
         position = tip + (front - RAY_STEP_PX) * direction
-        moved[index] = replace(end, position=position, skip=0.0)
-    return moved
+        return replace(end, position=position, skip=0.0)
+
+    return LazyEnds(len(ends), moved)
 
 
-def evidence_ends(judged: list, ends: list, moved: list) -> list:
+def evidence_ends(judged: Sequence, ends: Sequence, moved: Sequence) -> LazyEnds:
     """``judged`` (the ends as the turn pass judges them: a scrap's with its strand's
     colour and width) with each end :func:`ends_past_crossings` moved at its stub's
-    front (``moved[k]`` not ``ends[k]``), for the image's evidence."""
-    return [
-        replace(seen, position=shifted.position, skip=shifted.skip) if shifted is not end else seen
-        for seen, end, shifted in zip(judged, ends, moved, strict=True)
-    ]
+    front (``moved[k]`` not ``ends[k]``), for the image's evidence; each read when first
+    asked for."""
+    if not len(judged) == len(ends) == len(moved):
+        raise ValueError("judged, ends and moved differ in length")
+
+    def seen(index: int):
+        shifted = moved[index]
+        if shifted is ends[index]:
+            return judged[index]
+        return replace(judged[index], position=shifted.position, skip=shifted.skip)
+
+    return LazyEnds(len(judged), seen)

@@ -1,11 +1,18 @@
 """A strand crossing another just before it passes out of sight: its evidence read at the
 stub's front past the crossing (service/perception/crossing_stubs.py)."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from service.evaluation.synthetic_eval import evaluate_scene
-from service.perception.crossing_stubs import ends_past_crossings, stub_front
+from service.perception.crossing_stubs import (
+    LazyEnds,
+    ends_past_crossings,
+    evidence_ends,
+    stub_front,
+)
 from service.perception.merging import ChainEnd
 from service.synthetic.families import make_family_scene
 
@@ -89,6 +96,31 @@ def test_only_a_stub_without_a_piece_moves_its_end():
     in_junction_with_stub = np.append(in_junction, [False, True])
     moved = ends_past_crossings(with_stub, ends_with_stub, in_junction_with_stub, mask, zones, 40.0)
     assert moved[1] is ends_with_stub[1]
+
+
+def test_ends_are_read_when_first_asked_for_and_kept():
+    """The ends are moved lazily (most are never asked for on a photograph), each once:
+    the same object on every ask, as the list they replace gave."""
+    made = []
+    lazy = LazyEnds(3, lambda index: made.append(index) or object())
+    assert len(lazy) == 3 and made == []
+    first = lazy[2]
+    assert lazy[2] is first and lazy[-1] is first and made == [2]
+    assert lazy[0:2][1] is lazy[1] and made == [2, 0, 1]
+    with pytest.raises(IndexError):
+        lazy[3]
+    # The evidence ends take a judged end's own colour and width, the moved end's place.
+    pieces = _pieces()
+    in_junction = np.array([False, True, False, True, True, False])
+    mask, zones = _crossing(36)
+    ends = _ends(pieces)
+    moved = ends_past_crossings(pieces, ends, in_junction, mask, zones, 40.0)
+    judged = [replace(end, width=9.0) for end in ends]
+    seen = evidence_ends(judged, ends, moved)
+    assert seen[0] is judged[0]
+    assert seen[1].width == 9.0 and seen[1].position == pytest.approx(moved[1].position)
+    with pytest.raises(ValueError):
+        evidence_ends(judged[:2], ends, moved)
 
 
 @pytest.mark.parametrize(
