@@ -88,10 +88,12 @@ def extended_tip(points, at_start, mask, radius, span, search_limit, cos_half_an
     end would move by less than a pixel.
 
     The end's direction is geometry.end_direction's (the fit over ``span``); the walk
-    from the tip takes 1 px steps along it while they stay on ``mask`` (``uint8``), up
-    to ``3 radius + 2`` px, each rounded as Python's ``round``; then, unless the walk left
-    the picture, :func:`farthest_rim_ahead` within ``search_limit`` may carry the end
-    further, and the tip comes one radius back inside.
+    from the tip takes 1 px steps along it while they stay on ``mask`` (``uint8``), each
+    rounded as Python's ``round``, as far as the cable runs on straight ahead (a stretch
+    thinning left without skeleton, a cable's short end past a crossing whose piece fell
+    to spur removal); then, unless the walk left the picture, :func:`farthest_rim_ahead`
+    within ``search_limit`` may carry the end further, and the tip comes one radius back
+    inside.
     """
     height, width = mask.shape
     backwards = points if at_start else points[::-1]
@@ -99,9 +101,8 @@ def extended_tip(points, at_start, mask, radius, span, search_limit, cos_half_an
     tip_x = backwards[0, 0]
     tip_y = backwards[0, 1]
     reach = 0.0
-    limit = 3.0 * radius + 2.0
     leaves_image = False
-    while reach < limit:
+    while True:
         col = int(np.rint(tip_x + (reach + 1.0) * dir_x))
         row = int(np.rint(tip_y + (reach + 1.0) * dir_y))
         if not (0 <= col < width and 0 <= row < height):

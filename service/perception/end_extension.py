@@ -4,9 +4,16 @@ Thinning stops about one radius short of a square-cut cable end, and farther sho
 a thin cable's tip; a grasp at "the end" should still be on the cable. So each free end
 is moved along its direction to where the mask stops, or, when that is farther, toward
 the farthest pixel of the cable ahead, and then one radius back inside. A cable that
-runs out of the picture does not end there: its chain goes to the edge. An extension
-that stops at its search limit still inside the cable goes on from its new tip, a few
-times at most. Extensions lie on the mask, so they are seen cable, not inferred.
+runs out of the picture does not end there: its chain goes to the edge. The walk along
+the direction goes as far as the mask does, not a few radii: thinning can leave a long
+straight stretch without skeleton (Zhang-Suen removes a diagonal line two pixels thick,
+so a 45-degree tip thins away back to where the cable bends), and a cable's short end
+past a crossing loses its piece to spur removal, its chain stopping at the crossing,
+where the other cable's strands reach as far into the cone ahead as its own and the
+farthest rim's middle lay between them. An extension that stops inside the cable (the
+walk leaving a curving cable through its side, or the rim search at its limit) goes on
+from its new tip, a few times at most. Extensions lie on the mask, so they are seen
+cable, not inferred.
 """
 
 from __future__ import annotations

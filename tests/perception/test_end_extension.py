@@ -4,7 +4,9 @@ import cv2
 import numpy as np
 import pytest
 
+from service.evaluation.synthetic_eval import evaluate_scene
 from service.perception.end_extension import FAR_RIM_PX, TIP_SEARCH_COS, extend_end, extend_ends
+from service.synthetic import make_family_scene
 from tests.perception.references import end_extension as reference
 
 
@@ -22,6 +24,54 @@ def test_a_chain_far_short_of_a_thin_cables_end_is_taken_to_it_and_to_the_pictur
     # The cable leaves the picture at x = 0: its chain goes to the edge, not a radius short.
     np.testing.assert_allclose(vertices[0], [0.0, 20.0])
     assert len(filled) == len(vertices) - 1 and not filled.any()  # seen cable, not a gap
+
+
+def test_an_end_at_a_crossing_runs_on_along_its_own_short_stretch_not_the_other_strand():
+    # Cable A (half width 4) runs along y = 60 to its tip at x = 130; cable B crosses it at
+    # x = 100, 20 degrees off, and runs on out of the picture. A's chain stops at the
+    # crossing (its last short stretch lost to spur removal). The straight walk goes on
+    # along A to its tip; the cone's farthest rim, which B's strand reaches, is no
+    # farther, so the end is not drawn sideways onto B and along it.
+    mask = np.zeros((120, 220), np.uint8)
+    cv2.line(mask, (0, 60), (130, 60), 1, 9)
+    slope = np.tan(np.radians(20.0))
+    cv2.line(mask, (0, int(60 + 100 * slope)), (219, int(60 - 119 * slope)), 1, 9)
+    vertices, _ = extend_ends(
+        np.array([[10.0, 60.0], [96.0, 60.0]]), np.array([False]), mask > 0, 4.0, 20.0
+    )
+    assert 129.0 <= vertices[-1][0] <= 131.5  # one radius inside A's round tip at x = 134
+    assert abs(vertices[-1][1] - 60.0) < 1.0
+
+
+def test_a_diagonal_tip_the_thinning_ate_is_walked_to_its_end():
+    # A 45-degree cable, half width 4: Zhang-Suen thinning removes a diagonal line two
+    # pixels thick, so the skeleton of such a tip can stop 100 px short of it. Its chain
+    # ends 90 px short here; the straight walk along the end's direction stays on the
+    # cable to its tip (three rounds of a walk and a rim search reached about 50 px).
+    mask = np.zeros((200, 200), np.uint8)
+    cv2.line(mask, (10, 10), (180, 180), 1, 9)
+    points = np.array([[10.0, 10.0], [60.0, 60.0], [90.0, 90.0]])
+    vertices, _ = extend_ends(points, np.array([False, False]), mask > 0, 4.0, 20.0)
+    # One radius inside the round tip (its cap reaches 180 + 4 / sqrt(2) on each axis).
+    assert np.hypot(*(vertices[-1] - [180.0, 180.0])) < 1.5
+
+
+@pytest.mark.parametrize(
+    ("family", "seed"),
+    [
+        ("textured", 330013),  # a crossing near the picture's edge: the stretch to it
+        ("many", 330067),  # a cable's tip a few radii past where it crosses itself
+        ("edge", 330141),  # a tip past a ring: the rim ahead lay across the ring's hole
+        ("bright", 330012),  # a diagonal tip without skeleton, 80 px past a crossing
+    ],
+)
+def test_tuning_scenes_whose_visible_ends_the_chain_left_uncovered(family, seed):
+    """Tuning scenes, true mask: as many chains as cables and every hidden stretch
+    bridged, but a visible stretch at a cable's end uncovered: the end at a crossing drawn
+    onto the other strand by the rim search (three), or stopping short of a diagonal tip
+    the thinning ate."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
 
 
 # --------------------------------------------------------------------------- kernel

@@ -15,9 +15,8 @@ def extend_end(points, at_start, mask, radius, span):
     tip = points[0] if at_start else points[-1]
     height, width = mask.shape
     reach = 0.0
-    limit = 3.0 * radius + 2.0
     leaves_image = False
-    while reach < limit:
+    while True:
         probe = tip + (reach + 1.0) * direction
         col, row = round(probe[0]), round(probe[1])
         if not (0 <= col < width and 0 <= row < height):
