@@ -45,9 +45,10 @@ def test_an_end_at_a_crossing_runs_on_along_its_own_short_stretch_not_the_other_
 
 def test_a_diagonal_tip_the_thinning_ate_is_walked_to_its_end():
     # A 45-degree cable, half width 4: Zhang-Suen thinning removes a diagonal line two
-    # pixels thick, so the skeleton of such a tip can stop 100 px short of it. Its chain
-    # ends 90 px short here; the straight walk along the end's direction stays on the
-    # cable to its tip (three rounds of a walk and a rim search reached about 50 px).
+    # pixels thick, so the skeleton of such a tip can stop 80 px short of it (bright
+    # 330012). Its chain ends 127 px short here (90 on each axis); the straight walk along
+    # the end's direction stays on the cable to its tip (three rounds of a short walk and
+    # a rim search reached about 50 px).
     mask = np.zeros((200, 200), np.uint8)
     cv2.line(mask, (10, 10), (180, 180), 1, 9)
     points = np.array([[10.0, 10.0], [60.0, 60.0], [90.0, 90.0]])
