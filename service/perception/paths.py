@@ -18,6 +18,7 @@ import numpy as np
 from schemas import GapCurve
 from service.perception import _merging_kernels
 from service.perception.bridge_ends import partners
+from service.perception.euler_spiral import euler_spiral, is_large_turn
 from service.perception.geometry import arc_lengths
 
 
@@ -73,6 +74,10 @@ def gap_curve(
     ndarray
         ``(M, 2)`` samples from ``start`` to ``end`` inclusive.
     """
+    if GapCurve(shape) is GapCurve.smooth and is_large_turn(start, leaving, end, arriving):
+        spiral = euler_spiral(start, leaving, end, arriving, step)
+        if spiral is not None:
+            return spiral
     # Compiled: a frame bridges hundreds of gaps and crossings. The plain versions are
     # the references in tests/perception/references/merging.py.
     kernel = (
