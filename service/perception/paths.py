@@ -2,7 +2,8 @@
 
 :func:`gap_curve` is the curve ``DetectParams.gap_curve`` names: by default "smooth", a
 cubic along both end directions that spreads the turn over the whole gap as an elastic
-cable bends; or the paper's "natural" curve (Keipour et al.), straight along the end
+cable bends (the Euler spiral, :mod:`.euler_spiral`, where the ends turn by a right angle
+or more); or the paper's "natural" curve (Keipour et al.), straight along the end
 directions and then one arc of constant curvature. :func:`assemble_paths` walks every
 group of pieces :mod:`.merging` joined from one free end to the other and bridges each
 join. Its compiled curves are in ``_merging_kernels``, beside the rest of the merging
@@ -56,7 +57,12 @@ def gap_curve(
     handles would trace a circular arc between symmetric ends: the turning is spread
     over the whole gap instead of following a straight stretch, as an elastic cable
     bends. It is the default of :class:`schemas.DetectParams` (``gap_curve``): on
-    generated scenes its bridges follow hidden stretches more closely.
+    generated scenes its bridges follow hidden stretches more closely. Where the end
+    headings turn by :data:`.euler_spiral.LARGE_TURN` (a right angle) or more about the
+    line between the ends, the cubic's equal handles flatten the turn, and a loop's
+    hidden arc past a half turn it takes the short way round: there the curve is the
+    Euler spiral between the two ends (:func:`.euler_spiral.euler_spiral`), the cubic
+    only where none joins them.
 
     Parameters
     ----------
