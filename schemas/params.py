@@ -13,7 +13,8 @@ class GapCurve(StrEnum):
     smooth = "smooth"
     """A cubic whose handles follow both end directions and would trace a circular arc
     between symmetric ends: the turning is spread over the whole gap, as an elastic
-    cable bends."""
+    cable bends; where the ends turn by a right angle or more about the line between
+    them, the Euler spiral (curvature changing at a constant rate) between them."""
     natural = "natural"
     """Keipour et al.'s natural curve: straight along the end directions, then one
     constant-rate arc (a cubic where no single arc fits)."""

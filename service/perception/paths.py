@@ -2,7 +2,8 @@
 
 :func:`gap_curve` is the curve ``DetectParams.gap_curve`` names: by default "smooth", a
 cubic along both end directions that spreads the turn over the whole gap as an elastic
-cable bends; or the paper's "natural" curve (Keipour et al.), straight along the end
+cable bends (the Euler spiral, :mod:`.euler_spiral`, where the ends turn by a right angle
+or more); or the paper's "natural" curve (Keipour et al.), straight along the end
 directions and then one arc of constant curvature. :func:`assemble_paths` walks every
 group of pieces :mod:`.merging` joined from one free end to the other and bridges each
 join. Its compiled curves are in ``_merging_kernels``, beside the rest of the merging
@@ -18,6 +19,7 @@ import numpy as np
 from schemas import GapCurve
 from service.perception import _merging_kernels
 from service.perception.bridge_ends import partners
+from service.perception.euler_spiral import euler_spiral, is_large_turn
 from service.perception.geometry import arc_lengths
 
 
@@ -55,7 +57,12 @@ def gap_curve(
     handles would trace a circular arc between symmetric ends: the turning is spread
     over the whole gap instead of following a straight stretch, as an elastic cable
     bends. It is the default of :class:`schemas.DetectParams` (``gap_curve``): on
-    generated scenes its bridges follow hidden stretches more closely.
+    generated scenes its bridges follow hidden stretches more closely. Where the end
+    headings turn by :data:`.euler_spiral.LARGE_TURN` (a right angle) or more about the
+    line between the ends, the cubic's equal handles flatten the turn, and a loop's
+    hidden arc past a half turn it takes the short way round: there the curve is the
+    Euler spiral between the two ends (:func:`.euler_spiral.euler_spiral`), the cubic
+    only where none joins them.
 
     Parameters
     ----------
@@ -73,6 +80,10 @@ def gap_curve(
     ndarray
         ``(M, 2)`` samples from ``start`` to ``end`` inclusive.
     """
+    if GapCurve(shape) is GapCurve.smooth and is_large_turn(start, leaving, end, arriving):
+        spiral = euler_spiral(start, leaving, end, arriving, step)
+        if spiral is not None:
+            return spiral
     # Compiled: a frame bridges hundreds of gaps and crossings. The plain versions are
     # the references in tests/perception/references/merging.py.
     kernel = (

@@ -16,6 +16,7 @@ from service.perception.bridge_ends import (
     ends_of_short_pieces_from_partners,
 )
 from service.perception.deadline import Deadline, DeadlineExceeded
+from service.perception.euler_spiral import is_large_turn
 from service.perception.geometry import resample
 from service.perception.merging import (
     ChainEnd,
@@ -211,10 +212,15 @@ def test_gap_curve_kernels_equal_the_references_in_every_shape(seed):
         expected = reference.natural_curve(start, leaving, end, arriving, step)
         assert fast.shape == expected.shape
         np.testing.assert_allclose(fast, expected, rtol=0, atol=1e-9)
-        fast = gap_curve(start, leaving, end, arriving, step, shape="smooth")
+        # The cubic's kernel (gap_curve's smooth shape for turns under a right angle;
+        # larger ones take the Euler spiral, tests/perception/test_euler_spiral.py).
+        fast = _merging_kernels.smooth_curve_kernel(start, leaving, end, arriving, step)
         expected = reference.smooth_curve(start, leaving, end, arriving, step)
         assert fast.shape == expected.shape
         np.testing.assert_allclose(fast, expected, rtol=0, atol=1e-9)
+        if not is_large_turn(start, leaving, end, arriving):
+            smooth = gap_curve(start, leaving, end, arriving, step, shape="smooth")
+            np.testing.assert_array_equal(smooth, fast)
     # Each of the natural curve's three shapes was compared many times (about 40
     # straight, 90 arcs and 270 Bezier curves in 400).
     assert natural_shapes["straight"] >= 20
