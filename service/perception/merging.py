@@ -454,7 +454,7 @@ def choose_joins(
                 border_ok[pairs[index]] |= keep[index]
         pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
     if picture is not None and params.expected_count is None and len(costs):
-        keep = _bridges_inside(ends, pairs, costs, picture, params)
+        keep = _bridges_inside(ends, pairs, costs, picture, params, deadline)
         pairs, distances, costs = pairs[keep], distances[keep], costs[keep]
     if tips is not None and params.expected_count is None and len(costs):
         keep = tips(pairs, costs, MUTUAL_COST_FACTOR * params.merge_cost_threshold)
@@ -520,7 +520,11 @@ def _border_pairs_hidden(pairs, costs, keep, runs_out, at_border, params) -> np.
     return np.flatnonzero(~keep & near_edge & ~runs & (costs <= limit))
 
 
-def _bridges_inside(ends, pairs, costs, picture, params) -> np.ndarray:
+# How many candidate curves :func:`_bridges_inside` draws between looks at the deadline.
+DEADLINE_EVERY_CURVES = 64
+
+
+def _bridges_inside(ends, pairs, costs, picture, params, deadline=None) -> np.ndarray:
     """Which candidate joins' gap curves stay inside the picture (``picture`` is its
     (height, width)): a cable whose hidden stretch would run outside it left the
     picture there, and what it did out of sight cannot be told. Only joins that could
@@ -528,7 +532,11 @@ def _bridges_inside(ends, pairs, costs, picture, params) -> np.ndarray:
     height, width = picture
     keep = np.ones(len(costs), bool)
     limit = MUTUAL_COST_FACTOR * params.merge_cost_threshold
-    for index in np.flatnonzero(costs <= limit).tolist():
+    for count, index in enumerate(np.flatnonzero(costs <= limit).tolist()):
+        if count % DEADLINE_EVERY_CURVES == 0:
+            # Tens of thousands of candidates on a crowded frame (a large turn's curve,
+            # the Euler spiral, takes about half a millisecond): the budget is kept here.
+            check(deadline, "merging")
         a, b = ends[pairs[index, 0]], ends[pairs[index, 1]]
         curve = gap_curve(a.position, a.direction, b.position, -b.direction, shape=params.gap_curve)
         keep[index] = bool(
