@@ -148,9 +148,13 @@ def max_curvature(shape: tuple[float, float, float, float, float]) -> float:
 
 def _integral(function, first: float, turn: float, rates: np.ndarray) -> np.ndarray:
     """``integral_0^1 function(first + (turn - rate) t + rate t^2) dt`` per rate."""
-    rates = np.asarray(rates, np.float64)[:, None]
-    headings = first + (turn - rates) * _NODES + rates * _NODES**2
-    return function(headings) @ _WEIGHTS
+    return function(_headings(first, turn, np.asarray(rates, np.float64))) @ _WEIGHTS
+
+
+def _headings(first: float, turn: float, rates: np.ndarray) -> np.ndarray:
+    """The heading at each quadrature node (columns) per rate (rows)."""
+    rates = rates[:, None]
+    return first + (turn - rates) * _NODES + rates * _NODES**2
 
 
 def _roots(
@@ -162,7 +166,7 @@ def _roots(
     low, high = low.astype(np.float64), high.astype(np.float64)
     rate = 0.5 * (low + high)
     for _ in range(_REFINE_STEPS):
-        headings = first + (turn - rate[:, None]) * _NODES + rate[:, None] * _NODES**2
+        headings = _headings(first, turn, rate)
         value = np.sin(headings) @ _WEIGHTS
         slope = (np.cos(headings) * (_NODES**2 - _NODES)) @ _WEIGHTS
         keeps_sign = (value < 0) == low_negative
