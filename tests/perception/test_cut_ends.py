@@ -156,9 +156,16 @@ def test_no_cut_within_reach_is_no_cut():
 @pytest.mark.parametrize(
     ("family", "seed"),
     [
-        # doubled_back 330063 was here: its cuts' directions, read over 2-11 traced
-        # points, lean 17-36 degrees, and carried on to the border the bridge misses
-        # (twenty-eighth pass, docs/BENCHMARKS.md).
+        pytest.param(
+            "doubled_back",
+            330063,
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="twenty-eighth pass: its cuts' directions, read over 9-11 traced "
+                "points on a tight bend, lean 30-36 degrees, and carried on to the "
+                "border the bridge misses (docs/BENCHMARKS.md)",
+            ),
+        ),
         ("doubled_back", 330100),
         ("loops", 330066),
         ("loops", 330149),
