@@ -44,9 +44,9 @@ FIT_RADII = 3.0
 CARRY_STEP_PX = 0.5
 """The step (px) of the middle line carried on across a cut (:func:`carried_to_the_border`)."""
 CARRY_RADII = 1.7
-"""How far (half widths) the middle line is carried on past the narrowing: far enough
-for the far one of the lines beside it (half a half width out) to leave the mask across
-a cut about 50 degrees from square (1.5 half widths times tan 50 degrees is 1.8)."""
+"""How far (half widths) at most the middle line is carried on past the narrowing: far
+enough for the lines beside it (half a half width out) to leave the mask across a cut
+about 50 degrees from square (1.5 half widths times tan 50 degrees is 1.8)."""
 REACH_PAST_SKIP_RADII = 2.0
 """How far (radii) past the tip the fit left out a cut may lie: the skeleton's tip stops
 about a radius short of a cut, and a slanted cut's far corner a width further."""
@@ -169,19 +169,26 @@ def carried_to_the_border(
     half_width: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The middle line carried on from where the section began to narrow
-    (``position``, heading along ``direction``, bending with ``curvature``, 1/px) to
-    where the object's border crosses it, and its direction there.
+    (``position``, heading along ``direction``, bending with ``curvature``, 1/px)
+    towards where the object's border crosses it, as far as the mask still holds the
+    cable on both sides of it, and its direction there.
 
     An object's border crosses a cable at a slant: the section begins to narrow where
     the border meets the near side, but the cable's middle passes out of sight half the
     slant further on. Past the narrowing the section's middle is no longer the cable's,
     so the line is carried on as it ran (bending no tighter than the tightest bend a
-    cable takes, :data:`.turn_joins.HIDDEN_BEND_RADII` ``[0]`` half widths), and the
-    border read where it crosses two lines beside it, half a half width to either
-    side: a straight border crosses the middle halfway between (a heading a few degrees
-    off moves both alike, where the middle line alone would run on along the slant's
-    wedge). At most :data:`CARRY_RADII` half widths (a side line not yet out by then is
-    read there), and never past where the middle itself leaves the mask.
+    cable takes, :data:`.turn_joins.HIDDEN_BEND_RADII` ``[0]`` half widths), with two
+    lines beside it, half a half width to either side, until the first of them leaves
+    the mask: up to there the cable is seen on both sides of the carried middle, so a
+    heading a few degrees off cannot have carried it off the cable. Further on the
+    carried line is the heading's extrapolation alone: its error grows with the
+    distance (a direction read over a few traced points on a tight bend is 10-35
+    degrees off), and the side line that leaves last is the one the wedge a slanted
+    cut leaves runs on along, more so the more the heading leans into it. So the
+    bridge starts a quarter width short of where a straight border crosses the
+    middle (halfway between where the two side lines leave), on the cable. At most
+    :data:`CARRY_RADII` half widths, and never past where the middle itself leaves
+    the mask.
     """
     x, y = (float(value) for value in np.asarray(position, np.float64))
     hx, hy = (float(value) for value in unit(np.asarray(direction, np.float64)))
@@ -189,22 +196,21 @@ def carried_to_the_border(
     turn = min(max(float(curvature), -bound), bound) * CARRY_STEP_PX
     cos, sin = float(np.cos(turn)), float(np.sin(turn))
     side = 0.5 * half_width
-    steps = int(CARRY_RADII * half_width / CARRY_STEP_PX)
-    path = [(x, y, hx, hy)]
-    exits = [steps, steps]  # where each side line leaves the mask (steps)
+    carried = (x, y, hx, hy)
     if not _on_mask(mask, x, y):
         return np.array([x, y]), np.array([hx, hy])
-    for step in range(1, steps + 1):
+    for _ in range(int(CARRY_RADII * half_width / CARRY_STEP_PX)):
         x, y = x + CARRY_STEP_PX * hx, y + CARRY_STEP_PX * hy
         hx, hy = cos * hx - sin * hy, sin * hx + cos * hy
         if not _on_mask(mask, x, y):
             break
-        path.append((x, y, hx, hy))
-        for k, sign in enumerate((1.0, -1.0)):
-            if exits[k] == steps and not _on_mask(mask, x - sign * side * hy, y + sign * side * hx):
-                exits[k] = step
-    # Between where the two side lines leave the mask, and not past the middle's own exit.
-    x, y, hx, hy = path[min(round(0.5 * (exits[0] + exits[1])), len(path) - 1)]
+        carried = (x, y, hx, hy)
+        if not (
+            _on_mask(mask, x - side * hy, y + side * hx)
+            and _on_mask(mask, x + side * hy, y - side * hx)
+        ):
+            break
+    x, y, hx, hy = carried
     return np.array([x, y]), np.array([hx, hy])
 
 

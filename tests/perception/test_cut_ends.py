@@ -115,19 +115,47 @@ def test_a_short_pieces_cut_is_traced_from_its_middle():
     assert np.allclose(direction, [1.0, 0.0], atol=0.02)
 
 
-def test_the_middle_line_is_carried_to_the_border_as_it_ran():
-    """A straight cable cut at 45 degrees from square: from where the section begins
-    to narrow (its near side), carried on to where the border crosses its middle line,
-    5 px on, and not along the wedge the far side leaves, 10 px on."""
+def slanted_cut_mask() -> np.ndarray:
+    """A straight cable of half width 5.5 along y = 30, cut at 45 degrees from square by
+    the border x = 80 + (y - 30): its middle line leaves the mask at x = 80, its side
+    at y = 25 at x = 75, and the wedge on the side y = 35 runs on to x = 85."""
     mask = np.zeros((60, 140), bool)
     ys, xs = np.mgrid[0:60, 0:140]
-    # The border x = 80 + (y - 30): the middle line (y = 30) leaves at x = 80.
     mask[(np.abs(ys - 30) <= 5) & (xs <= 80 + (ys - 30))] = True
+    return mask
+
+
+def test_the_middle_line_is_carried_towards_the_border_while_both_sides_are_seen():
+    """From where the section begins to narrow (its near side, x = 75), carried on as it
+    ran until the line a quarter width to the near side leaves the mask, 2.75 px short
+    of where the border crosses the middle (x = 80), and not along the wedge the far side
+    leaves, 10 px on."""
     start = np.array([75.0, 30.0])
-    position, direction = carried_to_the_border(mask, start, np.array([1.0, 0.0]), 0.0, 5.5)
-    assert abs(position[0] - 80.0) <= 1.0
+    position, direction = carried_to_the_border(
+        slanted_cut_mask(), start, np.array([1.0, 0.0]), 0.0, 5.5
+    )
+    assert abs(position[0] - 77.25) <= 1.0
     assert abs(position[1] - 30.0) <= 1e-9
     assert np.allclose(direction, [1.0, 0.0])
+
+
+@pytest.mark.parametrize("lean_deg", [20.0, -20.0])
+def test_a_direction_leaning_off_is_not_carried_off_the_cable(lean_deg):
+    """The direction read at a short traced cut on a tight bend can be 10-35 degrees
+    off. Leaning 20 degrees either way, the carry stops where the cable stops being
+    seen on both sides of the carried line: its start stays within 1.1 px of the
+    middle line (carried on to halfway between where the two side lines leave, the
+    start fell 2.0 and 1.4 px off, leaning into the wedge and away from it)."""
+    lean = np.radians(lean_deg)
+    position, _ = carried_to_the_border(
+        slanted_cut_mask(),
+        np.array([75.0, 30.0]),
+        np.array([np.cos(lean), np.sin(lean)]),
+        0.0,
+        5.5,
+    )
+    assert abs(position[1] - 30.0) <= 1.1
+    assert 75.0 < position[0] <= 80.0
 
 
 def test_a_start_off_the_middle_is_put_on_it_at_once():
