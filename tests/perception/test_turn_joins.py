@@ -201,9 +201,10 @@ def test_cheapest_pairing_leaves_an_end_free_when_pairing_costs_more():
             78017,
             marks=pytest.mark.xfail(
                 strict=True,
-                reason="twenty-eighth pass: the cuts' directions, read over 4-9 traced "
-                "points on the bulb's tight bend, lean 15-44 degrees, and carried on "
-                "to the border the bridge falls 3 px off (docs/BENCHMARKS.md)",
+                reason="the cuts' directions, read over 4-9 traced points on the "
+                "bulb's tight bend, lean 10-21 degrees, and from the cuts the cubic "
+                "misses the bulb even carried only while both sides are seen "
+                "(turns8, docs/BENCHMARKS.md)",
             ),
         ),
         79046,
