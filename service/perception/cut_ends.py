@@ -338,6 +338,12 @@ def bridges_from_the_cuts(
     ``short_pieces`` (end index -> its short piece's points and half width, px: a piece
     bridged along its partners' line) starts at the cut traced from its piece's middle
     (:func:`short_piece_cut`), with no seen stretch drawn: its piece ends at its tip.
+    A cable whose half width is under :data:`CUT_NARROWING_PX` (a sliver of a short
+    piece, a thin cable of a photograph) is not traced: the narrowing that marks a cut
+    would be half its section and more, each border's pixel rounding alone reads as one,
+    and a direction fitted over its three radii of traced middle (4-6 px) is rounded by
+    10-20 degrees (on ariadne simple 00028 a short piece read 1 px wide, traced, turned
+    its bridge 21 degrees off its partners' line and 4 px off the cable).
 
     Returns
     -------
@@ -357,7 +363,12 @@ def bridges_from_the_cuts(
             end = ends[k]
             short = short_pieces.get(k) if short_pieces else None
             if short is not None:
-                found = short_piece_cut(mask, short[0], end, (short[1] or radius) + 0.5)
+                half_width = (short[1] or radius) + 0.5
+                found = (
+                    short_piece_cut(mask, short[0], end, half_width)
+                    if half_width >= CUT_NARROWING_PX
+                    else None
+                )
                 traced.append(found is not None)
                 cuts.append((end.position, end.direction) if found is None else found)
                 # The piece ends at its tip: the bridge leaves from there to the cut.
@@ -366,7 +377,8 @@ def bridges_from_the_cuts(
             half_width = (end.width or radius) + 0.5
             limit = end.skip + REACH_PAST_SKIP_RADII * half_width + 2.0
             # Only an end whose fit left out its tip starts its bridge behind the cut.
-            found = end_at_the_cut(mask, end, half_width, limit) if end.skip > 0 else None
+            traceable = end.skip > 0 and half_width >= CUT_NARROWING_PX
+            found = end_at_the_cut(mask, end, half_width, limit) if traceable else None
             traced.append(found is not None)
             cuts.append((end.position, end.direction) if found is None else found[1:])
             seen.append(True)
