@@ -6,6 +6,7 @@ import pytest
 
 from service.evaluation.synthetic_eval import evaluate_scene
 from service.perception.cut_ends import (
+    bridges_from_the_cuts,
     carried_to_the_border,
     end_at_the_cut,
     middle_line,
@@ -235,3 +236,30 @@ def test_cuts_read_over_few_traced_points_are_not_carried_off_the_cable(family, 
     the carried line, every cable is covered."""
     score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.correct
+
+
+@pytest.mark.parametrize(("half_width", "traced"), [(1.5, False), (5.0, True)])
+def test_a_cable_thinner_than_twice_the_cuts_narrowing_is_not_traced(half_width, traced):
+    """Two ends across a square gap of a straight cable, each fit leaving a 4 px tip out:
+    a cable of half width 5 is traced to its cuts (a bridge drawn from them); one of
+    half width 1.5 (a 3 px strip, where the 2 px narrowing that marks a cut is most of
+    its section) is not: its bridges start where the fits begin, as before."""
+    mask = np.zeros((40, 160), bool)
+    rows = slice(round(20 - half_width + 0.5), round(20 + half_width - 0.5) + 1)
+    mask[rows, 10:61] = True
+    mask[rows, 100:151] = True
+    ends = [
+        ChainEnd(
+            0, False, np.array([56.0, 20.0]), np.array([1.0, 0.0]), 0.0, 4.0, half_width - 0.5
+        ),
+        ChainEnd(
+            1, True, np.array([104.0, 20.0]), np.array([-1.0, 0.0]), 0.0, 4.0, half_width - 0.5
+        ),
+    ]
+    bridges = bridges_from_the_cuts(
+        ends, [(0, 1, 1.0)], [-1, -1], mask, half_width - 0.5, frozenset()
+    )
+    assert bool(bridges) == traced
+    if traced:
+        curve = bridges[0, 1]
+        assert np.abs(curve[:, 1] - 20.0).max() <= 0.5
