@@ -167,6 +167,7 @@ def carried_to_the_border(
     direction: np.ndarray,
     curvature: float,
     half_width: float,
+    to_the_border: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The middle line carried on from where the section began to narrow
     (``position``, heading along ``direction``, bending with ``curvature``, 1/px)
@@ -189,6 +190,10 @@ def carried_to_the_border(
     middle (halfway between where the two side lines leave), on the cable. At most
     :data:`CARRY_RADII` half widths, and never past where the middle itself leaves
     the mask.
+
+    With ``to_the_border``, carried on to that halfway point itself (a side line not
+    yet out at :data:`CARRY_RADII` half widths read there): where the turn pass reads
+    the cut's shape (:mod:`.traced_cuts`), the border itself, not the cable's start.
     """
     x, y = (float(value) for value in np.asarray(position, np.float64))
     hx, hy = (float(value) for value in unit(np.asarray(direction, np.float64)))
@@ -196,26 +201,36 @@ def carried_to_the_border(
     turn = min(max(float(curvature), -bound), bound) * CARRY_STEP_PX
     cos, sin = float(np.cos(turn)), float(np.sin(turn))
     side = 0.5 * half_width
-    carried = (x, y, hx, hy)
+    steps = int(CARRY_RADII * half_width / CARRY_STEP_PX)
+    path = [(x, y, hx, hy)]
+    exits = [steps, steps]  # where each side line leaves the mask (steps)
     if not _on_mask(mask, x, y):
         return np.array([x, y]), np.array([hx, hy])
-    for _ in range(int(CARRY_RADII * half_width / CARRY_STEP_PX)):
+    for step in range(1, steps + 1):
         x, y = x + CARRY_STEP_PX * hx, y + CARRY_STEP_PX * hy
         hx, hy = cos * hx - sin * hy, sin * hx + cos * hy
         if not _on_mask(mask, x, y):
             break
-        carried = (x, y, hx, hy)
-        if not (
-            _on_mask(mask, x - side * hy, y + side * hx)
-            and _on_mask(mask, x + side * hy, y - side * hx)
-        ):
+        path.append((x, y, hx, hy))
+        for k, sign in enumerate((1.0, -1.0)):
+            if exits[k] == steps and not _on_mask(mask, x - sign * side * hy, y + sign * side * hx):
+                exits[k] = step
+        if not to_the_border and min(exits) < steps:
             break
-    x, y, hx, hy = carried
+    # Where the first side line leaves (the cable seen on both sides up to there), or
+    # between where the two leave; never past the middle's own exit.
+    at = round(0.5 * (exits[0] + exits[1])) if to_the_border else min(exits)
+    x, y, hx, hy = path[min(at, len(path) - 1)]
     return np.array([x, y]), np.array([hx, hy])
 
 
 def end_at_the_cut(
-    mask: np.ndarray, end, half_width: float, limit: float, carry: bool = True
+    mask: np.ndarray,
+    end,
+    half_width: float,
+    limit: float,
+    carry: bool = True,
+    to_the_border: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Where the cable ``end`` (a :class:`.merging.ChainEnd`, where its bridge would
     start) passes out of sight, and its direction there.
@@ -226,8 +241,9 @@ def end_at_the_cut(
     :data:`FIT_RADII` radii: centred on the cable, not on the skeleton's hooked tip, and
     short enough to follow a tight bend, fitted on the sections the cut has not begun to
     narrow. Where less than half that is traced behind the end, the end's own fit bends
-    on to the cut instead. With ``carry``, the middle line is then carried on to where
-    the cut's border crosses it (:func:`carried_to_the_border`).
+    on to the cut instead. With ``carry``, the middle line is then carried on towards
+    where the cut's border crosses it (:func:`carried_to_the_border`, to the border
+    itself with ``to_the_border``).
 
     Returns
     -------
@@ -252,7 +268,7 @@ def end_at_the_cut(
         direction = rotated(end.direction, end.curvature * polyline_length(ahead))
         if carry:
             position, direction = carried_to_the_border(
-                mask, position, direction, end.curvature, half_width
+                mask, position, direction, end.curvature, half_width, to_the_border
             )
         return ahead, position, direction
     # The points from where a slanted cut begins to narrow the section (by more than
@@ -268,7 +284,7 @@ def end_at_the_cut(
     position, direction, curvature = end_fit(line, False, span)
     if carry:
         position, direction = carried_to_the_border(
-            mask, position, direction, curvature, half_width
+            mask, position, direction, curvature, half_width, to_the_border
         )
     return ahead, position, direction
 
