@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.perception.geometry import end_fit, polyline_length, rotated, unit
+from service.perception.geometry import arc_lengths, end_fit, polyline_length, rotated, unit
 from service.perception.paths import gap_curve
+from service.perception.turn_joins import HIDDEN_BEND_RADII
 
 TRACE_STEP_PX = 1.0
 """The step (px) along the cable between two traced middle points."""
@@ -32,11 +33,20 @@ SECTION_STEP_PX = 0.25
 CUT_NARROWING_PX = 2.0
 """A section narrower than the cable by more than this (px: a pixel's rounding at either
 border) has been cut on a side: its middle is no longer the cable's."""
+SECTION_ROUNDING_PX = 1.0
+"""How much narrower (px) than the cable a full section may read: each border's
+rounding to the pixel grid."""
 WIDTH_AGREES = 0.35
 """A cross-section is the cable's own when its width is within this share of the
 cable's full width: both borders are the cable's, and its middle is the cable's."""
 FIT_RADII = 3.0
 """The direction at a cut is fitted over the traced middle line's last this many radii."""
+CARRY_STEP_PX = 0.5
+"""The step (px) of the middle line carried on across a cut (:func:`carried_to_the_border`)."""
+CARRY_RADII = 1.7
+"""How far (half widths) at most the middle line is carried on past the narrowing: far
+enough for the lines beside it (half a half width out) to leave the mask across a cut
+about 50 degrees from square (1.5 half widths times tan 50 degrees is 1.8)."""
 REACH_PAST_SKIP_RADII = 2.0
 """How far (radii) past the tip the fit left out a cut may lie: the skeleton's tip stops
 about a radius short of a cut, and a slanted cut's far corner a width further."""
@@ -87,7 +97,7 @@ def middle_line(
     curvature: float,
     half_width: float,
     limit: float,
-) -> tuple[np.ndarray, bool]:
+) -> tuple[np.ndarray, bool, np.ndarray]:
     """The cable's middle line traced on ``mask`` from ``start`` along ``heading``, at
     most ``limit`` px, and whether it stopped at a cut.
 
@@ -103,16 +113,31 @@ def middle_line(
         ``(K, 2)`` traced points from ``start`` (``K >= 1``).
     cut : bool
         Whether the trace stopped at a cut before ``limit``.
+    shortfall : ndarray
+        ``(K,)`` how much (px) each point's section is narrower than the cable (0 at
+        ``start``, and where the section is wider).
     """
     # Plain floats, step by step (a trace is a few dozen steps, each a few samples).
     x, y = (float(value) for value in np.asarray(start, np.float64))
     hx, hy = (float(value) for value in unit(np.asarray(heading, np.float64)))
     points = [(x, y)]
+    shortfall = [0.0]
     if not _on_mask(mask, x, y):
-        return np.array(points), False
+        return np.array(points), False, np.array(shortfall)
     reach = 2.5 * half_width + 2.0
     steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX).tolist()
     cos, sin = float(np.cos(curvature * TRACE_STEP_PX)), float(np.sin(curvature * TRACE_STEP_PX))
+    # The start itself (a fit's, up to a couple of pixels off the middle) put on the
+    # middle at once where its section is the cable's: else the first steps, each
+    # moved by at most a step, lean across the cable and tilt a short fit through them.
+    nx, ny = -hy, hx
+    plus = _border_distance(mask, x, y, nx, ny, steps, reach)
+    minus = _border_distance(mask, x, y, -nx, -ny, steps, reach)
+    if plus + minus >= 2.0 * half_width - CUT_NARROWING_PX:
+        shift = _recentred(plus, minus, half_width)
+        if _on_mask(mask, x + shift * nx, y + shift * ny):
+            x, y = x + shift * nx, y + shift * ny
+            points = [(x, y)]
     for _ in range(int(limit / TRACE_STEP_PX)):
         x, y = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
         nx, ny = -hy, hx
@@ -122,18 +147,90 @@ def middle_line(
             if plus + minus < 2.0 * half_width - CUT_NARROWING_PX:
                 # The cut begins here, on one side or both: past it, what is left of
                 # the section is no longer centred on the cable.
-                return np.array(points), True
+                return np.array(points), True, np.array(shortfall)
+            narrower = max(2.0 * half_width - plus - minus, 0.0)
             shift = min(max(_recentred(plus, minus, half_width), -TRACE_STEP_PX), TRACE_STEP_PX)
             x, y = x + shift * nx, y + shift * ny
+        else:
+            narrower = 0.0
         if not _on_mask(mask, x, y):
-            return np.array(points), True
+            return np.array(points), True, np.array(shortfall)
         points.append((x, y))
+        shortfall.append(narrower)
         hx, hy = cos * hx - sin * hy, sin * hx + cos * hy
-    return np.array(points), False
+    return np.array(points), False, np.array(shortfall)
+
+
+def carried_to_the_border(
+    mask: np.ndarray,
+    position: np.ndarray,
+    direction: np.ndarray,
+    curvature: float,
+    half_width: float,
+    to_the_border: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The middle line carried on from where the section began to narrow
+    (``position``, heading along ``direction``, bending with ``curvature``, 1/px)
+    towards where the object's border crosses it, as far as the mask still holds the
+    cable on both sides of it, and its direction there.
+
+    An object's border crosses a cable at a slant: the section begins to narrow where
+    the border meets the near side, but the cable's middle passes out of sight half the
+    slant further on. Past the narrowing the section's middle is no longer the cable's,
+    so the line is carried on as it ran (bending no tighter than the tightest bend a
+    cable takes, :data:`.turn_joins.HIDDEN_BEND_RADII` ``[0]`` half widths), with two
+    lines beside it, half a half width to either side, until the first of them leaves
+    the mask: up to there the cable is seen on both sides of the carried middle, so a
+    heading a few degrees off cannot have carried it off the cable. Further on the
+    carried line is the heading's extrapolation alone: its error grows with the
+    distance (a direction read over a few traced points on a tight bend is 10-35
+    degrees off), and the side line that leaves last is the one the wedge a slanted
+    cut leaves runs on along, more so the more the heading leans into it. So the
+    bridge starts a quarter width short of where a straight border crosses the
+    middle (halfway between where the two side lines leave), on the cable. At most
+    :data:`CARRY_RADII` half widths, and never past where the middle itself leaves
+    the mask.
+
+    With ``to_the_border``, carried on to that halfway point itself (a side line not
+    yet out at :data:`CARRY_RADII` half widths read there): where the turn pass reads
+    the cut's shape (:mod:`.traced_cuts`), the border itself, not the cable's start.
+    """
+    x, y = (float(value) for value in np.asarray(position, np.float64))
+    hx, hy = (float(value) for value in unit(np.asarray(direction, np.float64)))
+    bound = 1.0 / (HIDDEN_BEND_RADII[0] * half_width)
+    turn = min(max(float(curvature), -bound), bound) * CARRY_STEP_PX
+    cos, sin = float(np.cos(turn)), float(np.sin(turn))
+    side = 0.5 * half_width
+    steps = int(CARRY_RADII * half_width / CARRY_STEP_PX)
+    path = [(x, y, hx, hy)]
+    exits = [steps, steps]  # where each side line leaves the mask (steps)
+    if not _on_mask(mask, x, y):
+        return np.array([x, y]), np.array([hx, hy])
+    for step in range(1, steps + 1):
+        x, y = x + CARRY_STEP_PX * hx, y + CARRY_STEP_PX * hy
+        hx, hy = cos * hx - sin * hy, sin * hx + cos * hy
+        if not _on_mask(mask, x, y):
+            break
+        path.append((x, y, hx, hy))
+        for k, sign in enumerate((1.0, -1.0)):
+            if exits[k] == steps and not _on_mask(mask, x - sign * side * hy, y + sign * side * hx):
+                exits[k] = step
+        if not to_the_border and min(exits) < steps:
+            break
+    # Where the first side line leaves (the cable seen on both sides up to there), or
+    # between where the two leave; never past the middle's own exit.
+    at = round(0.5 * (exits[0] + exits[1])) if to_the_border else min(exits)
+    x, y, hx, hy = path[min(at, len(path) - 1)]
+    return np.array([x, y]), np.array([hx, hy])
 
 
 def end_at_the_cut(
-    mask: np.ndarray, end, half_width: float, limit: float
+    mask: np.ndarray,
+    end,
+    half_width: float,
+    limit: float,
+    carry: bool = True,
+    to_the_border: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Where the cable ``end`` (a :class:`.merging.ChainEnd`, where its bridge would
     start) passes out of sight, and its direction there.
@@ -142,29 +239,95 @@ def end_at_the_cut(
     ``limit`` px) and back into the piece over :data:`FIT_RADII` radii; the direction at the
     cut is a quadratic's (:func:`.geometry.end_fit`) over the traced line's last
     :data:`FIT_RADII` radii: centred on the cable, not on the skeleton's hooked tip, and
-    short enough to follow a tight bend. Where less than half that is traced behind the
-    end, the end's own fit bends on to the cut instead.
+    short enough to follow a tight bend, fitted on the sections the cut has not begun to
+    narrow. Where less than half that is traced behind the end, the end's own fit bends
+    on to the cut instead. With ``carry``, the middle line is then carried on towards
+    where the cut's border crosses it (:func:`carried_to_the_border`, to the border
+    itself with ``to_the_border``).
 
     Returns
     -------
     (traced, position, direction) or None
         The traced stretch from the end to the cut, the cut (the fit's end, or the
-        traced stretch's), its outward direction;
+        traced stretch's, carried on to the border), its outward direction;
         None where no cut lies ahead within ``limit``, or the end is off the mask.
     """
     position = np.asarray(end.position, np.float64)
-    ahead, cut = middle_line(mask, position, end.direction, end.curvature, half_width, limit)
+    ahead, cut, shortfall = middle_line(
+        mask, position, end.direction, end.curvature, half_width, limit
+    )
     if not cut or len(ahead) < 2:
         return None
     span = FIT_RADII * half_width
-    behind, _ = middle_line(mask, position, -end.direction, -end.curvature, half_width, span)
+    behind, _, seen_shortfall = middle_line(
+        mask, position, -end.direction, -end.curvature, half_width, span
+    )
     if polyline_length(behind) < 0.5 * span:
         # Too little of the cable traced to fit its direction: the end's fit bends on.
-        return ahead, ahead[-1], rotated(end.direction, end.curvature * polyline_length(ahead))
-    line = np.concatenate([behind[::-1], ahead[1:]])
+        position = ahead[-1]
+        direction = rotated(end.direction, end.curvature * polyline_length(ahead))
+        if carry:
+            position, direction = carried_to_the_border(
+                mask, position, direction, end.curvature, half_width, to_the_border
+            )
+        return ahead, position, direction
+    # The points from where a slanted cut begins to narrow the section (by more than
+    # the borders' rounding) lean towards what it leaves: a short fit through them
+    # tilts by 15-25 degrees. The direction is fitted on the cable's full sections.
+    # Against the sections read behind the end (the cable's own, which the half width
+    # given may miss by a pixel).
+    own = float(np.median(seen_shortfall[1:])) if len(seen_shortfall) > 1 else 0.0
+    narrowed = np.flatnonzero(shortfall > own + SECTION_ROUNDING_PX)
+    full = max(int(narrowed[0]) if len(narrowed) else len(ahead), 2)
+    line = np.concatenate([behind[::-1], ahead[1:full]])
     # The fit's own end: the traced points carry a pixel's rounding from step to step.
-    position, direction, _ = end_fit(line, False, span)
+    position, direction, curvature = end_fit(line, False, span)
+    if carry:
+        position, direction = carried_to_the_border(
+            mask, position, direction, curvature, half_width, to_the_border
+        )
     return ahead, position, direction
+
+
+def middle_of(points: np.ndarray) -> np.ndarray:
+    """The point halfway along the polyline ``points`` (``(N, 2)``, ``N >= 1``)."""
+    points = np.asarray(points, np.float64)
+    along = arc_lengths(points)
+    if len(points) < 2 or along[-1] <= 0.0:
+        return points[0].copy()
+    half = 0.5 * along[-1]
+    k = min(int(np.searchsorted(along, half, side="right")), len(points) - 1)
+    share = (half - along[k - 1]) / max(along[k] - along[k - 1], 1e-12)
+    return points[k - 1] + share * (points[k] - points[k - 1])
+
+
+def short_piece_cut(
+    mask: np.ndarray, points: np.ndarray, end, half_width: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Where the cable through a short piece (``points``, bridged along its partners'
+    line: :func:`.bridge_ends.ends_through_short_pieces`) passes out of sight at
+    ``end``, and its direction there.
+
+    Thinning bends a short piece's tips toward the cut's corners, often a radius off the
+    cable's middle, and the partners' line is a chord of the bend the piece may lie on;
+    its middle joint lies on the middle line. So the cut is found as for a fitted end
+    (:func:`end_at_the_cut`) from the piece's middle, heading along the partners' line:
+    the middle line traced on to the cut, at most half the piece and
+    :data:`REACH_PAST_SKIP_RADII` radii past its tip, and its direction read there.
+
+    Returns
+    -------
+    (position, direction) or None
+        None where no cut lies ahead within reach (a tip that is the cable's own, a
+        middle off the mask).
+    """
+    middle = type(end)(end.piece, end.at_start, middle_of(points), end.direction)
+    limit = 0.5 * polyline_length(points) + REACH_PAST_SKIP_RADII * half_width + 2.0
+    # Not carried on across a slant (:func:`carried_to_the_border`): its direction is
+    # read over a few radii of a piece that often starts at a crossing, too unsteady to
+    # carry a radius or more.
+    found = end_at_the_cut(mask, middle, half_width, limit, carry=False)
+    return None if found is None else found[1:]
 
 
 def bridges_from_the_cuts(
@@ -176,6 +339,7 @@ def bridges_from_the_cuts(
     given: frozenset[int],
     shape: str = "smooth",
     turns: frozenset[tuple[int, int]] = frozenset(),
+    short_pieces: dict[int, tuple[np.ndarray, float]] | None = None,
 ) -> dict[tuple[int, int], np.ndarray]:
     """Bridges of the gaps (joins of two ends in no junction, with no curve of their
     own in ``given``) drawn from the cuts: from each bridging end (``ends``, where the
@@ -186,7 +350,16 @@ def bridges_from_the_cuts(
     to the other end's bridging point (the seen stretches drawn as curves from each
     bridging point to its cut). An end with no cut traced keeps its own
     start. The joins in ``turns`` (each as the turn pass keyed it) are bridged so too,
-    though their ends are in ``given``, where both ends reach a cut.
+    though their ends are in ``given``, where both ends reach a cut. An end in
+    ``short_pieces`` (end index -> its short piece's points and half width, px: a piece
+    bridged along its partners' line) starts at the cut traced from its piece's middle
+    (:func:`short_piece_cut`), with no seen stretch drawn: its piece ends at its tip.
+    A cable whose half width is under :data:`CUT_NARROWING_PX` (a sliver of a short
+    piece, a thin cable of a photograph) is not traced: the narrowing that marks a cut
+    would be half its section and more, each border's pixel rounding alone reads as one,
+    and a direction fitted over its three radii of traced middle (4-6 px) is rounded by
+    10-20 degrees (on ariadne simple 00028 a short piece read 1 px wide, traced, turned
+    its bridge 21 degrees off its partners' line and 4 px off the cable).
 
     Returns
     -------
@@ -201,15 +374,30 @@ def bridges_from_the_cuts(
         turn = (i, j) in turns or (j, i) in turns
         if (i in given or j in given) and not turn:
             continue
-        traced, cuts = [], []
+        traced, cuts, seen = [], [], []
         for k in (i, j):
             end = ends[k]
+            short = short_pieces.get(k) if short_pieces else None
+            if short is not None:
+                half_width = (short[1] or radius) + 0.5
+                found = (
+                    short_piece_cut(mask, short[0], end, half_width)
+                    if half_width >= CUT_NARROWING_PX
+                    else None
+                )
+                traced.append(found is not None)
+                cuts.append((end.position, end.direction) if found is None else found)
+                # The piece ends at its tip: the bridge leaves from there to the cut.
+                seen.append(False)
+                continue
             half_width = (end.width or radius) + 0.5
             limit = end.skip + REACH_PAST_SKIP_RADII * half_width + 2.0
             # Only an end whose fit left out its tip starts its bridge behind the cut.
-            found = end_at_the_cut(mask, end, half_width, limit) if end.skip > 0 else None
+            traceable = end.skip > 0 and half_width >= CUT_NARROWING_PX
+            found = end_at_the_cut(mask, end, half_width, limit) if traceable else None
             traced.append(found is not None)
             cuts.append((end.position, end.direction) if found is None else found[1:])
+            seen.append(True)
         if not any(traced) or (turn and not all(traced)):
             continue
         (a, leaving), (b, arriving) = (
@@ -219,8 +407,16 @@ def bridges_from_the_cuts(
         # The seen stretches drawn as the cable bends between the bridge's start and its
         # cut (the traced points carry a pixel's rounding from step to step).
         start_a, start_b = (np.asarray(ends[k].position, np.float64) for k in (i, j))
-        seen_a = gap_curve(start_a, ends[i].direction, a, leaving, shape=shape)
-        seen_b = gap_curve(b, -arriving, start_b, -ends[j].direction, shape=shape)
+        seen_a = (
+            gap_curve(start_a, ends[i].direction, a, leaving, shape=shape)
+            if seen[0]
+            else np.array([start_a, a])
+        )
+        seen_b = (
+            gap_curve(b, -arriving, start_b, -ends[j].direction, shape=shape)
+            if seen[1]
+            else np.array([b, start_b])
+        )
         curve = np.concatenate([seen_a[:-1], across, seen_b[1:]])
         if (j, i) in turns:
             bridges[j, i] = curve[::-1]  # the key the turn's own curve has

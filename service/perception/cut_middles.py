@@ -93,7 +93,7 @@ def cut_middle(
             continue
         ahead = float((np.asarray(tip, np.float64) - middle) @ heading)
         limit = max(ahead, 0.0) + REACH_PAST_SKIP_RADII * half_width + 2.0
-        traced, cut = middle_line(mask, middle, heading, 0.0, half_width, limit)
+        traced, cut, _shortfall = middle_line(mask, middle, heading, 0.0, half_width, limit)
         return traced[-1].copy() if cut else None
     return None
 

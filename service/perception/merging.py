@@ -896,6 +896,11 @@ def merge_chains(
             curve_given,
             params.gap_curve,
             wide_turns,
+            {
+                k: (pieces[end.piece], inner_ends[k].width)
+                for k, end in enumerate(bridging_ends)
+                if end is not inner_ends[k]
+            },
         )
         bridges = {**bridges, **cut_bridges}
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)

@@ -41,7 +41,9 @@ def ends_at_the_cuts(ends: list, mask: np.ndarray, radius: float) -> Callable[[i
                 half_width = (end.width or radius) + 0.5
                 start = replace(end, position=end.position - end.skip * end.direction)
                 limit = end.skip + REACH_PAST_SKIP_RADII * half_width + 2.0
-                found = end_at_the_cut(mask, start, half_width, limit)
+                # The cut's shape read at the border itself (where it crosses the
+                # middle line), as the turn pass's tests were measured.
+                found = end_at_the_cut(mask, start, half_width, limit, to_the_border=True)
             traced[index] = (
                 end
                 if found is None
