@@ -114,6 +114,12 @@ class RTDEWorker:
         return self._process.pid
 
     @property
+    def exitcode(self) -> int | None:
+        """The worker's exit status once it has been reaped (0 after :meth:`close`,
+        ``-SIGKILL`` after :meth:`kill`); None while it runs."""
+        return self._process.exitcode
+
+    @property
     def ended(self) -> bool:
         """Whether the worker can no longer serve calls (it exited, or its pipe closed)."""
         with self._state_lock:
