@@ -107,6 +107,13 @@ def connect(robot_ip: str) -> Interfaces:
     ``RTDEControlInterface`` uploads ur_rtde's control script, which makes the robot
     controllable remotely.
 
+    The worker is started with multiprocessing's "spawn" (never fork: this process has
+    threads), which imports the main module in the worker as multiprocessing always
+    does: a script that connects must keep its top-level code under
+    ``if __name__ == "__main__":`` (without it the worker refuses to start and
+    ``connect`` raises; nothing is sent). ``python -c``, ``python -m`` modules and the
+    ``dlo`` command are fine.
+
     Returns
     -------
     tuple
@@ -211,16 +218,19 @@ class _DeadlineMissed(Exception):
 class _CommandRunner:
     """Runs one blocking ur_rtde call on a worker thread and waits for it until a deadline.
 
-    ur_rtde releases the GIL while a call blocks, so the picker's thread keeps running
-    and can give up. Every call gets its own daemon thread: a call that missed its
+    A proxy of :func:`connect` waits for the worker process on an event, and ur_rtde in
+    this process releases the GIL while a call blocks, so the picker's thread keeps
+    running and can give up. Every call gets its own daemon thread: a call that missed its
     deadline still occupies its thread (it is blocked inside the client), and the
     ``stopL`` and ``reconnect`` that follow must not queue behind it.
 
     An abandoned call is left to the client's own timeout, which may never come: its
     thread only ever makes that one call, so it cannot send anything else; its result
-    or exception is discarded; being a daemon it never holds up interpreter exit. Its
-    name is kept in :attr:`abandoned`, and the picker issues no command afterwards
-    except the ``stopL`` and the single ``reconnect`` of the failure handling.
+    or exception is discarded; being a daemon it never holds up interpreter exit. With
+    the worker process, :meth:`UR3Picker.close` ends the worker, which fails the
+    abandoned call, so its thread returns. Its name is kept in :attr:`abandoned`, and
+    the picker issues no command afterwards except the ``stopL`` and the single
+    ``reconnect`` of the failure handling.
     """
 
     def __init__(self) -> None:
@@ -258,7 +268,8 @@ class UR3Picker:
     config
         Heights, speeds, workspace and gripper output.
     connect
-        ``connect(robot_ip) -> (control, receive, io)``; the real ur_rtde by default.
+        ``connect(robot_ip) -> (control, receive, io)``; by default :func:`connect`, the
+        real ur_rtde client in a worker process.
     clock, sleep
         Injectable time source (seconds) and wait, for the step durations and the
         gripper settle time.
