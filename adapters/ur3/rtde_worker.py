@@ -101,6 +101,7 @@ class RTDEWorker:
         self._pending: dict[int, _PendingCall] = {}
         self._call_ids = itertools.count()
         self._ended = False
+        self._ended_event = threading.Event()
         self._await_startup(startup_timeout_s)
         self._reader = threading.Thread(
             target=self._read_replies, name=f"ur_rtde replies from {self.pid}", daemon=True
@@ -124,6 +125,10 @@ class RTDEWorker:
         """Whether the worker can no longer serve calls (it exited, or its pipe closed)."""
         with self._state_lock:
             return self._ended
+
+    def wait_ended(self, timeout_s: float | None = None) -> bool:
+        """Block until the worker has ended (its pipe closed); False when ``timeout_s`` passed."""
+        return self._ended_event.wait(timeout_s)
 
     def proxies(self) -> tuple[ControlProxy, ReceiveProxy, IOProxy]:
         """The ``(control, receive, io)`` proxies forwarding to this worker."""
@@ -232,6 +237,7 @@ class RTDEWorker:
         with self._state_lock:
             self._ended = True
             pending, self._pending = list(self._pending.values()), {}
+        self._ended_event.set()
         message = self._ended_message()
         for call in pending:
             call.fail(WorkerEndedError(message))

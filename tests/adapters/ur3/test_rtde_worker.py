@@ -50,7 +50,7 @@ def test_calls_after_the_worker_was_killed_raise_a_one_line_error(fake_ur):
     assert control.isConnected() and receive.getSafetyMode() == 1
 
     os.kill(worker.pid, signal.SIGKILL)
-    # No wait: a call racing the kill fails as well, once the pipe reports the end.
+    assert worker.wait_ended(timeout_s=10)
     for call in (control.isConnected, control.isProgramRunning, receive.getActualTCPPose):
         with pytest.raises(WorkerEndedError) as raised:
             call()
@@ -119,6 +119,7 @@ class ChildProcess:
             self.process = subprocess.Popen(
                 [sys.executable, "-c", code, *arguments],
                 cwd=REPO_ROOT,
+                stdin=subprocess.PIPE,  # never written: a child reading it waits
                 stdout=subprocess.PIPE,
                 stderr=stderr,
                 text=True,
@@ -145,6 +146,8 @@ class ChildProcess:
         if self.process.poll() is None:
             self.process.kill()
             self.process.wait()
+        if self.process.stdin is not None:
+            self.process.stdin.close()
 
 
 @pytest.mark.fake_ur_args(*SLOW_MOTION)
@@ -194,6 +197,7 @@ def test_a_picker_whose_worker_died_refuses_then_reopens_with_a_fresh_worker(fak
     picker.open()
     first = picker.interfaces[0].worker
     os.kill(first.pid, signal.SIGKILL)
+    assert first.wait_ended(timeout_s=10)
     with pytest.raises(RobotNotReadyError, match=r"could not read the robot state.*has ended"):
         picker.pick(target())
     picker.close()
@@ -207,3 +211,37 @@ def test_a_picker_whose_worker_died_refuses_then_reopens_with_a_fresh_worker(fak
     assert report.ok, report.reason
     assert second.pid != first.pid
     assert second.exitcode == 0 and not process_exists(second.pid)
+
+
+CONNECT_AND_WAIT_CHILD = """
+import sys
+from adapters.ur3.driver import connect
+
+control, receive, io = connect(sys.argv[1])
+print("WORKER", control.worker.pid, flush=True)
+sys.stdin.read()  # until the test kills this process
+"""
+
+
+def process_running(pid: int) -> bool:
+    """Whether ``pid`` exists and is not a zombie (an orphan's zombie may wait for a
+    container's init to reap it)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except FileNotFoundError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_the_worker_ends_when_its_parent_is_killed(fake_ur, tmp_path):
+    child = ChildProcess(CONNECT_AND_WAIT_CHILD, fake_ur.host, stderr_path=tmp_path / "err")
+    try:
+        worker_pid = int(child.next_line("WORKER "))
+        assert process_running(worker_pid)
+        assert child.process.poll() is None  # still waiting on its stdin
+        child.process.kill()  # no close, no atexit: the worker only sees its pipe close
+        child.process.wait(timeout=10)
+    finally:
+        child.kill()
+    wait_until(lambda: not process_running(worker_pid), "the orphaned worker to exit")
