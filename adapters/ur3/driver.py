@@ -107,12 +107,11 @@ def connect(robot_ip: str) -> Interfaces:
     ``RTDEControlInterface`` uploads ur_rtde's control script, which makes the robot
     controllable remotely.
 
-    The worker is started with multiprocessing's "spawn" (never fork: this process has
-    threads), which imports the main module in the worker as multiprocessing always
-    does: a script that connects must keep its top-level code under
-    ``if __name__ == "__main__":`` (without it the worker refuses to start and
-    ``connect`` raises; nothing is sent). ``python -c``, ``python -m`` modules and the
-    ``dlo`` command are fine.
+    The worker is a fresh interpreter running only :mod:`adapters.ur3.rtde_worker`
+    (never a fork: this process has threads). It never imports the caller's main
+    module, so a plain script that connects at top level works, with or without
+    ``if __name__ == "__main__":``, as do ``python -c``, ``python -m`` and the ``dlo``
+    command.
 
     Returns
     -------

@@ -6,9 +6,13 @@ reconnects by itself) keep running through interpreter shutdown, where they were
 crash the process (SIGSEGV). So the three interfaces live in one worker process of their
 own, and the user's process holds thin proxies:
 
-* :class:`RTDEWorker` starts the worker (``multiprocessing`` "spawn": the parent has
-  threads, and a fork would copy them mid-flight) and forwards
-  ``(interface, method, args)`` requests over a pipe. Each request carries an id; the
+* :class:`RTDEWorker` starts the worker as a fresh interpreter (``subprocess``, never a
+  fork: the parent has threads, and a fork would copy them mid-flight) and forwards
+  ``(interface, method, args)`` requests over a socket pair (``multiprocessing``'s
+  :class:`~multiprocessing.connection.Connection` framing). The worker runs only this
+  module: unlike ``multiprocessing``'s "spawn" it never imports the user's main module,
+  so a plain script that connects at top level (no ``if __name__ == "__main__":``) works
+  as well as the ``dlo`` command. Each request carries an id; the
   worker serves each on its own thread, so a ``moveL`` that blocks forever on a dead link
   does not hold up the ``stopL`` sent after it. A reader thread in the parent hands each
   reply to the caller waiting for it.
@@ -21,19 +25,24 @@ own, and the user's process holds thin proxies:
   (links fine); :meth:`RTDEWorker.kill` ends it with SIGKILL (links in doubt): the
   operating system closes its sockets and no C++ teardown runs anywhere. The worker
   leaves with ``os._exit`` in every case, and also when the parent disappears (end of
-  the pipe), so ur_rtde's destructors never run at interpreter shutdown.
+  its socket), so ur_rtde's destructors never run at interpreter shutdown. It ignores
+  SIGINT: Ctrl-C in a terminal reaches the whole process group, and the parent decides
+  how the worker ends.
 
 This module imports only the standard library at import time, so the worker starts
-without loading the rest of the project.
+without loading the rest of the project. The worker needs POSIX (it inherits its socket
+through ``pass_fds``), like the rest of the UR3 adapter's process handling.
 """
 
 from __future__ import annotations
 
 import contextlib
 import itertools
-import multiprocessing
 import os
 import signal
+import socket
+import subprocess
+import sys
 import threading
 from multiprocessing.connection import Connection
 from typing import Any
@@ -53,7 +62,23 @@ disconnect the three interfaces); past it the worker is killed."""
 KILL_TIMEOUT_S = 10.0
 """Longest wait for a killed worker to be reaped."""
 
-_SPAWN = multiprocessing.get_context("spawn")
+PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+"""The directory holding this copy of the ``adapters`` package (site-packages when
+installed, the repository when run from it): the worker imports the same copy."""
+
+_WORKER_BOOTSTRAP = """\
+import signal
+signal.signal(signal.SIGINT, signal.SIG_IGN)
+import sys
+root, fd, robot_ip = sys.argv[1:]
+if root not in sys.path:
+    sys.path.insert(0, root)
+from adapters.ur3.rtde_worker import worker_main
+worker_main(int(fd), robot_ip)
+"""
+"""The worker's ``-c`` program: SIGINT ignored first, then this module from ``root``.
+Run with ``-P``: neither the cwd nor a script directory lands on ``sys.path``, so a
+user's file named like a module (``socket.py``) cannot shadow it in the worker."""
 
 
 class WorkerEndedError(ConnectionError):
@@ -83,19 +108,24 @@ class RTDEWorker:
 
     def __init__(self, robot_ip: str, *, startup_timeout_s: float = STARTUP_TIMEOUT_S) -> None:
         self.robot_ip = robot_ip
-        parent_end, worker_end = _SPAWN.Pipe()
-        self._process = _SPAWN.Process(
-            target=serve_interfaces,
-            args=(worker_end, robot_ip),
-            name=f"ur_rtde worker for {robot_ip}",
-            # Daemonic: if the user never closes the picker, multiprocessing ends the
-            # worker at interpreter exit (SIGTERM, no C++ teardown) instead of waiting.
-            daemon=True,
-        )
-        self._process.start()
-        # Only the worker may hold its end, or its death would never read as EOF here.
-        worker_end.close()
-        self._connection = parent_end
+        # Both ends are created non-inheritable: only the worker gets its end (pass_fds),
+        # and no other child of this process ever holds one.
+        parent_end, worker_end = socket.socketpair()
+        try:
+            self._process = subprocess.Popen(
+                worker_command(worker_end.fileno(), robot_ip),
+                stdin=subprocess.DEVNULL,
+                pass_fds=(worker_end.fileno(),),
+            )
+        except BaseException:
+            parent_end.close()
+            raise
+        finally:
+            # Only the worker may hold its end, or its death would never read as EOF here.
+            # If the user never closes the picker, the worker sees this process's end
+            # close at exit and leaves (os._exit, no C++ teardown).
+            worker_end.close()
+        self._connection = Connection(parent_end.detach())
         self._send_lock = threading.Lock()
         self._state_lock = threading.Lock()
         self._pending: dict[int, _PendingCall] = {}
@@ -111,23 +141,22 @@ class RTDEWorker:
     @property
     def pid(self) -> int:
         """The worker's process id."""
-        assert self._process.pid is not None
         return self._process.pid
 
     @property
     def exitcode(self) -> int | None:
         """The worker's exit status once it has been reaped (0 after :meth:`close`,
         ``-SIGKILL`` after :meth:`kill`); None while it runs."""
-        return self._process.exitcode
+        return self._process.poll()
 
     @property
     def ended(self) -> bool:
-        """Whether the worker can no longer serve calls (it exited, or its pipe closed)."""
+        """Whether the worker can no longer serve calls (it exited, or its socket closed)."""
         with self._state_lock:
             return self._ended
 
     def wait_ended(self, timeout_s: float | None = None) -> bool:
-        """Block until the worker has ended (its pipe closed); False when ``timeout_s`` passed."""
+        """Block until the worker has ended (its socket closed); False when ``timeout_s`` passed."""
         return self._ended_event.wait(timeout_s)
 
     def proxies(self) -> tuple[ControlProxy, ReceiveProxy, IOProxy]:
@@ -172,11 +201,10 @@ class RTDEWorker:
         if not self.ended:
             with contextlib.suppress(OSError, ValueError), self._send_lock:
                 self._connection.send(("exit",))
-        self._process.join(timeout_s)
-        if self._process.exitcode is None:
-            self.kill()
-        else:
+        if self._reap(timeout_s):
             self._wait_for_reader()
+        else:
+            self.kill()
 
     def kill(self) -> None:
         """End the worker with SIGKILL and reap it; no disconnect or destructor runs.
@@ -184,42 +212,54 @@ class RTDEWorker:
         For links in doubt: the operating system closes the worker's sockets, and
         nothing in ur_rtde gets the chance to write to them.
         """
-        self._process.kill()
-        self._process.join(KILL_TIMEOUT_S)
+        self._kill_and_reap()
         self._wait_for_reader()
+
+    def _reap(self, timeout_s: float) -> bool:
+        """Wait for the worker to exit and reap it; False when it still runs."""
+        try:
+            self._process.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            return False
+        return True
+
+    def _kill_and_reap(self) -> None:
+        # Popen.kill signals only a worker not yet reaped: never a recycled pid.
+        self._process.kill()
+        self._reap(KILL_TIMEOUT_S)
 
     def _await_startup(self, timeout_s: float) -> None:
         """Wait for the worker's first message: connected, or ur_rtde's error."""
         try:
             if not self._connection.poll(timeout_s):
-                self._process.kill()
-                self._process.join(KILL_TIMEOUT_S)
+                self._kill_and_reap()
+                self._connection.close()
                 raise RuntimeError(
                     f"the ur_rtde worker did not connect to {self.robot_ip} within "
                     f"{timeout_s:.0f} s (killed)"
                 )
             status, detail = self._connection.recv()
         except (EOFError, OSError) as error:
-            self._process.join(KILL_TIMEOUT_S)
+            if not self._reap(KILL_TIMEOUT_S):
+                self._kill_and_reap()
             self._connection.close()
             raise WorkerEndedError(
                 f"the ur_rtde worker process (pid {self.pid}) ended while connecting to "
-                f"{self.robot_ip} (exit code {self._process.exitcode})"
+                f"{self.robot_ip} (exit code {self._process.returncode})"
             ) from error
         except BaseException:
+            self._kill_and_reap()
             self._connection.close()
             raise
         if status != "ready":
             # The worker leaves on its own after reporting the error.
-            self._process.join(KILL_TIMEOUT_S)
-            if self._process.exitcode is None:
-                self._process.kill()
-                self._process.join(KILL_TIMEOUT_S)
+            if not self._reap(KILL_TIMEOUT_S):
+                self._kill_and_reap()
             self._connection.close()
             raise RuntimeError(detail)
 
     def _read_replies(self) -> None:
-        """Hand each reply to its waiting caller until the worker's end of the pipe closes."""
+        """Hand each reply to its waiting caller until the worker's end of the socket closes."""
         while True:
             try:
                 call_id, succeeded, value = self._connection.recv()
@@ -249,7 +289,7 @@ class RTDEWorker:
         )
 
     def _wait_for_reader(self) -> None:
-        # The reader sees the end of the pipe once the worker is gone; waiting for it
+        # The reader sees the end of the socket once the worker is gone; waiting for it
         # means no thread of this worker outlives close() or kill().
         self._reader.join(KILL_TIMEOUT_S)
 
@@ -355,18 +395,30 @@ class IOProxy(_InterfaceProxy):
         return self._call("setStandardDigitalOut", output_id, level)
 
 
+def worker_command(fd: int, robot_ip: str) -> list[str]:
+    """The worker's command line: this interpreter, ``-P`` (no cwd on ``sys.path``), the
+    bootstrap, and its arguments (package root, the worker's socket ``fd``, the robot)."""
+    return [sys.executable, "-P", "-c", _WORKER_BOOTSTRAP, PACKAGE_ROOT, str(fd), robot_ip]
+
+
 # --- inside the worker process -------------------------------------------------------------
+
+
+def worker_main(fd: int, robot_ip: str) -> None:
+    """The worker process's entry point: serve the connection on the inherited socket ``fd``."""
+    serve_interfaces(Connection(fd), robot_ip)
 
 
 def serve_interfaces(connection: Connection, robot_ip: str) -> None:
     """The worker's main: construct the interfaces, then serve calls until told to exit.
 
-    Runs in the spawned process. Every way out is ``os._exit``: interpreter shutdown
+    Runs in the worker process. Every way out is ``os._exit``: interpreter shutdown
     would destroy the interfaces (ur_rtde aborts on a dead socket) while ur_rtde's
     threads still run.
     """
     # Ctrl-C in a terminal reaches the whole process group; the parent decides how the
     # worker ends, and a KeyboardInterrupt here would run the interpreter's shutdown.
+    # (The bootstrap ignored SIGINT already; this covers a worker started otherwise.)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         try:
@@ -394,7 +446,7 @@ def _open_interfaces(robot_ip: str) -> dict[str, Any]:
 
 
 def _serve_calls(connection: Connection, interfaces: dict[str, Any]) -> None:
-    """Read requests until ``exit`` or the end of the pipe; each call on its own thread."""
+    """Read requests until ``exit`` or the end of the socket; each call on its own thread."""
     send_lock = threading.Lock()
 
     def serve(call_id: int, interface: str, method: str, args: tuple) -> None:

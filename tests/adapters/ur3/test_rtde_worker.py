@@ -7,7 +7,7 @@ killer): the user's process must see failed calls at once, never a hang or a cra
 
 from __future__ import annotations
 
-import multiprocessing
+import contextlib
 import os
 import signal
 import subprocess
@@ -36,11 +36,22 @@ SLOW_MOTION = ("--time-scale", "100")
 so a test can act while the picker's moveL is blocked in the worker."""
 
 
+def child_pids() -> set[int]:
+    """This process's children, zombies included (an unreaped worker counts)."""
+    children = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError):
+            if int(stat.read_text().rsplit(")", 1)[1].split()[1]) == os.getpid():
+                children.add(int(stat.parent.name))
+    return children
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 def test_unreachable_robot_raises_as_ur_rtde_does_and_leaves_no_worker():
-    before = set(multiprocessing.active_children())
+    before = child_pids()
     with pytest.raises(RuntimeError, match=f"Could not connect to: {UNUSED_LOOPBACK_HOST}"):
         connect(UNUSED_LOOPBACK_HOST)
-    assert set(multiprocessing.active_children()) <= before
+    assert child_pids() <= before
 
 
 def test_calls_after_the_worker_was_killed_raise_a_one_line_error(fake_ur):
@@ -112,13 +123,32 @@ print("CLOSED", flush=True)
 class ChildProcess:
     """A Python child whose stdout is read line by line as it runs."""
 
-    def __init__(self, code: str, *arguments: str, stderr_path: Path) -> None:
+    def __init__(
+        self,
+        code: str,
+        *arguments: str,
+        stderr_path: Path,
+        script_dir: Path | None = None,
+    ) -> None:
+        """Run ``code`` with ``-c`` from the repository, or, given ``script_dir``, as the
+        file ``script.py`` there (``python script.py``, cwd ``script_dir``, the
+        repository importable through ``PYTHONPATH``): a user's own script."""
         self.stderr_path = stderr_path
         self.lines: list[str] = []
+        command, cwd, env = [sys.executable, "-c", code], REPO_ROOT, None
+        if script_dir is not None:
+            (script_dir / "script.py").write_text(code)
+            command, cwd = [sys.executable, "script.py"], script_dir
+            path = os.environ.get("PYTHONPATH")
+            env = {
+                **os.environ,
+                "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO_ROOT), path])),
+            }
         with stderr_path.open("wb") as stderr:
             self.process = subprocess.Popen(
-                [sys.executable, "-c", code, *arguments],
-                cwd=REPO_ROOT,
+                [*command, *arguments],
+                cwd=cwd,
+                env=env,
                 stdin=subprocess.PIPE,  # never written: a child reading it waits
                 stdout=subprocess.PIPE,
                 stderr=stderr,
@@ -245,3 +275,50 @@ def test_the_worker_ends_when_its_parent_is_killed(fake_ur, tmp_path):
     finally:
         child.kill()
     wait_until(lambda: not process_running(worker_pid), "the orphaned worker to exit")
+
+
+USER_SCRIPT = """
+# A user's plain script: it connects at top level, with no `if __name__ == "__main__":`.
+import os
+import sys
+
+from adapters.grasp.motions import UR3Config
+from adapters.ur3.driver import UR3Picker
+from schemas import GraspTarget
+
+host, goal = sys.argv[1], GraspTarget.model_validate_json(sys.argv[2])
+picker = UR3Picker(host, UR3Config(gripper_settle_s=0.05))
+picker.open()
+worker = picker.interfaces[0].worker
+print("WORKER", worker.pid, flush=True)
+report = picker.pick(goal)
+picker.close()
+print("REPORT " + report.model_dump_json(), flush=True)
+print("EXITCODE", worker.exitcode, flush=True)
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_a_plain_user_script_without_a_main_guard_picks(fake_ur, tmp_path):
+    script_dir = tmp_path / "user"
+    script_dir.mkdir()
+    child = ChildProcess(
+        USER_SCRIPT,
+        fake_ur.host,
+        target().model_dump_json(),
+        stderr_path=tmp_path / "child.stderr",
+        script_dir=script_dir,
+    )
+    try:
+        worker_pid = int(child.next_line("WORKER "))
+        report = PickReport.model_validate_json(child.next_line("REPORT "))
+        exitcode = child.next_line("EXITCODE ")
+        returncode = child.wait(timeout=60)
+    finally:
+        child.kill()
+    assert report.ok, (report.reason, child.output())
+    assert exitcode == "0", child.output()
+    assert returncode == 0, child.output()
+    assert not process_running(worker_pid)
+    moves = fake_ur.commands("moveL")
+    assert moves and all(move["executed"] for move in moves), moves
