@@ -5,7 +5,9 @@ Ports and adapters
 The robot is reached through three ports with the method names of ur_rtde's
 ``RTDEControlInterface``, ``RTDEReceiveInterface`` and ``RTDEIOInterface``. A factory
 ``connect(robot_ip) -> (control, receive, io)`` makes them; the default,
-:func:`connect`, imports ur_rtde lazily, and tests inject :mod:`adapters.ur3.fakes`.
+:func:`connect`, runs the real ur_rtde client in a worker process of its own
+(:mod:`adapters.ur3.rtde_worker`) and returns proxies to it, and tests inject
+:mod:`adapters.ur3.fakes`.
 
 Planning (:func:`~adapters.grasp.motions.plan_motions`,
 :func:`~adapters.grasp.motions.check_workspace`) is pure and lives in
@@ -25,9 +27,17 @@ Safety rules
   link that died (seen with ur_rtde 1.6.5 when the controller refuses new
   connections); a missed deadline is handled as a lost link, and the picker refuses
   every later pick, since the abandoned call is still inside the client.
-* After a failure that may have involved a broken link, :meth:`UR3Picker.close` does
-  not disconnect the interfaces (ur_rtde 1.6.5 aborts the process doing so) but
-  retires them for the rest of the process (:func:`retire_interfaces`).
+* ur_rtde 1.6.5 aborts its process when an interface whose socket died is
+  disconnected or destroyed, and its background threads, which keep reconnecting,
+  were seen to crash a process at exit (SIGSEGV). So the real client runs in a worker
+  process: whatever ur_rtde does there, the user's process only sees a call fail.
+  After a failure that may have involved a broken link, :meth:`UR3Picker.close` does
+  not disconnect the interfaces but ends the worker with SIGKILL
+  (:func:`retire_interfaces`): the operating system closes its sockets and no C++
+  teardown runs anywhere. Nothing is left behind in the user's process, and a new
+  ``open()`` starts a fresh worker.
+* A worker that ends on its own (crash, killed) fails every pending and later call at
+  once; a pick in progress fails like one on a lost link.
 """
 
 from __future__ import annotations
@@ -42,6 +52,7 @@ from typing import Any, Protocol
 
 from adapters.errors import UnsafeTargetError
 from adapters.grasp.motions import UR3Config, check_workspace, plan_motions
+from adapters.ur3.rtde_worker import RTDEWorker
 from schemas import GraspTarget, Motion, PickReport, PickStep
 
 
@@ -87,20 +98,36 @@ ConnectFactory = Callable[[str], Interfaces]
 
 
 def connect(robot_ip: str) -> Interfaces:
-    """Open the three ur_rtde interfaces to the robot at ``robot_ip``.
+    """Open the three ur_rtde interfaces to the robot at ``robot_ip`` in a worker process.
 
-    ur_rtde is imported here, not at module import, so planning and tests work
-    without it. Constructing ``RTDEControlInterface`` uploads ur_rtde's control
-    script, which makes the robot controllable remotely.
+    One worker process (:class:`~adapters.ur3.rtde_worker.RTDEWorker`) constructs
+    ``RTDEControlInterface``, ``RTDEReceiveInterface`` and ``RTDEIOInterface`` and serves
+    calls on them; the returned proxies forward each call to it. ur_rtde is imported
+    only in the worker, so planning and tests work without it. Constructing
+    ``RTDEControlInterface`` uploads ur_rtde's control script, which makes the robot
+    controllable remotely.
+
+    The worker is a fresh interpreter running only :mod:`adapters.ur3.rtde_worker`
+    (never a fork: this process has threads). It never imports the caller's main
+    module, so a plain script that connects at top level works, with or without
+    ``if __name__ == "__main__":``, as do ``python -c``, ``python -m`` and the ``dlo``
+    command.
+
+    Returns
+    -------
+    tuple
+        ``(control, receive, io)`` proxies; each has ``worker`` (its pid is
+        ``worker.pid``). :meth:`UR3Picker.close` ends the worker.
+
+    Raises
+    ------
+    RuntimeError
+        ur_rtde could not connect (its message, one line), as when it ran in this
+        process; no worker is left running.
+    ConnectionError
+        The worker process ended while connecting.
     """
-    import rtde_control
-    import rtde_io
-    import rtde_receive
-
-    control = rtde_control.RTDEControlInterface(robot_ip)
-    receive = rtde_receive.RTDEReceiveInterface(robot_ip)
-    io = rtde_io.RTDEIOInterface(robot_ip)
-    return control, receive, io
+    return RTDEWorker(robot_ip).proxies()
 
 
 SAFETY_MODES_READY = frozenset({1, 2})
@@ -190,16 +217,19 @@ class _DeadlineMissed(Exception):
 class _CommandRunner:
     """Runs one blocking ur_rtde call on a worker thread and waits for it until a deadline.
 
-    ur_rtde releases the GIL while a call blocks, so the picker's thread keeps running
-    and can give up. Every call gets its own daemon thread: a call that missed its
+    A proxy of :func:`connect` waits for the worker process on an event, and ur_rtde in
+    this process releases the GIL while a call blocks, so the picker's thread keeps
+    running and can give up. Every call gets its own daemon thread: a call that missed its
     deadline still occupies its thread (it is blocked inside the client), and the
     ``stopL`` and ``reconnect`` that follow must not queue behind it.
 
     An abandoned call is left to the client's own timeout, which may never come: its
     thread only ever makes that one call, so it cannot send anything else; its result
-    or exception is discarded; being a daemon it never holds up interpreter exit. Its
-    name is kept in :attr:`abandoned`, and the picker issues no command afterwards
-    except the ``stopL`` and the single ``reconnect`` of the failure handling.
+    or exception is discarded; being a daemon it never holds up interpreter exit. With
+    the worker process, :meth:`UR3Picker.close` ends the worker, which fails the
+    abandoned call, so its thread returns. Its name is kept in :attr:`abandoned`, and
+    the picker issues no command afterwards except the ``stopL`` and the single
+    ``reconnect`` of the failure handling.
     """
 
     def __init__(self) -> None:
@@ -237,7 +267,8 @@ class UR3Picker:
     config
         Heights, speeds, workspace and gripper output.
     connect
-        ``connect(robot_ip) -> (control, receive, io)``; the real ur_rtde by default.
+        ``connect(robot_ip) -> (control, receive, io)``; by default :func:`connect`, the
+        real ur_rtde client in a worker process.
     clock, sleep
         Injectable time source (seconds) and wait, for the step durations and the
         gripper settle time.
@@ -272,27 +303,44 @@ class UR3Picker:
             self._interfaces = self._connect(self.robot_ip)
 
     def close(self) -> None:
-        """Disconnect every interface that has a ``disconnect`` method.
+        """Disconnect the interfaces, or retire them after a failure on a doubtful link.
 
-        After a pick failure that may have involved a broken link, the interfaces are
-        not disconnected but handed to :func:`retire_interfaces`, which keeps them
-        alive until the process ends: with ur_rtde 1.6.5, ``disconnect()`` or the
-        destructor of an interface whose socket died throws from C++ ("write: Broken
-        pipe", "read: End of file") and aborts the whole process. A failure counts as
-        possibly involving a link unless every link reported itself up, no command
-        missed its deadline, and the robot reported a protective or emergency stop
-        that explains the failure. (The IO interface has no reader thread and never
-        notices its link dropped, so "every link reported up" alone proves nothing.)
+        Links fine: the ur_rtde worker process (the default ``connect``) is asked to
+        disconnect its interfaces and exit, and is joined (killed if it does not exit in
+        time); other interfaces (fakes) get ``disconnect()`` when they have it.
+
+        After a pick failure that may have involved a broken link, nothing is
+        disconnected: the interfaces go to :func:`retire_interfaces`, which ends the
+        worker with SIGKILL. With ur_rtde 1.6.5, ``disconnect()`` or the destructor of
+        an interface whose socket died throws from C++ ("write: Broken pipe", "read: End
+        of file") and aborts its process; killed, the worker runs no C++ teardown, and
+        the operating system closes its sockets. Nothing of the lost link stays in this
+        process. A failure counts as possibly involving a link unless every link
+        reported itself up, no command missed its deadline, and the robot reported a
+        protective or emergency stop that explains the failure. (The IO interface has
+        no reader thread and never notices its link dropped, so "every link reported
+        up" alone proves nothing.)
+
+        A later :meth:`open` (or pick) connects again, with a fresh worker. The refusal
+        after a missed deadline stays: this picker sends nothing more.
         """
         interfaces, self._interfaces = self._interfaces, None
-        if interfaces is not None and self._links_in_doubt:
+        # The doubt is about the interfaces closed now, not the ones a later open makes.
+        links_in_doubt, self._links_in_doubt = self._links_in_doubt, False
+        if interfaces is None:
+            return
+        if links_in_doubt:
             retire_interfaces(interfaces)
             return
-        for interface in interfaces or ():
+        for interface in interfaces:
+            if _worker_of(interface) is not None:
+                continue  # the worker disconnects all of its interfaces as it exits
             disconnect = getattr(interface, "disconnect", None)
             if disconnect is not None:
                 with contextlib.suppress(Exception):  # closing must not hide an error
                     disconnect()
+        for worker in _workers_of(interfaces):
+            worker.close()
 
     def __enter__(self) -> UR3Picker:
         self.open()
@@ -560,31 +608,53 @@ class UR3Picker:
 
 
 _RETIRED_INTERFACES: list[Any] = []
-"""Interfaces kept alive by :func:`retire_interfaces` (for inspection; the extra
-reference count is what keeps them alive through interpreter shutdown)."""
+"""Interfaces other than worker proxies kept alive by :func:`retire_interfaces` (for
+inspection; the extra reference count is what keeps them alive through interpreter
+shutdown)."""
 
 
 def retire_interfaces(interfaces: Sequence[Any]) -> None:
-    """Keep interfaces whose link may be broken alive, undisconnected, until the process ends.
+    """Get rid of interfaces whose link may be broken without disconnecting them.
 
-    ur_rtde 1.6.5 aborts the process (``std::terminate``) when an interface whose
-    socket died is disconnected or destroyed, and its destructor runs when the last
-    Python reference goes, at the latest during interpreter shutdown. So no method is
-    called and each object gets one extra reference that is never released: it is
-    never destroyed, and the operating system closes its sockets at exit. The cost is
-    the objects and ur_rtde's background threads (which may keep trying to reconnect,
-    and may upload their control script again) for the rest of the process; a service
-    should restart after a lost link rather than pile these up.
+    ur_rtde 1.6.5 aborts its process (``std::terminate``) when an interface whose socket
+    died is disconnected or destroyed. Worker proxies (the default ``connect``): their
+    worker process is ended with SIGKILL and reaped, so no disconnect or destructor
+    runs, the operating system closes the sockets, and ur_rtde's background threads end
+    with the worker; nothing stays behind in this process.
+
+    Any other object (ur_rtde interfaces constructed in this process, fakes) gets no
+    method call and one extra reference that is never released: it is never destroyed,
+    and the operating system closes its sockets at exit. That keeps its background
+    threads for the rest of the process, which is why :func:`connect` uses a worker.
 
     Parameters
     ----------
     interfaces
         The ``(control, receive, io)`` objects; any objects work (fakes too).
     """
+    for worker in _workers_of(interfaces):
+        worker.kill()
     for interface in interfaces:
-        _RETIRED_INTERFACES.append(interface)
-        # Deliberate leak: module globals are cleared at shutdown, this count is not.
-        ctypes.pythonapi.Py_IncRef(ctypes.py_object(interface))
+        if _worker_of(interface) is None:
+            _RETIRED_INTERFACES.append(interface)
+            # Deliberate leak: module globals are cleared at shutdown, this count is not.
+            ctypes.pythonapi.Py_IncRef(ctypes.py_object(interface))
+
+
+def _worker_of(interface: Any) -> RTDEWorker | None:
+    """The worker process behind a proxy from :func:`connect`; None for other objects."""
+    worker = getattr(interface, "worker", None)
+    return worker if isinstance(worker, RTDEWorker) else None
+
+
+def _workers_of(interfaces: Sequence[Any]) -> list[RTDEWorker]:
+    """The distinct workers behind ``interfaces``, in order (one per :func:`connect`)."""
+    workers: list[RTDEWorker] = []
+    for interface in interfaces:
+        worker = _worker_of(interface)
+        if worker is not None and worker not in workers:
+            workers.append(worker)
+    return workers
 
 
 def _is_connected(interface: Any) -> bool:

@@ -11,6 +11,7 @@ digital outputs the IO interface set.
 from __future__ import annotations
 
 import math
+import os
 import signal
 import socket
 import struct
@@ -222,15 +223,16 @@ def test_pose_outside_the_controller_safety_limits_is_refused_with_nothing_sent(
     assert fake_ur.commands(*ACTUATING) == []
 
 
-# ur_rtde 1.6.5 is not robust to a link that drops mid-command: it aborts the whole
-# process (std::terminate on "write: Broken pipe" or "read: End of file") when an
-# interface whose socket died is disconnected or destroyed, and its synchronous moveL
-# blocks forever once the controller refuses connections. The picker now avoids both
-# (it retires such interfaces instead of closing them, and waits for each command at
-# most a deadline), but the pick still runs in a child process here, so a regression
-# cannot take the test session down; the child prints the report before it closes the
-# interfaces, and exits normally (interpreter shutdown is where an abort from a
-# destructor would show).
+# ur_rtde 1.6.5 is not robust to a link that drops mid-command: it aborts its process
+# (std::terminate on "write: Broken pipe" or "read: End of file") when an interface
+# whose socket died is disconnected or destroyed, its background threads were seen to
+# crash a process at exit (SIGSEGV), and its synchronous moveL blocks forever once the
+# controller refuses connections. The picker avoids all three (ur_rtde runs in a worker
+# process, killed rather than disconnected after such a failure, and each command is
+# waited for at most a deadline), but the pick still runs in a child process here, so a
+# regression cannot take the test session down; the child prints its worker's pid and
+# the report before it closes the picker, and exits normally (interpreter shutdown is
+# where an abort or a crash would show).
 PICK_IN_CHILD = """
 import sys
 from adapters.grasp.motions import UR3Config
@@ -239,6 +241,8 @@ from schemas import GraspTarget
 
 host, goal = sys.argv[1], GraspTarget.model_validate_json(sys.argv[2])
 picker = UR3Picker(host, UR3Config(gripper_settle_s=0.05))
+picker.open()
+print("WORKER", picker.interfaces[0].worker.pid, flush=True)
 report = picker.pick(goal)
 print("REPORT " + report.model_dump_json(), flush=True)
 picker.close()
@@ -253,6 +257,23 @@ class ChildPick:
     closed: bool
     returncode: int | None
     output: str
+    worker_pid: int | None
+    """The pid of the child's ur_rtde worker process; None when it never connected."""
+
+    @property
+    def worker_gone(self) -> bool:
+        """Whether the worker process no longer exists (the child exited and was reaped)."""
+        assert self.worker_pid is not None, self.output
+        return not process_exists(self.worker_pid)
+
+
+def process_exists(pid: int) -> bool:
+    """Whether a process ``pid`` exists (a zombie counts: it was not reaped)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
 
 
 def pick_in_child(host: str, goal: GraspTarget, timeout: float) -> ChildPick:
@@ -269,7 +290,9 @@ def pick_in_child(host: str, goal: GraspTarget, timeout: float) -> ChildPick:
     lines = output.splitlines()
     report_lines = [line for line in lines if line.startswith("REPORT ")]
     report = PickReport.model_validate_json(report_lines[0][7:]) if report_lines else None
-    return ChildPick(report, "CLOSED" in lines, returncode, output)
+    worker_lines = [line.split()[1] for line in lines if line.startswith("WORKER ")]
+    worker_pid = int(worker_lines[0]) if worker_lines else None
+    return ChildPick(report, "CLOSED" in lines, returncode, output, worker_pid)
 
 
 def _text(data: bytes | str | None) -> str:
@@ -291,6 +314,7 @@ def test_dropped_rtde_link_mid_sequence_fails_and_never_resumes(fake_ur):
     # the receive link has noticed the drop yet (ur_rtde's control link reconnects by
     # itself inside moveL; the IO link has no reader and never notices).
     assert report.reconnected == report.reconnect_attempted
+    assert child.closed and child.returncode == 0 and child.worker_gone, child.output
     log = fake_ur.commands()
     drop = next(i for i, e in enumerate(log) if e.get("event") == "drop")
     before, after = log[:drop], log[drop + 1 :]
@@ -336,12 +360,15 @@ def _program_running_as_logged(state: dict, drop: int) -> bool:
 
 def test_closing_the_interfaces_after_a_dropped_link_does_not_abort(fake_ur):
     # Closing used to abort the process here: ur_rtde's disconnect and destructors
-    # write to the dead sockets. UR3Picker.close now retires the interfaces instead.
+    # write to the dead sockets. Then the picker leaked the interfaces instead, and
+    # their threads sometimes crashed the process at exit (SIGSEGV, exit -11). Now
+    # UR3Picker.close kills the worker process that holds them.
     fake_ur.request("arm", event="drop", after_commands=1, reconnect=True, scope="rtde")
     child = pick_in_child(fake_ur.host, target(), timeout=60)
     assert child.report is not None and not child.report.ok, child.output
-    assert child.returncode != -signal.SIGABRT, child.output
+    assert child.returncode not in (-signal.SIGABRT, -signal.SIGSEGV), child.output
     assert child.closed and child.returncode == 0, child.output
+    assert child.worker_gone, child.output
 
 
 def test_dropped_link_of_every_connection_never_resumes(fake_ur):
@@ -350,9 +377,10 @@ def test_dropped_link_of_every_connection_never_resumes(fake_ur):
     ur_rtde's moveL reconnects by itself and returns False; the pick fails. Closing
     the interfaces used to abort the process (ur_rtde's disconnect and destructors
     write to the dead port-30003 socket: std::terminate, "write: Broken pipe", exit
-    status -6); the picker now retires them (see ``UR3Picker.close``), so the child
-    closes and exits normally. ur_rtde's background thread of the retired control
-    interface may still reconnect and upload its script; it never moves the arm.
+    status -6); the picker now kills the worker process that holds them (see
+    ``UR3Picker.close``), so the child closes, exits normally, and leaves no worker.
+    ur_rtde's control interface may have reconnected and uploaded its script before the
+    kill; it never moves the arm.
     """
     plan = plan_motions(target(), UR3Config())
     fake_ur.request("arm", event="drop", after_commands=1, reconnect=True, scope="all")
@@ -361,6 +389,7 @@ def test_dropped_link_of_every_connection_never_resumes(fake_ur):
     assert child.report is not None, "the pick never returned:\n" + child.output
     assert not child.report.ok and child.report.reason.startswith("descend:")
     assert child.closed and child.returncode == 0, child.output
+    assert child.worker_gone, child.output
     log = fake_ur.commands()
     drop = next(i for i, e in enumerate(log) if e.get("event") == "drop")
     assert [e["executed"] for e in log[:drop] if e["command"] == "moveL"] == [True, False]
@@ -391,6 +420,7 @@ def test_link_that_stays_down_is_reported_as_a_failure(fake_ur):
     assert report.reason.startswith(expected), report.reason
     assert report.reconnect_attempted and not report.reconnected and not report.stop_sent
     assert child.closed and child.returncode == 0, child.output
+    assert child.worker_gone, child.output
     assert [e["executed"] for e in fake_ur.commands("moveL")] == [True, False]
     assert fake_ur.commands("stopL", "setToolDigitalOut") == []
     assert fake_ur.state()["tcp_pose"] == list(plan[0].pose)
