@@ -5,7 +5,9 @@ The spiral's heading, measured from the chord, is ``first + (turn - rate) t + ra
 for ``t`` in ``[0, 1]``; it ends on the chord where ``integral sin(heading) dt = 0``. The
 integrals are Gauss-Legendre sums over :data:`NODES`, taken one rate at a time (the
 NumPy version took them for all rates at once as matrix products: the sums' order, and
-so their last bits, differ; the curves agree within 1e-9 px).
+so their last bits, differ). With the same rule for the root (:func:`_root`: the step
+nearest it), the plain version (``tests/perception/references/euler_spiral.py``) and the
+kernels agree within 1e-10 px, their samples bit for bit for the same shape.
 """
 
 from __future__ import annotations
