@@ -20,23 +20,23 @@ half turn of it. The spiral ends on the chord when ``integral sin(theta) dt = 0`
 equation in ``A``); its length is then the gap over ``integral cos(theta) dt``. Of the
 solutions, the one bending least (the least elastic energy, ``(D^2 + A^2 / 3) / length``)
 is the curve.
+
+The search for ``A`` (a scan of 97 rates for sign changes, then Newton's steps kept in each
+bracket) and the sampling run compiled (:mod:`._euler_spiral_kernels`, about 0.04 ms a curve
+where NumPy took 0.4); this module checks the ends and keeps the public functions. Plain
+version: ``tests/perception/references/euler_spiral.py``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from service.perception import _euler_spiral_kernels
+
 LARGE_TURN = 0.5 * np.pi
 """Gaps whose ends' headings turn by at least this (radians) about the line between them
 take the spiral; gentler ones keep the cubic (:func:`.paths.gap_curve`), which follows
 them as closely."""
-_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(32)
-_NODES = 0.5 * (_NODES + 1.0)  # Gauss-Legendre on [0, 1]
-_WEIGHTS = 0.5 * _WEIGHTS
-_SCAN = np.linspace(-2.0 * np.pi, 2.0 * np.pi, 97)
-"""Offsets of ``A`` (radians) about the first guess scanned for solutions."""
-_REFINE_STEPS = 12
-"""Steps refining each solution bracketed (Newton's converge in 4-6)."""
 
 
 def chord_turn(
@@ -97,17 +97,20 @@ def euler_spiral(
         return None
     first, turn, rate, length, chord = shape
     count = max(2, int(np.ceil(length / step)) + 1)
-    # Each step's heading at its middle (exact for a constant-curvature step, within
-    # 1e-4 px a step here), then the small closing error spread along the curve.
-    along = np.linspace(0.0, 1.0, count)
-    middle = 0.5 * (along[1:] + along[:-1])
-    heading = chord + first + (turn - rate) * middle + rate * middle**2
-    steps = (length / (count - 1)) * np.column_stack([np.cos(heading), np.sin(heading)])
-    points = np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
     start = np.asarray(start, np.float64)
-    points += start
-    points += np.outer(along, np.asarray(end, np.float64) - points[-1])
-    return points
+    end = np.asarray(end, np.float64)
+    return _euler_spiral_kernels.spiral_samples(
+        first,
+        turn,
+        rate,
+        length,
+        chord,
+        float(start[0]),
+        float(start[1]),
+        float(end[0]),
+        float(end[1]),
+        count,
+    )
 
 
 def spiral_shape(
@@ -120,23 +123,10 @@ def spiral_shape(
     distance, chord, first, last = chord_turn(start, leaving, end, arriving)
     if distance < 1e-9:
         return None
-    turn = last - first
-    guess = 3.0 * (first + last)  # exact for symmetric ends (0: the circular arc)
-    rates = guess + _SCAN
-    sines = _integral(np.sin, first, turn, rates)
-    changes = np.flatnonzero(np.signbit(sines[:-1]) != np.signbit(sines[1:]))
-    if not len(changes):
+    found, rate, length = _euler_spiral_kernels.spiral_rate(first, last, distance)
+    if not found:
         return None
-    rates = _roots(first, turn, rates[changes], rates[changes + 1], sines[changes] < 0)
-    cosines = _integral(np.cos, first, turn, rates)
-    ahead = cosines > 1e-9  # else the spiral would end on the chord behind the start
-    if not ahead.any():
-        return None
-    rates, lengths = rates[ahead], distance / cosines[ahead]
-    energies = (turn**2 + rates**2 / 3.0) / lengths
-    best = int(np.argmin(energies))
-    rate, length = float(rates[best]), float(lengths[best])
-    return first, turn, rate, length, chord
+    return first, last - first, rate, length, chord
 
 
 def max_curvature(shape: tuple[float, float, float, float, float]) -> float:
@@ -144,39 +134,6 @@ def max_curvature(shape: tuple[float, float, float, float, float]) -> float:
     the curvature changes linearly along it)."""
     _, turn, rate, length, _ = shape
     return max(abs(turn - rate), abs(turn + rate)) / length
-
-
-def _integral(function, first: float, turn: float, rates: np.ndarray) -> np.ndarray:
-    """``integral_0^1 function(first + (turn - rate) t + rate t^2) dt`` per rate."""
-    return function(_headings(first, turn, np.asarray(rates, np.float64))) @ _WEIGHTS
-
-
-def _headings(first: float, turn: float, rates: np.ndarray) -> np.ndarray:
-    """The heading at each quadrature node (columns) per rate (rows)."""
-    rates = rates[:, None]
-    return first + (turn - rates) * _NODES + rates * _NODES**2
-
-
-def _roots(
-    first: float, turn: float, low: np.ndarray, high: np.ndarray, low_negative: np.ndarray
-) -> np.ndarray:
-    """The rates in ``[low, high]`` (one per bracket) where the spiral ends on the chord:
-    Newton's steps kept inside each bracket (a bisection where one would leave it), all
-    brackets at once."""
-    low, high = low.astype(np.float64), high.astype(np.float64)
-    rate = 0.5 * (low + high)
-    for _ in range(_REFINE_STEPS):
-        headings = _headings(first, turn, rate)
-        value = np.sin(headings) @ _WEIGHTS
-        slope = (np.cos(headings) * (_NODES**2 - _NODES)) @ _WEIGHTS
-        keeps_sign = (value < 0) == low_negative
-        low = np.where(keeps_sign, rate, low)
-        high = np.where(keeps_sign, high, rate)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            newton = rate - value / slope
-        inside = np.isfinite(newton) & (newton > low) & (newton < high)
-        rate = np.where(inside, newton, 0.5 * (low + high))
-    return rate
 
 
 def _wrapped(angle: float) -> float:

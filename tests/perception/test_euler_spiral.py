@@ -14,6 +14,7 @@ from service.perception.euler_spiral import (
 )
 from service.perception.paths import gap_curve
 from service.synthetic.families import make_family_scene
+from tests.perception.references import euler_spiral as reference
 
 
 def _on_circle(radius: float, angle: float) -> tuple[np.ndarray, np.ndarray]:
@@ -118,3 +119,59 @@ def test_long_hidden_turns_of_tuning_scenes_are_followed(family, seed):
     score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.n_chains == score.frame.n_cables
     assert score.frame.correct, score.frame.coverage
+
+
+def _large_turns(count: int, seed: int):
+    """Random gaps up to 60 px long whose ends turn by a right angle or more."""
+    rng = np.random.default_rng(seed)
+    while count:
+        start = rng.uniform(0, 200, 2)
+        end = start + rng.uniform(-60, 60, 2)
+        leaving, arriving = (
+            np.array([np.cos(a), np.sin(a)]) for a in rng.uniform(-np.pi, np.pi, 2)
+        )
+        if is_large_turn(start, leaving, end, arriving):
+            count -= 1
+            yield start, leaving, end, arriving
+
+
+def _chord_offset(shape) -> float:
+    """``integral sin(heading) dt`` of ``shape``: 0 where the spiral ends on the chord."""
+    first, turn, rate, _, _ = shape
+    t, weights = np.polynomial.legendre.leggauss(200)
+    t = 0.5 * (t + 1.0)
+    return float(np.sin(first + (turn - rate) * t + rate * t**2) @ (0.5 * weights))
+
+
+def test_the_compiled_spiral_is_the_plain_one():
+    # The kernels sum the quadrature one node at a time where NumPy's matrix products
+    # sum in another order: the same roots to the last few bits, and the same samples
+    # bit for bit for the same shape.
+    for start, leaving, end, arriving in _large_turns(400, seed=7):
+        shape = spiral_shape(start, leaving, end, arriving)
+        expected = reference.spiral_shape(start, leaving, end, arriving)
+        assert (shape is None) == (expected is None)
+        if shape is None:
+            continue
+        curve = euler_spiral(start, leaving, end, arriving)
+        np.testing.assert_array_equal(curve, reference.spiral_samples(shape, start, end))
+        np.testing.assert_allclose(
+            curve, reference.euler_spiral(start, leaving, end, arriving), rtol=0, atol=1e-9
+        )
+
+
+def test_the_root_search_keeps_the_root_it_converged_on():
+    # Once Newton's steps reach the root, the next lands on the bracket's end just moved
+    # there and used to be refused for a bisection, which walked away from the root: at
+    # about a fifth of large turns the spiral then ended up to 1e-4 of its length off
+    # the chord (the closing error spread along the curve hid it).
+    old_offsets, offsets = [], []
+    for start, leaving, end, arriving in _large_turns(200, seed=11):
+        shape = spiral_shape(start, leaving, end, arriving)
+        if shape is None:
+            continue
+        offsets.append(abs(_chord_offset(shape)))
+        old = reference.spiral_shape(start, leaving, end, arriving, converged=False)
+        old_offsets.append(abs(_chord_offset(old)))
+    assert max(offsets) < 1e-12
+    assert np.mean(np.array(old_offsets) > 1e-6) > 0.1
