@@ -216,7 +216,10 @@ def hidden_turn_curves(
     """
     apart = float(np.hypot(*(np.asarray(end, np.float64) - np.asarray(start, np.float64))))
     fitted_turn = abs(float(np.arctan2(*_cross_dot(leaving, arriving))))
-    near = apart <= BULB_REACH_RADII * cable_radius and fitted_turn >= BULB_MIN_TURN
+    # The long way round turns by more than a half turn: doubled back, whatever the
+    # short way's turn.
+    doubled_back = fitted_turn >= BULB_MIN_TURN or _long_way_round(fitted_turn, DIRECTION_SLACK)
+    near = apart <= BULB_REACH_RADII * cable_radius and doubled_back
     curves = []
     for tilt_first, tilt_last in DIRECTION_TILTS if near else DIRECTION_TILTS[:1]:
         first = rotated(leaving, tilt_first)
@@ -225,7 +228,7 @@ def hidden_turn_curves(
         if abs(turn) < 1e-6:
             continue
         readings = [turn]
-        if abs(turn) > NEAR_U_TURN:
+        if abs(turn) > NEAR_U_TURN or (near and _long_way_round(abs(turn))):
             readings.append(turn - np.copysign(2 * np.pi, turn))
         for reading in readings:
             tightest = HIDDEN_BEND_RADII[0] * cable_radius
@@ -246,6 +249,16 @@ def hidden_turn_curves(
             continue
         seen.append(curve)
         yield curve
+
+
+def _long_way_round(turn: float, slack: float = 0.0) -> bool:
+    """Whether a cable whose ends' directions turn by ``turn`` (radians, unsigned, the
+    short way) may have turned the long way round out of sight, by ``2 pi - turn``: no
+    more than :data:`MAX_HIDDEN_TURN`, the directions read up to ``slack`` (radians)
+    off at each end. A doubled-back cable whose strands already swing apart where they
+    pass out of sight (the bulb's first bend seen) leaves two ends pointing apart, the
+    short way a turn away from each other that no curve reaches."""
+    return 2.0 * np.pi - turn - 2.0 * slack <= MAX_HIDDEN_TURN
 
 
 def tightest_bend(curve: np.ndarray, window: float) -> float:
