@@ -193,13 +193,18 @@ def hidden_turn_curves(
     itself, its strands touching), it cannot turn round in one arc: it swings out into a
     bulb, bending away from the other strand, round by more than a half turn, and away
     again (:func:`bulb_turns`). So the candidates are, for each way round the cable may
-    have turned (both near a U-turn, :data:`NEAR_U_TURN`): the natural curve with the
+    have turned (both near a U-turn, :data:`NEAR_U_TURN`, and, for ends close enough for
+    a bulb, wherever the long way round turns no more than :data:`MAX_HIDDEN_TURN`:
+    strands that already swing apart where they pass out of sight point away from each
+    other, and only the long way reaches, :func:`_long_way_round`): the natural curve with the
     tightest arc allowed (:func:`natural_turn`), and a bulb of each bend radius in
     :data:`HIDDEN_BEND_RADII`, the round arc turning at most :data:`MAX_HIDDEN_TURN`.
     A cut end's fitted direction is uncertain where the piece already bends into the
     turn, or a slanted cut leaves a hook, so each is also tried tilted
     (:data:`DIRECTION_TILTS`). Ends further apart than :data:`BULB_REACH_RADII`, or
-    turning by less than :data:`BULB_MIN_TURN`, get the natural curves alone. At most
+    turning by less than :data:`BULB_MIN_TURN` the short way and by more than
+    :data:`MAX_HIDDEN_TURN` the long way with both directions tilted towards it, get
+    the natural curves alone. At most
     :data:`MAX_TURN_TRIALS` distinct curves are yielded, lazily: a pair whose first
     curve is hidden is tested once.
 
