@@ -203,8 +203,8 @@ def hidden_turn_curves(
     turn, or a slanted cut leaves a hook, so each is also tried tilted
     (:data:`DIRECTION_TILTS`). Ends further apart than :data:`BULB_REACH_RADII`, or
     turning by less than :data:`BULB_MIN_TURN` the short way and by more than
-    :data:`MAX_HIDDEN_TURN` the long way with both directions tilted towards it, get
-    the natural curves alone. At most
+    :data:`MAX_HIDDEN_TURN` the long way with one direction tilted towards it, get the
+    natural curves alone. At most
     :data:`MAX_TURN_TRIALS` distinct curves are yielded, lazily: a pair whose first
     curve is hidden is tested once.
 
@@ -260,10 +260,16 @@ def _long_way_round(turn: float, slack: float = 0.0) -> bool:
     """Whether a cable whose ends' directions turn by ``turn`` (radians, unsigned, the
     short way) may have turned the long way round out of sight, by ``2 pi - turn``: no
     more than :data:`MAX_HIDDEN_TURN`, the directions read up to ``slack`` (radians)
-    off at each end. A doubled-back cable whose strands already swing apart where they
-    pass out of sight (the bulb's first bend seen) leaves two ends pointing apart, the
-    short way a turn away from each other that no curve reaches."""
-    return 2.0 * np.pi - turn - 2.0 * slack <= MAX_HIDDEN_TURN
+    off. A doubled-back cable whose strands already swing apart where they pass out of
+    sight (the bulb's first bend seen) leaves two ends pointing apart, the short way a
+    turn away from each other that no curve reaches.
+
+    The fitted directions are given one end's slack (:data:`DIRECTION_SLACK`), not
+    both ends': with both, two ends side by side pointing the same way (a cable that
+    would have looped round whole, crossing itself) would pass, as two pieces of one
+    cable passing under an object do (occluded 86078: the long way round paired the
+    wrong ends there)."""
+    return 2.0 * np.pi - turn - slack <= MAX_HIDDEN_TURN
 
 
 def tightest_bend(curve: np.ndarray, window: float) -> float:
