@@ -328,10 +328,11 @@ def test_a_doubled_back_cable_swinging_apart_under_an_object_is_one_chain(seed):
 
 
 def test_ends_side_by_side_pointing_the_same_way_are_not_joined_the_long_way_round():
-    """Tuning scene 86078 of the occluded family, true mask: four free ends of one cable
-    lie round an object of the background's own colour. Two of them lie side by side
-    pointing the same way; read the long way round with both ends' directions tilted
-    towards it (a whole loop), they were paired, and the other two with them, the wrong
-    way (2 of its 4 occlusions lost)."""
+    """Tuning scene 86078 of the occluded family, true mask: a loop passes under a disc
+    of the background's own colour and, further round, under a blue box, leaving two
+    free ends at each. One end at the disc and one at the box lie side by side pointing
+    the same way; read the long way round with both ends' directions tilted towards it
+    (a whole loop), they were paired, and the other two with each other (2 of its 4
+    occlusions lost)."""
     score, _ = evaluate_scene(make_family_scene("occluded", 86078), 86078, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
