@@ -193,13 +193,18 @@ def hidden_turn_curves(
     itself, its strands touching), it cannot turn round in one arc: it swings out into a
     bulb, bending away from the other strand, round by more than a half turn, and away
     again (:func:`bulb_turns`). So the candidates are, for each way round the cable may
-    have turned (both near a U-turn, :data:`NEAR_U_TURN`): the natural curve with the
+    have turned (both near a U-turn, :data:`NEAR_U_TURN`, and, for ends close enough for
+    a bulb, wherever the long way round turns no more than :data:`MAX_HIDDEN_TURN`:
+    strands that already swing apart where they pass out of sight point away from each
+    other, and only the long way reaches, :func:`_long_way_round`): the natural curve with the
     tightest arc allowed (:func:`natural_turn`), and a bulb of each bend radius in
     :data:`HIDDEN_BEND_RADII`, the round arc turning at most :data:`MAX_HIDDEN_TURN`.
     A cut end's fitted direction is uncertain where the piece already bends into the
     turn, or a slanted cut leaves a hook, so each is also tried tilted
     (:data:`DIRECTION_TILTS`). Ends further apart than :data:`BULB_REACH_RADII`, or
-    turning by less than :data:`BULB_MIN_TURN`, get the natural curves alone. At most
+    turning by less than :data:`BULB_MIN_TURN` the short way and by more than
+    :data:`MAX_HIDDEN_TURN` the long way with one direction tilted towards it, get the
+    natural curves alone. At most
     :data:`MAX_TURN_TRIALS` distinct curves are yielded, lazily: a pair whose first
     curve is hidden is tested once.
 
@@ -216,7 +221,10 @@ def hidden_turn_curves(
     """
     apart = float(np.hypot(*(np.asarray(end, np.float64) - np.asarray(start, np.float64))))
     fitted_turn = abs(float(np.arctan2(*_cross_dot(leaving, arriving))))
-    near = apart <= BULB_REACH_RADII * cable_radius and fitted_turn >= BULB_MIN_TURN
+    # The long way round turns by more than a half turn: doubled back, whatever the
+    # short way's turn.
+    doubled_back = fitted_turn >= BULB_MIN_TURN or _long_way_round(fitted_turn, DIRECTION_SLACK)
+    near = apart <= BULB_REACH_RADII * cable_radius and doubled_back
     curves = []
     for tilt_first, tilt_last in DIRECTION_TILTS if near else DIRECTION_TILTS[:1]:
         first = rotated(leaving, tilt_first)
@@ -225,7 +233,7 @@ def hidden_turn_curves(
         if abs(turn) < 1e-6:
             continue
         readings = [turn]
-        if abs(turn) > NEAR_U_TURN:
+        if abs(turn) > NEAR_U_TURN or (near and _long_way_round(abs(turn))):
             readings.append(turn - np.copysign(2 * np.pi, turn))
         for reading in readings:
             tightest = HIDDEN_BEND_RADII[0] * cable_radius
@@ -246,6 +254,22 @@ def hidden_turn_curves(
             continue
         seen.append(curve)
         yield curve
+
+
+def _long_way_round(turn: float, slack: float = 0.0) -> bool:
+    """Whether a cable whose ends' directions turn by ``turn`` (radians, unsigned, the
+    short way) may have turned the long way round out of sight, by ``2 pi - turn``: no
+    more than :data:`MAX_HIDDEN_TURN`, the directions read up to ``slack`` (radians)
+    off. A doubled-back cable whose strands already swing apart where they pass out of
+    sight (the bulb's first bend seen) leaves two ends pointing apart, the short way a
+    turn away from each other that no curve reaches.
+
+    The fitted directions are given one end's slack (:data:`DIRECTION_SLACK`), not
+    both ends': with both, two ends side by side pointing the same way (a cable that
+    would have looped round whole, crossing itself) would pass, as two pieces of one
+    cable passing under an object do (occluded 86078: the long way round paired the
+    wrong ends there)."""
+    return 2.0 * np.pi - turn - slack <= MAX_HIDDEN_TURN
 
 
 def tightest_bend(curve: np.ndarray, window: float) -> float:
