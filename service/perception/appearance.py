@@ -280,7 +280,22 @@ def gap_hidden(
     radius : float
         Cable half width (px).
     """
-    background = background_beside(image_bgr, mask, ends, radius)
+    return gap_hidden_beside(
+        image_bgr, mask, curve, ends, radius, background_beside(image_bgr, mask, ends, radius)
+    )
+
+
+def gap_hidden_beside(
+    image_bgr: np.ndarray,
+    mask: np.ndarray,
+    curve: np.ndarray,
+    ends: tuple,
+    radius: float,
+    background: tuple[np.ndarray, float] | None,
+) -> bool:
+    """:func:`gap_hidden` with the background beside the two ends already read
+    (:func:`background_beside`, None when it cannot be): the same for every curve tried
+    between one pair of ends, so the turn pass reads it once per pair."""
     if background is None:
         return False
 

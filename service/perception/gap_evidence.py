@@ -20,7 +20,7 @@ from service.perception.appearance import (
     cut_or_lopsided,
     cut_square,
     ends_alike,
-    gap_hidden,
+    gap_hidden_beside,
     out_of_view,
     reads_own_tip,
     unlike_background,
@@ -293,14 +293,42 @@ def turn_evidence(image, mask, ends, colours, radius, partings=()) -> tuple:
     sight; an object of the background's own colour, cutting the strands along a round
     rim or as they bend into the bulb, leaves neither cut straight across.
     """
+    # What depends on the ends alone is read once, not once per curve tried: the
+    # background beside a pair (the turn pass tries up to eight curves per pair, and a
+    # frame crowded with cables leaves a dozen pairs within reach of every end), and
+    # whether an end is cut square. Most pairs in such a frame are two cables' own round
+    # tips, which no curve's evidence can join: the cut tests refuse them before reading
+    # the image along the curve, with the answer cut_ends_alike itself would give.
+    backgrounds: dict[tuple[int, int], tuple | None] = {}
+    square: dict[int, bool] = {}
+
+    def hidden(i: int, j: int, curve: np.ndarray) -> bool:
+        pair = (ends[i], ends[j])
+        if (i, j) not in backgrounds:
+            backgrounds[i, j] = background_beside(image, mask, pair, radius)
+        return gap_hidden_beside(image, mask, curve, pair, radius, backgrounds[i, j])
+
+    def cut_square_at(index: int) -> bool:
+        if index not in square:
+            end = ends[index]
+            square[index] = bool(cut_square(mask, end.position, end.direction, end.width, end.skip))
+        return square[index]
+
+    def cut_alike(cut_needed: int):
+        def passes(i: int, j: int, curve: np.ndarray) -> bool:
+            cuts = [cut_square_at(i), cut_square_at(j)]
+            if not any(cuts) or (cut_needed > 1 and not all(cuts)):
+                return False  # cut_ends_alike says no on these ends, whatever the curve
+            return cut_ends_alike(
+                ends[i], ends[j], i, j, curve, mask, colours, radius, cut_needed, image
+            )
+
+        return passes
+
     return (
-        lambda i, j, curve: gap_hidden(image, mask, curve, (ends[i], ends[j]), radius),
-        lambda i, j, curve: cut_ends_alike(
-            ends[i], ends[j], i, j, curve, mask, colours, radius, image=image
-        ),
-        lambda i, j, curve: cut_ends_alike(
-            ends[i], ends[j], i, j, curve, mask, colours, radius, TURN_CUT_ENDS, image
-        ),
+        hidden,
+        cut_alike(2),
+        cut_alike(TURN_CUT_ENDS),
         lambda i, j, curve: (
             ((i, j) in partings or (j, i) in partings)
             and strands_turn_out_of_sight(ends[i], ends[j], curve, mask, radius)
