@@ -422,8 +422,12 @@ def _bulb_shapes(start, leaving, end, arriving, turn: float, bends: list[float])
         unit_reach += (turned - heading) / (1j * sense)
         heading = turned
     shapes = []
-    for bend in bends:
-        first, last, miss = _straights(leaving, arriving, offset - bend * unit_reach)
+    # Every bend radius at once (one row each): the straights are elementwise, and a
+    # crowded frame asks for them thousands of times.
+    radii = np.asarray(bends, np.float64)[:, None]
+    all_first, all_last, all_miss = _straights(leaving, arriving, offset - radii * unit_reach)
+    for row, bend in enumerate(bends):
+        first, last, miss = all_first[row], all_last[row], all_miss[row]
         reached = np.flatnonzero(
             (miss <= BULB_TOLERANCE_RADII * bend)
             & (first <= abs(offset) + bend)
