@@ -482,3 +482,33 @@ def test_a_piece_too_short_to_read_twice_leaves_a_changed_end_unknown():
     colours = appearance.end_colours(image, pieces, ends, 3.5)
     assert colours.known[0]
     assert not colours.known[1]
+
+
+def test_the_turn_tests_read_once_per_pair_and_answer_as_read_per_curve():
+    """The turn pass's tests (:func:`.gap_evidence.turn_evidence`) read the background
+    beside a pair and each end's cut once, not once per curve: their answers are those
+    of :func:`.appearance.gap_hidden` and :func:`.gap_evidence.cut_ends_alike` called
+    afresh on each curve, for a gap under an object, over open paper between round tips
+    and between square cuts, and on a curve bowed off the gap's line."""
+    from service.perception.gap_evidence import TURN_CUT_ENDS, cut_ends_alike, turn_evidence
+
+    radius = 3.5
+    colours = EndColours(np.zeros((2, 3)), np.ones(2, bool))
+    for box, square in (((60, 140, 60), False), (None, False), (None, True)):
+        image, mask, curve, ends = gap_scene(box)
+        if square:  # the pieces cut straight across: the cut tests pass
+            mask[:] = False
+            mask[47:54, 10:81] = mask[47:54, 180:251] = True
+        ends = tuple(
+            ChainEnd(end.piece, end.at_start, end.position, end.direction, width=3.5)
+            for end in ends
+        )
+        bowed = curve + np.column_stack(
+            [np.zeros(len(curve)), 8 * np.sin(np.linspace(0, np.pi, len(curve)))]
+        )
+        hidden, both_cut, one_cut, _ = turn_evidence(image, mask, list(ends), colours, radius)
+        for path in (curve, bowed, curve):
+            assert hidden(0, 1, path) == appearance.gap_hidden(image, mask, path, ends, radius)
+            for test, needed in ((both_cut, 2), (one_cut, TURN_CUT_ENDS)):
+                fresh = cut_ends_alike(*ends, 0, 1, path, mask, colours, radius, needed, image)
+                assert test(0, 1, path) == fresh
