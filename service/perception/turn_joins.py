@@ -530,8 +530,9 @@ def turn_joins(
         any passes on any curve, and bridged along the shortest curve the strongest
         test that passes at all passes on.
     reach : callable (i, j) -> float or ndarray
-        The longest gap (px) between the two ends that anything hides; called once, on
-        arrays of ends ``i`` and ``j`` (every pair of free ends), elementwise.
+        The longest gap (px) between the two ends that anything hides; called on
+        arrays of ends ``i`` and ``j`` (every pair of free ends, a block at a time),
+        elementwise.
     free_cost : float
         What leaving an end free costs in the matching.
     rival_limit : float
@@ -569,13 +570,7 @@ def turn_joins(
     turns: dict[tuple[int, int], float] = {}
     hidden_curves: dict[tuple[int, int], np.ndarray] = {}
     rivals: dict[tuple[int, int], float] = {}
-    # Every pair's gap against its reach at once, in the order the pairs are asked
-    # (a frame of textured background may leave hundreds of free ends).
-    first, second = np.triu_indices(len(members), 1)
-    gaps = np.hypot(*(positions[first] - positions[second]).T)
-    member_index = np.asarray(members, np.int64)
-    within = gaps <= reach(member_index[first], member_index[second])
-    for a_pos, b_pos in zip(first[within].tolist(), second[within].tolist(), strict=True):
+    for a_pos, b_pos in _pairs_within_reach(members, positions, reach):
         i, j = members[a_pos], members[b_pos]
         if component.find(ends[i].piece) == component.find(ends[j].piece):
             continue
@@ -640,6 +635,42 @@ def turn_joins(
                 if bridges is not None and (i, j) in hidden_curves:
                     bridges[i, j] = hidden_curves[i, j]
     return sorted(made, key=lambda item: item[2])
+
+
+PAIR_BLOCK = 1 << 22
+"""About how many pairs of ends :func:`_pairs_within_reach` measures at once."""
+
+
+def _pairs_within_reach(
+    members: list[int], positions: np.ndarray, reach: Callable
+) -> Iterator[tuple[int, int]]:
+    """The pairs ``(a, b)``, ``a < b``, of positions in ``members`` whose ends lie no
+    further apart than ``reach`` (called on arrays of end indices, elementwise), in
+    order of ``a`` then ``b``: every pair's gap against its reach, vectorised, a block
+    of first ends at a time. A frame of textured background leaves hundreds of free
+    ends, and one crowded with small cables thousands, whose pairs (half the square of
+    their number) would not all fit in memory at once; only a dozen or so per end lie
+    within reach."""
+    count = len(members)
+    member_index = np.asarray(members, np.int64)
+    rows = max(1, PAIR_BLOCK // max(count, 1))
+    for start in range(0, max(count - 1, 0), rows):
+        first, second = _upper_pairs(count, start, min(start + rows, count))
+        gaps = np.hypot(*(positions[first] - positions[second]).T)
+        within = gaps <= reach(member_index[first], member_index[second])
+        yield from zip(first[within].tolist(), second[within].tolist(), strict=True)
+
+
+def _upper_pairs(count: int, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs ``(a, b)`` with ``start <= a < stop`` and ``a < b < count``, in order
+    of ``a`` then ``b`` (the rows of :func:`numpy.triu_indices` from ``start``)."""
+    firsts = np.arange(start, stop, dtype=np.int64)
+    lengths = count - 1 - firsts
+    first = np.repeat(firsts, lengths)
+    # Within each row, b runs from a + 1 up: its offset from the row's beginning.
+    row_starts = np.cumsum(lengths) - lengths
+    second = first + 1 + (np.arange(len(first), dtype=np.int64) - np.repeat(row_starts, lengths))
+    return first, second
 
 
 def _components(ends: list, joins: list[tuple[int, int, float]]) -> Components:

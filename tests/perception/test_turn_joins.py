@@ -345,3 +345,29 @@ def test_ends_side_by_side_pointing_the_same_way_are_not_joined_the_long_way_rou
     occlusions lost)."""
     score, _ = evaluate_scene(make_family_scene("occluded", 86078), 86078, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
+
+
+def test_the_pairs_within_reach_are_measured_a_block_at_a_time_in_order(monkeypatch):
+    """The turn pass measures its pairs of free ends a block of first ends at a time (a
+    crowded frame's thousands of ends would not fit in memory all at once): the pairs
+    within reach, and their order, are every pair's, measured at once, whatever the
+    block."""
+    from service.perception import turn_joins as module
+
+    rng = np.random.default_rng(0)
+    widths = rng.uniform(1.0, 5.0, 400)
+
+    def reach(i, j):
+        return 25.0 * np.maximum(3.0, 0.5 * (widths[i] + widths[j]))
+
+    for count in (0, 1, 2, 3, 40, 300):
+        members = sorted(rng.choice(400, count, replace=False).tolist())
+        positions = rng.uniform(0.0, 500.0, (count, 2))
+        first, second = np.triu_indices(count, 1)
+        index = np.asarray(members, np.int64)
+        gaps = np.hypot(*(positions[first] - positions[second]).T)
+        within = gaps <= reach(index[first], index[second])
+        expected = list(zip(first[within].tolist(), second[within].tolist(), strict=True))
+        for block in (1, 7, 1 << 22):
+            monkeypatch.setattr(module, "PAIR_BLOCK", block)
+            assert list(module._pairs_within_reach(members, positions, reach)) == expected
