@@ -32,23 +32,30 @@ MIN_ALONG_CHORD = 1e-9
 start (or at infinity): no solution."""
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _heading(first, turn, rate, k):
+    """The spiral's heading from the chord at node ``k``: ``first + (turn - rate) t +
+    rate t^2`` (one place for the integrals and the root's Newton steps)."""
+    return first + (turn - rate) * NODES[k] + rate * _NODES_SQUARED[k]
+
+
 @njit(cache=True, nogil=True)
 def _sine_integral(first, turn, rate):
-    """``integral_0^1 sin(first + (turn - rate) t + rate t^2) dt``."""
+    """``integral_0^1 sin(heading) dt``: where it is zero the spiral ends on the chord.
+    (Kept apart from the cosine's: the scan takes the sine alone at every rate, the
+    cosine once per root.)"""
     total = 0.0
     for k in range(NODES.shape[0]):
-        heading = first + (turn - rate) * NODES[k] + rate * _NODES_SQUARED[k]
-        total += np.sin(heading) * WEIGHTS[k]
+        total += np.sin(_heading(first, turn, rate, k)) * WEIGHTS[k]
     return total
 
 
 @njit(cache=True, nogil=True)
 def _cosine_integral(first, turn, rate):
-    """``integral_0^1 cos(first + (turn - rate) t + rate t^2) dt``."""
+    """``integral_0^1 cos(heading) dt``: the chord's length per px of spiral."""
     total = 0.0
     for k in range(NODES.shape[0]):
-        heading = first + (turn - rate) * NODES[k] + rate * _NODES_SQUARED[k]
-        total += np.cos(heading) * WEIGHTS[k]
+        total += np.cos(_heading(first, turn, rate, k)) * WEIGHTS[k]
     return total
 
 
@@ -69,7 +76,7 @@ def _root(first, turn, low, high, low_negative):
         value = 0.0
         slope = 0.0
         for k in range(NODES.shape[0]):
-            heading = first + (turn - rate) * NODES[k] + rate * _NODES_SQUARED[k]
+            heading = _heading(first, turn, rate, k)
             value += np.sin(heading) * WEIGHTS[k]
             slope += np.cos(heading) * _SLOPE_FACTORS[k] * WEIGHTS[k]
         if abs(value) < best_value:
