@@ -161,109 +161,6 @@ def middle_line(
     return np.array(points), False, np.array(shortfall)
 
 
-def _kept_from_one_side(
-    mask: np.ndarray,
-    history: list[tuple[float, float]],
-    side: float,
-    half_width: float,
-    limit: float,
-) -> list[tuple[float, float]]:
-    """The middle line traced on from ``history``'s last point, each step put back to the
-    distance from the border on ``side`` (+1: the normal's plus side, -1: minus) that it
-    had there; the heading is the chord over the last half width of the line, so that it
-    follows the border round a bend. Stops where the point leaves the mask, where that
-    border's distance jumps by more than :data:`CUT_NARROWING_PX` (an object reached it,
-    something else touches it), or where the other side reads wider than it did at the
-    start by more than :data:`SECTION_ROUNDING_PX` (the line drifts off the middle: the
-    kept side is not the cable's own)."""
-    history = list(history)
-    back = max(round(0.5 * half_width / TRACE_STEP_PX), 2)
-    reach = 2.5 * half_width + 2.0
-    steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX).tolist()
-
-    def heading() -> tuple[float, float]:
-        (ax, ay), (bx, by) = history[-min(back, len(history) - 1) - 1], history[-1]
-        norm = float(np.hypot(bx - ax, by - ay)) or 1.0
-        return (bx - ax) / norm, (by - ay) / norm
-
-    x, y = history[-1]
-    hx, hy = heading()
-    kept0 = _border_distance(mask, x, y, -side * hy, side * hx, steps, reach)
-    other0 = _border_distance(mask, x, y, side * hy, -side * hx, steps, reach)
-    points = []
-    for _ in range(int(limit / TRACE_STEP_PX)):
-        x, y = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
-        if not _on_mask(mask, x, y):
-            break
-        nx, ny = -side * hy, side * hx  # towards the kept side
-        kept = _border_distance(mask, x, y, nx, ny, steps, reach)
-        other = _border_distance(mask, x, y, -nx, -ny, steps, reach)
-        if abs(kept - kept0) > CUT_NARROWING_PX or other > other0 + SECTION_ROUNDING_PX:
-            break
-        shift = kept - kept0
-        x, y = x + shift * nx, y + shift * ny
-        if not _on_mask(mask, x, y):
-            break
-        points.append((x, y))
-        history.append((x, y))
-        hx, hy = heading()
-    return points
-
-
-def along_the_seen_side(
-    mask: np.ndarray,
-    line: np.ndarray,
-    half_width: float,
-    limit: float,
-) -> np.ndarray:
-    """The cable's middle line traced on past where an object's border began to cut it,
-    as far in from the border the object has not yet reached as it was before the cut.
-
-    An object's border crosses a cable at a slant: it cuts one side first, and the other
-    side, still the cable's own border, runs on a further ``2 half_width / tan(slant)``.
-    Past the narrowing the section's middle is no longer the cable's, but the cable's
-    middle still lies as far in from that seen side as it did on the last full section,
-    up to where the object's border crosses the middle, which is where the cable passes
-    out of sight. On a loop's tight bend that seen stretch is where the cable turns most
-    before it hides (the hidden loop is tighter than the cable leading into it): a
-    direction read without it lags the bend, and a bridge across a half turn bulges out
-    by more than a radius.
-
-    From the traced middle ``line`` (``(K, 2)``, ending on the last full section), the
-    line is followed on from each side (:func:`_kept_from_one_side`): kept at its
-    distance from the cut side's border, it drifts off the middle towards the seen side
-    (which then reads wider) or runs off the mask within a step or two; kept from the
-    seen side, it runs on until the middle passes out of sight. The longer of the two.
-
-    Returns
-    -------
-    ndarray
-        ``(M, 2)`` the points traced after the line's end (``M >= 0``).
-    """
-    history = [(float(x), float(y)) for x, y in np.asarray(line, np.float64)[-64:]]
-    if len(history) < 2:
-        return np.zeros((0, 2), np.float64)
-    traces = [_kept_from_one_side(mask, history, side, half_width, limit) for side in (1.0, -1.0)]
-    _, heading, bend = end_fit(np.asarray(line, np.float64), False, FIT_RADII * half_width)
-
-    def turned_with_the_bend(trace: list[tuple[float, float]]) -> float:
-        # How far (radians) the trace's last chord has turned from the line's heading, the
-        # way the line bends: the cable's own border follows the bend on past the cut's
-        # start, while the object's edge meets the cable at a corner, against the bend or
-        # across it.
-        if len(trace) < 2:
-            return -np.inf
-        chord = np.asarray(trace[-1]) - np.asarray(trace[max(len(trace) - 1 - int(half_width), 0)])
-        turn = float(np.arctan2(heading[0] * chord[1] - heading[1] * chord[0], heading @ chord))
-        return turn * np.sign(bend)
-
-    if abs(bend) * half_width > 0.02 and all(len(trace) >= 2 for trace in traces):
-        chosen = max(traces, key=turned_with_the_bend)
-    else:
-        chosen = max(traces, key=len)
-    return np.array(chosen, np.float64).reshape(-1, 2)
-
-
 def carried_to_the_border(
     mask: np.ndarray,
     position: np.ndarray,
@@ -383,12 +280,6 @@ def end_at_the_cut(
     narrowed = np.flatnonzero(shortfall > own + SECTION_ROUNDING_PX)
     full = max(int(narrowed[0]) if len(narrowed) else len(ahead), 2)
     line = np.concatenate([behind[::-1], ahead[1:full]])
-    if not to_the_border:
-        # On past the narrowing along the side the object has not reached yet, to where
-        # the middle passes out of sight (the turn pass's cut tests read the cut's own
-        # border from the full sections: ``to_the_border``).
-        seen_side = along_the_seen_side(mask, line, half_width, limit)
-        line = np.concatenate([line, seen_side])
     # The fit's own end: the traced points carry a pixel's rounding from step to step.
     position, direction, curvature = end_fit(line, False, span)
     if carry:
