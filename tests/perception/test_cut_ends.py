@@ -210,6 +210,23 @@ def test_hidden_turns_bridged_from_their_cuts_are_covered(family, seed):
     assert score.frame.correct
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="the directions read at both cuts lag the loop's bend by 10-23 degrees (it tightens "
+    "at the cut, on the wedge the slanted cut leaves, which the trace stops before); the hidden "
+    "half turn is bridged as one of about 200 degrees and bulges out by 6-18 px. From the same "
+    "cut points with the true tangents the curve covers (0.3-3.1 px). Reading the cut along the "
+    "side the object has not reached was tried (docs/BENCHMARKS.md, branch loops10), not kept",
+)
+@pytest.mark.parametrize(("family", "seed"), [("loops", 330001), ("loops", 350104)])
+def test_a_loops_hidden_half_turn_is_bridged_from_directions_that_follow_its_bend(family, seed):
+    """Tuning scenes (true mask) whose loop passes out of sight where it bends tightest:
+    the bridge between the right cut points leaves each along a direction that lags
+    the bend, and the hidden stretch is not covered."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.correct
+
+
 @pytest.mark.parametrize(
     ("family", "seed"),
     [
