@@ -829,6 +829,7 @@ def merge_chains(
         lambda made: free_ends_beside_crossings(pieces, ends, made, span, junction_of_end),
     )
     turn_bridges: dict[tuple[int, int], np.ndarray] = {}
+    turn_hidden = None
     if hidden_gap is not None and params.expected_count is None and ends:
         # Sharp turns under an object, on the image's evidence (:mod:`.turn_joins`); a
         # scrap joined through its crossing is judged as the strand it continues.
@@ -836,6 +837,7 @@ def merge_chains(
         seen, hues = scraps_through_junctions(ends, colours, joins, junction_of_end, pieces, radius)
         widths = np.array([end.width for end in seen], np.float64)
         judged = evidence_ends(seen, ends, seen_from)
+        turn_hidden = turn_out_of_view(image, mask, seen, radius)
         joins = joins + turn_joins(
             seen,
             joins,
@@ -854,7 +856,7 @@ def merge_chains(
             MAX_JUNCTION_ENDS,
             turn_bridges,
             TURN_EVIDENCE_ALONG_CURVE,
-            turn_out_of_view(image, mask, seen, radius),
+            turn_hidden,
         )
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
@@ -902,8 +904,36 @@ def merge_chains(
                 if end is not inner_ends[k]
             },
         )
+        if turn_hidden is not None:
+            cut_bridges = {
+                pair: curve
+                for pair, curve in cut_bridges.items()
+                if not _cut_turn_seen(pair, curve, turn_bridges, wide_turns, turn_hidden)
+            }
         bridges = {**bridges, **cut_bridges}
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])
+
+
+def _cut_turn_seen(
+    pair: tuple[int, int],
+    curve: np.ndarray,
+    turn_bridges: dict[tuple[int, int], np.ndarray],
+    wide_turns: frozenset,
+    hidden_all_along: Callable[[int, int, np.ndarray], bool],
+) -> bool:
+    """Whether the bridge from the traced cuts of a turn under an object (``pair``, one
+    of ``wide_turns``, the turn pass's curve ``turn_bridges[pair]`` found out of view all
+    the way) would put the cable where the image shows open background: a cut misread
+    (a fork in the skeleton at the object's edge, a wedge a slanted border leaves) turns
+    the bridge out past the object, where a cable would be seen. The turn's own curve,
+    which the evidence placed under the object all the way, is kept then.
+
+    ``hidden_all_along`` is the turn pass's test (:func:`.gap_evidence.turn_out_of_view`),
+    called ``(i, j, curve)``."""
+    if pair not in wide_turns or pair not in turn_bridges:
+        return False
+    i, j = pair
+    return hidden_all_along(i, j, turn_bridges[pair]) and not hidden_all_along(i, j, curve)

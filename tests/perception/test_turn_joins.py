@@ -371,3 +371,14 @@ def test_the_pairs_within_reach_are_measured_a_block_at_a_time_in_order(monkeypa
         for block in (1, 7, 1 << 22):
             monkeypatch.setattr(module, "PAIR_BLOCK", block)
             assert list(module._pairs_within_reach(members, positions, reach)) == expected
+
+
+def test_a_turns_bridge_from_misread_cuts_over_open_background_gives_way_to_the_turns_curve():
+    """Tuning scene doubled_back 330074, true mask: a fork in the skeleton where the
+    object's edge crosses the lower strand tilts that strand's traced cut by 74 degrees,
+    and the spiral from the cuts zigzags between the strands over the open background
+    (17.8 px off the hidden bend against a tolerance of 7.4). The turn pass's own curve,
+    under the object all the way, is the bridge instead: the frame is right."""
+    seed = 330074
+    score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
