@@ -15,16 +15,22 @@ strand widens the section), until the section narrows (an object's border has be
 cut the cable) or the middle line leaves the mask: there the cable passes out of sight
 (:func:`end_at_the_cut`). The bridge runs along that traced stretch and from its end,
 along the direction a short quadratic fit of the traced middle line gives there, across
-the gap (:func:`bridges_from_the_cuts`).
+the gap (:func:`bridges_from_the_cuts`). Across a large turn that curve is the Euler
+spiral, whose curvature changes linearly along it: where the two cuts' readings
+disagree it crowds the turn at one end, tighter than a cable bends, and the readings
+are then turned, within their uncertainty, as little as a cable's shape takes
+(:func:`.euler_spiral.headings_within_bend`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from schemas import GapCurve
+from service.perception.euler_spiral import headings_within_bend, is_large_turn
 from service.perception.geometry import arc_lengths, end_fit, polyline_length, rotated, unit
 from service.perception.paths import gap_curve
-from service.perception.turn_joins import HIDDEN_BEND_RADII
+from service.perception.turn_joins import DIRECTION_SLACK, HIDDEN_BEND_RADII
 
 TRACE_STEP_PX = 1.0
 """The step (px) along the cable between two traced middle points."""
@@ -346,7 +352,11 @@ def bridges_from_the_cuts(
     fit begins) along the cable traced to where it passes out of sight
     (:func:`end_at_the_cut`, within the tip the fit left out and
     :data:`REACH_PAST_SKIP_RADII` radii past it; only ends whose fit left a tip out),
-    across the gap by :func:`.paths.gap_curve` of ``shape`` between the two cuts, and on
+    across the gap by :func:`.paths.gap_curve` of ``shape`` between the two cuts (where
+    that is the Euler spiral of a large turn bending tighter than
+    :data:`.turn_joins.HIDDEN_BEND_RADII` ``[0]`` of the cable's half width, from the
+    nearest headings within :data:`.turn_joins.DIRECTION_SLACK` of the cuts' whose spiral
+    does not, :func:`.euler_spiral.headings_within_bend`), and on
     to the other end's bridging point (the seen stretches drawn as curves from each
     bridging point to its cut). An end with no cut traced keeps its own
     start. The joins in ``turns`` (each as the turn pass keyed it) are bridged so too,
@@ -403,6 +413,15 @@ def bridges_from_the_cuts(
         (a, leaving), (b, arriving) = (
             (np.asarray(point, np.float64), heading) for point, heading in cuts
         )
+        if GapCurve(shape) is GapCurve.smooth and is_large_turn(a, leaving, b, -arriving):
+            # The spiral across a large turn bends as a cable does (no tighter than its
+            # tightest bend), its headings turned from the readings as little as that takes.
+            cable = 0.5 * ((ends[i].width or radius) + (ends[j].width or radius))
+            within = headings_within_bend(
+                a, leaving, b, -arriving, HIDDEN_BEND_RADII[0] * cable, DIRECTION_SLACK
+            )
+            if within is not None:
+                leaving, arriving = within[0], -within[1]
         across = gap_curve(a, leaving, b, -arriving, shape=shape)
         # The seen stretches drawn as the cable bends between the bridge's start and its
         # cut (the traced points carry a pixel's rounding from step to step).

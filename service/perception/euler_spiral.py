@@ -32,11 +32,16 @@ from __future__ import annotations
 import numpy as np
 
 from service.perception import _euler_spiral_kernels
+from service.perception.geometry import rotated
 
 LARGE_TURN = 0.5 * np.pi
 """Gaps whose ends' headings turn by at least this (radians) about the line between them
 take the spiral; gentler ones keep the cubic (:func:`.paths.gap_curve`), which follows
 them as closely."""
+
+
+TILT_STEP = np.radians(2.0)
+"""The grid (radians) the ends' headings are turned on in :func:`headings_within_bend`."""
 
 
 def chord_turn(
@@ -127,6 +132,52 @@ def spiral_shape(
     if not found:
         return None
     return first, last - first, rate, length, chord
+
+
+def headings_within_bend(
+    start: np.ndarray,
+    leaving: np.ndarray,
+    end: np.ndarray,
+    arriving: np.ndarray,
+    min_radius: float,
+    slack: float,
+    step: float = TILT_STEP,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The two ends' headings, each turned by at most ``slack`` (radians), nearest the
+    given ones whose Euler spiral bends nowhere tighter than ``min_radius`` (px); None
+    where the given headings have no spiral (:func:`.paths.gap_curve` then draws its
+    cubic) or no such pair turns by :data:`LARGE_TURN` or more.
+
+    The spiral shares a turn between its ends as their headings ask, and its curvature
+    changes linearly along it: where the two headings disagree (one read on a bend that
+    turns at the cut, one on the straight before it) it crowds the turn at one end,
+    tighter than a cable bends. Both readings cannot then be the cable's own: of the
+    headings within their uncertainty, the pair turned least from the readings (least
+    summed square of the two tilts, tried on a grid of ``step``) whose spiral a cable
+    could take is kept. Headings whose spiral already bends no tighter are returned as
+    they are.
+    """
+    limit = 1.0 / float(min_radius)
+    if spiral_shape(start, leaving, end, arriving) is None:
+        return None
+    for first, last in _tilts(float(slack), float(step)):
+        turned_leaving = rotated(leaving, first)
+        turned_arriving = rotated(arriving, last)
+        if not is_large_turn(start, turned_leaving, end, turned_arriving):
+            continue
+        shape = spiral_shape(start, turned_leaving, end, turned_arriving)
+        if shape is not None and max_curvature(shape) <= limit:
+            return turned_leaving, turned_arriving
+    return None
+
+
+def _tilts(slack: float, step: float) -> list[tuple[float, float]]:
+    """Pairs of tilts (radians) on a grid of ``step`` up to ``slack`` each, in order of
+    their summed square (the untilted pair first)."""
+    count = int(np.floor(slack / step + 1e-9))
+    grid = step * np.arange(-count, count + 1)
+    pairs = [(float(first), float(last)) for first in grid for last in grid]
+    return sorted(pairs, key=lambda pair: (pair[0] ** 2 + pair[1] ** 2, abs(pair[0]), pair))
 
 
 def max_curvature(shape: tuple[float, float, float, float, float]) -> float:
