@@ -507,10 +507,10 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     half_widths = widths[[end // 2 for end in ends]]
     strands = 0.5 * float(half_widths.sum())  # the two strands' half widths together
     # Most four-way junctions are crossings, narrowest at their middle and widest there
-    # along the line between the pairs. There a crossing at any angle is at most a right-angle one's sqrt(1/2) of the
-    # two strands wide, well over the shallow crossing's half (a loop's own crossing,
-    # loops 20020, 20174, 20192, 290195), so the middle is held to halfway between
-    # that and touching strands' whole two widths.
+    # along the line between the pairs. There a crossing at any angle is at most a
+    # right-angle one's sqrt(1/2) of the two strands wide, well over a shallow crossing's
+    # half (a loop's own crossing, loops 20020, 20174, 20192, 290195), so the middle is
+    # held to halfway between that and touching strands' whole two widths.
     if _widest_between(middle_a, middle_b, distance) < TOUCHING_MIDDLE_FRACTION * strands:
         return None
     # Strands, not the scraps thinning leaves where a blob bulges (as for a shared piece).
