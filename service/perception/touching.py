@@ -456,6 +456,13 @@ def _widest(points: np.ndarray, distance: np.ndarray) -> float:
     return float(distance[rows, cols].max())
 
 
+# Where two strands cross at angle theta, the middle of the crossing lies r / cos(theta / 2)
+# from the background, sqrt(2) r at most (a right angle; past it the other angle is the
+# acute one): sqrt(1/2) of the two strands' widths together, against all of it where
+# they touch side by side. A four-way junction's middle is held to halfway between.
+TOUCHING_MIDDLE_FRACTION = 0.5 * (1.0 + math.sqrt(0.5))
+
+
 def _touching_junction_pairs(ends, positions, directions, pieces, distance, leaving, widths):
     """The two pairs of ends to join at a four-way junction that is a touching stretch
     short enough for the junction zone to take it whole, the far ends of a pair of
@@ -466,7 +473,10 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     The two strands enter the stretch side by side at one end and leave it side by side
     at the other: the ends fall into two close pairs (the partition whose pairs lie
     closest together) at the stretch's two ends, each pointing along the stretch
-    towards the other pair. The mask along the middle third of the line between them
+    towards the other pair. The mask is wider somewhere on the middle third of the line
+    between them than any crossing's middle (:data:`TOUCHING_MIDDLE_FRACTION` of both
+    strands' widths: a right-angle crossing's middle is wider than one cable's,
+    :func:`_widest_between`), and along the middle third of the line between them
     (:func:`_middle_of_stretch`) keeps both strands' widths
     (:data:`SIDE_BY_SIDE_WIDTH_FRACTION`, as a shared piece must): where two cables
     cross, even at a shallow angle, it narrows to one cable's there, at the crossing.
@@ -496,12 +506,12 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
         return None
     half_widths = widths[[end // 2 for end in ends]]
     strands = 0.5 * float(half_widths.sum())  # the two strands' half widths together
-    # Most four-way junctions are crossings, narrow at their middle: told at one pixel.
-    centre = np.rint(0.5 * (middle_a + middle_b)).astype(np.int64)
-    height, width = distance.shape
-    if distance[min(max(centre[1], 0), height - 1), min(max(centre[0], 0), width - 1)] < (
-        SIDE_BY_SIDE_WIDTH_FRACTION * strands
-    ):
+    # Most four-way junctions are crossings, narrowest at their middle and widest there
+    # along the line between the pairs. There a crossing at any angle is at most a
+    # right-angle one's sqrt(1/2) of the two strands wide, well over a shallow crossing's
+    # half (a loop's own crossing, loops 20020, 20174, 20192, 290195), so the middle is
+    # held to halfway between that and touching strands' whole two widths.
+    if _widest_between(middle_a, middle_b, distance) < TOUCHING_MIDDLE_FRACTION * strands:
         return None
     # Strands, not the scraps thinning leaves where a blob bulges (as for a shared piece).
     short = {
@@ -540,6 +550,23 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     cut = pair_a if short <= set(pair_a) else pair_b
     short_widths = {end // 2: _widest(pieces[end // 2], distance) for end in short}
     return pairs, (cut[0] ^ 1, cut[1] ^ 1), short_widths
+
+
+def _widest_between(start: np.ndarray, end: np.ndarray, distance: np.ndarray) -> float:
+    """The largest distance transform on the middle third of the line from ``start`` to
+    ``end`` (every pixel of it; the middle pixel when shorter): the crossing's middle,
+    the point of an X farthest from the background, or the touching stretch's width,
+    read where a pixel's rounding off the middle does not lose it."""
+    length = float(np.hypot(*(end - start)))
+    if length >= 3.0:
+        along = np.arange(length / 3.0, 2.0 * length / 3.0 + 1e-9, 1.0)
+    else:
+        along = np.array([0.5 * length])
+    points = start + along[:, None] * ((end - start) / max(length, 1e-9))
+    height, width = distance.shape
+    cols = np.clip(np.rint(points[:, 0]).astype(int), 0, width - 1)
+    rows = np.clip(np.rint(points[:, 1]).astype(int), 0, height - 1)
+    return float(distance[rows, cols].max())
 
 
 def _cut_short_pair(short, pairs, pieces, distance, widths) -> bool:
