@@ -29,6 +29,8 @@ version: ``tests/perception/references/euler_spiral.py``.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from service.perception import _euler_spiral_kernels
@@ -171,13 +173,15 @@ def headings_within_bend(
     return None
 
 
-def _tilts(slack: float, step: float) -> list[tuple[float, float]]:
+@functools.lru_cache(maxsize=8)
+def _tilts(slack: float, step: float) -> tuple[tuple[float, float], ...]:
     """Pairs of tilts (radians) on a grid of ``step`` up to ``slack`` each, in order of
-    their summed square (the untilted pair first)."""
+    their summed square (the untilted pair first). Kept: every bridge asks for the same
+    grid, ~1,000 pairs sorted."""
     count = int(np.floor(slack / step + 1e-9))
     grid = step * np.arange(-count, count + 1)
     pairs = [(float(first), float(last)) for first in grid for last in grid]
-    return sorted(pairs, key=lambda pair: (pair[0] ** 2 + pair[1] ** 2, abs(pair[0]), pair))
+    return tuple(sorted(pairs, key=lambda pair: (pair[0] ** 2 + pair[1] ** 2, abs(pair[0]), pair)))
 
 
 def max_curvature(shape: tuple[float, float, float, float, float]) -> float:

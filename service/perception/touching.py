@@ -445,15 +445,20 @@ def _cable_wide_pair(
     return narrow > 0 and narrow >= WIDTH_AGREEMENT * wide
 
 
+def _distance_at(xs: np.ndarray, ys: np.ndarray, distance: np.ndarray) -> np.ndarray:
+    """The distance transform at the pixel nearest each point (clipped to the picture)."""
+    height, width = distance.shape
+    cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
+    rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
+    return distance[rows, cols]
+
+
 def _widest(points: np.ndarray, distance: np.ndarray) -> float:
     """The largest distance transform along the piece, at every pixel of its line."""
     points = np.asarray(points, np.float64)
     along = arc_lengths(points)
     xs, ys = points_along(points, along, np.arange(0.0, along[-1] + 1e-9, 1.0)).T
-    height, width = distance.shape
-    cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
-    rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
-    return float(distance[rows, cols].max())
+    return float(_distance_at(xs, ys, distance).max())
 
 
 # Where two strands cross at angle theta, the middle of the crossing lies r / cos(theta / 2)
@@ -563,10 +568,7 @@ def _widest_between(start: np.ndarray, end: np.ndarray, distance: np.ndarray) ->
     else:
         along = np.array([0.5 * length])
     points = start + along[:, None] * ((end - start) / max(length, 1e-9))
-    height, width = distance.shape
-    cols = np.clip(np.rint(points[:, 0]).astype(int), 0, width - 1)
-    rows = np.clip(np.rint(points[:, 1]).astype(int), 0, height - 1)
-    return float(distance[rows, cols].max())
+    return float(_distance_at(points[:, 0], points[:, 1], distance).max())
 
 
 def _cut_short_pair(short, pairs, pieces, distance, widths) -> bool:
@@ -617,10 +619,7 @@ def _narrowest(
         half_width = 0.5 * float(along[-1])
     samples = np.arange(half_width, along[-1] - half_width + 1e-9, 1.0)
     xs, ys = points_along(points, along, samples).T
-    height, width = distance.shape
-    cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
-    rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
-    return float(distance[rows, cols].min())
+    return float(_distance_at(xs, ys, distance).min())
 
 
 def split_where_leaving_together(
@@ -921,10 +920,7 @@ def _crossed_along(points: np.ndarray, distance: np.ndarray, strands: list[list[
     length = float(along[-1])
     samples = np.arange(0.0, length + 1e-9, 1.0)
     xs, ys = points_along(points, along, samples).T
-    height, width = distance.shape
-    cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
-    rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
-    half_widths = distance[rows, cols].astype(np.float64)
+    half_widths = _distance_at(xs, ys, distance).astype(np.float64)
     widest = max(max(side) for side in strands)
     for low, high in ((0.125, 0.375), (0.625, 0.875)):
         span = (samples >= low * length) & (samples <= high * length)
