@@ -834,7 +834,15 @@ def merge_chains(
         # Sharp turns under an object, on the image's evidence (:mod:`.turn_joins`); a
         # scrap joined through its crossing is judged as the strand it continues.
         mutual = MUTUAL_COST_FACTOR * params.merge_cost_threshold
-        seen, hues = scraps_through_junctions(ends, colours, joins, junction_of_end, pieces, radius)
+        seen, hues = scraps_through_junctions(
+            ends,
+            colours,
+            joins,
+            junction_of_end,
+            pieces,
+            radius,
+            2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS,
+        )
         widths = np.array([end.width for end in seen], np.float64)
         judged = evidence_ends(seen, ends, seen_from)
         turn_hidden = turn_out_of_view(image, mask, seen, radius)

@@ -113,6 +113,48 @@ def test_a_scrap_joined_through_its_crossing_takes_that_strands_colour_and_width
     assert scraps_through_junctions(ends, None, joins, junction_of_end, pieces, 5.0)[1] is None
 
 
+def test_a_stub_joined_through_its_crossing_takes_that_strands_width_where_its_own_is_narrower():
+    # Piece 1: a stub of 3 joints with a colour of its own, from a crossing (end 2,
+    # joined to the strand's end 1 there) to an object whose rim cut it at a slant (end
+    # 3): its width, read only where the cut narrows it, is the strand's 0.8 or less.
+    ends = [_end(0, True, 4.4), _end(0, False, 4.4), _end(1, True, 3.2), _end(1, False, 3.2)]
+    red = [50.0, 60.0, 40.0]
+    colours = EndColours(np.array([red] * 4), np.full(4, 2.0))
+    junction_of_end = [-1, 0, 0, -1]
+    pieces = [np.array([[0.0, 0.0], [200.0, 0.0]]), np.array([[0, 0], [8, 0], [20.0, 0]])]
+    joins = [(1, 2, 0.1)]
+    seen, hues = scraps_through_junctions(ends, colours, joins, junction_of_end, pieces, 4.0, 11)
+    assert seen[3].width == 4.4 and seen[:3] == ends[:3]
+    assert hues.known.all()
+    # Without a stub length (the default), a piece with a middle of its own, a wider
+    # stub, one of another colour, or one not joined at its junction: no change.
+    blue = [50.0, -40.0, -40.0]
+    other = EndColours(np.array([red, red, blue, blue]), np.full(4, 2.0))
+    wider = [*ends[:2], replace(ends[2], width=5.0), replace(ends[3], width=5.0)]
+    for case in (
+        (ends, colours, joins, pieces, 0),
+        (ends, colours, joins, pieces, 3),
+        (wider, colours, joins, pieces, 11),
+        (ends, other, joins, pieces, 11),
+        (ends, colours, [], pieces, 11),
+    ):
+        kept, _ = scraps_through_junctions(
+            case[0], case[1], case[2], junction_of_end, case[3], 4.0, case[4]
+        )
+        assert kept[3].width == case[0][3].width
+
+
+def test_a_loops_turn_under_an_object_beside_a_crossing_is_joined_from_a_stub():
+    # Tuning scene loops 280175: a cable's loop turns under a box just past a crossing;
+    # the strand's stub between the crossing and the box, read 6.6 px wide where the
+    # box's corner cuts it (the cable: 8.7), looked too narrow to be the same cable as
+    # the piece across the box, and the turn was never joined (four chains for three).
+    scene = make_family_scene("loops", 280175)
+    score, result = evaluate_scene(scene, 280175, mask_from_labels=True)
+    assert len(result.detection.chains) == 3
+    assert score.frame.correct
+
+
 def test_a_short_piece_cut_at_a_crossing_takes_its_width_clear_of_the_junction():
     # Piece 0: six joints from a crossing (junction zone round x = 4) to an object's cut
     # (x = 30); the other strand widens the mask in the zone, the cut narrows the tip.
