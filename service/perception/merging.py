@@ -94,6 +94,8 @@ FULL_WIDTH_FRACTION = 0.8
 NARROW_END_JOINTS = 4
 # A piece measures its own full width when it has this many joints beyond those.
 MIN_INTERIOR_JOINTS = 3
+# The fewest joints a piece has a middle with (both ends' narrow joints and an interior).
+MIDDLE_JOINTS = 2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS
 
 
 @dataclass(frozen=True)
@@ -163,7 +165,7 @@ def chain_ends(
         # Cables differ in width: a piece's own full width is the typical distance to
         # the border at its joints, and for a long piece also that away from both ends
         # (more than NARROW_END_JOINTS in), where no cut end narrows it.
-        long = np.flatnonzero(np.diff(starts) >= 2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS)
+        long = np.flatnonzero(np.diff(starts) >= MIDDLE_JOINTS)
         middles = [pieces[k][NARROW_END_JOINTS:-NARROW_END_JOINTS] for k in long]
         part_starts = np.cumsum([0, *counts, *(len(points) for points in middles)])
         values = _merging_kernels.median_distance_per_piece(
@@ -188,7 +190,7 @@ def chain_ends(
             pieces,
             widths,
             narrow_in,
-            2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS,
+            MIDDLE_JOINTS,
             FULL_WIDTH_FRACTION,
         )
     # Both fits of every piece in one compiled loop (geometry.end_fit's, end by end); a
@@ -695,9 +697,7 @@ def merge_chains(
         pieces, span, skip=radius, distance=distance, full_width=full_width, bend_aware=at_crossing
     )
     if distance is not None and zones is not None:
-        ends = widths_clear_of_crossings(
-            pieces, ends, distance, zones, at_crossing, 2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS
-        )
+        ends = widths_clear_of_crossings(pieces, ends, distance, zones, at_crossing, MIDDLE_JOINTS)
     if mask is not None:
         ends = ends_of_stubs(pieces, ends, mask, radius)  # a stub's skeleton runs across it
     check(deadline, "merging")
@@ -841,7 +841,7 @@ def merge_chains(
             junction_of_end,
             pieces,
             radius,
-            2 * NARROW_END_JOINTS + MIN_INTERIOR_JOINTS,
+            MIDDLE_JOINTS,
         )
         widths = np.array([end.width for end in seen], np.float64)
         judged = evidence_ends(seen, ends, seen_from)
