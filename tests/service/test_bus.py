@@ -72,7 +72,9 @@ def publisher_to_bus(
     With ``bus_session`` (the session that publishes the results), also wait until it
     knows the client's subscriber on ``dlo/<camera>/chains``, so that no result is lost.
     """
-    publisher = client.declare_publisher(key)
+    # BLOCK: a frame larger than a zenoh batch goes in fragments, and the default (DROP)
+    # drops it whole when they wait for the link longer than 50 ms, as on a loaded machine.
+    publisher = client.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
     wait_until(lambda: publisher.matching_status.matching, "the bus's subscriber", TIMEOUT)
     if bus_session is not None:
         wait_for_subscriber(bus_session, f"dlo/{key.split('/')[1]}/chains")

@@ -69,7 +69,9 @@ def test_the_local_configurations_join_a_service_and_a_script(free_endpoint: str
     with DetectionBus(service_config) as bus, zenoh.open(script_config) as script:
         received: queue.Queue[bytes] = queue.Queue()
         script.declare_subscriber("dlo/*/chains", lambda s: received.put(s.payload.to_bytes()))
-        publisher = script.declare_publisher("dlo/cam1/image")
+        publisher = script.declare_publisher(  # BLOCK: see tests/service/test_bus.py
+            "dlo/cam1/image", congestion_control=zenoh.CongestionControl.BLOCK
+        )
         wait_until(lambda: publisher.matching_status.matching, "the service's subscriber")
         wait_for_subscriber(bus.session, "dlo/cam1/chains")
         publisher.put(image.tobytes())

@@ -103,7 +103,9 @@ def acknowledged_until(socket: ClientConnection, kind: str, frame_id) -> tuple[d
 
 def watched_publisher(client: zenoh.Session, camera: str) -> zenoh.Publisher:
     """A publisher on ``dlo/<camera>/image``, once a subscriber (the hub's) matches it."""
-    publisher = client.declare_publisher(f"dlo/{camera}/image")
+    publisher = client.declare_publisher(  # BLOCK: see tests/service/test_bus.py
+        f"dlo/{camera}/image", congestion_control=zenoh.CongestionControl.BLOCK
+    )
     wait_until(lambda: publisher.matching_status.matching, "a subscriber of the frames", TIMEOUT)
     return publisher
 

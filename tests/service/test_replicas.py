@@ -151,7 +151,9 @@ def test_frame_identity_travels_through_the_pipe() -> None:
         zenoh.open(client_config(endpoint)) as client,
     ):
         chains, errors = Results(client), Results(client, "dlo/*/errors")
-        publisher = client.declare_publisher("dlo/cam1/image")
+        publisher = client.declare_publisher(  # BLOCK: see tests/service/test_bus.py
+            "dlo/cam1/image", congestion_control=zenoh.CongestionControl.BLOCK
+        )
         wait_until(lambda: publisher.matching_status.matching, "the replica's subscriber")
         image = encoded_scene()
 
