@@ -480,9 +480,9 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     closest together) at the stretch's two ends, each pointing along the stretch
     towards the other pair. The mask is wider somewhere on the middle third of the line
     between them than any crossing's middle (:data:`TOUCHING_MIDDLE_FRACTION` of both
-    strands' widths: a right-angle crossing's middle is wider than one cable's,
-    :func:`_widest_between`), and along the middle third of the line between them
-    (:func:`_middle_of_stretch`) keeps both strands' widths
+    strands' widths, a short strand's the widest its mask gets: a right-angle crossing's
+    middle is wider than one cable's, :func:`_widest_between`), and along the middle
+    third of the line between them (:func:`_middle_of_stretch`) keeps both strands' widths
     (:data:`SIDE_BY_SIDE_WIDTH_FRACTION`, as a shared piece must): where two cables
     cross, even at a shallow angle, it narrows to one cable's there, at the crossing.
     Strands that touch all along cannot cross there, so each keeps its side:
