@@ -85,6 +85,7 @@ def end_colours(
     radius: float,
     distance: np.ndarray | None = None,
     free: np.ndarray | None = None,
+    widths: np.ndarray | None = None,
 ) -> EndColours:
     """The colour of the cable at every chain end (see the module's docstring).
 
@@ -113,6 +114,12 @@ def end_colours(
         shorter than three radii is a stretch of cable seen between two objects, not a
         scrap where the skeleton meets a blob or a junction, and keeps the colour of
         its whole length.
+    widths : ndarray, optional
+        Per end, its piece's own full half width (px, the median distance transform at
+        its joints; 0 when unknown): where wider than the typical ``radius + 0.5``, the
+        end's wide samples are those past :data:`WIDE_FACTOR` times its own. A cable
+        more than twice as thick as the picture's typical one is wider than that limit
+        everywhere, and its ends would have no colour at all (loops 400119).
     """
     count = len(ends)
     if count == 0:
@@ -123,9 +130,21 @@ def end_colours(
     end_at_start = np.array([end.at_start for end in ends], np.bool_)
     image = np.ascontiguousarray(image_bgr, dtype=np.uint8)
 
+    own = np.full(count, radius + 0.5)
+    if widths is not None:
+        own = np.maximum(own, np.asarray(widths, np.float64))
+
     def stretch(skip, which=slice(None)):
         return _stretch_colours(
-            image, joints, starts, end_piece[which], end_at_start[which], skip, radius, distance
+            image,
+            joints,
+            starts,
+            end_piece[which],
+            end_at_start[which],
+            skip,
+            radius,
+            distance,
+            own[which],
         )
 
     colour, spread, lengths = stretch(STRETCH_SKIP_RADII * radius)
@@ -169,9 +188,12 @@ def end_colours(
     return EndColours(colour, spread)
 
 
-def _stretch_colours(image, joints, starts, end_piece, end_at_start, skip, radius, distance):
+def _stretch_colours(
+    image, joints, starts, end_piece, end_at_start, skip, radius, distance, own=None
+):
     """Median colour and scatter of every end's stretch from ``skip`` on, and the
-    length of its piece (see :func:`end_colours`)."""
+    length of its piece (see :func:`end_colours`; ``own``: per end, the full half width
+    its wide samples are judged by, at least ``radius + 0.5``)."""
     samples, bounds, pixels, lengths = _appearance_kernels.end_samples(
         image, joints, starts, end_piece, end_at_start, skip, STRETCH_RADII * radius
     )
@@ -180,12 +202,32 @@ def _stretch_colours(image, joints, starts, end_piece, end_at_start, skip, radiu
     lab = cv2.cvtColor(samples.reshape(1, -1, 3), cv2.COLOR_BGR2LAB).reshape(-1, 3)
     limit = WIDE_FACTOR * (radius + 0.5)
     wide = np.zeros(len(samples), np.bool_)
+    margin = int(np.ceil(limit))
     if distance is not None and len(samples):
-        wide = distance[pixels[:, 0], pixels[:, 1]] > limit
+        at = distance[pixels[:, 0], pixels[:, 1]]
+        if own is None or not (own > radius + 0.5).any():
+            wide = at > limit
+        else:
+            wide = _first_wide_less_margin(at, bounds, WIDE_FACTOR * own)
+            margin = 0
     colour, spread = _appearance_kernels.colour_medians(
-        np.ascontiguousarray(lab), bounds, wide, MIN_SAMPLES, int(np.ceil(limit))
+        np.ascontiguousarray(lab), bounds, wide, MIN_SAMPLES, margin
     )
     return colour, spread, lengths
+
+
+def _first_wide_less_margin(at: np.ndarray, bounds: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """Per end (samples ``bounds[e]:bounds[e + 1]``, distance transform ``at``), the
+    sample its colour's samples stop at marked alone: the first past the end's own
+    ``limits[e]``, less that limit (rounded up) more, the rim of the wide blob, as the
+    compiled median reads one limit for all ends with its ``margin``."""
+    wide = np.zeros(len(at), np.bool_)
+    for end, limit in enumerate(limits.tolist()):
+        start, stop = int(bounds[end]), int(bounds[end + 1])
+        past = np.flatnonzero(at[start:stop] > limit)
+        if len(past):
+            wide[max(start + int(past[0]) - int(np.ceil(limit)), start)] = True
+    return wide
 
 
 def colour_penalty(colours: EndColours, first: np.ndarray, second: np.ndarray) -> np.ndarray:

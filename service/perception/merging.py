@@ -771,7 +771,8 @@ def merge_chains(
             # A short strand parting from a touching stretch is no scrap either (its
             # width said so, :func:`.touching.split_touching_strands`): its whole length.
             free[list(touching.strand_widths)] = True
-        colours = end_colours(image, pieces, ends, radius, distance, free)
+        own_widths = np.array([end.width for end in ends], np.float64)
+        colours = end_colours(image, pieces, ends, radius, distance, free, own_widths)
     picture = None
     if zones is not None or mask is not None:
         picture = (zones if zones is not None else mask).shape[:2]

@@ -480,9 +480,9 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     closest together) at the stretch's two ends, each pointing along the stretch
     towards the other pair. The mask is wider somewhere on the middle third of the line
     between them than any crossing's middle (:data:`TOUCHING_MIDDLE_FRACTION` of both
-    strands' widths: a right-angle crossing's middle is wider than one cable's,
-    :func:`_widest_between`), and along the middle third of the line between them
-    (:func:`_middle_of_stretch`) keeps both strands' widths
+    strands' widths, a short strand's the widest its mask gets: a right-angle crossing's
+    middle is wider than one cable's, :func:`_widest_between`), and along the middle
+    third of the line between them (:func:`_middle_of_stretch`) keeps both strands' widths
     (:data:`SIDE_BY_SIDE_WIDTH_FRACTION`, as a shared piece must): where two cables
     cross, even at a shallow angle, it narrows to one cable's there, at the crossing.
     Strands that touch all along cannot cross there, so each keeps its side:
@@ -511,13 +511,6 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
         return None
     half_widths = widths[[end // 2 for end in ends]]
     strands = 0.5 * float(half_widths.sum())  # the two strands' half widths together
-    # Most four-way junctions are crossings, narrowest at their middle and widest there
-    # along the line between the pairs. There a crossing at any angle is at most a
-    # right-angle one's sqrt(1/2) of the two strands wide, well over a shallow crossing's
-    # half (a loop's own crossing, loops 20020, 20174, 20192, 290195), so the middle is
-    # held to halfway between that and touching strands' whole two widths.
-    if _widest_between(middle_a, middle_b, distance) < TOUCHING_MIDDLE_FRACTION * strands:
-        return None
     # Strands, not the scraps thinning leaves where a blob bulges (as for a shared piece).
     short = {
         end
@@ -525,6 +518,25 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
         if polyline_length(pieces[end // 2]) < 2 * strands
         and (leaving is None or not leaving[end ^ 1])
     }
+    if short:
+        # A short strand's median falls where an object cuts it (a cut only narrows): its
+        # width is the widest its mask gets, as :func:`_strand_widths` reads one. Read
+        # narrow, it lowers the middle a crossing is held to below a loop's own crossing
+        # beside the object that cuts the strand (loops 400162).
+        half_widths = np.array(
+            [
+                max(float(width), _widest(pieces[end // 2], distance)) if end in short else width
+                for end, width in zip(ends, half_widths.tolist(), strict=True)
+            ]
+        )
+        strands = 0.5 * float(half_widths.sum())
+    # Most four-way junctions are crossings, narrowest at their middle and widest there
+    # along the line between the pairs. There a crossing at any angle is at most a
+    # right-angle one's sqrt(1/2) of the two strands wide, well over a shallow crossing's
+    # half (a loop's own crossing, loops 20020, 20174, 20192, 290195), so the middle is
+    # held to halfway between that and touching strands' whole two widths.
+    if _widest_between(middle_a, middle_b, distance) < TOUCHING_MIDDLE_FRACTION * strands:
+        return None
     if short and not _cut_short_pair(short, (pair_a, pair_b), pieces, distance, widths):
         return None
     line = np.array([middle_a, middle_b])

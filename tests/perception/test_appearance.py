@@ -45,6 +45,23 @@ def test_end_colours_equal_the_plain_reference(seed):
     )
     np.testing.assert_allclose(found.colour, colour, rtol=1e-6, atol=1e-4)
     np.testing.assert_allclose(found.spread, spread, rtol=1e-6, atol=1e-4)
+    # With its piece's own width, an end wider than the typical cable is read as the
+    # reference reads it at its own limit; the others as before.
+    widths = rng.uniform(0, 3 * (radius + 0.5), len(ends))
+    own = appearance.end_colours(image, pieces, ends, radius, distance, widths=widths)
+    for index, end in enumerate(ends):
+        one_colour, one_spread = reference.end_colours(
+            image,
+            pieces,
+            [end],
+            appearance.STRETCH_SKIP_RADII * radius,
+            appearance.STRETCH_RADII * radius,
+            distance,
+            appearance.WIDE_FACTOR * max(radius + 0.5, widths[index]),
+            appearance.MIN_SAMPLES,
+        )
+        np.testing.assert_allclose(own.colour[index], one_colour[0], rtol=1e-6, atol=1e-4)
+        np.testing.assert_allclose(own.spread[index], one_spread[0], rtol=1e-6, atol=1e-4)
 
 
 def test_colour_penalty_is_zero_for_one_cable_and_grows_with_the_difference():
@@ -120,6 +137,40 @@ def gap_scene(box_colour, box=(82, 178)):
     )
     curve = np.column_stack([np.arange(78.0, 183.0), np.full(105, 50.0)])
     return image, mask > 0, curve, ends
+
+
+def test_a_cable_over_twice_as_thick_as_the_typical_one_has_a_colour_of_its_own():
+    """The picture's typical cable is thin (half width 3.7); a cable 17 px wide (half
+    width 8.4) is wider than twice that everywhere, so every sample of its ends read
+    as a blob's and its ends had no colour, which a turn under an object needs (loops
+    400119). Judged by its own width, its ends have its colour; a wide blob on it still
+    stops the reading."""
+    image = np.full((80, 300, 3), 60, np.uint8)
+    cv2.line(image, (0, 40), (280, 40), (200, 205, 210), 17)  # a thick light cable
+    mask = np.zeros(image.shape[:2], np.uint8)
+    cv2.line(mask, (0, 40), (280, 40), 1, 17)
+    cv2.circle(mask, (235, 40), 30, 1, -1)  # a wide blob segmented with it
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    pieces = [np.column_stack([np.linspace(10, 260, 51), np.full(51, 40.0)])]
+    ends = [ChainEnd(0, at_start, np.zeros(2), np.zeros(2)) for at_start in (True, False)]
+    radius = 3.7
+    typical = appearance.end_colours(image, pieces, ends, radius, distance)
+    own = appearance.end_colours(image, pieces, ends, radius, distance, widths=np.full(2, 8.9))
+    assert list(typical.known) == [False, False]
+    assert list(own.known) == [True, False]
+    lightness = cv2.cvtColor(np.array([[[200, 205, 210]]], np.uint8), cv2.COLOR_BGR2LAB)[0, 0, 0]
+    assert abs(own.colour[0, 0] - float(lightness) * 100 / 255) < 2
+
+
+@pytest.mark.parametrize("seed", [400119])
+def test_a_thick_cables_turn_under_an_object_is_joined(seed):
+    """loops 400119: a cable of half width 8.4 in a picture whose typical cable's is 3.7,
+    its loop's turn hidden under a box; its ends had no colour, and the turn pass, which
+    needs two ends alike, never joined it (one chain too many)."""
+    from service.evaluation.synthetic_eval import evaluate_scene
+
+    score, _ = evaluate_scene(make_family_scene("loops", seed), seed, mask_from_labels=True)
+    assert score.frame.correct
 
 
 def test_a_gap_under_an_object_is_hidden_and_one_over_open_paper_is_not():

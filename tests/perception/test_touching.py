@@ -278,3 +278,15 @@ def test_a_loops_own_crossing_at_a_wide_angle_is_crossed_not_turned_back(seed):
     cut the crossing's corners, two visible stretches a pixel or two beyond tolerance."""
     score, _ = evaluate_scene(make_family_scene("loops", seed), seed, mask_from_labels=True)
     assert score.frame.correct
+
+
+@pytest.mark.parametrize("seed", [400162])
+def test_a_loops_crossing_beside_the_object_that_cuts_one_strand_short_is_crossed(seed):
+    """A loop's own crossing with an object right beside it: one strand runs 11 px from
+    the crossing into the object, and its median width (2.7 against its cable's 4.4) fell
+    where the object cuts it. Counted so, the two strands' widths held the crossing's
+    middle (7.0) to less than a crossing's, and the junction was paired as a touching
+    stretch, the cable turned back at its crossing (one chain too many). A short strand
+    is as wide as the widest its mask gets, as a shared piece's short strand is read."""
+    score, _ = evaluate_scene(make_family_scene("loops", seed), seed, mask_from_labels=True)
+    assert score.frame.correct
