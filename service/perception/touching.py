@@ -529,7 +529,11 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
         return None
     line = np.array([middle_a, middle_b])
     if _narrows_between_shoulders(
-        line, distance, _middle_of_stretch(length, strands), SIDE_BY_SIDE_WIDTH_FRACTION * strands
+        line,
+        distance,
+        _middle_of_stretch(length, strands),
+        SIDE_BY_SIDE_WIDTH_FRACTION * strands,
+        strands,
     ):
         return None
     sides = []
@@ -605,20 +609,23 @@ def _middle_of_stretch(length: float, strands: float) -> float:
 
 
 def _narrows_between_shoulders(
-    line: np.ndarray, distance: np.ndarray, clear: float, level: float
+    line: np.ndarray, distance: np.ndarray, clear: float, level: float, touch: float
 ) -> bool:
     """Whether the mask along ``line`` (from between one pair of a four-way junction's
     ends to between the other's) narrows below ``level`` on its middle, ``clear`` px
-    clear of each end, between two places wider than it: a crossing's narrowing.
+    clear of each end, as a crossing does, not as touching strands parting.
 
     Where two cables cross, the mask is narrowest at the crossing and widens again on
-    both sides of it, where the strands lie side by side before they part. Where two
-    touching strands part at a shallow angle, the notch between them narrows the mask
-    from the stretch's end inwards, over more than the ends' clearance when they part
-    slowly (a doubled-back cable's bulb opening from its neck, doubled_back 400158,
-    400267): the mask narrows on towards that end and never widens again, so that
-    narrowing is the parting's, not a crossing's. Wider means by more than a pixel, the
-    distance transform's own step (readings a pixel apart differ by up to ~0.7 px).
+    both sides of it, where the strands lie side by side before they part; at a wide
+    angle it is as wide as ``level`` only for a pixel or two round the X's middle. Where
+    two touching strands part at a shallow angle, the notch between them narrows the
+    mask from the stretch's end inwards, over more than the ends' clearance when they
+    part slowly (a doubled-back cable's bulb opening from its neck, doubled_back 400158,
+    400267). So the narrowing is the parting's when the mask keeps ``level`` along a
+    stretch at least ``touch`` px long (the strands touching over a cable's width) and
+    the narrowest reading is not between two wider places: the mask narrows on towards
+    that end and never widens again. Wider means by more than a pixel, the distance
+    transform's own step (readings a pixel apart differ by up to ~0.7 px).
 
     Parameters
     ----------
@@ -630,6 +637,8 @@ def _narrows_between_shoulders(
         How far from each end the narrowing is looked for (px).
     level : float
         The width (distance transform) under which the mask narrows.
+    touch : float
+        How long (px) the mask must keep ``level`` for the strands to touch.
 
     Returns
     -------
@@ -656,6 +665,11 @@ def _narrows_between_shoulders(
     narrowest = widths[at]
     if narrowest >= level:
         return False
+    # The longest run of readings keeping the level: the stretch the strands touch along.
+    keeps = np.concatenate([[False], widths >= level, [False]])
+    starts, stops = np.flatnonzero(~keeps[:-1] & keeps[1:]), np.flatnonzero(keeps[:-1] & ~keeps[1:])
+    if not len(starts) or float((along[stops - 1] - along[starts]).max()) < touch:
+        return True
     wider = narrowest + 1.0
     return bool(widths[:at].max(initial=0.0) > wider and widths[at + 1 :].max(initial=0.0) > wider)
 
