@@ -540,8 +540,12 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     if short and not _cut_short_pair(short, (pair_a, pair_b), pieces, distance, widths):
         return None
     line = np.array([middle_a, middle_b])
-    if _narrowest(line, distance, _middle_of_stretch(length, strands)) < (
-        SIDE_BY_SIDE_WIDTH_FRACTION * strands
+    if _narrows_between_shoulders(
+        line,
+        distance,
+        _middle_of_stretch(length, strands),
+        SIDE_BY_SIDE_WIDTH_FRACTION * strands,
+        strands,
     ):
         return None
     sides = []
@@ -614,6 +618,72 @@ def _middle_of_stretch(length: float, strands: float) -> float:
     angle (2.7 radii at 20 degrees), whether the strands touch or cross. Where two
     cables cross, the mask is narrowest at the crossing, the middle of the line."""
     return max(strands, length / 3.0)
+
+
+def _narrows_between_shoulders(
+    line: np.ndarray, distance: np.ndarray, clear: float, level: float, touch: float
+) -> bool:
+    """Whether the mask along ``line`` (from between one pair of a four-way junction's
+    ends to between the other's) narrows below ``level`` on its middle, ``clear`` px
+    clear of each end, as a crossing does, not as touching strands parting.
+
+    Where two cables cross, the mask is narrowest at the crossing and widens again on
+    both sides of it, where the strands lie side by side before they part; at a wide
+    angle it is as wide as ``level`` only for a pixel or two round the X's middle. Where
+    two touching strands part at a shallow angle, the notch between them narrows the
+    mask from the stretch's end inwards, over more than the ends' clearance when they
+    part slowly (a doubled-back cable's bulb opening from its neck, doubled_back 400158,
+    400267). So the narrowing is the parting's when the mask keeps ``level`` along a
+    stretch at least ``touch`` px long (the strands touching over a cable's width) and
+    the narrowest reading is not between two wider places: the mask narrows on towards
+    that end and never widens again. Wider means by more than a pixel, the distance
+    transform's own step (readings a pixel apart differ by up to ~0.7 px).
+
+    Parameters
+    ----------
+    line : ndarray
+        ``(2, 2)`` the line's two ends.
+    distance : ndarray
+        Distance transform of the mask.
+    clear : float
+        How far from each end the narrowing is looked for (px).
+    level : float
+        The width (distance transform) under which the mask narrows.
+    touch : float
+        How long (px) the mask must keep ``level`` for the strands to touch.
+
+    Returns
+    -------
+    bool
+        True also when the line is too short to leave a middle (as :func:`_narrowest`
+        reads 0 there).
+    """
+    points = np.asarray(line, np.float64)
+    length = float(np.hypot(*(points[1] - points[0])))
+    if length <= 2 * clear:
+        return True
+    # The middle sampled as :func:`_narrowest` samples it, the rest a pixel apart.
+    middle_along = np.arange(clear, length - clear + 1e-9, 1.0)
+    if not len(middle_along):
+        return True
+    before = np.arange(0.0, clear, 1.0)
+    after = np.arange(middle_along[-1] + 1.0, length + 1e-9, 1.0)
+    along = np.concatenate([before, middle_along, after])
+    middle = np.zeros(len(along), bool)
+    middle[len(before) : len(before) + len(middle_along)] = True
+    samples = points[0] + along[:, None] * ((points[1] - points[0]) / length)
+    widths = _distance_at(samples[:, 0], samples[:, 1], distance).astype(np.float64)
+    at = int(np.flatnonzero(middle)[np.argmin(widths[middle])])
+    narrowest = widths[at]
+    if narrowest >= level:
+        return False
+    # The longest run of readings keeping the level: the stretch the strands touch along.
+    keeps = np.concatenate([[False], widths >= level, [False]])
+    starts, stops = np.flatnonzero(~keeps[:-1] & keeps[1:]), np.flatnonzero(keeps[:-1] & ~keeps[1:])
+    if not len(starts) or float((along[stops - 1] - along[starts]).max()) < touch:
+        return True
+    wider = narrowest + 1.0
+    return bool(widths[:at].max(initial=0.0) > wider and widths[at + 1 :].max(initial=0.0) > wider)
 
 
 def _narrowest(

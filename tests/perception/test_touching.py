@@ -106,6 +106,52 @@ def test_four_ends_in_the_notches_of_strands_parting_at_a_shallow_angle_pair_by_
     assert sorted(tuple(sorted(pair)) for pair in split.pairs) == [(1, 5), (3, 7)]
 
 
+def test_four_ends_where_strands_part_slowly_past_the_middle_pair_by_side():
+    """Two strands touching for 30 px part at 4 degrees on the right, and the junction's
+    right ends lie 45 px on, where they have just parted: the notch between the strands
+    narrows the mask from there inwards over more than the ends' clearance, into the
+    middle the stretch is judged on. The mask narrows on towards the notch and never
+    widens again, as a crossing's does past its middle, so it is the parting's
+    narrowing (doubled_back 400158, 400267: a bulb opening slowly from its neck): each
+    strand keeps its side."""
+    upper = [(20, 40), (100, 96), (130, 96), (250, 88)]
+    lower = [(20, 160), (100, 104), (130, 104), (250, 112)]
+    mask = touching_strands_mask(upper, lower, shape=(200, 280))
+    arms = [
+        [(20, 40), (60, 68), (94, 92)],
+        [(20, 160), (60, 132), (94, 108)],
+        [(250, 88), (210, 91), (175, 94)],
+        [(250, 112), (210, 109), (175, 106)],
+    ]
+    pieces, positions, directions, labels, distance = _four_arms(mask, arms)
+    profile = distance[100, 94:176]
+    narrowest = int(np.argmin(profile[27:55])) + 27  # the middle third
+    assert profile[narrowest] < 0.75 * profile.max()  # narrower than touching strands
+    assert profile[narrowest:].max() <= profile[narrowest] + 1.0  # and never wider past it
+    split = split_touching_strands(pieces, positions, directions, labels, distance)
+    assert sorted(tuple(sorted(pair)) for pair in split.pairs) == [(1, 5), (3, 7)]
+
+
+@pytest.mark.parametrize("seed", [400158, 400267])
+def test_a_doubled_back_bulb_opening_slowly_from_its_neck_keeps_each_strands_side(seed):
+    """A doubled-back cable's two strands touch just below its bulb and part slowly into
+    it: the junction zone takes the stretch whole, and its four ends were paired straight
+    across, the chain crossing its own stretch a pixel outside tolerance."""
+    score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
+    assert score.frame.correct
+
+
+@pytest.mark.parametrize(("family", "seed"), [("many", 86102), ("loops", 94112)])
+def test_a_thin_cables_wide_crossing_is_no_parting_touching_stretch(family, seed):
+    """A loop of a thin cable (radius 3.2, 4.4 px) crossing itself at a wide angle: pixel
+    rounding puts the X's middle near 0.9 of the two strands, and the mask narrows from
+    there into the notches between its arms as a slow parting's does. It keeps 3/4 of the
+    two for 0-2 px, not over a cable's width as touching strands do: a crossing still
+    (read as a parting, the loop turned back at it, a visible stretch off tolerance)."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.correct
+
+
 def test_four_ends_of_a_shallow_crossing_are_left_to_the_crossing():
     """Two cables crossing at 23 degrees: the same four arms, but the mask narrows to
     one cable's width where they cross, so the junction is left as it is."""
