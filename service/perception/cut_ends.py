@@ -336,6 +336,28 @@ def short_piece_cut(
     return None if found is None else found[1:]
 
 
+SLIVER_SHARE = 1.0 - WIDTH_AGREES
+"""A short piece narrower than this share of the strand it is joined to is no section of
+that cable (:data:`WIDTH_AGREES`): a sliver of the cut's corner."""
+
+
+def _strand_of_sliver(k: int, short, ends: list, through: dict[int, int]) -> int | None:
+    """For the bridging end ``k`` of a short piece (``short``: its points and half width,
+    px), the end of the strand it is a sliver of, or None.
+
+    A thick cable cut at a slant leaves a wedge that thinning forks: the strand's
+    skeleton ends at the fork, and a sliver runs on into each of the cut's corners,
+    a half width and more off the cable's middle. The sliver whose far end the junction
+    pairing joins to the strand carries the gap's join; its own middle is the corner's,
+    not the cable's. So where the piece is narrower than :data:`SLIVER_SHARE` of the
+    strand's half width, the strand's end (``through[k ^ 1]``: the piece's other end's
+    partner in its junction) is where the cut is traced from."""
+    partner = through.get(k ^ 1)
+    if partner is None or not short[1] or not ends[partner].width:
+        return None
+    return partner if short[1] < SLIVER_SHARE * ends[partner].width else None
+
+
 def bridges_from_the_cuts(
     ends: list,
     joins: list[tuple[int, int, float]],
@@ -378,6 +400,11 @@ def bridges_from_the_cuts(
         the joins where at least one end was traced.
     """
     bridges = {}
+    # Each end joined through a junction, to its partner there.
+    through = {}
+    for i, j, _ in joins:
+        if junction_of_end[i] >= 0 and junction_of_end[j] >= 0:
+            through[i], through[j] = j, i
     for i, j, _ in joins:
         if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
             continue
@@ -388,6 +415,23 @@ def bridges_from_the_cuts(
         for k in (i, j):
             end = ends[k]
             short = short_pieces.get(k) if short_pieces else None
+            strand = _strand_of_sliver(k, short, ends, through) if short is not None else None
+            if strand is not None:
+                # A sliver in the cut's corner, joined through the fork thinning makes
+                # there to the strand it cuts off: the cable passes out of sight where
+                # the strand's middle line, traced on across the fork, reaches the cut.
+                half_width = (ends[strand].width or radius) + 0.5
+                reach = float(
+                    np.hypot(*(np.asarray(short[0], np.float64) - ends[strand].position).T).max()
+                )
+                limit = ends[strand].skip + reach + REACH_PAST_SKIP_RADII * half_width + 2.0
+                found = end_at_the_cut(mask, ends[strand], half_width, limit, carry=False)
+                short = None if found is None else short
+                if found is not None:
+                    traced.append(True)
+                    cuts.append(found[1:])
+                    seen.append(False)
+                    continue
             if short is not None:
                 half_width = (short[1] or radius) + 0.5
                 found = (
