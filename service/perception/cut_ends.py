@@ -385,7 +385,9 @@ def bridges_from_the_cuts(
     though their ends are in ``given``, where both ends reach a cut. An end in
     ``short_pieces`` (end index -> its short piece's points and half width, px: a piece
     bridged along its partners' line) starts at the cut traced from its piece's middle
-    (:func:`short_piece_cut`), with no seen stretch drawn: its piece ends at its tip.
+    (:func:`short_piece_cut`), with no seen stretch drawn: its piece ends at its tip; or,
+    a sliver of a slanted cut's corner joined through the fork to its strand, at the cut
+    traced from the strand's end (:func:`_strand_of_sliver`).
     A cable whose half width is under :data:`CUT_NARROWING_PX` (a sliver of a short
     piece, a thin cable of a photograph) is not traced: the narrowing that marks a cut
     would be half its section and more, each border's pixel rounding alone reads as one,
@@ -420,13 +422,17 @@ def bridges_from_the_cuts(
                 # A sliver in the cut's corner, joined through the fork thinning makes
                 # there to the strand it cuts off: the cable passes out of sight where
                 # the strand's middle line, traced on across the fork, reaches the cut.
+                # Traced as far as the sliver reaches and past it as for any end; not
+                # carried on across the slant (the wedge's fork is no straight border).
+                # No cut found from the strand: the sliver's middle, the corner's, is no
+                # better a start than its tip, which the end keeps.
                 half_width = (ends[strand].width or radius) + 0.5
                 reach = float(
                     np.hypot(*(np.asarray(short[0], np.float64) - ends[strand].position).T).max()
                 )
                 limit = ends[strand].skip + reach + REACH_PAST_SKIP_RADII * half_width + 2.0
                 found = end_at_the_cut(mask, ends[strand], half_width, limit, carry=False)
-                short = None if found is None else short
+                short = None
                 if found is not None:
                     traced.append(True)
                     cuts.append(found[1:])
