@@ -336,6 +336,10 @@ def short_piece_cut(
     return None if found is None else found[1:]
 
 
+FORK_ENDS = 3
+"""The most ends a junction thinning forks in a cut's wedge holds: the strand's and a
+sliver running into each corner. A crossing's holds four, its strands' pieces on either
+side: a short piece there is a stretch of the other strand, narrowed by a cut, not a sliver."""
 SLIVER_SHARE = 1.0 - WIDTH_AGREES
 """A short piece narrower than this share of the strand it is joined to is no section of
 that cable (:data:`WIDTH_AGREES`): a sliver of the cut's corner."""
@@ -351,7 +355,8 @@ def _strand_of_sliver(k: int, short, ends: list, through: dict[int, int]) -> int
     pairing joins to the strand carries the gap's join; its own middle is the corner's,
     not the cable's. So where the piece is narrower than :data:`SLIVER_SHARE` of the
     strand's half width, the strand's end (``through[k ^ 1]``: the piece's other end's
-    partner in its junction) is where the cut is traced from."""
+    partner in its junction, a fork of at most :data:`FORK_ENDS` ends) is where the cut is
+    traced from."""
     partner = through.get(k ^ 1)
     if partner is None or not short[1] or not ends[partner].width:
         return None
@@ -402,10 +407,19 @@ def bridges_from_the_cuts(
         the joins where at least one end was traced.
     """
     bridges = {}
-    # Each end joined through a junction, to its partner there.
+    # Each end joined through a fork's junction (at most three ends: a strand and the
+    # slivers of a cut's wedge; a crossing holds four), to its partner there.
+    junctions, ends_at = np.unique(
+        [junction for junction in junction_of_end if junction >= 0], return_counts=True
+    )
+    fork = {
+        int(junction)
+        for junction, count in zip(junctions, ends_at, strict=True)
+        if count <= FORK_ENDS
+    }
     through = {}
     for i, j, _ in joins:
-        if junction_of_end[i] >= 0 and junction_of_end[j] >= 0:
+        if junction_of_end[i] in fork and junction_of_end[j] in fork:
             through[i], through[j] = j, i
     for i, j, _ in joins:
         if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
