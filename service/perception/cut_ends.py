@@ -336,6 +336,33 @@ def short_piece_cut(
     return None if found is None else found[1:]
 
 
+FORK_ENDS = 3
+"""The most ends a junction thinning forks in a cut's wedge holds: the strand's and a
+sliver running into each corner. A crossing's holds four, its strands' pieces on either
+side: a short piece there is a stretch of the other strand, narrowed by a cut, not a sliver."""
+SLIVER_SHARE = 1.0 - WIDTH_AGREES
+"""A short piece narrower than this share of the strand it is joined to is no section of
+that cable (:data:`WIDTH_AGREES`): a sliver of the cut's corner."""
+
+
+def _strand_of_sliver(k: int, short, ends: list, through: dict[int, int]) -> int | None:
+    """For the bridging end ``k`` of a short piece (``short``: its points and half width,
+    px), the end of the strand it is a sliver of, or None.
+
+    A thick cable cut at a slant leaves a wedge that thinning forks: the strand's
+    skeleton ends at the fork, and a sliver runs on into each of the cut's corners,
+    a half width and more off the cable's middle. The sliver whose far end the junction
+    pairing joins to the strand carries the gap's join; its own middle is the corner's,
+    not the cable's. So where the piece is narrower than :data:`SLIVER_SHARE` of the
+    strand's half width, the strand's end (``through[k ^ 1]``: the piece's other end's
+    partner in its junction, a fork of at most :data:`FORK_ENDS` ends) is where the cut is
+    traced from."""
+    partner = through.get(k ^ 1)
+    if partner is None or not short[1] or not ends[partner].width:
+        return None
+    return partner if short[1] < SLIVER_SHARE * ends[partner].width else None
+
+
 def bridges_from_the_cuts(
     ends: list,
     joins: list[tuple[int, int, float]],
@@ -363,7 +390,9 @@ def bridges_from_the_cuts(
     though their ends are in ``given``, where both ends reach a cut. An end in
     ``short_pieces`` (end index -> its short piece's points and half width, px: a piece
     bridged along its partners' line) starts at the cut traced from its piece's middle
-    (:func:`short_piece_cut`), with no seen stretch drawn: its piece ends at its tip.
+    (:func:`short_piece_cut`), with no seen stretch drawn: its piece ends at its tip; or,
+    a sliver of a slanted cut's corner joined through the fork to its strand, at the cut
+    traced from the strand's end (:func:`_strand_of_sliver`).
     A cable whose half width is under :data:`CUT_NARROWING_PX` (a sliver of a short
     piece, a thin cable of a photograph) is not traced: the narrowing that marks a cut
     would be half its section and more, each border's pixel rounding alone reads as one,
@@ -378,6 +407,20 @@ def bridges_from_the_cuts(
         the joins where at least one end was traced.
     """
     bridges = {}
+    # Each end joined through a fork's junction (at most three ends: a strand and the
+    # slivers of a cut's wedge; a crossing holds four), to its partner there.
+    junctions, ends_at = np.unique(
+        [junction for junction in junction_of_end if junction >= 0], return_counts=True
+    )
+    fork = {
+        int(junction)
+        for junction, count in zip(junctions, ends_at, strict=True)
+        if count <= FORK_ENDS
+    }
+    through = {}
+    for i, j, _ in joins:
+        if junction_of_end[i] in fork and junction_of_end[j] in fork:
+            through[i], through[j] = j, i
     for i, j, _ in joins:
         if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
             continue
@@ -388,6 +431,27 @@ def bridges_from_the_cuts(
         for k in (i, j):
             end = ends[k]
             short = short_pieces.get(k) if short_pieces else None
+            strand = _strand_of_sliver(k, short, ends, through) if short is not None else None
+            if strand is not None:
+                # A sliver in the cut's corner, joined through the fork thinning makes
+                # there to the strand it cuts off: the cable passes out of sight where
+                # the strand's middle line, traced on across the fork, reaches the cut.
+                # Traced as far as the sliver reaches and past it as for any end; not
+                # carried on across the slant (the wedge's fork is no straight border).
+                # No cut found from the strand: the sliver's middle, the corner's, is no
+                # better a start than its tip, which the end keeps.
+                half_width = (ends[strand].width or radius) + 0.5
+                reach = float(
+                    np.hypot(*(np.asarray(short[0], np.float64) - ends[strand].position).T).max()
+                )
+                limit = ends[strand].skip + reach + REACH_PAST_SKIP_RADII * half_width + 2.0
+                found = end_at_the_cut(mask, ends[strand], half_width, limit, carry=False)
+                short = None
+                if found is not None:
+                    traced.append(True)
+                    cuts.append(found[1:])
+                    seen.append(False)
+                    continue
             if short is not None:
                 half_width = (short[1] or radius) + 0.5
                 found = (

@@ -699,7 +699,8 @@ def merge_chains(
     if distance is not None and zones is not None:
         ends = widths_clear_of_crossings(pieces, ends, distance, zones, at_crossing, MIDDLE_JOINTS)
     if mask is not None:
-        ends = ends_of_stubs(pieces, ends, mask, radius)  # a stub's skeleton runs across it
+        # A stub's skeleton runs across it, and reads it narrow.
+        ends = ends_of_stubs(pieces, ends, mask, radius, distance)
     check(deadline, "merging")
     # Every end's position and direction as arrays, once (until touching strands split).
     end_positions = np.array([end.position for end in ends], np.float64).reshape(-1, 2)

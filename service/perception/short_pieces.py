@@ -28,7 +28,13 @@ from service.perception.geometry import polyline_length
 SIDE_DIRECTIONS = 90
 
 
-def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius: float) -> list:
+def ends_of_stubs(
+    pieces: list[np.ndarray],
+    ends: list,
+    mask: np.ndarray,
+    radius: float,
+    distance: np.ndarray | None = None,
+) -> list:
     """``ends`` with those of every isolated stub read from the stub's sides.
 
     A stub is a piece whose skeleton is shorter than twice the cable's full width
@@ -41,6 +47,12 @@ def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius
     where its middle line (the line along that direction through the blob's centre)
     leaves the blob; the start end points back along the skeleton's first-to-last
     joint, as before. Their curvature is 0: a stub shows no bend.
+
+    With ``distance`` (the mask's distance transform), a stub's ends also take the
+    half width of its widest joint, tips included, where that is wider than the median
+    they read (:func:`stub_width`): its two or three joints lie where thinning bends
+    the axis into the cuts' corners, and their median reads the cable a quarter to a
+    half too narrow to look like the rest of it (:func:`.appearance.ends_alike`).
 
     Parameters
     ----------
@@ -85,6 +97,10 @@ def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius
             continue  # another piece's blob too: a crossing or a touching cable
         if blob[0].any() or blob[-1].any() or blob[:, 0].any() or blob[:, -1].any():
             continue  # runs on beyond the window: no stub
+        if distance is not None:
+            width_now = stub_width(pieces[piece], distance, ends[2 * piece].width)
+            for index in (2 * piece, 2 * piece + 1):
+                adjusted[index] = replace(adjusted[index], width=width_now)
         ys, xs = np.nonzero(blob)
         pixels = np.stack([xs + x0, ys + y0], axis=1).astype(np.float64)
         axis = _side_direction(pixels, full_width)
@@ -100,7 +116,7 @@ def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius
         if not on_line.any():
             continue
         first, last = float(along[on_line].min()), float(along[on_line].max())
-        start, end = ends[2 * piece], ends[2 * piece + 1]
+        start, end = adjusted[2 * piece], adjusted[2 * piece + 1]
         adjusted[2 * piece] = replace(
             start, position=middle + first * axis, direction=-axis, curvature=0.0
         )
@@ -108,6 +124,22 @@ def ends_of_stubs(pieces: list[np.ndarray], ends: list, mask: np.ndarray, radius
             end, position=middle + last * axis, direction=axis.copy(), curvature=0.0
         )
     return adjusted
+
+
+def stub_width(points: np.ndarray, distance: np.ndarray, median: float) -> float:
+    """The half width of a stub (``points``, its joints, whose blob is its own): the
+    larger of its ``median`` and its widest joint's ``distance`` (the mask's distance
+    transform), tips included.
+
+    A cut only ever narrows a cable, and a blob that is the stub's own holds no other
+    cable or crossing to widen it: no joint reads wider than the cable (the distance
+    transform is at most the half width anywhere on it), and the widest reads it to
+    within a pixel's rounding. Between two cuts less than two widths apart, every joint
+    but one or two lies where a cut narrows the section."""
+    height, width = distance.shape[:2]
+    joints = np.rint(np.asarray(points, np.float64)).astype(np.int64)
+    values = distance[joints[:, 1].clip(0, height - 1), joints[:, 0].clip(0, width - 1)]
+    return max(float(median), float(values.max()))
 
 
 def _side_direction(pixels: np.ndarray, full_width: float) -> np.ndarray | None:

@@ -290,3 +290,48 @@ def test_a_cable_thinner_than_twice_the_cuts_narrowing_is_not_traced(half_width,
     if traced:
         curve = bridges[0, 1]
         assert np.abs(curve[:, 1] - 20.0).max() <= 0.5
+
+
+def _sliver_scene(sliver_width: float):
+    """A straight cable of half width 8 along y = 40, cut at a slant near x = 80 and seen
+    again from x = 120: its strand's skeleton ends at the fork thinning makes in the
+    cut's wedge (x = 70), a sliver of ``sliver_width`` runs from there into the cut's
+    upper corner (7 px off the middle), joined to the strand through the fork's junction
+    and across the gap to the far piece."""
+    ys, xs = np.mgrid[0:80, 0:170].astype(np.float64)
+    band = np.abs(ys - 40.0) <= 7.5
+    mask = band & (xs >= 10.0) & (xs <= 80.0 + 0.8 * (ys - 40.0))
+    mask |= band & (xs >= 120.0) & (xs <= 160.0)
+    sliver = np.array([[70.0, 40.0], [78.0, 33.0]])
+    slant = (sliver[1] - sliver[0]) / np.hypot(*(sliver[1] - sliver[0]))
+    ends = [
+        ChainEnd(0, True, np.array([14.0, 40.0]), np.array([-1.0, 0.0]), 0.0, 4.0, 7.5),
+        ChainEnd(0, False, np.array([66.0, 40.0]), np.array([1.0, 0.0]), 0.0, 4.0, 7.5),
+        ChainEnd(1, True, sliver[0], -slant, 0.0, 0.0, sliver_width),
+        ChainEnd(1, False, sliver[1], slant, 0.0, 0.0, sliver_width),
+        ChainEnd(2, True, np.array([124.0, 40.0]), np.array([-1.0, 0.0]), 0.0, 4.0, 7.5),
+        ChainEnd(2, False, np.array([156.0, 40.0]), np.array([1.0, 0.0]), 0.0, 4.0, 7.5),
+    ]
+    joins = [(1, 2, 0.1), (3, 4, 0.5)]
+    junction_of_end = [-1, 0, 0, -1, -1, -1]
+    return mask, ends, joins, junction_of_end, sliver
+
+
+@pytest.mark.parametrize(("junction", "from_the_strand"), [(0, True), (-1, False)])
+def test_a_sliver_in_the_cuts_corner_is_bridged_from_its_strands_cut(junction, from_the_strand):
+    """A sliver (half width 2 against the strand's 7.5) joined to its strand through the
+    fork's junction is no section of the cable: the gap's bridge leaves from where the
+    strand's middle line, traced across the fork, reaches the cut, on the cable's
+    middle. Read from the sliver itself (joined to nothing through a junction), the cut
+    is its corner's, off the middle."""
+    mask, ends, joins, junction_of_end, sliver = _sliver_scene(2.0)
+    junction_of_end[1] = junction_of_end[2] = junction
+    bridges = bridges_from_the_cuts(
+        ends, joins, junction_of_end, mask, 7.5, frozenset(), short_pieces={3: (sliver, 2.0)}
+    )
+    curve = bridges[3, 4]
+    # The curve's first point is the sliver's tip; the bridge proper follows.
+    off_middle = np.abs(curve[1:, 1] - 40.0).max()
+    assert (off_middle <= 1.0) == from_the_strand
+    if from_the_strand:
+        assert 72.0 <= curve[1, 0] <= 80.0  # at the cut, not at the fork
