@@ -24,6 +24,15 @@ import numpy as np
 from service.perception import _merging_kernels
 from service.perception.appearance import WIDTH_AGREEMENT
 from service.perception.geometry import arc_lengths, points_along, polyline_length
+from service.perception.junction_widths import (
+    TOUCHING_MIDDLE_FRACTION,
+    distance_at,
+    middle_of_stretch,
+    narrowest,
+    narrows_between_shoulders,
+    widest,
+    widest_between,
+)
 from service.perception.strand_sides import (
     SIDE_BY_SIDE_WIDTH_FRACTION,
     end_kind,
@@ -357,7 +366,7 @@ def _split_shared_pieces(
         strands = np.mean([sum(side_widths) for side_widths in strand_widths])
         # A piece shorter than its width (a stretch a little longer than the junction
         # zones) is judged at its middle: its ends are in the zones' rims.
-        if _narrowest(points, distance, float(widths[index]), short_at_middle=True) < (
+        if narrowest(points, distance, float(widths[index]), short_at_middle=True) < (
             SIDE_BY_SIDE_WIDTH_FRACTION * strands
         ):
             continue
@@ -390,13 +399,13 @@ def _strand_widths(
     """The half widths of a junction's two other strands (ends ``side``), or None when
     one is a scrap, not a strand (:func:`_cable_wide_pair`). A strand shorter than the
     stretch is wide (``stretch_width``) that does not leave the picture is short: its
-    half width is the widest its mask gets (:func:`_widest`; the median of its few
+    half width is the widest its mask gets (:func:`widest`; the median of its few
     joints falls in the hook an object's slanted cut leaves), put in ``short_widths``
     (by piece); the others' their median (``widths``). ``beyond``: the half widths of
     the two long strands at the stretch's other junction, or None."""
     short = [_short(other, lengths, stretch_width, leaving) for other in side]
     side_widths = [
-        _widest(pieces[other // 2], distance) if is_short else float(widths[other // 2])
+        widest(pieces[other // 2], distance) if is_short else float(widths[other // 2])
         for other, is_short in zip(side, short, strict=True)
     ]
     if any(short) and not _cable_wide_pair(side_widths, short, beyond):
@@ -445,29 +454,6 @@ def _cable_wide_pair(
     return narrow > 0 and narrow >= WIDTH_AGREEMENT * wide
 
 
-def _distance_at(xs: np.ndarray, ys: np.ndarray, distance: np.ndarray) -> np.ndarray:
-    """The distance transform at the pixel nearest each point (clipped to the picture)."""
-    height, width = distance.shape
-    cols = np.clip(np.rint(xs).astype(int), 0, width - 1)
-    rows = np.clip(np.rint(ys).astype(int), 0, height - 1)
-    return distance[rows, cols]
-
-
-def _widest(points: np.ndarray, distance: np.ndarray) -> float:
-    """The largest distance transform along the piece, at every pixel of its line."""
-    points = np.asarray(points, np.float64)
-    along = arc_lengths(points)
-    xs, ys = points_along(points, along, np.arange(0.0, along[-1] + 1e-9, 1.0)).T
-    return float(_distance_at(xs, ys, distance).max())
-
-
-# Where two strands cross at angle theta, the middle of the crossing lies r / cos(theta / 2)
-# from the background, sqrt(2) r at most (a right angle; past it the other angle is the
-# acute one): sqrt(1/2) of the two strands' widths together, against all of it where
-# they touch side by side. A four-way junction's middle is held to halfway between.
-TOUCHING_MIDDLE_FRACTION = 0.5 * (1.0 + math.sqrt(0.5))
-
-
 def _touching_junction_pairs(ends, positions, directions, pieces, distance, leaving, widths):
     """The two pairs of ends to join at a four-way junction that is a touching stretch
     short enough for the junction zone to take it whole, the far ends of a pair of
@@ -481,8 +467,8 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     towards the other pair. The mask is wider somewhere on the middle third of the line
     between them than any crossing's middle (:data:`TOUCHING_MIDDLE_FRACTION` of both
     strands' widths, a short strand's the widest its mask gets: a right-angle crossing's
-    middle is wider than one cable's, :func:`_widest_between`), and along the middle
-    third of the line between them (:func:`_middle_of_stretch`) keeps both strands' widths
+    middle is wider than one cable's, :func:`widest_between`), and along the middle
+    third of the line between them (:func:`middle_of_stretch`) keeps both strands' widths
     (:data:`SIDE_BY_SIDE_WIDTH_FRACTION`, as a shared piece must): where two cables
     cross, even at a shallow angle, it narrows to one cable's there, at the crossing.
     Strands that touch all along cannot cross there, so each keeps its side:
@@ -525,7 +511,7 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
         # beside the object that cuts the strand (loops 400162).
         half_widths = np.array(
             [
-                max(float(width), _widest(pieces[end // 2], distance)) if end in short else width
+                max(float(width), widest(pieces[end // 2], distance)) if end in short else width
                 for end, width in zip(ends, half_widths.tolist(), strict=True)
             ]
         )
@@ -535,15 +521,15 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     # right-angle one's sqrt(1/2) of the two strands wide, well over a shallow crossing's
     # half (a loop's own crossing, loops 20020, 20174, 20192, 290195), so the middle is
     # held to halfway between that and touching strands' whole two widths.
-    if _widest_between(middle_a, middle_b, distance) < TOUCHING_MIDDLE_FRACTION * strands:
+    if widest_between(middle_a, middle_b, distance) < TOUCHING_MIDDLE_FRACTION * strands:
         return None
     if short and not _cut_short_pair(short, (pair_a, pair_b), pieces, distance, widths):
         return None
     line = np.array([middle_a, middle_b])
-    if _narrows_between_shoulders(
+    if narrows_between_shoulders(
         line,
         distance,
-        _middle_of_stretch(length, strands),
+        middle_of_stretch(length, strands),
         SIDE_BY_SIDE_WIDTH_FRACTION * strands,
         strands,
     ):
@@ -569,22 +555,8 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     if not short:
         return pairs, None, {}
     cut = pair_a if short <= set(pair_a) else pair_b
-    short_widths = {end // 2: _widest(pieces[end // 2], distance) for end in short}
+    short_widths = {end // 2: widest(pieces[end // 2], distance) for end in short}
     return pairs, (cut[0] ^ 1, cut[1] ^ 1), short_widths
-
-
-def _widest_between(start: np.ndarray, end: np.ndarray, distance: np.ndarray) -> float:
-    """The largest distance transform on the middle third of the line from ``start`` to
-    ``end`` (every pixel of it; the middle pixel when shorter): the crossing's middle,
-    the point of an X farthest from the background, or the touching stretch's width,
-    read where a pixel's rounding off the middle does not lose it."""
-    length = float(np.hypot(*(end - start)))
-    if length >= 3.0:
-        along = np.arange(length / 3.0, 2.0 * length / 3.0 + 1e-9, 1.0)
-    else:
-        along = np.array([0.5 * length])
-    points = start + along[:, None] * ((end - start) / max(length, 1e-9))
-    return float(_distance_at(points[:, 0], points[:, 1], distance).max())
 
 
 def _cut_short_pair(short, pairs, pieces, distance, widths) -> bool:
@@ -600,108 +572,10 @@ def _cut_short_pair(short, pairs, pieces, distance, widths) -> bool:
     other = pairs[1] if pairs[0] == cut else pairs[0]
     long = float(np.mean([widths[end // 2] for end in other]))
     for end in short:
-        own = _widest(pieces[end // 2], distance)
+        own = widest(pieces[end // 2], distance)
         if min(own, long) < WIDTH_AGREEMENT * max(own, long):
             return False
     return True
-
-
-def _middle_of_stretch(length: float, strands: float) -> float:
-    """How far clear of each end (px) the width of a stretch ``length`` px long between
-    a four-way junction's two pairs of ends is read (:func:`_touching_junction_pairs`):
-    a third of its length, and at least the two strands' half widths together
-    (``strands``).
-
-    The line runs from between one pair's ends to between the other's: at a bulb's two
-    ends it starts in the bulb's hole, and where the strands part it ends in the notch
-    between them, which narrows the mask over a few radii when they part at a shallow
-    angle (2.7 radii at 20 degrees), whether the strands touch or cross. Where two
-    cables cross, the mask is narrowest at the crossing, the middle of the line."""
-    return max(strands, length / 3.0)
-
-
-def _narrows_between_shoulders(
-    line: np.ndarray, distance: np.ndarray, clear: float, level: float, touch: float
-) -> bool:
-    """Whether the mask along ``line`` (from between one pair of a four-way junction's
-    ends to between the other's) narrows below ``level`` on its middle, ``clear`` px
-    clear of each end, as a crossing does, not as touching strands parting.
-
-    Where two cables cross, the mask is narrowest at the crossing and widens again on
-    both sides of it, where the strands lie side by side before they part; at a wide
-    angle it is as wide as ``level`` only for a pixel or two round the X's middle. Where
-    two touching strands part at a shallow angle, the notch between them narrows the
-    mask from the stretch's end inwards, over more than the ends' clearance when they
-    part slowly (a doubled-back cable's bulb opening from its neck, doubled_back 400158,
-    400267). So the narrowing is the parting's when the mask keeps ``level`` along a
-    stretch at least ``touch`` px long (the strands touching over a cable's width) and
-    the narrowest reading is not between two wider places: the mask narrows on towards
-    that end and never widens again. Wider means by more than a pixel, the distance
-    transform's own step (readings a pixel apart differ by up to ~0.7 px).
-
-    Parameters
-    ----------
-    line : ndarray
-        ``(2, 2)`` the line's two ends.
-    distance : ndarray
-        Distance transform of the mask.
-    clear : float
-        How far from each end the narrowing is looked for (px).
-    level : float
-        The width (distance transform) under which the mask narrows.
-    touch : float
-        How long (px) the mask must keep ``level`` for the strands to touch.
-
-    Returns
-    -------
-    bool
-        True also when the line is too short to leave a middle (as :func:`_narrowest`
-        reads 0 there).
-    """
-    points = np.asarray(line, np.float64)
-    length = float(np.hypot(*(points[1] - points[0])))
-    if length <= 2 * clear:
-        return True
-    # The middle sampled as :func:`_narrowest` samples it, the rest a pixel apart.
-    middle_along = np.arange(clear, length - clear + 1e-9, 1.0)
-    if not len(middle_along):
-        return True
-    before = np.arange(0.0, clear, 1.0)
-    after = np.arange(middle_along[-1] + 1.0, length + 1e-9, 1.0)
-    along = np.concatenate([before, middle_along, after])
-    middle = np.zeros(len(along), bool)
-    middle[len(before) : len(before) + len(middle_along)] = True
-    samples = points[0] + along[:, None] * ((points[1] - points[0]) / length)
-    widths = _distance_at(samples[:, 0], samples[:, 1], distance).astype(np.float64)
-    at = int(np.flatnonzero(middle)[np.argmin(widths[middle])])
-    narrowest = widths[at]
-    if narrowest >= level:
-        return False
-    # The longest run of readings keeping the level: the stretch the strands touch along.
-    keeps = np.concatenate([[False], widths >= level, [False]])
-    starts, stops = np.flatnonzero(~keeps[:-1] & keeps[1:]), np.flatnonzero(keeps[:-1] & ~keeps[1:])
-    if not len(starts) or float((along[stops - 1] - along[starts]).max()) < touch:
-        return True
-    wider = narrowest + 1.0
-    return bool(widths[:at].max(initial=0.0) > wider and widths[at + 1 :].max(initial=0.0) > wider)
-
-
-def _narrowest(
-    points: np.ndarray, distance: np.ndarray, half_width: float, short_at_middle: bool = False
-) -> float:
-    """The least distance transform along the piece (every pixel of it) half its width
-    clear of its ends; 0 when nothing is left, or with ``short_at_middle`` the distance
-    at the middle of a piece that short. (Where two cables cross, the middle of what
-    they share is where they cross, the narrowest.)"""
-    points = np.asarray(points, np.float64)
-    along = arc_lengths(points)
-    if along[-1] <= 2 * half_width:
-        if not short_at_middle or along[-1] <= 0:
-            return 0.0
-        half_width = 0.5 * float(along[-1])
-    samples = np.arange(half_width, along[-1] - half_width + 1e-9, 1.0)
-    xs, ys = points_along(points, along, samples).T
-    return float(_distance_at(xs, ys, distance).min())
 
 
 def split_where_leaving_together(
@@ -1002,7 +876,7 @@ def _crossed_along(points: np.ndarray, distance: np.ndarray, strands: list[list[
     length = float(along[-1])
     samples = np.arange(0.0, length + 1e-9, 1.0)
     xs, ys = points_along(points, along, samples).T
-    half_widths = _distance_at(xs, ys, distance).astype(np.float64)
+    half_widths = distance_at(xs, ys, distance).astype(np.float64)
     widest = max(max(side) for side in strands)
     for low, high in ((0.125, 0.375), (0.625, 0.875)):
         span = (samples >= low * length) & (samples <= high * length)
