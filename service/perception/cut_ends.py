@@ -418,7 +418,7 @@ def bridges_from_the_cuts(
         if count <= FORK_ENDS
     }
     through = {}
-    for i, j, _ in joins:
+    for i, j, _ in joins if short_pieces else ():  # only a short piece is a sliver
         if junction_of_end[i] in fork and junction_of_end[j] in fork:
             through[i], through[j] = j, i
     for i, j, _ in joins:

@@ -23,6 +23,7 @@ import numpy as np
 from service.perception import _merging_kernels
 from service.perception.appearance import SCRAP_RADII, EndColours, colour_penalty
 from service.perception.geometry import polyline_length
+from service.perception.junction_widths import distance_at
 
 # The directions tried for a stub's sides, over half a turn.
 SIDE_DIRECTIONS = 90
@@ -136,10 +137,8 @@ def stub_width(points: np.ndarray, distance: np.ndarray, median: float) -> float
     transform is at most the half width anywhere on it), and the widest reads it to
     within a pixel's rounding. Between two cuts less than two widths apart, every joint
     but one or two lies where a cut narrows the section."""
-    height, width = distance.shape[:2]
-    joints = np.rint(np.asarray(points, np.float64)).astype(np.int64)
-    values = distance[joints[:, 1].clip(0, height - 1), joints[:, 0].clip(0, width - 1)]
-    return max(float(median), float(values.max()))
+    joints = np.asarray(points, np.float64)
+    return max(float(median), float(distance_at(joints[:, 0], joints[:, 1], distance).max()))
 
 
 def _side_direction(pixels: np.ndarray, full_width: float) -> np.ndarray | None:
