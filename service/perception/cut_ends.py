@@ -336,6 +336,33 @@ def short_piece_cut(
     return None if found is None else found[1:]
 
 
+def unfitted_end_cut(
+    mask: np.ndarray, points: np.ndarray, end, half_width: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Where the cable through a piece too short for its end's fit (``points``: shorter
+    than twice the tip the fit leaves out, so the end is left at the tip with the chord
+    through the cut's hook) passes out of sight at ``end``, and its direction there.
+
+    Thinning bends the tip into the cut's corner, up to a half width off the cable's
+    middle: traced from there, the section is already narrowed and no cut is found
+    ahead, and the chord's direction is 20-30 degrees off. The piece's middle joint lies
+    on the middle line, and the joints either side of it give the cable's direction
+    there (a tip's bend does not reach it): the cut is read as a short piece's
+    (:func:`short_piece_cut`) from there, heading along that direction.
+    """
+    points = np.asarray(points, np.float64)
+    outward = points[::-1] if end.at_start else points  # ends at this end's tip
+    if len(outward) < 3:
+        return None
+    along = arc_lengths(outward)
+    k = min(max(int(np.searchsorted(along, 0.5 * along[-1])), 1), len(outward) - 2)
+    chord = outward[k + 1] - outward[k - 1]
+    if not np.hypot(*chord) > 0.0:
+        return None
+    heading = type(end)(end.piece, end.at_start, end.position, unit(chord))
+    return short_piece_cut(mask, points, heading, half_width)
+
+
 FORK_ENDS = 3
 """The most ends a junction thinning forks in a cut's wedge holds: the strand's and a
 sliver running into each corner. A crossing's holds four, its strands' pieces on either
@@ -373,6 +400,7 @@ def bridges_from_the_cuts(
     shape: str = "smooth",
     turns: frozenset[tuple[int, int]] = frozenset(),
     short_pieces: dict[int, tuple[np.ndarray, float]] | None = None,
+    unfitted: dict[int, np.ndarray] | None = None,
 ) -> dict[tuple[int, int], np.ndarray]:
     """Bridges of the gaps (joins of two ends in no junction, with no curve of their
     own in ``given``) drawn from the cuts: from each bridging end (``ends``, where the
@@ -392,7 +420,10 @@ def bridges_from_the_cuts(
     bridged along its partners' line) starts at the cut traced from its piece's middle
     (:func:`short_piece_cut`), with no seen stretch drawn: its piece ends at its tip; or,
     a sliver of a slanted cut's corner joined through the fork to its strand, at the cut
-    traced from the strand's end (:func:`_strand_of_sliver`).
+    traced from the strand's end (:func:`_strand_of_sliver`). An end in ``unfitted`` (end
+    index -> its piece's points: a piece too short for the end's fit, the end left at its
+    tip) whose own trace finds no cut starts at the cut read from its piece's middle
+    (:func:`unfitted_end_cut`), its piece ending at its tip as a short piece's.
     A cable whose half width is under :data:`CUT_NARROWING_PX` (a sliver of a short
     piece, a thin cable of a photograph) is not traced: the narrowing that marks a cut
     would be half its section and more, each border's pixel rounding alone reads as one,
@@ -469,6 +500,14 @@ def bridges_from_the_cuts(
             # Only an end whose fit left out its tip starts its bridge behind the cut.
             traceable = end.skip > 0 and half_width >= CUT_NARROWING_PX
             found = end_at_the_cut(mask, end, half_width, limit) if traceable else None
+            if found is None and traceable and unfitted and k in unfitted:
+                # The end is the tip in the cut's corner: the cut is read from the middle.
+                cut = unfitted_end_cut(mask, unfitted[k], end, half_width)
+                if cut is not None:
+                    traced.append(True)
+                    cuts.append(cut)
+                    seen.append(False)
+                    continue
             traced.append(found is not None)
             cuts.append((end.position, end.direction) if found is None else found[1:])
             seen.append(True)

@@ -913,6 +913,7 @@ def merge_chains(
                 for k, end in enumerate(bridging_ends)
                 if end is not inner_ends[k]
             },
+            _unfitted_pieces(pieces, bridging_ends, ends),
         )
         if turn_hidden is not None:
             cut_bridges = {
@@ -925,6 +926,18 @@ def merge_chains(
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])
+
+
+def _unfitted_pieces(pieces, bridging_ends, ends) -> dict[int, np.ndarray]:
+    """Per bridging end left where its chain end was (no stage moved it: no fit beyond
+    the tip the fit leaves out, :func:`.bridge_ends.bridge_from_the_fits`, and no
+    partners' line) though its fit left a tip out, its piece's points: such an end is the
+    tip, or a fit's extrapolation over it, in the cut's corner."""
+    return {
+        k: pieces[end.piece]
+        for k, end in enumerate(bridging_ends)
+        if end is ends[k] and end.skip > 0
+    }
 
 
 def _cut_turn_seen(
