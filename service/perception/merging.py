@@ -38,6 +38,7 @@ from service.perception.appearance import (
     gap_hidden,
 )
 from service.perception.bridge_ends import (
+    FIT_JOINTS,
     bridge_from_the_fits,
     ends_of_short_pieces_from_partners,
     ends_through_short_pieces,
@@ -58,7 +59,7 @@ from service.perception.gap_evidence import (
     turn_evidence,
     turn_out_of_view,
 )
-from service.perception.geometry import polyline_length
+from service.perception.geometry import arc_lengths, polyline_length
 from service.perception.pairing import Components, cheapest_pairing
 from service.perception.paths import MergedPath, assemble_paths, gap_curve
 from service.perception.short_pieces import (
@@ -929,15 +930,24 @@ def merge_chains(
 
 
 def _unfitted_pieces(pieces, bridging_ends, ends) -> dict[int, np.ndarray]:
-    """Per bridging end left where its chain end was (no stage moved it: no fit beyond
-    the tip the fit leaves out, :func:`.bridge_ends.bridge_from_the_fits`, and no
-    partners' line) though its fit left a tip out, its piece's points: such an end is the
-    tip, or a fit's extrapolation over it, in the cut's corner."""
-    return {
-        k: pieces[end.piece]
-        for k, end in enumerate(bridging_ends)
-        if end is ends[k] and end.skip > 0
-    }
+    """Per bridging end left at its tip for want of joints to fit, its piece's points.
+
+    An end whose fit left a tip out (a cut's hook) is bridged from where the fit
+    begins (:func:`.bridge_ends.bridge_from_the_fits`); on a piece with fewer than
+    :data:`.bridge_ends.FIT_JOINTS` joints past that tip no fit is made there, and no
+    later stage moves the end (a short piece joined at both ends is taken along its
+    partners' line instead): it stays at the tip, in the cut's corner, heading along the
+    chord through the hook.
+    """
+    unfitted = {}
+    for k, end in enumerate(bridging_ends):
+        if end is not ends[k] or end.skip <= 0:
+            continue
+        points = pieces[end.piece]
+        along = arc_lengths(points[::-1] if end.at_start else points)
+        if np.count_nonzero(along[-1] - along > end.skip) < FIT_JOINTS:
+            unfitted[k] = points
+    return unfitted
 
 
 def _cut_turn_seen(

@@ -11,6 +11,7 @@ from service.perception.cut_ends import (
     end_at_the_cut,
     middle_line,
     short_piece_cut,
+    unfitted_end_cut,
 )
 from service.perception.merging import ChainEnd
 from service.synthetic.families import make_family_scene
@@ -114,6 +115,43 @@ def test_a_short_pieces_cut_is_traced_from_its_middle():
     assert abs(position[1] - 30.0) <= 0.5
     assert 68.0 <= position[0] <= 71.0
     assert np.allclose(direction, [1.0, 0.0], atol=0.02)
+
+
+def test_an_end_left_at_its_tip_in_the_cuts_corner_reads_its_cut_from_the_middle():
+    """A piece too short for its end's fit (five joints, the fit's skip half of it) on a
+    loop's bend: the end is left at its tip, which thinning bent 4 px toward the cut's
+    outer corner, heading along the chord through it, 43 degrees off the cable. Traced
+    from there the section is already narrowed: no cut. Read from the piece's middle,
+    along the joints either side of it, the cut lies on the middle line, within 3 px
+    before the true cut, heading within 8 degrees of the cable."""
+    cut_angle = 0.6
+    mask = arc_mask(cut_angle)
+    angles = cut_angle - np.array([36.0, 26.0, 16.0, 6.0]) / BEND
+    points = CENTRE + BEND * np.column_stack([np.cos(angles), np.sin(angles)])
+    corner = cut_angle - 1.0 / BEND
+    tip = CENTRE + (BEND + 0.8 * HALF_WIDTH) * np.array([np.cos(corner), np.sin(corner)])
+    points = np.vstack([points, tip])
+    chord = (points[-1] - points[-2]) / np.hypot(*(points[-1] - points[-2]))
+    end = ChainEnd(0, False, tip, chord, 0.0, 20.0, HALF_WIDTH - 0.5)
+    tangent = np.array([-np.sin(cut_angle), np.cos(cut_angle)])
+    assert angle_deg(chord, tangent) > 40.0
+    assert end_at_the_cut(mask, end, HALF_WIDTH, 20.0 + 2 * HALF_WIDTH + 2.0) is None
+    found = unfitted_end_cut(mask, points, end, HALF_WIDTH)
+    assert found is not None
+    position, direction = found
+    cut = CENTRE + BEND * np.array([np.cos(cut_angle), np.sin(cut_angle)])
+    assert abs(np.hypot(*(position - CENTRE)) - BEND) <= 1.0
+    assert np.hypot(*(position - cut)) <= 3.0
+    assert angle_deg(direction, tangent) <= 8.0
+
+
+@pytest.mark.parametrize("seed", [400233, 410254])
+def test_a_loops_turn_from_an_end_left_at_its_tip_is_bridged_from_its_pieces_middle(seed):
+    """Loops 400233 and 410254 (tuning blocks): a five-joint piece between the loop's
+    crossing and the object, its end left at its tip 4-5 px off the middle and 24-27
+    degrees off; bridged from the cut read from its middle, the hidden turn is covered."""
+    score, _ = evaluate_scene(make_family_scene("loops", seed), seed, mask_from_labels=True)
+    assert score.frame.correct
 
 
 def slanted_cut_mask() -> np.ndarray:
