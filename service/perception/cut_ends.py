@@ -339,13 +339,14 @@ def short_piece_cut(
 def unfitted_end_cut(
     mask: np.ndarray, points: np.ndarray, end, half_width: float
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """Where the cable through a piece too short for its end's fit (``points``: shorter
-    than twice the tip the fit leaves out, so the end is left at the tip with the chord
-    through the cut's hook) passes out of sight at ``end``, and its direction there.
+    """Where the cable through a piece too short for its end's fit (``points``: fewer
+    joints past the tip the fit leaves out than the fit needs, so the end is left at the
+    tip with the chord through the cut's hook) passes out of sight at ``end``, and its
+    direction there.
 
     Thinning bends the tip into the cut's corner, up to a half width off the cable's
     middle: traced from there, the section is already narrowed and no cut is found
-    ahead, and the chord's direction is 20-30 degrees off. The piece's middle joint lies
+    ahead, and the chord's direction is 20-45 degrees off. The piece's middle joint lies
     on the middle line, and the joints either side of it give the cable's direction
     there (a tip's bend does not reach it): the cut is read as a short piece's
     (:func:`short_piece_cut`) from there, heading along that direction.
