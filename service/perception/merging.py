@@ -926,8 +926,7 @@ def merge_chains(
                 if not _cut_turn_seen(pair, curve, turn_bridges, wide_turns, turn_hidden)
             }
         # A bridge from the cuts that folds tighter than the cable's own half width is no
-        # cable's path (misread cuts swing it round on itself): the join keeps the
-        # turn's curve, or the gap's curve from the ends' fits.
+        # cable's path (misread cuts swing it round on itself): the turn's curve stays.
         cut_bridges = {
             pair: curve
             for pair, curve in cut_bridges.items()
@@ -975,19 +974,18 @@ def _cut_turn_folds(
     turn_bridges: dict[tuple[int, int], np.ndarray],
     half_width: float,
 ) -> bool:
-    """Whether the bridge from the traced cuts of a join (``pair``) bends, anywhere over a
-    stretch one half width long, tighter than the cable's half width ``half_width``: then
-    the join is bridged as it was before the cuts were read, along the turn pass's curve
-    (``turn_bridges[pair]``) where that bends as a cable does
-    (:func:`.turn_joins.bends_as_a_cable`), or, for a join the turn pass did not make,
-    along the gap's curve between the ends' fits.
+    """Whether the bridge from the traced cuts of a turn the turn pass joined (``pair``,
+    its curve ``turn_bridges[pair]``) bends, anywhere over a stretch one half width long,
+    tighter than the cable's half width ``half_width``, while the turn's own curve bends
+    as a cable does (:func:`.turn_joins.bends_as_a_cable`).
 
     A centreline bent tighter than the cable's half width folds the cable's inner side
     on itself: no cable lies so, whatever its stiffness. Such a bridge comes from cuts
-    whose positions or directions were misread (a hook in the cut's corner, a wedge a
-    slanted border leaves): the spiral or cubic between them swings round on itself."""
+    whose directions were misread (a hook in the cut's corner, a wedge a slanted border
+    leaves): the spiral or cubic between them swings round on itself. The turn pass's
+    curve, which the evidence found hidden, is kept then."""
+    if pair not in turn_bridges:
+        return False
     if tightest_bend(curve, half_width) >= half_width:
         return False
-    if pair not in turn_bridges:
-        return True
     return bends_as_a_cable(turn_bridges[pair], half_width)
