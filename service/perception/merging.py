@@ -76,12 +76,7 @@ from service.perception.touching import (
 )
 from service.perception.touching_ends import keep_turns_free
 from service.perception.traced_cuts import traced_cut_tests
-from service.perception.turn_joins import (
-    HIDDEN_BEND_RADII,
-    bends_as_a_cable,
-    tightest_bend,
-    turn_joins,
-)
+from service.perception.turn_joins import HIDDEN_BEND_RADII, turn_joins
 
 # An end whose cable runs on along its direction, within this many radii plus
 # BORDER_REACH_PX, to the picture's border (or within BORDER_MARGIN_PX of it) is a cable
@@ -925,13 +920,6 @@ def merge_chains(
                 for pair, curve in cut_bridges.items()
                 if not _cut_turn_seen(pair, curve, turn_bridges, wide_turns, turn_hidden)
             }
-        # A bridge from the cuts that folds tighter than the cable's own half width is no
-        # cable's path (misread cuts swing it round on itself): the turn's curve stays.
-        cut_bridges = {
-            pair: curve
-            for pair, curve in cut_bridges.items()
-            if not _cut_turn_folds(pair, curve, turn_bridges, _half_width(ends, pair, radius))
-        }
         bridges = {**bridges, **cut_bridges}
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
@@ -959,33 +947,3 @@ def _cut_turn_seen(
         return False
     i, j = pair
     return hidden_all_along(i, j, turn_bridges[pair]) and not hidden_all_along(i, j, curve)
-
-
-def _half_width(ends: list[ChainEnd], pair: tuple[int, int], radius: float) -> float:
-    """The half width (px) of the cable a join ``pair`` bridges: its two ends' mean, or
-    the picture's typical ``radius`` where neither end's is known."""
-    i, j = pair
-    return 0.5 * (ends[i].width + ends[j].width) or radius
-
-
-def _cut_turn_folds(
-    pair: tuple[int, int],
-    curve: np.ndarray,
-    turn_bridges: dict[tuple[int, int], np.ndarray],
-    half_width: float,
-) -> bool:
-    """Whether the bridge from the traced cuts of a turn the turn pass joined (``pair``,
-    its curve ``turn_bridges[pair]``) bends, anywhere over a stretch one half width long,
-    tighter than the cable's half width ``half_width``, while the turn's own curve bends
-    as a cable does (:func:`.turn_joins.bends_as_a_cable`).
-
-    A centreline bent tighter than the cable's half width folds the cable's inner side
-    on itself: no cable lies so, whatever its stiffness. Such a bridge comes from cuts
-    whose directions were misread (a hook in the cut's corner, a wedge a slanted border
-    leaves): the spiral or cubic between them swings round on itself. The turn pass's
-    curve, which the evidence found hidden, is kept then."""
-    if pair not in turn_bridges:
-        return False
-    if tightest_bend(curve, half_width) >= half_width:
-        return False
-    return bends_as_a_cable(turn_bridges[pair], half_width)
