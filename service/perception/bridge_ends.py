@@ -410,6 +410,7 @@ def ends_through_short_pieces(
     joins: list[tuple[int, int, float]],
     shorter_than: float,
     junction_of_end: list[int] | None = None,
+    turns: frozenset[tuple[int, int]] = frozenset(),
 ) -> list:
     """Ends for bridging, with short pieces taken along the line between their partners.
 
@@ -437,12 +438,24 @@ def ends_through_short_pieces(
     thrown off (a partner's direction tilted by a crossing or a slanted cut) is
     outvoted. The piece's own end fit is no reading: thinning bends its ends. The
     joins themselves, and their costs, are left as they were.
+
+    A piece joined at either end by one of ``turns`` (the joins the turn pass made,
+    keyed either way round: the cable turns round out of sight there, a doubled-back
+    cable's bulb) keeps its own ends: the cable does not run from one partner to the
+    other through it, but leaves it into a turn and comes back beside it, so the line
+    between the partners (one of them the other strand's end, across the turn) is no
+    reading of its direction (doubled_back 410014: 75 degrees off).
     """
     partner = partners(len(ends), joins)
     adjusted = list(ends)
     for piece, points in enumerate(pieces):
         before, after = partner[2 * piece], partner[2 * piece + 1]
         if before < 0 or after < 0 or polyline_length(points) >= shorter_than:
+            continue
+        if any(
+            (own, partner[own]) in turns or (partner[own], own) in turns
+            for own in (2 * piece, 2 * piece + 1)
+        ):
             continue
         axis = ends[after].position - ends[before].position
         length = float(np.hypot(*axis))

@@ -882,7 +882,9 @@ def merge_chains(
         inner_ends = ends_along_straight_sides(
             pieces, inner_ends, joins, junction_of_end, mask, span, curve_given
         )
-    bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span, junction_of_end)
+    bridging_ends = ends_through_short_pieces(
+        pieces, inner_ends, joins, span, junction_of_end, frozenset(turn_bridges)
+    )
     if mask is not None:
         # A short piece's skeleton tip lies in the cut's corner: its bridges leave the
         # cable's middle at the cut instead.
