@@ -61,14 +61,20 @@ def test_a_short_piece_joined_by_a_turn_keeps_its_own_ends():
     along_partners = ends_through_short_pieces(pieces, ends, joins, 40.0)
     # Read along the partners' line, its top end points 56 degrees off the strand.
     assert abs(along_partners[2].direction[0]) > 0.5
-    kept = ends_through_short_pieces(pieces, ends, joins, 40.0, turns=frozenset({(1, 2)}))
+    gaps = [-1] * 6  # every end joined across a gap, none in a junction
+    kept = ends_through_short_pieces(pieces, ends, joins, 40.0, gaps, frozenset({(1, 2)}))
     assert kept[2] is ends[2] and kept[3] is ends[3]
     np.testing.assert_allclose(kept[2].direction, [0.0, -1.0], atol=1e-6)
     # Keyed the other way round, the same.
     assert (
-        ends_through_short_pieces(pieces, ends, joins, 40.0, turns=frozenset({(2, 1)}))[2]
+        ends_through_short_pieces(pieces, ends, joins, 40.0, gaps, frozenset({(2, 1)}))[2]
         is ends[2]
     )
+    # Joined through a crossing below (its lower end and its partner in one junction),
+    # the piece keeps the middle of three readings, which follows a loop's bend.
+    crossing = [-1, -1, -1, 0, 0, -1]
+    beside = ends_through_short_pieces(pieces, ends, joins, 40.0, crossing, frozenset({(1, 2)}))
+    assert beside[2] is not ends[2]
 
 
 @pytest.mark.parametrize("seed", [410014, 410099, 410278])
