@@ -410,6 +410,7 @@ def ends_through_short_pieces(
     joins: list[tuple[int, int, float]],
     shorter_than: float,
     junction_of_end: list[int] | None = None,
+    turns: frozenset[tuple[int, int]] = frozenset(),
 ) -> list:
     """Ends for bridging, with short pieces taken along the line between their partners.
 
@@ -437,12 +438,33 @@ def ends_through_short_pieces(
     thrown off (a partner's direction tilted by a crossing or a slanted cut) is
     outvoted. The piece's own end fit is no reading: thinning bends its ends. The
     joins themselves, and their costs, are left as they were.
+
+    A piece joined across gaps at both ends (a stretch seen between two objects, or
+    between where two strands part and an object), one of them one of ``turns`` (the
+    joins the turn pass made, keyed either way round: the cable turns round out of sight
+    there, a doubled-back cable's bulb), keeps its own ends: the cable does not run from
+    one partner to the other through it, but leaves it into a turn and comes back beside
+    it, so the line between the partners, or the circle through the partner across the
+    gap and both tips (one of them the other strand's end, across the turn), is no
+    reading of its direction (doubled_back 410014: 75 degrees off). A piece joined
+    through a crossing at its other end keeps the middle of three readings above, which
+    follows a loop's bend into its hidden stretch and outvotes one reading thrown off.
+    Needs ``junction_of_end``.
     """
     partner = partners(len(ends), joins)
     adjusted = list(ends)
     for piece, points in enumerate(pieces):
         before, after = partner[2 * piece], partner[2 * piece + 1]
         if before < 0 or after < 0 or polyline_length(points) >= shorter_than:
+            continue
+        if (
+            junction_of_end is not None
+            and _gaps_on_both_sides(2 * piece, 2 * piece + 1, partner, junction_of_end)
+            and any(
+                (own, partner[own]) in turns or (partner[own], own) in turns
+                for own in (2 * piece, 2 * piece + 1)
+            )
+        ):
             continue
         axis = ends[after].position - ends[before].position
         length = float(np.hypot(*axis))

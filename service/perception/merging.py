@@ -833,6 +833,7 @@ def merge_chains(
     )
     turn_bridges: dict[tuple[int, int], np.ndarray] = {}
     turn_hidden = None
+    turn_pairs: frozenset[tuple[int, int]] = frozenset()
     if hidden_gap is not None and params.expected_count is None and ends:
         # Sharp turns under an object, on the image's evidence (:mod:`.turn_joins`); a
         # scrap joined through its crossing is judged as the strand it continues.
@@ -849,7 +850,7 @@ def merge_chains(
         widths = np.array([end.width for end in seen], np.float64)
         judged = evidence_ends(seen, ends, seen_from)
         turn_hidden = turn_out_of_view(image, mask, seen, radius)
-        joins = joins + turn_joins(
+        turned = turn_joins(
             seen,
             joins,
             ~leaving & ~np.isin([end.piece for end in ends], sorted(dropped)),
@@ -869,6 +870,8 @@ def merge_chains(
             TURN_EVIDENCE_ALONG_CURVE,
             turn_hidden,
         )
+        joins = joins + turned
+        turn_pairs = frozenset((i, j) for i, j, _ in turned)
     check(deadline, "merging")
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
     bridges = {**touching.bridges, **turn_bridges}
@@ -883,7 +886,9 @@ def merge_chains(
         inner_ends = ends_along_straight_sides(
             pieces, inner_ends, joins, junction_of_end, mask, span, curve_given
         )
-    bridging_ends = ends_through_short_pieces(pieces, inner_ends, joins, span, junction_of_end)
+    bridging_ends = ends_through_short_pieces(
+        pieces, inner_ends, joins, span, junction_of_end, turn_pairs
+    )
     if mask is not None:
         # A short piece's skeleton tip lies in the cut's corner: its bridges leave the
         # cable's middle at the cut instead.

@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
+from service.evaluation.synthetic_eval import evaluate_scene
 from service.perception import bridge_ends
 from service.perception.bridge_ends import (
     bridge_from_the_fits,
@@ -17,6 +18,7 @@ from service.perception.bridge_ends import (
 from service.perception.geometry import fit_where_skipped
 from service.perception.merging import ChainEnd, chain_ends
 from service.perception.paths import assemble_paths
+from service.synthetic import make_family_scene
 from tests.perception.references import bridge_ends as reference
 
 
@@ -41,6 +43,50 @@ def test_a_short_piece_joined_on_both_sides_is_bridged_along_its_partners_line()
 
     # The piece's own tilted directions throw the bridges well off the line.
     assert worst_offset(adjusted) <= 2.5 < worst_offset(ends)
+
+
+def test_a_short_piece_joined_by_a_turn_keeps_its_own_ends():
+    # A doubled-back cable: a long strand up x = 0 turns round under an object and comes
+    # back down x = 30, where a short piece (seen between the object and where the strands
+    # meet again) is joined by the turn at its top and on to a strand below. The line
+    # between its partners runs from the other strand's end across the turn to the strand
+    # below: no reading of the short piece's direction.
+    pieces = [
+        np.array([[0.0, 100.0], [0.0, 80.0], [0.0, 60.0], [0.0, 40.0]]),
+        np.array([[30.0, 40.0], [30.0, 50.0], [30.0, 60.0]]),
+        np.array([[30.0, 80.0], [30.0, 100.0], [30.0, 120.0]]),
+    ]
+    ends = chain_ends(pieces, 40.0)
+    joins = [(1, 2, 1.1), (3, 4, 0.1)]  # the turn: strand 0's top to the short piece's top
+    along_partners = ends_through_short_pieces(pieces, ends, joins, 40.0)
+    # Read along the partners' line, its top end points 56 degrees off the strand.
+    assert abs(along_partners[2].direction[0]) > 0.5
+    gaps = [-1] * 6  # every end joined across a gap, none in a junction
+    kept = ends_through_short_pieces(pieces, ends, joins, 40.0, gaps, frozenset({(1, 2)}))
+    assert kept[2] is ends[2] and kept[3] is ends[3]
+    np.testing.assert_allclose(kept[2].direction, [0.0, -1.0], atol=1e-6)
+    # Keyed the other way round, the same.
+    assert (
+        ends_through_short_pieces(pieces, ends, joins, 40.0, gaps, frozenset({(2, 1)}))[2]
+        is ends[2]
+    )
+    # Joined through a crossing below (its lower end and its partner in one junction),
+    # the piece keeps the middle of three readings, which follows a loop's bend.
+    crossing = [-1, -1, -1, 0, 0, -1]
+    beside = ends_through_short_pieces(pieces, ends, joins, 40.0, crossing, frozenset({(1, 2)}))
+    assert beside[2] is not ends[2]
+
+
+@pytest.mark.parametrize("seed", [410014, 410099, 410278])
+def test_a_doubled_back_turn_whose_short_piece_keeps_its_own_ends_is_right(seed):
+    """Tuning scenes doubled_back 410014, 410099, 410278 (fresh block), true mask: a
+    strand's stretch between where the strands part and the object is shorter than the end
+    fit's span, joined by the turn at the object. Along its partners' line (to the other
+    strand's end across the turn) its end pointed 75-80 degrees off and the bridge from
+    the cuts left 12-22 px back from its tip, turning round on itself (7.8-25 px off the
+    hidden bend against 5.7-8.9). Its own fitted ends: the frames come out right."""
+    score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
 
 
 def test_a_short_piece_on_a_bend_is_bridged_between_its_chord_and_its_partners_line():
