@@ -941,8 +941,9 @@ def _unfitted_pieces(pieces, bridging_ends, ends) -> dict[int, np.ndarray]:
     begins (:func:`.bridge_ends.bridge_from_the_fits`); on a piece with fewer than
     :data:`.bridge_ends.FIT_JOINTS` joints past that tip no fit is made there, and no
     later stage moves the end (a short piece joined at both ends is taken along its
-    partners' line instead): it stays at the tip, in the cut's corner, heading along the
-    chord through the hook.
+    partners' line instead, unless one of its joins is a turn: then it keeps its own
+    ends, and is read here too): it stays at the tip, in the cut's corner, heading along
+    the chord through the hook.
     """
     unfitted = {}
     for k, end in enumerate(bridging_ends):
