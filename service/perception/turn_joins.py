@@ -337,6 +337,28 @@ def _likeliest_shape(
     return best
 
 
+def _seen_to_the_tips(
+    curves: Iterator[np.ndarray], first: np.ndarray, last: np.ndarray, step: float = 1.0
+) -> Iterator[np.ndarray]:
+    """Each of ``curves`` (drawn between two ends' tips) led in straight from ``first``
+    and out straight to ``last`` (where each end's fit begins, behind its tip)."""
+    for curve in curves:
+        lead = _straight(first, curve[0], step)
+        tail = _straight(curve[-1], last, step)
+        yield np.concatenate([lead, curve, tail[1:], np.asarray(last, np.float64)[None]])
+
+
+def _straight(start: np.ndarray, stop: np.ndarray, step: float) -> np.ndarray:
+    """Samples about ``step`` apart from ``start`` up to (not including) ``stop``."""
+    start = np.asarray(start, np.float64)
+    offset = np.asarray(stop, np.float64) - start
+    length = float(np.hypot(*offset))
+    if length < 1e-9:
+        return start[None][:0]
+    along = np.arange(0.0, length, step)
+    return start + np.outer(along / length, offset)
+
+
 def _cached(curves: Iterator[np.ndarray], tried: list[np.ndarray]) -> Iterator[np.ndarray]:
     """The curves in ``tried``, then the rest of ``curves``, each kept in ``tried``: the
     curves are drawn lazily and once, however many tests ask for them."""
@@ -589,12 +611,10 @@ def turn_joins(
         # From where each end's fit begins: over a cut's hook the fit's extrapolation
         # may leave the cable (the bridge starts there too,
         # :func:`.bridge_ends.bridge_from_the_fits`).
-        curves = hidden_turn_curves(
+        curves = _seen_to_the_tips(
+            hidden_turn_curves(a.position, a.direction, b.position, -b.direction, cable),
             a.position - a.skip * a.direction,
-            a.direction,
             b.position - b.skip * b.direction,
-            -b.direction,
-            cable,
         )
         # The strongest evidence any curve has picks the bridge: a curve an object
         # is seen over before the shortest one the ends' cuts allow.
