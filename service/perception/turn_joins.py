@@ -337,11 +337,42 @@ def _likeliest_shape(
     return best
 
 
-def _seen_to_the_tips(
+def _turn_leaves_at(end, distance, cable: float) -> np.ndarray:
+    """Where a turn out of sight leaves ``end``'s strand (:class:`.merging.ChainEnd`):
+    its tip, where the cable is seen straight along the fit's line all the way from
+    where the fit begins (the line keeps to the middle half of the cable, ``distance``,
+    the mask's distance transform, at least half the half width ``cable``, up to a half
+    width before the tip, where the cut's own face comes near, and to the mask up to the
+    tip); else (or without ``distance``) where the fit begins.
+
+    An end's fit leaves out its tip (``skip``: a radius at least, more over a cut's
+    hook). Where the cable is seen straight up to the tip, it runs on that far: a turn
+    drawn from where the fit begins swings out of the strand before the tip, where the
+    cable would show, and its most compact bulb falls short of the hidden turn. Where
+    the line drifts off the middle sooner, the strand bends away from its fit there
+    (into the turn, or into a cut's hook), and the turn is drawn from where the fit
+    begins, bending as the strand does."""
+    start = end.position - end.skip * end.direction
+    if distance is None or end.skip <= 0:
+        return start
+    height, width = distance.shape[:2]
+    along = np.append(np.arange(0.0, end.skip, 1.0), end.skip)
+    points = start + np.outer(along, end.direction)
+    cols, rows = np.rint(points[:, 0]).astype(np.int64), np.rint(points[:, 1]).astype(np.int64)
+    if not ((cols >= 0) & (cols < width) & (rows >= 0) & (rows < height)).all():
+        return start
+    depth = distance[rows, cols]
+    before_the_cut = along <= end.skip - cable
+    if (depth <= 0).any() or (depth[before_the_cut] < 0.5 * cable).any():
+        return start
+    return end.position
+
+
+def _led_in(
     curves: Iterator[np.ndarray], first: np.ndarray, last: np.ndarray, step: float = 1.0
 ) -> Iterator[np.ndarray]:
-    """Each of ``curves`` (drawn between two ends' tips) led in straight from ``first``
-    and out straight to ``last`` (where each end's fit begins, behind its tip)."""
+    """Each of ``curves`` led in straight from ``first`` and out straight to ``last``
+    (where the two ends' fits begin: the bridge starts there)."""
     for curve in curves:
         lead = _straight(first, curve[0], step)
         tail = _straight(curve[-1], last, step)
@@ -528,6 +559,7 @@ def turn_joins(
     bridges: dict[tuple[int, int], np.ndarray] | None = None,
     along_curve: Sequence[bool] = (True,),
     out_of_view: Callable[[int, int, np.ndarray], bool] | None = None,
+    distance: np.ndarray | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -611,10 +643,19 @@ def turn_joins(
         # From where each end's fit begins: over a cut's hook the fit's extrapolation
         # may leave the cable (the bridge starts there too,
         # :func:`.bridge_ends.bridge_from_the_fits`).
-        curves = _seen_to_the_tips(
-            hidden_turn_curves(a.position, a.direction, b.position, -b.direction, cable),
-            a.position - a.skip * a.direction,
-            b.position - b.skip * b.direction,
+        # From each end's tip where the fit's line is seen all the way there, else
+        # from where the fit begins (:func:`_turn_leaves_at`).
+        a_from, b_from = a.position - a.skip * a.direction, b.position - b.skip * b.direction
+        curves = _led_in(
+            hidden_turn_curves(
+                _turn_leaves_at(a, distance, cable),
+                a.direction,
+                _turn_leaves_at(b, distance, cable),
+                -b.direction,
+                cable,
+            ),
+            a_from,
+            b_from,
         )
         # The strongest evidence any curve has picks the bridge: a curve an object
         # is seen over before the shortest one the ends' cuts allow.
