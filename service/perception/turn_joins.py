@@ -75,6 +75,9 @@ BULB_MIN_TURN = 0.5 * np.pi
 no bulbs, and no tilts, are tried for them."""
 MAX_TURN_TRIALS = 8
 """The most curves (the shortest) tried for one pair of ends."""
+PIXEL_ROUNDING = 1.0
+"""How far (px) the mask's distance transform at a point on a cable's middle may fall
+short of its half width for the pixel grid alone (:func:`_turn_leaves_at`)."""
 KINK_SHARE = 0.75
 """A curve whose samples bend, over a stretch one cable radius long, tighter than this
 share of the tightest bend a cable takes (:data:`HIDDEN_BEND_RADII` ``[0]``) has a kink
@@ -339,19 +342,21 @@ def _likeliest_shape(
 
 def _turn_leaves_at(end, distance, cable: float) -> np.ndarray:
     """Where a turn out of sight leaves ``end``'s strand (:class:`.merging.ChainEnd`):
-    its tip, where the cable is seen straight along the fit's line all the way from
-    where the fit begins (the line keeps to the middle half of the cable, ``distance``,
-    the mask's distance transform, at least half the half width ``cable``, up to a half
-    width before the tip, where the cut's own face comes near, and to the mask up to the
-    tip); else (or without ``distance``) where the fit begins.
+    its tip, where the cable is seen whole and straight along the fit's line from where
+    the fit begins; else (or without ``distance``) where the fit begins.
 
     An end's fit leaves out its tip (``skip``: a radius at least, more over a cut's
     hook). Where the cable is seen straight up to the tip, it runs on that far: a turn
     drawn from where the fit begins swings out of the strand before the tip, where the
-    cable would show, and its most compact bulb falls short of the hidden turn. Where
-    the line drifts off the middle sooner, the strand bends away from its fit there
-    (into the turn, or into a cut's hook), and the turn is drawn from where the fit
-    begins, bending as the strand does."""
+    cable would show, and its most compact bulb falls short of the hidden turn. The
+    cable is seen whole and straight there when the mask's distance transform
+    (``distance``) along the fit's line keeps to the cable's half width ``cable`` (less
+    a pixel's rounding) up to a half width before the tip, where a square cut's own face
+    comes near, and the line stays on the mask up to the tip. Where the line drifts off
+    the middle sooner, the strand bends away from its fit (into the turn, or into a
+    cut's hook), or an object's rim has already taken one side of it (a slanted cut,
+    whose wedge of mask may run on past where the cable turns): the turn is drawn from
+    where the fit begins, as the other hidden turns."""
     start = end.position - end.skip * end.direction
     if distance is None or end.skip <= 0:
         return start
@@ -363,7 +368,7 @@ def _turn_leaves_at(end, distance, cable: float) -> np.ndarray:
         return start
     depth = distance[rows, cols]
     before_the_cut = along <= end.skip - cable
-    if (depth <= 0).any() or (depth[before_the_cut] < 0.5 * cable).any():
+    if (depth <= 0).any() or (depth[before_the_cut] < cable - PIXEL_ROUNDING).any():
         return start
     return end.position
 
