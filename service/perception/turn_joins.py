@@ -18,7 +18,9 @@ join is made here only on the image's evidence, after every other join
   cables that end side by side. The curves tried (:func:`hidden_turn_curves`) are the
   natural curve (:func:`natural_turn`) and the bulbs a cable doubled back on itself
   swings out into, turning round by up to :data:`MAX_HIDDEN_TURN` (:func:`bulb_turns`),
-  from the ends' fitted directions and from tilted ones; the join is bridged along the
+  from the ends' fitted directions and from tilted ones (from each end's tip where the
+  cable is seen whole and straight up to it, else from where its fit begins:
+  :func:`_turn_leaves_at`); the join is bridged along the
   shortest curve the strongest test passes (a curve an object is seen over before the
   shortest the ends' cuts allow), except that a turn seen on the cuts alone, its strands
   far enough apart to turn round in one arc, is bridged as any gap is (the cuts say
@@ -612,6 +614,9 @@ def turn_joins(
         Whether a cable along the curve would be hidden all the way from end ``i`` to
         end ``j`` (nowhere over open background): of the curves the first test passes
         on, the shortest such is the bridge (:func:`_likeliest_shape`).
+    distance : ndarray, optional
+        The mask's distance transform: an end whose strand it reads whole and straight
+        up to the tip has its turns drawn from there (:func:`_turn_leaves_at`).
 
     Returns
     -------
@@ -648,8 +653,9 @@ def turn_joins(
         # From where each end's fit begins: over a cut's hook the fit's extrapolation
         # may leave the cable (the bridge starts there too,
         # :func:`.bridge_ends.bridge_from_the_fits`).
-        # From each end's tip where the fit's line is seen all the way there, else
-        # from where the fit begins (:func:`_turn_leaves_at`).
+        # From each end's tip where the cable is seen whole and straight along the
+        # fit's line up to it, else from where the fit begins (:func:`_turn_leaves_at`);
+        # the bridge starts where the fits begin either way.
         a_from, b_from = a.position - a.skip * a.direction, b.position - b.skip * b.direction
         curves = _led_in(
             hidden_turn_curves(
