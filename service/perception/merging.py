@@ -869,6 +869,7 @@ def merge_chains(
             turn_bridges,
             TURN_EVIDENCE_ALONG_CURVE,
             turn_hidden,
+            distance,
         )
         joins = joins + turned
         turn_pairs = frozenset((i, j) for i, j, _ in turned)

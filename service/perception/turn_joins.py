@@ -18,7 +18,9 @@ join is made here only on the image's evidence, after every other join
   cables that end side by side. The curves tried (:func:`hidden_turn_curves`) are the
   natural curve (:func:`natural_turn`) and the bulbs a cable doubled back on itself
   swings out into, turning round by up to :data:`MAX_HIDDEN_TURN` (:func:`bulb_turns`),
-  from the ends' fitted directions and from tilted ones; the join is bridged along the
+  from the ends' fitted directions and from tilted ones (from each end's tip where the
+  cable is seen whole and straight up to it, else from where its fit begins:
+  :func:`_turn_leaves_at`); the join is bridged along the
   shortest curve the strongest test passes (a curve an object is seen over before the
   shortest the ends' cuts allow), except that a turn seen on the cuts alone, its strands
   far enough apart to turn round in one arc, is bridged as any gap is (the cuts say
@@ -75,6 +77,9 @@ BULB_MIN_TURN = 0.5 * np.pi
 no bulbs, and no tilts, are tried for them."""
 MAX_TURN_TRIALS = 8
 """The most curves (the shortest) tried for one pair of ends."""
+PIXEL_ROUNDING = 1.0
+"""How far (px) the mask's distance transform at a point on a cable's middle may fall
+short of its half width for the pixel grid alone (:func:`_turn_leaves_at`)."""
 KINK_SHARE = 0.75
 """A curve whose samples bend, over a stretch one cable radius long, tighter than this
 share of the tightest bend a cable takes (:data:`HIDDEN_BEND_RADII` ``[0]``) has a kink
@@ -337,6 +342,61 @@ def _likeliest_shape(
     return best
 
 
+def _turn_leaves_at(end, distance, cable: float) -> np.ndarray:
+    """Where a turn out of sight leaves ``end``'s strand (:class:`.merging.ChainEnd`):
+    its tip, where the cable is seen whole and straight along the fit's line from where
+    the fit begins; else (or without ``distance``) where the fit begins.
+
+    An end's fit leaves out its tip (``skip``: a radius at least, more over a cut's
+    hook). Where the cable is seen straight up to the tip, it runs on that far: a turn
+    drawn from where the fit begins swings out of the strand before the tip, where the
+    cable would show, and its most compact bulb falls short of the hidden turn. The
+    cable is seen whole and straight there when the mask's distance transform
+    (``distance``) along the fit's line keeps to the cable's half width ``cable`` (less
+    a pixel's rounding) up to a half width before the tip, where a square cut's own face
+    comes near, and the line stays on the mask up to the tip. Where the line drifts off
+    the middle sooner, the strand bends away from its fit (into the turn, or into a
+    cut's hook), or an object's rim has already taken one side of it (a slanted cut,
+    whose wedge of mask may run on past where the cable turns): the turn is drawn from
+    where the fit begins, as the other hidden turns."""
+    start = end.position - end.skip * end.direction
+    if distance is None or end.skip <= 0:
+        return start
+    height, width = distance.shape[:2]
+    along = np.append(np.arange(0.0, end.skip, 1.0), end.skip)
+    points = start + np.outer(along, end.direction)
+    cols, rows = np.rint(points[:, 0]).astype(np.int64), np.rint(points[:, 1]).astype(np.int64)
+    if not ((cols >= 0) & (cols < width) & (rows >= 0) & (rows < height)).all():
+        return start
+    depth = distance[rows, cols]
+    before_the_cut = along <= end.skip - cable
+    if (depth <= 0).any() or (depth[before_the_cut] < cable - PIXEL_ROUNDING).any():
+        return start
+    return end.position
+
+
+def _led_in(
+    curves: Iterator[np.ndarray], first: np.ndarray, last: np.ndarray, step: float = 1.0
+) -> Iterator[np.ndarray]:
+    """Each of ``curves`` led in straight from ``first`` and out straight to ``last``
+    (where the two ends' fits begin: the bridge starts there)."""
+    for curve in curves:
+        lead = _straight(first, curve[0], step)
+        tail = _straight(curve[-1], last, step)
+        yield np.concatenate([lead, curve, tail[1:], np.asarray(last, np.float64)[None]])
+
+
+def _straight(start: np.ndarray, stop: np.ndarray, step: float) -> np.ndarray:
+    """Samples about ``step`` apart from ``start`` up to (not including) ``stop``."""
+    start = np.asarray(start, np.float64)
+    offset = np.asarray(stop, np.float64) - start
+    length = float(np.hypot(*offset))
+    if length < 1e-9:
+        return start[None][:0]
+    along = np.arange(0.0, length, step)
+    return start + np.outer(along / length, offset)
+
+
 def _cached(curves: Iterator[np.ndarray], tried: list[np.ndarray]) -> Iterator[np.ndarray]:
     """The curves in ``tried``, then the rest of ``curves``, each kept in ``tried``: the
     curves are drawn lazily and once, however many tests ask for them."""
@@ -506,6 +566,7 @@ def turn_joins(
     bridges: dict[tuple[int, int], np.ndarray] | None = None,
     along_curve: Sequence[bool] = (True,),
     out_of_view: Callable[[int, int, np.ndarray], bool] | None = None,
+    distance: np.ndarray | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -553,6 +614,9 @@ def turn_joins(
         Whether a cable along the curve would be hidden all the way from end ``i`` to
         end ``j`` (nowhere over open background): of the curves the first test passes
         on, the shortest such is the bridge (:func:`_likeliest_shape`).
+    distance : ndarray, optional
+        The mask's distance transform: an end whose strand it reads whole and straight
+        up to the tip has its turns drawn from there (:func:`_turn_leaves_at`).
 
     Returns
     -------
@@ -589,12 +653,20 @@ def turn_joins(
         # From where each end's fit begins: over a cut's hook the fit's extrapolation
         # may leave the cable (the bridge starts there too,
         # :func:`.bridge_ends.bridge_from_the_fits`).
-        curves = hidden_turn_curves(
-            a.position - a.skip * a.direction,
-            a.direction,
-            b.position - b.skip * b.direction,
-            -b.direction,
-            cable,
+        # From each end's tip where the cable is seen whole and straight along the
+        # fit's line up to it, else from where the fit begins (:func:`_turn_leaves_at`);
+        # the bridge starts where the fits begin either way.
+        a_from, b_from = a.position - a.skip * a.direction, b.position - b.skip * b.direction
+        curves = _led_in(
+            hidden_turn_curves(
+                _turn_leaves_at(a, distance, cable),
+                a.direction,
+                _turn_leaves_at(b, distance, cable),
+                -b.direction,
+                cable,
+            ),
+            a_from,
+            b_from,
         )
         # The strongest evidence any curve has picks the bridge: a curve an object
         # is seen over before the shortest one the ends' cuts allow.

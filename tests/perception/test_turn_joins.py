@@ -13,6 +13,7 @@ from service.perception.gap_evidence import strands_turn_out_of_sight
 from service.perception.merging import merge_chains
 from service.perception.pairing import cheapest_pairing
 from service.perception.turn_joins import (
+    _turn_leaves_at,
     bends_as_a_cable,
     bulb_turns,
     hidden_turn_curves,
@@ -380,5 +381,41 @@ def test_a_turns_bridge_from_misread_cuts_over_open_background_gives_way_to_the_
     (17.8 px off the hidden bend against a tolerance of 7.4). The turn pass's own curve,
     under the object all the way, is the bridge instead: the frame is right."""
     seed = 330074
+    score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
+
+
+def _end(position, direction, skip):
+    return SimpleNamespace(
+        position=np.asarray(position, float), direction=np.asarray(direction, float), skip=skip
+    )
+
+
+def test_a_turn_leaves_a_strand_at_its_tip_only_where_the_cable_is_seen_straight_there():
+    """A strand 7 px wide running straight up to its cut at y = 40: its fit begins 10 px
+    before its tip (y = 52) and the strand is seen whole along the fit's line up to a half
+    width before the tip, so the turn leaves at the tip. A strand bending away from its
+    fitted line within its last 13 px: the line leaves it, and the turn leaves where the
+    fit begins; so it does without the mask's distance transform."""
+    mask = np.zeros((120, 120), np.uint8)
+    cv2.line(mask, (40, 110), (40, 41), 1, 7)
+    cv2.line(mask, (80, 110), (80, 60), 1, 7)
+    cv2.ellipse(mask, (90, 60), (10, 10), 0, 180, 250, 1, 7)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    up = [0.0, -1.0]
+    straight = _end([40.0, 42.0], up, 10.0)
+    assert np.allclose(_turn_leaves_at(straight, distance, 3.5), [40.0, 42.0])
+    bending = _end([80.0, 47.0], up, 13.0)
+    assert np.allclose(_turn_leaves_at(bending, distance, 3.5), [80.0, 60.0])
+    assert np.allclose(_turn_leaves_at(straight, None, 3.5), [40.0, 52.0])
+
+
+@pytest.mark.parametrize("seed", [410017, 410171])
+def test_a_doubled_back_cables_bulb_is_drawn_from_where_its_strands_are_last_seen(seed):
+    """Tuning scenes of the doubled_back family, true mask: two strands 2.7-3 cable radii
+    apart seen whole and straight up to an object that hides their turn. Drawn from where
+    the ends' fits begin, 7-12 px before their tips, the turn pass's most compact bulb swung
+    out of the strands before the cut and fell 7.3-14.1 px off the hidden bulb (branch
+    bulb14, docs/BENCHMARKS.md)."""
     score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
