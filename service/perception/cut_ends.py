@@ -96,6 +96,32 @@ def _recentred(plus: float, minus: float, half_width: float) -> float:
     return 0.0
 
 
+def _full_beyond(
+    mask: np.ndarray,
+    x: float,
+    y: float,
+    hx: float,
+    hy: float,
+    steps: list[float],
+    reach: float,
+    half_width: float,
+) -> bool:
+    """Whether the section a step on from ``(x, y)`` along ``(hx, hy)`` is the cable's
+    full width again: the narrowing at ``(x, y)`` was its borders' rounding, no cut.
+
+    An object's border that has begun to cut the cable takes more of it a step further
+    on (or all of it, past the middle: off the mask), never less. A cable's own border
+    is a pixel staircase: read across at a slant, each border may fall up to half a
+    pixel's diagonal (0.7 px) short, and a half width read from the skeleton a pixel
+    over the cable's leaves that within :data:`CUT_NARROWING_PX` of a single section."""
+    x, y = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
+    if not _on_mask(mask, x, y):
+        return False
+    plus = _border_distance(mask, x, y, -hy, hx, steps, reach)
+    minus = _border_distance(mask, x, y, hy, -hx, steps, reach)
+    return plus + minus >= 2.0 * half_width - CUT_NARROWING_PX
+
+
 def middle_line(
     mask: np.ndarray,
     start: np.ndarray,
@@ -150,7 +176,9 @@ def middle_line(
         if _on_mask(mask, x, y):
             plus = _border_distance(mask, x, y, nx, ny, steps, reach)
             minus = _border_distance(mask, x, y, -nx, -ny, steps, reach)
-            if plus + minus < 2.0 * half_width - CUT_NARROWING_PX:
+            if plus + minus < 2.0 * half_width - CUT_NARROWING_PX and not _full_beyond(
+                mask, x, y, hx, hy, steps, reach, half_width
+            ):
                 # The cut begins here, on one side or both: past it, what is left of
                 # the section is no longer centred on the cable.
                 return np.array(points), True, np.array(shortfall)
