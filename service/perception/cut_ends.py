@@ -311,8 +311,10 @@ def end_at_the_cut(
     # Against the sections read behind the end (the cable's own, which the half width
     # given may miss by a pixel).
     own = float(np.median(seen_shortfall[1:])) if len(seen_shortfall) > 1 else 0.0
-    narrowed = np.flatnonzero(shortfall > own + SECTION_ROUNDING_PX)
-    full = max(int(narrowed[0]) if len(narrowed) else len(ahead), 2)
+    # The cut's narrowing runs on to where the trace stopped; a narrower section
+    # before a full one is the border's rounding (:func:`_full_beyond`).
+    kept = np.flatnonzero(shortfall <= own + SECTION_ROUNDING_PX)
+    full = max(int(kept[-1]) + 1, 2)
     line = np.concatenate([behind[::-1], ahead[1:full]])
     # The fit's own end: the traced points carry a pixel's rounding from step to step.
     position, direction, curvature = end_fit(line, False, span)
