@@ -137,7 +137,9 @@ def middle_line(
     fit bends (``curvature``, signed, 1/px), and is then put half the cable's width
     (``half_width``) in from its borders read across it (:func:`_recentred`). The trace
     stops at a cut where the section across it is narrower than the cable (an object's
-    border has begun to cut it) or the middle point leaves the mask.
+    border has begun to cut it) and the next one is too (:func:`_full_beyond`: a cut
+    narrows on; one narrow section is its borders' rounding), or the middle point
+    leaves the mask.
 
     Returns
     -------
@@ -274,7 +276,8 @@ def end_at_the_cut(
     cut is a quadratic's (:func:`.geometry.end_fit`) over the traced line's last
     :data:`FIT_RADII` radii: centred on the cable, not on the skeleton's hooked tip, and
     short enough to follow a tight bend, fitted on the sections the cut has not begun to
-    narrow. Where less than half that is traced behind the end, the end's own fit bends
+    narrow (those before the run of narrowed sections the trace ends on). Where less than
+    half that is traced behind the end, the end's own fit bends
     on to the cut instead. With ``carry``, the middle line is then carried on towards
     where the cut's border crosses it (:func:`carried_to_the_border`, to the border
     itself with ``to_the_border``).
