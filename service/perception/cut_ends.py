@@ -96,6 +96,32 @@ def _recentred(plus: float, minus: float, half_width: float) -> float:
     return 0.0
 
 
+def _full_beyond(
+    mask: np.ndarray,
+    x: float,
+    y: float,
+    hx: float,
+    hy: float,
+    steps: list[float],
+    reach: float,
+    half_width: float,
+) -> bool:
+    """Whether the section a step on from ``(x, y)`` along ``(hx, hy)`` is the cable's
+    full width again: the narrowing at ``(x, y)`` was its borders' rounding, no cut.
+
+    An object's border that has begun to cut the cable takes more of it a step further
+    on (or all of it, past the middle: off the mask), never less. A cable's own border
+    is a pixel staircase: read across at a slant, each border may fall up to half a
+    pixel's diagonal (0.7 px) short, and a half width read from the skeleton a pixel
+    over the cable's leaves that within :data:`CUT_NARROWING_PX` of a single section."""
+    x, y = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
+    if not _on_mask(mask, x, y):
+        return False
+    plus = _border_distance(mask, x, y, -hy, hx, steps, reach)
+    minus = _border_distance(mask, x, y, hy, -hx, steps, reach)
+    return plus + minus >= 2.0 * half_width - CUT_NARROWING_PX
+
+
 def middle_line(
     mask: np.ndarray,
     start: np.ndarray,
@@ -103,6 +129,7 @@ def middle_line(
     curvature: float,
     half_width: float,
     limit: float,
+    first_narrowing: bool = False,
 ) -> tuple[np.ndarray, bool, np.ndarray]:
     """The cable's middle line traced on ``mask`` from ``start`` along ``heading``, at
     most ``limit`` px, and whether it stopped at a cut.
@@ -111,7 +138,11 @@ def middle_line(
     fit bends (``curvature``, signed, 1/px), and is then put half the cable's width
     (``half_width``) in from its borders read across it (:func:`_recentred`). The trace
     stops at a cut where the section across it is narrower than the cable (an object's
-    border has begun to cut it) or the middle point leaves the mask.
+    border has begun to cut it) and the next one is too (:func:`_full_beyond`: a cut
+    narrows on; one narrow section is its borders' rounding), or the middle point
+    leaves the mask. With ``first_narrowing``, at the first narrowed section: the
+    reading the turn pass's tests of a cut's shape were measured on
+    (:func:`end_at_the_cut`).
 
     Returns
     -------
@@ -150,7 +181,9 @@ def middle_line(
         if _on_mask(mask, x, y):
             plus = _border_distance(mask, x, y, nx, ny, steps, reach)
             minus = _border_distance(mask, x, y, -nx, -ny, steps, reach)
-            if plus + minus < 2.0 * half_width - CUT_NARROWING_PX:
+            if plus + minus < 2.0 * half_width - CUT_NARROWING_PX and (
+                first_narrowing or not _full_beyond(mask, x, y, hx, hy, steps, reach, half_width)
+            ):
                 # The cut begins here, on one side or both: past it, what is left of
                 # the section is no longer centred on the cable.
                 return np.array(points), True, np.array(shortfall)
@@ -237,6 +270,7 @@ def end_at_the_cut(
     limit: float,
     carry: bool = True,
     to_the_border: bool = False,
+    first_narrowing: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Where the cable ``end`` (a :class:`.merging.ChainEnd`, where its bridge would
     start) passes out of sight, and its direction there.
@@ -246,10 +280,14 @@ def end_at_the_cut(
     cut is a quadratic's (:func:`.geometry.end_fit`) over the traced line's last
     :data:`FIT_RADII` radii: centred on the cable, not on the skeleton's hooked tip, and
     short enough to follow a tight bend, fitted on the sections the cut has not begun to
-    narrow. Where less than half that is traced behind the end, the end's own fit bends
+    narrow (those before the run of narrowed sections the trace ends on). Where less than
+    half that is traced behind the end, the end's own fit bends
     on to the cut instead. With ``carry``, the middle line is then carried on towards
     where the cut's border crosses it (:func:`carried_to_the_border`, to the border
-    itself with ``to_the_border``).
+    itself with ``to_the_border``). With ``first_narrowing``, the traces stop at the
+    first narrowed section and the direction is fitted before it, as before the
+    borders' rounding was told from a cut (:func:`_full_beyond`): the reading the turn
+    pass's tests of a cut's shape were measured on (:mod:`.traced_cuts`).
 
     Returns
     -------
@@ -260,13 +298,13 @@ def end_at_the_cut(
     """
     position = np.asarray(end.position, np.float64)
     ahead, cut, shortfall = middle_line(
-        mask, position, end.direction, end.curvature, half_width, limit
+        mask, position, end.direction, end.curvature, half_width, limit, first_narrowing
     )
     if not cut or len(ahead) < 2:
         return None
     span = FIT_RADII * half_width
     behind, _, seen_shortfall = middle_line(
-        mask, position, -end.direction, -end.curvature, half_width, span
+        mask, position, -end.direction, -end.curvature, half_width, span, first_narrowing
     )
     if polyline_length(behind) < 0.5 * span:
         # Too little of the cable traced to fit its direction: the end's fit bends on.
@@ -283,8 +321,13 @@ def end_at_the_cut(
     # Against the sections read behind the end (the cable's own, which the half width
     # given may miss by a pixel).
     own = float(np.median(seen_shortfall[1:])) if len(seen_shortfall) > 1 else 0.0
-    narrowed = np.flatnonzero(shortfall > own + SECTION_ROUNDING_PX)
-    full = max(int(narrowed[0]) if len(narrowed) else len(ahead), 2)
+    # The cut's narrowing runs on to where the trace stopped; a narrower section
+    # before a full one is the border's rounding (:func:`_full_beyond`).
+    kept = np.flatnonzero(shortfall <= own + SECTION_ROUNDING_PX)
+    full = max(int(kept[-1]) + 1, 2)
+    if first_narrowing:
+        narrowed = np.flatnonzero(shortfall > own + SECTION_ROUNDING_PX)
+        full = max(int(narrowed[0]) if len(narrowed) else len(ahead), 2)
     line = np.concatenate([behind[::-1], ahead[1:full]])
     # The fit's own end: the traced points carry a pixel's rounding from step to step.
     position, direction, curvature = end_fit(line, False, span)

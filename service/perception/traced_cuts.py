@@ -42,8 +42,12 @@ def ends_at_the_cuts(ends: list, mask: np.ndarray, radius: float) -> Callable[[i
                 start = replace(end, position=end.position - end.skip * end.direction)
                 limit = end.skip + REACH_PAST_SKIP_RADII * half_width + 2.0
                 # The cut's shape read at the border itself (where it crosses the
-                # middle line), as the turn pass's tests were measured.
-                found = end_at_the_cut(mask, start, half_width, limit, to_the_border=True)
+                # middle line), as the turn pass's tests were measured: on traces that
+                # stop at the first narrowed section (a cut's test is evidence for a
+                # join; its reading was not measured again, see BENCHMARKS, cutfb14).
+                found = end_at_the_cut(
+                    mask, start, half_width, limit, to_the_border=True, first_narrowing=True
+                )
             traced[index] = (
                 end
                 if found is None
