@@ -31,6 +31,7 @@ import numpy as np
 
 from schemas import DetectParams
 from service.perception import _merging_kernels, _pruning_kernels
+from service.perception._geometry_kernels import outward_fit
 from service.perception.appearance import (
     EndColours,
     colour_penalty,
@@ -697,6 +698,8 @@ def merge_chains(
     ends = chain_ends(
         pieces, span, skip=radius, distance=distance, full_width=full_width, bend_aware=at_crossing
     )
+    if mask is not None and ends:
+        ends = _ends_refitted_onto_the_mask(pieces, ends, mask, span)
     if distance is not None and zones is not None:
         ends = widths_clear_of_crossings(pieces, ends, distance, zones, at_crossing, MIDDLE_JOINTS)
     if mask is not None:
@@ -932,6 +935,40 @@ def merge_chains(
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])
+
+
+def _ends_off_the_mask(ends, mask) -> np.ndarray:
+    """Per end, whether its fitted position lies off the foreground (or the picture)."""
+    xy = np.rint(np.array([end.position for end in ends], np.float64)).astype(np.int64)
+    height, width = mask.shape[:2]
+    inside = (xy[:, 0] >= 0) & (xy[:, 1] >= 0) & (xy[:, 0] < width) & (xy[:, 1] < height)
+    on = np.zeros(len(ends), bool)
+    on[inside] = mask[xy[inside, 1], xy[inside, 0]]
+    return ~on
+
+
+def _ends_refitted_onto_the_mask(pieces, ends, mask, span) -> list[ChainEnd]:
+    """Each end whose fit lies off the foreground refitted over half the span, and half
+    again, until its fitted position lies on the foreground (kept as it was if none does)."""
+    off = np.flatnonzero(_ends_off_the_mask(ends, mask))
+    if not len(off):
+        return ends
+    ends = list(ends)
+    for k in off.tolist():
+        end = ends[k]
+        points = np.ascontiguousarray(pieces[end.piece], np.float64)
+        backwards = points if end.at_start else points[::-1].copy()
+        fit_span = 0.5 * span
+        while fit_span > 1.0:
+            x, y, dx, dy, curvature = outward_fit(backwards, float(end.skip), fit_span)
+            moved = replace(
+                end, position=np.array([x, y]), direction=np.array([dx, dy]), curvature=curvature
+            )
+            if not _ends_off_the_mask([moved], mask)[0]:
+                ends[k] = moved
+                break
+            fit_span *= 0.5
+    return ends
 
 
 def _unfitted_pieces(pieces, bridging_ends, ends) -> dict[int, np.ndarray]:
