@@ -937,20 +937,31 @@ def merge_chains(
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])
 
 
-def _ends_off_the_mask(ends, mask) -> np.ndarray:
-    """Per end, whether its fitted position lies off the foreground (or the picture)."""
+def _ends_off_the_mask(ends, mask, pieces=None) -> np.ndarray:
+    """Per end, whether its fitted position lies off the foreground (or the picture),
+    and (``pieces`` given) further from its piece's tip than the piece's half width."""
     xy = np.rint(np.array([end.position for end in ends], np.float64)).astype(np.int64)
     height, width = mask.shape[:2]
     inside = (xy[:, 0] >= 0) & (xy[:, 1] >= 0) & (xy[:, 0] < width) & (xy[:, 1] < height)
     on = np.zeros(len(ends), bool)
     on[inside] = mask[xy[inside, 1], xy[inside, 0]]
-    return ~on
+    off = ~on
+    if pieces is not None:
+        for k in np.flatnonzero(off).tolist():
+            end = ends[k]
+            points = pieces[end.piece]
+            tip = np.asarray(points[0] if end.at_start else points[-1], np.float64)
+            if np.hypot(*(np.asarray(end.position) - tip)) <= end.width:
+                off[k] = False
+    return off
 
 
 def _ends_refitted_onto_the_mask(pieces, ends, mask, span) -> list[ChainEnd]:
     """Each end whose fit lies off the foreground refitted over half the span, and half
     again, until its fitted position lies on the foreground (kept as it was if none does)."""
-    off = np.flatnonzero(_ends_off_the_mask(ends, mask))
+    off = np.flatnonzero(_ends_off_the_mask(ends, mask, pieces))
+    if len(off) and __import__("os").environ.get("T14DBG"):
+        print("T14 refit", len(off), "of", len(ends), flush=True)
     if not len(off):
         return ends
     ends = list(ends)
