@@ -31,7 +31,6 @@ import numpy as np
 
 from schemas import DetectParams
 from service.perception import _merging_kernels, _pruning_kernels
-from service.perception._geometry_kernels import outward_fit
 from service.perception.appearance import (
     EndColours,
     colour_penalty,
@@ -49,6 +48,7 @@ from service.perception.crossing_stubs import ends_past_crossings, evidence_ends
 from service.perception.cut_ends import bridges_from_the_cuts
 from service.perception.cut_middles import short_ends_at_cut_middles
 from service.perception.deadline import Deadline, check
+from service.perception.end_readings import ends_read_at_cuts, ends_refitted_onto_the_mask
 from service.perception.gap_evidence import (
     TURN_EVIDENCE_ALONG_CURVE,
     beyond_hiding,
@@ -698,8 +698,9 @@ def merge_chains(
     ends = chain_ends(
         pieces, span, skip=radius, distance=distance, full_width=full_width, bend_aware=at_crossing
     )
-    if mask is not None and ends:
-        ends = _ends_refitted_onto_the_mask(pieces, ends, mask, span)
+    if mask is not None:
+        # A fit over a tight bend may land beside the cable: refitted nearer the tip.
+        ends = ends_refitted_onto_the_mask(pieces, ends, mask, span)
     if distance is not None and zones is not None:
         ends = widths_clear_of_crossings(pieces, ends, distance, zones, at_crossing, MIDDLE_JOINTS)
     if mask is not None:
@@ -789,6 +790,9 @@ def merge_chains(
         seen_from = ends_past_crossings(
             pieces, ends, tips_in_junctions(pieces, zones), mask, zones, span
         )
+    if mask is not None and ends:
+        # A tip left unfitted in a cut's corner reads no cut: read from its middle.
+        seen_from = ends_read_at_cuts(pieces, ends, seen_from, mask, radius)
     if image is not None and mask is not None:
 
         def hidden_gap(i: int, j: int, curve: np.ndarray | None = None) -> bool:
@@ -935,51 +939,6 @@ def merge_chains(
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])
-
-
-def _ends_off_the_mask(ends, mask, pieces=None) -> np.ndarray:
-    """Per end, whether its fitted position lies off the foreground (or the picture),
-    and (``pieces`` given) further from its piece's tip than the piece's half width."""
-    xy = np.rint(np.array([end.position for end in ends], np.float64)).astype(np.int64)
-    height, width = mask.shape[:2]
-    inside = (xy[:, 0] >= 0) & (xy[:, 1] >= 0) & (xy[:, 0] < width) & (xy[:, 1] < height)
-    on = np.zeros(len(ends), bool)
-    on[inside] = mask[xy[inside, 1], xy[inside, 0]]
-    off = ~on
-    if pieces is not None:
-        for k in np.flatnonzero(off).tolist():
-            end = ends[k]
-            points = pieces[end.piece]
-            tip = np.asarray(points[0] if end.at_start else points[-1], np.float64)
-            if np.hypot(*(np.asarray(end.position) - tip)) <= end.width:
-                off[k] = False
-    return off
-
-
-def _ends_refitted_onto_the_mask(pieces, ends, mask, span) -> list[ChainEnd]:
-    """Each end whose fit lies off the foreground refitted over half the span, and half
-    again, until its fitted position lies on the foreground (kept as it was if none does)."""
-    off = np.flatnonzero(_ends_off_the_mask(ends, mask, pieces))
-    if len(off) and __import__("os").environ.get("T14DBG"):
-        print("T14 refit", len(off), "of", len(ends), flush=True)
-    if not len(off):
-        return ends
-    ends = list(ends)
-    for k in off.tolist():
-        end = ends[k]
-        points = np.ascontiguousarray(pieces[end.piece], np.float64)
-        backwards = points if end.at_start else points[::-1].copy()
-        fit_span = 0.5 * span
-        while fit_span > 1.0:
-            x, y, dx, dy, curvature = outward_fit(backwards, float(end.skip), fit_span)
-            moved = replace(
-                end, position=np.array([x, y]), direction=np.array([dx, dy]), curvature=curvature
-            )
-            if not _ends_off_the_mask([moved], mask)[0]:
-                ends[k] = moved
-                break
-            fit_span *= 0.5
-    return ends
 
 
 def _unfitted_pieces(pieces, bridging_ends, ends) -> dict[int, np.ndarray]:
