@@ -210,11 +210,6 @@ def evidence_ends(judged: Sequence, ends: Sequence, moved: Sequence) -> LazyEnds
         shifted = moved[index]
         if shifted is ends[index]:
             return judged[index]
-        return replace(
-            judged[index],
-            position=shifted.position,
-            direction=shifted.direction,
-            skip=shifted.skip,
-        )
+        return replace(judged[index], position=shifted.position, skip=shifted.skip)
 
     return LazyEnds(len(judged), seen)

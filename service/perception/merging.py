@@ -48,7 +48,7 @@ from service.perception.crossing_stubs import ends_past_crossings, evidence_ends
 from service.perception.cut_ends import bridges_from_the_cuts
 from service.perception.cut_middles import short_ends_at_cut_middles
 from service.perception.deadline import Deadline, check
-from service.perception.end_readings import ends_read_at_cuts, ends_refitted_onto_the_mask
+from service.perception.end_readings import ends_refitted_onto_the_mask
 from service.perception.gap_evidence import (
     TURN_EVIDENCE_ALONG_CURVE,
     beyond_hiding,
@@ -790,9 +790,6 @@ def merge_chains(
         seen_from = ends_past_crossings(
             pieces, ends, tips_in_junctions(pieces, zones), mask, zones, span
         )
-    if mask is not None and ends:
-        # A tip left unfitted in a cut's corner reads no cut: read from its middle.
-        seen_from = ends_read_at_cuts(pieces, ends, seen_from, mask, radius)
     if image is not None and mask is not None:
 
         def hidden_gap(i: int, j: int, curve: np.ndarray | None = None) -> bool:
