@@ -51,10 +51,13 @@ def ends_refitted_onto_the_mask(
     pieces: list[np.ndarray], ends: list, mask: np.ndarray, span: float
 ) -> list:
     """``ends`` with each end :func:`ends_off_the_mask` finds refitted over half the
-    span, and half again, until its fitted position lies on the foreground (left as it
-    was where none does): the stretch of cable nearest the tip, which the bend has not
-    yet turned away from (as :func:`._geometry_kernels.bend_aware_fit` fits an end at a
-    loop's own crossing). The same skip, so a cut's hook stays left out."""
+    span, and half again, until it is no longer astray (left as it was where none
+    does): the stretch of cable nearest the tip, which the bend has not yet turned away
+    from, as :func:`._geometry_kernels.bend_aware_fit` fits an end at a loop's own
+    crossing. With the skeleton's joints about 10 px apart, half the span holds too few
+    joints for the quadratic, and the end is then its tip, pointing along the chord to
+    the last joint within that span (the tip of such a piece, not cut at a slant, lies
+    on the cable's middle)."""
     off = np.flatnonzero(ends_off_the_mask(pieces, ends, mask))
     if not len(off):
         return ends
