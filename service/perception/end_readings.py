@@ -48,7 +48,7 @@ def ends_off_the_mask(pieces: list[np.ndarray], ends: Sequence, mask: np.ndarray
 
 
 def ends_refitted_onto_the_mask(
-    pieces: list[np.ndarray], ends: list, mask: np.ndarray, span: float
+    pieces: list[np.ndarray], ends: list, mask: np.ndarray, span: float, skip: float = 0.0
 ) -> list:
     """``ends`` with each end :func:`ends_off_the_mask` finds refitted over half the
     span, and half again, until it is no longer astray (left as it was where none
@@ -64,6 +64,10 @@ def ends_refitted_onto_the_mask(
     ends = list(ends)
     for k in off.tolist():
         end = ends[k]
+        if end.skip > skip:
+            # Its fit left out a narrow tip (a cut's hook): the tip lies in the cut's
+            # corner, up to a half width off the middle, no reading to fall back on.
+            continue
         points = np.ascontiguousarray(pieces[end.piece], np.float64)
         backwards = np.ascontiguousarray(points if end.at_start else points[::-1])
         span_tried = 0.5 * span

@@ -700,7 +700,7 @@ def merge_chains(
     )
     if mask is not None:
         # A fit over a tight bend may land beside the cable: refitted nearer the tip.
-        ends = ends_refitted_onto_the_mask(pieces, ends, mask, span)
+        ends = ends_refitted_onto_the_mask(pieces, ends, mask, span, radius)
     if distance is not None and zones is not None:
         ends = widths_clear_of_crossings(pieces, ends, distance, zones, at_crossing, MIDDLE_JOINTS)
     if mask is not None:
