@@ -8,7 +8,9 @@ foreground, pointing tens of degrees off. Read there, the end's join cost, the i
 evidence for a turn under the object (the background beside it, whether it is cut) and
 its bridge are read off the cable: the turn is never joined. A fit over the stretch
 nearest the tip, which the bend has not yet turned away from, lies on the cable (as
-:func:`._geometry_kernels.bend_aware_fit` fits an end at a loop's own crossing).
+:func:`._geometry_kernels.bend_aware_fit` fits an end at a loop's own crossing). Only
+an end whose fit left out no narrow tip: a cut's hook puts the tip in the cut's corner,
+up to a half width off the middle, and a fit there is no better reading.
 """
 
 from __future__ import annotations
@@ -56,8 +58,9 @@ def ends_refitted_onto_the_mask(
     from, as :func:`._geometry_kernels.bend_aware_fit` fits an end at a loop's own
     crossing. With the skeleton's joints about 10 px apart, half the span holds too few
     joints for the quadratic, and the end is then its tip, pointing along the chord to
-    the last joint within that span (the tip of such a piece, not cut at a slant, lies
-    on the cable's middle)."""
+    the last joint within that span. Only ends whose fit left out no more than
+    ``skip`` (the fit's own skip: no narrow tip, so the tip lies on the cable's
+    middle)."""
     off = np.flatnonzero(ends_off_the_mask(pieces, ends, mask))
     if not len(off):
         return ends
