@@ -48,6 +48,7 @@ from service.perception.crossing_stubs import ends_past_crossings, evidence_ends
 from service.perception.cut_ends import bridges_from_the_cuts
 from service.perception.cut_middles import short_ends_at_cut_middles
 from service.perception.deadline import Deadline, check
+from service.perception.end_readings import ends_refitted_onto_the_mask
 from service.perception.gap_evidence import (
     TURN_EVIDENCE_ALONG_CURVE,
     beyond_hiding,
@@ -697,6 +698,9 @@ def merge_chains(
     ends = chain_ends(
         pieces, span, skip=radius, distance=distance, full_width=full_width, bend_aware=at_crossing
     )
+    if mask is not None:
+        # A fit over a tight bend may land beside the cable: refitted nearer the tip.
+        ends = ends_refitted_onto_the_mask(pieces, ends, mask, span, radius)
     if distance is not None and zones is not None:
         ends = widths_clear_of_crossings(pieces, ends, distance, zones, at_crossing, MIDDLE_JOINTS)
     if mask is not None:
