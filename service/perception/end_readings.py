@@ -20,7 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from service.perception._geometry_kernels import outward_fit
+from service.perception.geometry import end_fit
 
 
 def ends_off_the_mask(pieces: list[np.ndarray], ends: Sequence, mask: np.ndarray) -> np.ndarray:
@@ -71,19 +71,27 @@ def ends_refitted_onto_the_mask(
             # Its fit left out a narrow tip (a cut's hook): the tip lies in the cut's
             # corner, up to a half width off the middle, no reading to fall back on.
             continue
-        points = np.ascontiguousarray(pieces[end.piece], np.float64)
-        backwards = np.ascontiguousarray(points if end.at_start else points[::-1])
+        points = pieces[end.piece]
+        if len(points) < 2 or _closed(points):
+            # A ring closed on itself (its two tips neighbouring pixels) has no free
+            # end to read: its fit runs round the ring, and a refit would give it one.
+            continue
         span_tried = 0.5 * span
         while span_tried > 1.0:
-            x, y, dx, dy, curvature = outward_fit(backwards, float(end.skip), span_tried)
-            refitted = replace(
-                end,
-                position=np.array([x, y]),
-                direction=np.array([dx, dy]),
-                curvature=curvature,
+            # Through geometry.end_fit, the kernel every fit calls (and the one the
+            # compiled module holds), not a kernel only other kernels call.
+            position, direction, curvature = end_fit(
+                points, end.at_start, span_tried, float(end.skip)
             )
+            refitted = replace(end, position=position, direction=direction, curvature=curvature)
             if not ends_off_the_mask(pieces, [refitted], mask)[0]:
                 ends[k] = refitted
                 break
             span_tried *= 0.5
     return ends
+
+
+def _closed(points: np.ndarray) -> bool:
+    """Whether a piece's two tips are neighbouring pixels: a contour run closed on itself
+    (:func:`.fitting.fit_chains` puts a joint at a closed run's first and last pixel)."""
+    return bool(np.hypot(*(points[0] - points[-1])) <= 1.5)

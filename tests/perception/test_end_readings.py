@@ -80,3 +80,19 @@ def test_a_turn_whose_short_pieces_end_was_fitted_beside_the_cable_is_joined(fam
     400046, a five-joint piece whose end was fitted 7.0 px across its line."""
     score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.correct
+
+
+def test_a_ring_closed_on_itself_keeps_its_ends():
+    """A small ring's contour run is one piece whose tips are neighbouring pixels; its
+    40 px fit runs round the ring and lands off it, but it has no free end to refit (a
+    refit gave each ring of ``dlo bench --rings`` an end, and the rings were joined)."""
+    mask = np.zeros((60, 60), bool)
+    ys, xs = np.mgrid[0:60, 0:60]
+    mask[np.abs(np.hypot(xs - 30, ys - 30) - 10) <= 2.5] = True
+    angles = np.radians(np.arange(0.0, 360.0, 45.0))
+    piece = np.column_stack([30 + 10 * np.cos(angles), 30 + 10 * np.sin(angles)])
+    piece = np.vstack([piece, [[40.0, 29.0]]])  # the last pixel beside the first
+    ends = chain_ends([piece], 40.0, skip=2.5)
+    assert ends_off_the_mask([piece], ends, mask).any()
+    refitted = ends_refitted_onto_the_mask([piece], ends, mask, 40.0, 2.5)
+    assert all(a is b for a, b in zip(refitted, ends, strict=True))
