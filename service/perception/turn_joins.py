@@ -650,12 +650,10 @@ def turn_joins(
             rivals[i, j] = pair_cost
         cable = 0.5 * (ends[i].width + ends[j].width) or radius
         a, b = ends[i], ends[j]
-        # From where each end's fit begins: over a cut's hook the fit's extrapolation
-        # may leave the cable (the bridge starts there too,
-        # :func:`.bridge_ends.bridge_from_the_fits`).
         # From each end's tip where the cable is seen whole and straight along the
-        # fit's line up to it, else from where the fit begins (:func:`_turn_leaves_at`);
-        # the bridge starts where the fits begin either way.
+        # fit's line up to it, else from where the fit begins (:func:`_turn_leaves_at`):
+        # over a cut's hook the fit's extrapolation may leave the cable. The bridge
+        # starts where the fits begin either way (:func:`.bridge_ends.bridge_from_the_fits`).
         a_from, b_from = a.position - a.skip * a.direction, b.position - b.skip * b.direction
         curves = _led_in(
             hidden_turn_curves(
