@@ -222,11 +222,18 @@ def _first_wide_less_margin(at: np.ndarray, bounds: np.ndarray, limits: np.ndarr
     ``limits[e]``, less that limit (rounded up) more, the rim of the wide blob, as the
     compiled median reads one limit for all ends with its ``margin``."""
     wide = np.zeros(len(at), np.bool_)
-    for end, limit in enumerate(limits.tolist()):
-        start, stop = int(bounds[end]), int(bounds[end + 1])
-        past = np.flatnonzero(at[start:stop] > limit)
-        if len(past):
-            wide[max(start + int(past[0]) - int(np.ceil(limit)), start)] = True
+    counts = np.diff(bounds)
+    # Every end's samples at once (called for every end of a frame, twice): each
+    # compared with its end's limit in the distance transform's own type, as NumPy
+    # compares an array with a Python float.
+    past = np.flatnonzero(at > np.repeat(np.asarray(limits).astype(at.dtype), counts))
+    if not past.size:
+        return wide
+    end_of = np.searchsorted(bounds, past, side="right") - 1
+    ends, first = np.unique(end_of, return_index=True)
+    starts = bounds[ends]
+    margins = np.ceil(np.asarray(limits, np.float64)[ends]).astype(np.int64)
+    wide[np.maximum(past[first] - margins, starts)] = True
     return wide
 
 

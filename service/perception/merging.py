@@ -211,18 +211,24 @@ def chain_ends(
         np.zeros(0, np.bool_) if bend_aware is None else np.ascontiguousarray(bend_aware, np.bool_),
     )
     curvatures, skips, widths = curvatures.tolist(), skips.tolist(), widths.tolist()
-    return [
-        ChainEnd(
-            end // 2,
-            end % 2 == 0,
-            positions[end].copy(),
-            directions[end].copy(),
-            curvatures[end],
-            skips[end],
-            widths[end // 2],
+    # Each row its own array, as ``positions[end].copy()`` gives (one split, not a copy
+    # per end); each end made as the dataclass's ``__init__`` would, without its
+    # ``object.__setattr__`` per field of a frozen class (every end of every frame).
+    positions, directions = list(positions.copy()), list(directions.copy())
+    made = []
+    for end in range(2 * len(pieces)):
+        chain_end = object.__new__(ChainEnd)
+        chain_end.__dict__.update(
+            piece=end // 2,
+            at_start=end % 2 == 0,
+            position=positions[end],
+            direction=directions[end],
+            curvature=curvatures[end],
+            skip=skips[end],
+            width=widths[end // 2],
         )
-        for end in range(2 * len(pieces))
-    ]
+        made.append(chain_end)
+    return made
 
 
 def join_cost(a: ChainEnd, b: ChainEnd, params: DetectParams, radius: float) -> float:
@@ -754,6 +760,7 @@ def merge_chains(
         # Each strand of a shared stretch is a piece of its own now: new ends for them,
         # and its far ends meet the picture's border where the shared piece's did.
         pieces = touching.pieces
+        at_crossing = tips_in_junctions(pieces, zones)
         ends = _ends_of_split_pieces(ends, pieces, touching, span)
         end_positions = np.array([end.position for end in ends], np.float64).reshape(-1, 2)
         end_directions = np.array([end.direction for end in ends], np.float64).reshape(-1, 2)
@@ -772,7 +779,7 @@ def merge_chains(
     )
     colours = None
     if image is not None and params.colour_weight > 0:
-        free = None if zones is None else ~tips_in_junctions(pieces, zones).reshape(-1, 2).any(1)
+        free = None if zones is None else ~at_crossing.reshape(-1, 2).any(1)
         if free is not None and touching.strand_widths:
             # A short strand parting from a touching stretch is no scrap either (its
             # width said so, :func:`.touching.split_touching_strands`): its whole length.
@@ -787,9 +794,7 @@ def merge_chains(
     # crossing: the image's evidence for its end is read there (:mod:`.crossing_stubs`).
     seen_from = ends
     if zones is not None and mask is not None and ends:
-        seen_from = ends_past_crossings(
-            pieces, ends, tips_in_junctions(pieces, zones), mask, zones, span
-        )
+        seen_from = ends_past_crossings(pieces, ends, at_crossing, mask, zones, span)
     if image is not None and mask is not None:
 
         def hidden_gap(i: int, j: int, curve: np.ndarray | None = None) -> bool:
@@ -924,7 +929,7 @@ def merge_chains(
                 for k, end in enumerate(bridging_ends)
                 if end is not inner_ends[k]
             },
-            _unfitted_pieces(pieces, bridging_ends, ends),
+            _unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end),
         )
         if turn_hidden is not None:
             cut_bridges = {
@@ -939,7 +944,7 @@ def merge_chains(
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])
 
 
-def _unfitted_pieces(pieces, bridging_ends, ends) -> dict[int, np.ndarray]:
+def _unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end) -> dict[int, np.ndarray]:
     """Per bridging end left at its tip for want of joints to fit, its piece's points.
 
     An end whose fit left a tip out (a cut's hook) is bridged from where the fit
@@ -951,7 +956,12 @@ def _unfitted_pieces(pieces, bridging_ends, ends) -> dict[int, np.ndarray]:
     the chord through the hook.
     """
     unfitted = {}
-    for k, end in enumerate(bridging_ends):
+    # Only the ends of gaps' joins (neither end in a junction) are read there.
+    gaps = sorted(
+        k for i, j, _ in joins if max(junction_of_end[i], junction_of_end[j]) < 0 for k in (i, j)
+    )
+    for k in gaps:
+        end = bridging_ends[k]
         if end is not ends[k] or end.skip <= 0:
             continue
         points = pieces[end.piece]

@@ -497,6 +497,12 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
         return None
     half_widths = widths[[end // 2 for end in ends]]
     strands = 0.5 * float(half_widths.sum())  # the two strands' half widths together
+    # Most four-way junctions are crossings, narrowest at their middle: one read against
+    # the pieces' own widths tells most of them at once (a short strand's widest, read
+    # below, only ever raises the bar it is held to).
+    middle = widest_between(middle_a, middle_b, distance)
+    if middle < TOUCHING_MIDDLE_FRACTION * strands:
+        return None
     # Strands, not the scraps thinning leaves where a blob bulges (as for a shared piece).
     short = {
         end
@@ -521,7 +527,7 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     # right-angle one's sqrt(1/2) of the two strands wide, well over a shallow crossing's
     # half (a loop's own crossing, loops 20020, 20174, 20192, 290195), so the middle is
     # held to halfway between that and touching strands' whole two widths.
-    if widest_between(middle_a, middle_b, distance) < TOUCHING_MIDDLE_FRACTION * strands:
+    if middle < TOUCHING_MIDDLE_FRACTION * strands:
         return None
     if short and not _cut_short_pair(short, (pair_a, pair_b), pieces, distance, widths):
         return None
