@@ -12,6 +12,7 @@ step's kernels.
 
 from __future__ import annotations
 
+from bisect import bisect_left, bisect_right
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -174,9 +175,10 @@ def _trimmed(pieces: list[np.ndarray], trims: np.ndarray) -> list[np.ndarray]:
         if head <= 0 and tail <= 0:
             result.append(points)
             continue
-        # The arc lengths never decrease: the joints kept are one run, found by bisection.
-        along = arc_lengths(points)
-        first = int(np.searchsorted(along, head, side="left"))
-        stop = int(np.searchsorted(along, along[-1] - tail, side="right"))
+        # The arc lengths never decrease: the joints kept are one run, found by bisection
+        # (in a list: what np.searchsorted finds, without its call per bound and piece).
+        along = arc_lengths(points).tolist()
+        first = bisect_left(along, head)
+        stop = bisect_right(along, along[-1] - tail)
         result.append(points[first:stop].copy() if stop - first >= 2 else points)
     return result

@@ -454,6 +454,10 @@ def _cable_wide_pair(
     return narrow > 0 and narrow >= WIDTH_AGREEMENT * wide
 
 
+# The three ways of splitting four ends into two pairs, end 0's partner 1, 2, 3 in turn.
+_FOUR_END_PARTITIONS = (((0, 1), (2, 3)), ((0, 2), (1, 3)), ((0, 3), (1, 2)))
+
+
 def _touching_junction_pairs(ends, positions, directions, pieces, distance, leaving, widths):
     """The two pairs of ends to join at a four-way junction that is a touching stretch
     short enough for the junction zone to take it whole, the far ends of a pair of
@@ -478,13 +482,14 @@ def _touching_junction_pairs(ends, positions, directions, pieces, distance, leav
     """
     ends = list(ends)
     points = positions[ends].tolist()
-    spread = {}
-    for first in (1, 2, 3):
-        rest = [k for k in (1, 2, 3) if k != first]
-        spread[(0, first), tuple(rest)] = math.dist(points[0], points[first]) + math.dist(
-            points[rest[0]], points[rest[1]]
-        )
-    pair_a, pair_b = (tuple(ends[k] for k in pair) for pair in min(spread, key=spread.get))
+    # The partition whose pairs lie closest together (the first of equals).
+    closest = min(
+        _FOUR_END_PARTITIONS,
+        key=lambda pairs: (
+            math.dist(*(points[k] for k in pairs[0])) + math.dist(*(points[k] for k in pairs[1]))
+        ),
+    )
+    pair_a, pair_b = (tuple(ends[k] for k in pair) for pair in closest)
     middle_a = 0.5 * (positions[pair_a[0]] + positions[pair_a[1]])
     middle_b = 0.5 * (positions[pair_b[0]] + positions[pair_b[1]])
     length = float(np.hypot(*(middle_b - middle_a)))

@@ -563,3 +563,23 @@ def test_the_turn_tests_read_once_per_pair_and_answer_as_read_per_curve():
             for test, needed in ((both_cut, 2), (one_cut, TURN_CUT_ENDS)):
                 fresh = cut_ends_alike(*ends, 0, 1, path, mask, colours, radius, needed, image)
                 assert test(0, 1, path) == fresh
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_first_wide_samples_of_all_ends_at_once_equal_the_end_by_end_reference(dtype):
+    # Every end's samples read in one pass must mark what the per-end loop marked,
+    # bit for bit: limits a hair either side of the samples' float32 values, ends with
+    # no samples, none past, all past.
+    rng = np.random.default_rng(7)
+    for _ in range(3000):
+        counts = rng.integers(0, 12, int(rng.integers(0, 8)))
+        bounds = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        at = (rng.integers(0, 40, bounds[-1]) / 4.0).astype(dtype)
+        at += rng.choice([0.0, 1e-8, -1e-8], bounds[-1]).astype(dtype)
+        limits = rng.integers(0, 40, len(counts)) / 4.0 + rng.choice(
+            [0.0, 1e-8, -1e-8, 0.1], len(counts)
+        )
+        np.testing.assert_array_equal(
+            appearance._first_wide_less_margin(at, bounds, limits),
+            reference.first_wide_less_margin(at, bounds, limits),
+        )

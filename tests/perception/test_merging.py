@@ -1,5 +1,6 @@
 """Step 6, merging: join costs, joins, gap curves and bridges, and their kernels."""
 
+import dataclasses
 from collections import Counter
 from dataclasses import replace
 
@@ -910,3 +911,27 @@ def test_a_cable_kinked_slightly_along_the_border_is_not_cut():
     cv2.polylines(mask, [np.rint(piece).astype(np.int32)], False, 1, 9)
     pieces = split_where_leaving_together([piece], mask > 0, 4.5, 6.5, 2.0, 40.0)
     assert len(pieces) == 1 and pieces[0] is piece
+
+
+def test_chain_ends_are_the_dataclass_s_own_ends():
+    # chain_ends makes its ends without the frozen dataclass's __init__ (one setattr per
+    # field): each must equal the end that __init__ makes, own its position and
+    # direction (writing one end's must not move another's), and stay frozen.
+    rng = np.random.default_rng(5)
+    pieces = [
+        rng.uniform(0, 100, 2) + np.cumsum(rng.normal(0, 4, (n, 2)), axis=0) for n in (2, 5, 17)
+    ]
+    ends = chain_ends(pieces, 20.0, skip=2.0)
+    assert len(ends) == 6
+    for index, end in enumerate(ends):
+        made = ChainEnd(
+            **{field.name: getattr(end, field.name) for field in dataclasses.fields(ChainEnd)}
+        )
+        assert made == end and vars(made).keys() == vars(end).keys()
+        assert (end.piece, end.at_start) == (index // 2, index % 2 == 0)
+        assert end.position.dtype == np.float64 and end.position.flags.c_contiguous
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            end.skip = 1.0
+    before = ends[1].position.copy()
+    ends[0].position[:] = -1.0
+    np.testing.assert_array_equal(ends[1].position, before)

@@ -99,3 +99,16 @@ def end_colours(
             if known and colour_penalty(inner, np.array([0]), np.array([1]))[0] == 0:
                 colour[index], spread[index] = body[index], body_spread[index]
     return colour, spread
+
+
+def first_wide_less_margin(at, bounds, limits):
+    """``appearance._first_wide_less_margin`` end by end: per end, the first sample past
+    its limit (compared as NumPy compares the array with a Python float), less that
+    limit rounded up, marked alone."""
+    wide = np.zeros(len(at), np.bool_)
+    for end, limit in enumerate(limits.tolist()):
+        start, stop = int(bounds[end]), int(bounds[end + 1])
+        past = np.flatnonzero(at[start:stop] > limit)
+        if len(past):
+            wide[max(start + int(past[0]) - int(np.ceil(limit)), start)] = True
+    return wide
