@@ -53,6 +53,10 @@ CARRY_RADII = 1.7
 """How far (half widths) at most the middle line is carried on past the narrowing: far
 enough for the lines beside it (half a half width out) to leave the mask across a cut
 about 50 degrees from square (1.5 half widths times tan 50 degrees is 1.8)."""
+WEDGE = True
+DEBUG = False
+HEADING = "chord"
+FULL_SECTIONS = 5
 REACH_PAST_SKIP_RADII = 2.0
 """How far (radii) past the tip the fit left out a cut may lie: the skeleton's tip stops
 about a radius short of a cut, and a slanted cut's far corner a width further."""
@@ -120,6 +124,120 @@ def _full_beyond(
     plus = _border_distance(mask, x, y, -hy, hx, steps, reach)
     minus = _border_distance(mask, x, y, hy, -hx, steps, reach)
     return plus + minus >= 2.0 * half_width - CUT_NARROWING_PX
+
+
+def _far_border(
+    mask: np.ndarray, x: float, y: float, dx: float, dy: float, steps: list[float], reach: float
+) -> float | None:
+    """Distance (px) from ``(x, y)`` along ``(dx, dy)`` to the first of the sample
+    ``steps`` off ``mask`` past the first on it (the mask's border on that side, read
+    from a point that may itself lie off the mask), ``reach`` when it runs on, or None
+    where no sample is on the mask."""
+    height, width = mask.shape
+    entered = False
+    for step in steps:
+        column, row = round(x + step * dx), round(y + step * dy)
+        on = 0 <= column < width and 0 <= row < height and bool(mask[row, column])
+        if on:
+            entered = True
+        elif entered:
+            return step - 0.5 * SECTION_STEP_PX
+    return reach if entered else None
+
+
+def _heading(line: np.ndarray, half_width: float) -> tuple[float, float]:
+    """The direction a step on from the end of ``line``: a quadratic's over its last
+    :data:`FIT_RADII` radii, turned by its curvature over the step (bounded by the
+    tightest bend a cable takes)."""
+    if HEADING == "chord":
+        back = max(len(line) - 1 - int(round(half_width / TRACE_STEP_PX)), 0)
+        hx, hy = unit(line[-1] - line[back])
+        return float(hx), float(hy)
+    _, direction, curvature = end_fit(line, False, FIT_RADII * half_width)
+    bound = 1.0 / (HIDDEN_BEND_RADII[0] * half_width)
+    hx, hy = rotated(direction, min(max(curvature, -bound), bound) * TRACE_STEP_PX)
+    return float(hx), float(hy)
+
+
+def along_the_wedge(
+    mask: np.ndarray,
+    points: np.ndarray,
+    half_width: float,
+    limit: float,
+) -> np.ndarray:
+    """The cable's middle line carried on from the traced ``points`` (``(K, 2)``, the
+    last on the cable's last full section) into the wedge a slanted cut leaves, half the
+    cable's width (``half_width``, the full sections' own) in from the one border that is
+    still the cable's, at most ``limit`` px.
+
+    Where an object's border crosses the cable at a slant, one border of the cable ends
+    where the object's meets it and the other runs on, a width times the slant's tangent
+    further: the visible end is a wedge. Past the first border's end the section's
+    middle is no longer the cable's (it leans into the wedge, towards its tip), but the
+    border that runs on is still the cable's own, and the cable's middle lies half its
+    width in from it: where the cable bends into the hidden stretch, that border bends
+    with it, and is the only part of the image that shows the bend. So each step goes
+    :data:`TRACE_STEP_PX` along the line's heading (its last step's, as the trace turns
+    with the border), and is put half a width in from the border read at the cable's
+    own distance (within :data:`SECTION_ROUNDING_PX`, a pixel's rounding, of it); from
+    both where both are (a section the cut has not narrowed). The side it follows is
+    kept once chosen; past where the middle itself leaves the mask the border is read
+    from the middle's side outwards (:func:`_far_border`). It stops where neither
+    border is the cable's (the wedge's tip: the object's border has reached the other
+    side too), or the border read lies past the mask's edge.
+
+    Returns
+    -------
+    ndarray
+        ``(M, 2)`` the points added past ``points[-1]`` (``M >= 0``).
+    """
+    if len(points) < 2:
+        return np.zeros((0, 2))
+    x, y = (float(value) for value in points[-1])
+    hx, hy = _heading(points, half_width)
+    reach = 2.5 * half_width + 2.0
+    steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX).tolist()
+    # The cable's own half width, from its last full sections (the one given may lie
+    # a pixel over it): each border is followed at the distance the cable's own shows.
+    widths = []
+    ax, ay = (float(value) for value in unit(points[-1] - points[-min(FULL_SECTIONS, len(points))]))
+    for px, py in points[-FULL_SECTIONS:]:
+        widths.append(
+            _border_distance(mask, px, py, -ay, ax, steps, reach)
+            + _border_distance(mask, px, py, ay, -ax, steps, reach)
+        )
+    half_width = 0.5 * float(np.median(widths))
+    if DEBUG:
+        print("wedge start", points[-1], (hx, hy), "own hw", half_width)
+    added = []
+    side = 0  # +1 / -1 once the line follows one border alone
+    for _ in range(int(limit / TRACE_STEP_PX)):
+        nx_, ny_ = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
+        nx, ny = -hy, hx
+        on = _on_mask(mask, nx_, ny_)
+        plus = _far_border(mask, nx_, ny_, nx, ny, steps, reach) if on or side > 0 else None
+        minus = _far_border(mask, nx_, ny_, -nx, -ny, steps, reach) if on or side < 0 else None
+        plus_own = plus is not None and plus < reach and abs(plus - half_width) <= SECTION_ROUNDING_PX
+        minus_own = (
+            minus is not None and minus < reach and abs(minus - half_width) <= SECTION_ROUNDING_PX
+        )
+        if side == 0 and plus_own and minus_own:
+            shift = 0.5 * (plus - minus)
+        elif plus_own and side >= 0:
+            side, shift = 1, plus - half_width
+        elif minus_own and side <= 0:
+            side, shift = -1, half_width - minus
+        else:
+            if DEBUG:
+                print("  stop", (nx_, ny_), on, plus, minus, side)
+            break
+        if DEBUG:
+            print("  step", (nx_, ny_), on, plus, minus, side)
+        shift = min(max(shift, -TRACE_STEP_PX), TRACE_STEP_PX)
+        x, y = nx_ + shift * nx, ny_ + shift * ny
+        added.append((x, y))
+        hx, hy = _heading(np.concatenate([points, np.array(added)]), half_width)
+    return np.array(added).reshape(-1, 2)
 
 
 def middle_line(
@@ -329,6 +447,8 @@ def end_at_the_cut(
         narrowed = np.flatnonzero(shortfall > own + SECTION_ROUNDING_PX)
         full = max(int(narrowed[0]) if len(narrowed) else len(ahead), 2)
     line = np.concatenate([behind[::-1], ahead[1:full]])
+    if WEDGE and not first_narrowing:
+        line = np.concatenate([line, along_the_wedge(mask, line, half_width, span)])
     # The fit's own end: the traced points carry a pixel's rounding from step to step.
     position, direction, curvature = end_fit(line, False, span)
     if carry:
