@@ -56,6 +56,11 @@ about 50 degrees from square (1.5 half widths times tan 50 degrees is 1.8)."""
 WEDGE = True
 DEBUG = False
 HEADING = "chord"
+BOUND = "stop"
+SIDE = "first"
+ONMASK = True
+SPLIT = True
+WEDGE_RADII = 4.0
 FULL_SECTIONS = 5
 REACH_PAST_SKIP_RADII = 2.0
 """How far (radii) past the tip the fit left out a cut may lie: the skeleton's tip stops
@@ -159,6 +164,40 @@ def _heading(line: np.ndarray, half_width: float) -> tuple[float, float]:
     return float(hx), float(hy)
 
 
+def _tip_side(
+    mask: np.ndarray, points: np.ndarray, heading: tuple[float, float], half_width: float
+) -> int:
+    """The side (+1 along the heading's left normal ``(-hy, hx)``, -1 the other, 0 for
+    neither) whose border runs on further past ``points[-1]``: the wedge's tip side.
+
+    Two lines beside the middle line, half a half width to either side (as
+    :func:`carried_to_the_border`'s), are carried on along ``heading`` bending as the
+    fit through ``points`` does (no tighter than the tightest bend a cable takes) until
+    each leaves the mask: the one the object's border crosses first leaves first. Where
+    both leave within a pixel of each other (a square cut, to the pixel's rounding),
+    there is no wedge."""
+    x, y = (float(value) for value in points[-1])
+    hx, hy = heading
+    _, _, curvature = end_fit(points, False, FIT_RADII * half_width)
+    bound = 1.0 / (HIDDEN_BEND_RADII[0] * half_width)
+    turn = min(max(float(curvature), -bound), bound) * CARRY_STEP_PX
+    cos, sin = float(np.cos(turn)), float(np.sin(turn))
+    side = 0.5 * half_width
+    steps = int(WEDGE_RADII * half_width / CARRY_STEP_PX)
+    exits = [steps, steps]
+    for step in range(1, steps + 1):
+        x, y = x + CARRY_STEP_PX * hx, y + CARRY_STEP_PX * hy
+        hx, hy = cos * hx - sin * hy, sin * hx + cos * hy
+        for k, sign in enumerate((1.0, -1.0)):
+            if exits[k] == steps and not _on_mask(mask, x - sign * side * hy, y + sign * side * hx):
+                exits[k] = step
+        if max(exits) < steps:
+            break
+    if abs(exits[0] - exits[1]) * CARRY_STEP_PX <= SECTION_ROUNDING_PX:
+        return 0
+    return 1 if exits[0] > exits[1] else -1
+
+
 def along_the_wedge(
     mask: np.ndarray,
     points: np.ndarray,
@@ -195,6 +234,7 @@ def along_the_wedge(
         return np.zeros((0, 2))
     x, y = (float(value) for value in points[-1])
     hx, hy = _heading(points, half_width)
+    start = (hx, hy)
     reach = 2.5 * half_width + 2.0
     steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX).tolist()
     # The cable's own half width, from its last full sections (the one given may lie
@@ -211,21 +251,35 @@ def along_the_wedge(
         print("wedge start", points[-1], (hx, hy), "own hw", half_width)
     added = []
     side = 0  # +1 / -1 once the line follows one border alone
+    if SIDE == "tip":
+        side = _tip_side(mask, points, (hx, hy), half_width)
+        if side == 0:
+            return np.zeros((0, 2))
     for _ in range(int(limit / TRACE_STEP_PX)):
         nx_, ny_ = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
         nx, ny = -hy, hx
         on = _on_mask(mask, nx_, ny_)
+        if ONMASK and not on:
+            break
         plus = _far_border(mask, nx_, ny_, nx, ny, steps, reach) if on or side > 0 else None
         minus = _far_border(mask, nx_, ny_, -nx, -ny, steps, reach) if on or side < 0 else None
         plus_own = plus is not None and plus < reach and abs(plus - half_width) <= SECTION_ROUNDING_PX
         minus_own = (
             minus is not None and minus < reach and abs(minus - half_width) <= SECTION_ROUNDING_PX
         )
-        if side == 0 and plus_own and minus_own:
+        # A side is taken for the cable's alone where the other reads shorter by more
+        # than a border's rounding: two sections short alike are the borders' rounding
+        # or a cut across both, which tells neither side.
+        apart = (
+            plus is not None
+            and minus is not None
+            and abs(plus - minus) > SECTION_ROUNDING_PX
+        )
+        if side == 0 and plus_own and minus_own and (not SPLIT or not apart):
             shift = 0.5 * (plus - minus)
-        elif plus_own and side >= 0:
+        elif plus_own and (side > 0 or (side == 0 and (not SPLIT or (apart and plus > minus)))):
             side, shift = 1, plus - half_width
-        elif minus_own and side <= 0:
+        elif minus_own and (side < 0 or (side == 0 and (not SPLIT or (apart and minus > plus)))):
             side, shift = -1, half_width - minus
         else:
             if DEBUG:
@@ -235,8 +289,19 @@ def along_the_wedge(
             print("  step", (nx_, ny_), on, plus, minus, side)
         shift = min(max(shift, -TRACE_STEP_PX), TRACE_STEP_PX)
         x, y = nx_ + shift * nx, ny_ + shift * ny
+        line = np.concatenate([points, np.array(added + [(x, y)])])
+        hx, hy = _heading(line, half_width)
+        # The border followed bends no tighter than a cable: turned further from where
+        # the wedge began than the tightest bend turns over the steps taken (and a
+        # pixel's rounding over the chord the heading is read on), it is the object's.
+        if BOUND and abs(np.arctan2(hx * start[1] - hy * start[0], hx * start[0] + hy * start[1])) > (
+            (len(added) + 1) * TRACE_STEP_PX / (HIDDEN_BEND_RADII[0] * half_width)
+            + np.arctan(1.0 / half_width)
+        ):
+            if DEBUG:
+                print("  bend bound", (x, y), (hx, hy))
+            return np.zeros((0, 2)) if BOUND == "all" else np.array(added).reshape(-1, 2)
         added.append((x, y))
-        hx, hy = _heading(np.concatenate([points, np.array(added)]), half_width)
     return np.array(added).reshape(-1, 2)
 
 
