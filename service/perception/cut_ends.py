@@ -13,7 +13,9 @@ So the stretch between where the fit begins and the cut is traced on the mask
 width in from its borders (from the one at the cable's own distance where a touching
 strand widens the section), until the section narrows (an object's border has begun to
 cut the cable) or the middle line leaves the mask: there the cable passes out of sight
-(:func:`end_at_the_cut`). The bridge runs along that traced stretch and from its end,
+(:func:`end_at_the_cut`); past where a slanted cut has begun to narrow the section, on
+along the one border that is still the cable's, to where the middle passes out of sight
+(:func:`along_the_wedge`). The bridge runs along that traced stretch and from its end,
 along the direction a short quadratic fit of the traced middle line gives there, across
 the gap (:func:`bridges_from_the_cuts`). Across a large turn that curve is the Euler
 spiral, whose curvature changes linearly along it: where the two cuts' readings
@@ -53,15 +55,9 @@ CARRY_RADII = 1.7
 """How far (half widths) at most the middle line is carried on past the narrowing: far
 enough for the lines beside it (half a half width out) to leave the mask across a cut
 about 50 degrees from square (1.5 half widths times tan 50 degrees is 1.8)."""
-WEDGE = True
-DEBUG = False
-HEADING = "chord"
-BOUND = "stop"
-SIDE = "first"
-ONMASK = True
-SPLIT = True
-WEDGE_RADII = 4.0
 FULL_SECTIONS = 5
+"""The last traced sections (a step, a pixel, apart) whose median width is the cable's own
+where a wedge is followed: enough to outvote one section's dip from the borders' rounding."""
 REACH_PAST_SKIP_RADII = 2.0
 """How far (radii) past the tip the fit left out a cut may lie: the skeleton's tip stops
 about a radius short of a cut, and a slanted cut's far corner a width further."""
@@ -135,9 +131,9 @@ def _far_border(
     mask: np.ndarray, x: float, y: float, dx: float, dy: float, steps: list[float], reach: float
 ) -> float | None:
     """Distance (px) from ``(x, y)`` along ``(dx, dy)`` to the first of the sample
-    ``steps`` off ``mask`` past the first on it (the mask's border on that side, read
-    from a point that may itself lie off the mask), ``reach`` when it runs on, or None
-    where no sample is on the mask."""
+    ``steps`` off ``mask`` past the first on it (the mask's border on that side, past a
+    first sample that rounds off the pixel ``(x, y)`` lies on), ``reach`` when it runs
+    on, or None where no sample is on the mask."""
     height, width = mask.shape
     entered = False
     for step in steps:
@@ -151,51 +147,13 @@ def _far_border(
 
 
 def _heading(line: np.ndarray, half_width: float) -> tuple[float, float]:
-    """The direction a step on from the end of ``line``: a quadratic's over its last
-    :data:`FIT_RADII` radii, turned by its curvature over the step (bounded by the
-    tightest bend a cable takes)."""
-    if HEADING == "chord":
-        back = max(len(line) - 1 - int(round(half_width / TRACE_STEP_PX)), 0)
-        hx, hy = unit(line[-1] - line[back])
-        return float(hx), float(hy)
-    _, direction, curvature = end_fit(line, False, FIT_RADII * half_width)
-    bound = 1.0 / (HIDDEN_BEND_RADII[0] * half_width)
-    hx, hy = rotated(direction, min(max(curvature, -bound), bound) * TRACE_STEP_PX)
+    """The direction at the end of ``line``: the chord over its last half width
+    (``half_width`` px). A single step's, moved by up to a pixel across as each point is
+    put on the middle, would swing by 45 degrees; a fit's, extrapolated over the step,
+    swings with the rounding of its last points."""
+    back = max(len(line) - 1 - round(half_width / TRACE_STEP_PX), 0)
+    hx, hy = unit(line[-1] - line[back])
     return float(hx), float(hy)
-
-
-def _tip_side(
-    mask: np.ndarray, points: np.ndarray, heading: tuple[float, float], half_width: float
-) -> int:
-    """The side (+1 along the heading's left normal ``(-hy, hx)``, -1 the other, 0 for
-    neither) whose border runs on further past ``points[-1]``: the wedge's tip side.
-
-    Two lines beside the middle line, half a half width to either side (as
-    :func:`carried_to_the_border`'s), are carried on along ``heading`` bending as the
-    fit through ``points`` does (no tighter than the tightest bend a cable takes) until
-    each leaves the mask: the one the object's border crosses first leaves first. Where
-    both leave within a pixel of each other (a square cut, to the pixel's rounding),
-    there is no wedge."""
-    x, y = (float(value) for value in points[-1])
-    hx, hy = heading
-    _, _, curvature = end_fit(points, False, FIT_RADII * half_width)
-    bound = 1.0 / (HIDDEN_BEND_RADII[0] * half_width)
-    turn = min(max(float(curvature), -bound), bound) * CARRY_STEP_PX
-    cos, sin = float(np.cos(turn)), float(np.sin(turn))
-    side = 0.5 * half_width
-    steps = int(WEDGE_RADII * half_width / CARRY_STEP_PX)
-    exits = [steps, steps]
-    for step in range(1, steps + 1):
-        x, y = x + CARRY_STEP_PX * hx, y + CARRY_STEP_PX * hy
-        hx, hy = cos * hx - sin * hy, sin * hx + cos * hy
-        for k, sign in enumerate((1.0, -1.0)):
-            if exits[k] == steps and not _on_mask(mask, x - sign * side * hy, y + sign * side * hx):
-                exits[k] = step
-        if max(exits) < steps:
-            break
-    if abs(exits[0] - exits[1]) * CARRY_STEP_PX <= SECTION_ROUNDING_PX:
-        return 0
-    return 1 if exits[0] > exits[1] else -1
 
 
 def along_the_wedge(
@@ -215,15 +173,21 @@ def along_the_wedge(
     middle is no longer the cable's (it leans into the wedge, towards its tip), but the
     border that runs on is still the cable's own, and the cable's middle lies half its
     width in from it: where the cable bends into the hidden stretch, that border bends
-    with it, and is the only part of the image that shows the bend. So each step goes
-    :data:`TRACE_STEP_PX` along the line's heading (its last step's, as the trace turns
-    with the border), and is put half a width in from the border read at the cable's
-    own distance (within :data:`SECTION_ROUNDING_PX`, a pixel's rounding, of it); from
-    both where both are (a section the cut has not narrowed). The side it follows is
-    kept once chosen; past where the middle itself leaves the mask the border is read
-    from the middle's side outwards (:func:`_far_border`). It stops where neither
-    border is the cable's (the wedge's tip: the object's border has reached the other
-    side too), or the border read lies past the mask's edge.
+    with it, and is the only part of the image that shows the bend (the middle line of
+    the narrowed sections runs straight on into the wedge's tip, and a fit over it
+    leaves 15-50 degrees off where a doubled-back cable turns under the object). So
+    each step goes :data:`TRACE_STEP_PX` along the line's heading (:func:`_heading`),
+    and is put half a width in from the border read at the cable's own distance (within
+    :data:`SECTION_ROUNDING_PX`, a pixel's rounding, of it): from both while both are
+    (a section the cut has not narrowed); from one alone once the other reads shorter
+    by more than that rounding (two borders short alike are their rounding, or a cut
+    across both, and tell neither side), and from that side on. It stops where the
+    middle leaves the mask (the cable passes out of sight), where the border followed
+    is no longer at the cable's distance (the wedge's tip), or where the line has
+    turned further than the tightest bend a cable takes
+    (:data:`.turn_joins.HIDDEN_BEND_RADII` ``[0]`` half widths) would over the steps
+    taken, and a pixel's rounding over the chord its heading is read on: the border
+    followed is then the object's, meeting the cable at its corner.
 
     Returns
     -------
@@ -247,60 +211,44 @@ def along_the_wedge(
             + _border_distance(mask, px, py, ay, -ax, steps, reach)
         )
     half_width = 0.5 * float(np.median(widths))
-    if DEBUG:
-        print("wedge start", points[-1], (hx, hy), "own hw", half_width)
     added = []
     side = 0  # +1 / -1 once the line follows one border alone
-    if SIDE == "tip":
-        side = _tip_side(mask, points, (hx, hy), half_width)
-        if side == 0:
-            return np.zeros((0, 2))
     for _ in range(int(limit / TRACE_STEP_PX)):
         nx_, ny_ = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
         nx, ny = -hy, hx
-        on = _on_mask(mask, nx_, ny_)
-        if ONMASK and not on:
-            break
-        plus = _far_border(mask, nx_, ny_, nx, ny, steps, reach) if on or side > 0 else None
-        minus = _far_border(mask, nx_, ny_, -nx, -ny, steps, reach) if on or side < 0 else None
-        plus_own = plus is not None and plus < reach and abs(plus - half_width) <= SECTION_ROUNDING_PX
+        if not _on_mask(mask, nx_, ny_):
+            break  # the middle has passed out of sight: the cut
+        plus = _far_border(mask, nx_, ny_, nx, ny, steps, reach)
+        minus = _far_border(mask, nx_, ny_, -nx, -ny, steps, reach)
+        plus_own = (
+            plus is not None and plus < reach and abs(plus - half_width) <= SECTION_ROUNDING_PX
+        )
         minus_own = (
             minus is not None and minus < reach and abs(minus - half_width) <= SECTION_ROUNDING_PX
         )
         # A side is taken for the cable's alone where the other reads shorter by more
         # than a border's rounding: two sections short alike are the borders' rounding
         # or a cut across both, which tells neither side.
-        apart = (
-            plus is not None
-            and minus is not None
-            and abs(plus - minus) > SECTION_ROUNDING_PX
-        )
-        if side == 0 and plus_own and minus_own and (not SPLIT or not apart):
+        apart = plus is not None and minus is not None and abs(plus - minus) > SECTION_ROUNDING_PX
+        if side == 0 and plus_own and minus_own and not apart:
             shift = 0.5 * (plus - minus)
-        elif plus_own and (side > 0 or (side == 0 and (not SPLIT or (apart and plus > minus)))):
+        elif plus_own and (side > 0 or (side == 0 and apart and plus > minus)):
             side, shift = 1, plus - half_width
-        elif minus_own and (side < 0 or (side == 0 and (not SPLIT or (apart and minus > plus)))):
+        elif minus_own and (side < 0 or (side == 0 and apart and minus > plus)):
             side, shift = -1, half_width - minus
         else:
-            if DEBUG:
-                print("  stop", (nx_, ny_), on, plus, minus, side)
             break
-        if DEBUG:
-            print("  step", (nx_, ny_), on, plus, minus, side)
         shift = min(max(shift, -TRACE_STEP_PX), TRACE_STEP_PX)
         x, y = nx_ + shift * nx, ny_ + shift * ny
-        line = np.concatenate([points, np.array(added + [(x, y)])])
+        line = np.concatenate([points, np.array([*added, (x, y)])])
         hx, hy = _heading(line, half_width)
         # The border followed bends no tighter than a cable: turned further from where
         # the wedge began than the tightest bend turns over the steps taken (and a
         # pixel's rounding over the chord the heading is read on), it is the object's.
-        if BOUND and abs(np.arctan2(hx * start[1] - hy * start[0], hx * start[0] + hy * start[1])) > (
-            (len(added) + 1) * TRACE_STEP_PX / (HIDDEN_BEND_RADII[0] * half_width)
-            + np.arctan(1.0 / half_width)
-        ):
-            if DEBUG:
-                print("  bend bound", (x, y), (hx, hy))
-            return np.zeros((0, 2)) if BOUND == "all" else np.array(added).reshape(-1, 2)
+        turned = abs(np.arctan2(hx * start[1] - hy * start[0], hx * start[0] + hy * start[1]))
+        bend = (len(added) + 1) * TRACE_STEP_PX / (HIDDEN_BEND_RADII[0] * half_width)
+        if turned > bend + np.arctan(1.0 / half_width):
+            break
         added.append((x, y))
     return np.array(added).reshape(-1, 2)
 
@@ -463,7 +411,9 @@ def end_at_the_cut(
     cut is a quadratic's (:func:`.geometry.end_fit`) over the traced line's last
     :data:`FIT_RADII` radii: centred on the cable, not on the skeleton's hooked tip, and
     short enough to follow a tight bend, fitted on the sections the cut has not begun to
-    narrow (those before the run of narrowed sections the trace ends on). Where less than
+    narrow (those before the run of narrowed sections the trace ends on), and on past
+    them into a slanted cut's wedge along the border still the cable's
+    (:func:`along_the_wedge`). Where less than
     half that is traced behind the end, the end's own fit bends
     on to the cut instead. With ``carry``, the middle line is then carried on towards
     where the cut's border crosses it (:func:`carried_to_the_border`, to the border
@@ -512,7 +462,9 @@ def end_at_the_cut(
         narrowed = np.flatnonzero(shortfall > own + SECTION_ROUNDING_PX)
         full = max(int(narrowed[0]) if len(narrowed) else len(ahead), 2)
     line = np.concatenate([behind[::-1], ahead[1:full]])
-    if WEDGE and not first_narrowing:
+    if carry and not first_narrowing:
+        # Past the last full section, along the border of a slanted cut's wedge that is
+        # still the cable's (:func:`along_the_wedge`).
         line = np.concatenate([line, along_the_wedge(mask, line, half_width, span)])
     # The fit's own end: the traced points carry a pixel's rounding from step to step.
     position, direction, curvature = end_fit(line, False, span)
