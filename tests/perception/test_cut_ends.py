@@ -122,6 +122,18 @@ def test_a_steeply_slanted_cuts_direction_is_read_along_the_border_that_runs_on(
     assert abs(np.hypot(*(position - CENTRE)) - BEND) <= 2.0
 
 
+@pytest.mark.parametrize(
+    ("family", "seed"),
+    [("doubled_back", 410215), ("loops", 410094), ("occluded", 410172)],
+)
+def test_hidden_stretches_bridged_from_a_slanted_cuts_wedge_are_covered(family, seed):
+    """Tuning scenes, true mask: where an object cuts the cable at a steep slant the
+    direction is read along the border of the wedge that is still the cable's
+    (410215: one cut 47 degrees off and 3.3 px off the middle before, 20 and 0.6 now)."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
+
+
 def test_a_short_pieces_cut_is_traced_from_its_middle():
     """A short piece (bridged along its partners' line) whose tip thinning bent 3 px
     toward the corner of a square cut: its bridge starts on the middle line at the
