@@ -101,39 +101,6 @@ def test_a_slanted_cut_stops_the_trace_where_it_begins_and_the_bridge_at_the_mid
     assert angle_deg(direction, tangent) <= 15.0
 
 
-@pytest.mark.parametrize("slant_deg", [45.0, 60.0])
-def test_a_steeply_slanted_cuts_direction_is_read_along_the_border_that_runs_on(slant_deg):
-    """Cut at 45 and 60 degrees from square on a bend of 6 half widths, the wedge's tip
-    on the bend's outer border: the narrowed sections' middle runs on into the tip, and
-    a fit over the traced line ending there leaned 7 and 20 degrees off the cable (the
-    cut point 0.9 and 2.5 px off its middle). Followed half a width in from the outer
-    border, which is the cable's own up to the tip, the direction where the cable
-    passes out of sight is read within 6 degrees, on the middle within 2 px."""
-    cut_angle = 0.6
-    end = end_before(cut_angle - 14.0 / BEND, skip=10.0)
-    found = end_at_the_cut(
-        arc_mask(cut_angle, np.radians(slant_deg)), end, HALF_WIDTH, 10.0 + 2 * HALF_WIDTH + 2.0
-    )
-    assert found is not None
-    _, position, direction = found
-    angle = float(np.arctan2(*(position - CENTRE)[::-1]))
-    tangent = np.array([-np.sin(angle), np.cos(angle)])
-    assert angle_deg(direction, tangent) <= 6.0
-    assert abs(np.hypot(*(position - CENTRE)) - BEND) <= 2.0
-
-
-@pytest.mark.parametrize(
-    ("family", "seed"),
-    [("doubled_back", 410215), ("loops", 410094), ("occluded", 410172)],
-)
-def test_hidden_stretches_bridged_from_a_slanted_cuts_wedge_are_covered(family, seed):
-    """Tuning scenes, true mask: where an object cuts the cable at a steep slant the
-    direction is read along the border of the wedge that is still the cable's
-    (410215: one cut 47 degrees off and 3.3 px off the middle before, 20 and 0.6 now)."""
-    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
-    assert score.frame.correct, score.frame.coverage
-
-
 def test_a_short_pieces_cut_is_traced_from_its_middle():
     """A short piece (bridged along its partners' line) whose tip thinning bent 3 px
     toward the corner of a square cut: its bridge starts on the middle line at the

@@ -199,10 +199,16 @@ def test_cheapest_pairing_leaves_an_end_free_when_pairing_costs_more():
 @pytest.mark.parametrize(
     "seed",
     [
-        # The cuts' directions, read over 4-9 traced points on the bulb's tight bend,
-        # leaned 10-21 degrees (turns8); read along the border of the slanted cut's
-        # wedge (wedge15, docs/BENCHMARKS.md) the bulb is covered.
-        78017,
+        pytest.param(
+            78017,
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="the cuts' directions, read over 4-9 traced points on the "
+                "bulb's tight bend, lean 10-21 degrees, and from the cuts the cubic "
+                "misses the bulb even carried only while both sides are seen "
+                "(turns8, docs/BENCHMARKS.md)",
+            ),
+        ),
         pytest.param(
             79046,
             marks=pytest.mark.xfail(
