@@ -64,14 +64,27 @@ def _start_on_the_piece(end, piece: np.ndarray, distance: np.ndarray, half_width
     steps = np.diff(points, axis=0)
     lengths = np.hypot(steps[:, 0], steps[:, 1])
     arcs = np.concatenate([[0.0], np.cumsum(lengths)])
-    for back in np.arange(float(end.skip), float(arcs[-1]) + 1e-9, WALK_STEP_PX):
-        k = min(int(np.searchsorted(arcs, back, side="right")) - 1, len(steps) - 1)
-        if lengths[k] <= 0:
-            continue
-        point = points[k] + (back - arcs[k]) / lengths[k] * steps[k]
-        if _on(distance, point) >= half_width - PIXEL_ROUNDING:
-            return point, -steps[k] / lengths[k], float(back)
-    return None
+    backs = np.arange(float(end.skip), float(arcs[-1]) + 1e-9, WALK_STEP_PX)
+    if len(steps) == 0 or len(backs) == 0:
+        return None
+    # Every point of the walk at once (a ring's end walks its whole piece).
+    segment = np.minimum(np.searchsorted(arcs, backs, side="right") - 1, len(steps) - 1)
+    used = lengths[segment] > 0
+    backs, segment = backs[used], segment[used]
+    walked = (
+        points[segment] + ((backs - arcs[segment]) / lengths[segment])[:, None] * steps[segment]
+    )
+    cols = np.rint(walked[:, 0]).astype(np.int64)
+    rows = np.rint(walked[:, 1]).astype(np.int64)
+    height, width = distance.shape[:2]
+    inside = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height)
+    depth = np.zeros(len(walked))
+    depth[inside] = distance[rows[inside], cols[inside]]
+    whole = np.flatnonzero(depth >= half_width - PIXEL_ROUNDING)
+    if len(whole) == 0:
+        return None
+    k = int(whole[0])
+    return walked[k], -steps[segment[k]] / lengths[segment[k]], float(backs[k])
 
 
 def ends_at_the_cuts(
