@@ -31,6 +31,7 @@ import numpy as np
 
 from service.perception.appearance import cut_square
 from service.perception.cut_ends import REACH_PAST_SKIP_RADII, end_at_the_cut
+from service.perception.end_readings import closed_on_itself
 from service.perception.gap_evidence import TURN_CUT_ENDS, cut_ends_alike
 from service.perception.turn_joins import PIXEL_ROUNDING
 
@@ -110,9 +111,15 @@ def ends_at_the_cuts(
                 half_width = (end.width or radius) + 0.5
                 start = replace(end, position=end.position - end.skip * end.direction)
                 limit = end.skip + REACH_PAST_SKIP_RADII * half_width + 2.0
-                if pieces is not None and distance is not None and not _on(mask, start.position):
+                if (
+                    pieces is not None
+                    and distance is not None
+                    and not _on(mask, start.position)
+                    and not closed_on_itself(pieces[end.piece])
+                ):
                     # The line back from the tip leaves the cable (a bend into a
-                    # corner's wedge): start on the piece, where the cable is whole.
+                    # corner's wedge): start on the piece, where the cable is whole. (A
+                    # ring closed on itself has no free end: its fit runs round it.)
                     on_piece = _start_on_the_piece(end, pieces[end.piece], distance, end.width)
                     if on_piece is not None:
                         point, heading, back = on_piece
