@@ -72,7 +72,7 @@ def ends_refitted_onto_the_mask(
             # corner, up to a half width off the middle, no reading to fall back on.
             continue
         points = pieces[end.piece]
-        if len(points) < 2 or _closed(points):
+        if len(points) < 2 or closed_on_itself(points):
             # A ring closed on itself (its two tips neighbouring pixels) has no free
             # end to read: its fit runs round the ring, and a refit would give it one.
             continue
@@ -91,7 +91,7 @@ def ends_refitted_onto_the_mask(
     return ends
 
 
-def _closed(points: np.ndarray) -> bool:
+def closed_on_itself(points: np.ndarray) -> bool:
     """Whether a piece's two tips are neighbouring pixels: a contour run closed on itself
     (:func:`.fitting.fit_chains` puts a joint at a closed run's first and last pixel)."""
     return bool(np.hypot(*(points[0] - points[-1])) <= 1.5)

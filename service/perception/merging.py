@@ -870,7 +870,7 @@ def merge_chains(
                 + params.colour_weight * float(colour_penalty(hues, [i], [j])[0])
             ),
             turn_evidence(image, mask, judged, hues, radius, set(touching.partings))
-            + traced_cut_tests(judged, mask, hues, radius, image),
+            + traced_cut_tests(judged, mask, hues, radius, image, pieces, distance),
             lambda i, j: open_gap_limit(radius, widths[i], widths[j]),
             mutual,
             mutual,

@@ -12,6 +12,14 @@ along that direction, is the object's border across the cable.
 :func:`traced_cut_tests` gives the turn pass (:mod:`.turn_joins`) the two tests of the
 cuts (:func:`.gap_evidence.cut_ends_alike`: both ends cut square, or one square and the
 other lopsided) read at the traced cuts, after the tests of the usual readings.
+
+Where a strand bends into the turn right up to an object's corner, or into a short, steep
+cut, the skeleton runs on into the narrow wedge the object leaves, and an end left at its
+tip (too few joints to fit) or fitted over the bend points along a chord of the bend: the
+line back from its tip to where its fit begins leaves the cable on the bend's inside.
+Traced from there, nothing is read. Such an end's trace starts on its own piece instead,
+at the first point back from the tip where the cable is seen whole
+(:func:`_start_on_the_piece`).
 """
 
 from __future__ import annotations
@@ -23,14 +31,76 @@ import numpy as np
 
 from service.perception.appearance import cut_square
 from service.perception.cut_ends import REACH_PAST_SKIP_RADII, end_at_the_cut
+from service.perception.end_readings import closed_on_itself
 from service.perception.gap_evidence import TURN_CUT_ENDS, cut_ends_alike
+from service.perception.turn_joins import PIXEL_ROUNDING
+
+# Step (px) of the walk back along a piece from its tip (:func:`_start_on_the_piece`).
+WALK_STEP_PX = 0.5
 
 
-def ends_at_the_cuts(ends: list, mask: np.ndarray, radius: float) -> Callable[[int], object]:
+def _on(grid: np.ndarray, point: np.ndarray) -> float:
+    """``grid``'s value at the pixel nearest ``point``; 0 outside the picture."""
+    col, row = int(np.rint(point[0])), int(np.rint(point[1]))
+    height, width = grid.shape[:2]
+    if not (0 <= col < width and 0 <= row < height):
+        return 0.0
+    return float(grid[row, col])
+
+
+def _start_on_the_piece(end, piece: np.ndarray, distance: np.ndarray, half_width: float):
+    """Where a trace to ``end``'s cut starts on its own ``piece`` (joints, px), and the
+    heading there: the first point back along the piece from the end's tip, no nearer
+    the tip than where the end's fit begins (``skip``), at which the mask's
+    ``distance`` transform reaches the cable's ``half_width`` less a pixel's rounding
+    (:data:`.turn_joins.PIXEL_ROUNDING`), heading along the piece towards the tip; with
+    the arc from there to the tip. None where the piece nowhere shows the cable whole.
+
+    The skeleton lies on the cable's middle, so the piece's point stays on the cable
+    where a straight line back from a tip in a cut's corner leaves it; a cut only
+    narrows a section, so where the section is whole the cut has not begun."""
+    points = np.asarray(piece, np.float64)
+    if not end.at_start:
+        points = points[::-1]  # from the tip back
+    steps = np.diff(points, axis=0)
+    lengths = np.hypot(steps[:, 0], steps[:, 1])
+    arcs = np.concatenate([[0.0], np.cumsum(lengths)])
+    backs = np.arange(float(end.skip), float(arcs[-1]) + 1e-9, WALK_STEP_PX)
+    if len(steps) == 0 or len(backs) == 0:
+        return None
+    # Every point of the walk at once (a ring's end walks its whole piece).
+    segment = np.minimum(np.searchsorted(arcs, backs, side="right") - 1, len(steps) - 1)
+    used = lengths[segment] > 0
+    backs, segment = backs[used], segment[used]
+    walked = (
+        points[segment] + ((backs - arcs[segment]) / lengths[segment])[:, None] * steps[segment]
+    )
+    cols = np.rint(walked[:, 0]).astype(np.int64)
+    rows = np.rint(walked[:, 1]).astype(np.int64)
+    height, width = distance.shape[:2]
+    inside = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height)
+    depth = np.zeros(len(walked))
+    depth[inside] = distance[rows[inside], cols[inside]]
+    whole = np.flatnonzero(depth >= half_width - PIXEL_ROUNDING)
+    if len(whole) == 0:
+        return None
+    k = int(whole[0])
+    return walked[k], -steps[segment[k]] / lengths[segment[k]], float(backs[k])
+
+
+def ends_at_the_cuts(
+    ends: list,
+    mask: np.ndarray,
+    radius: float,
+    pieces: list | None = None,
+    distance: np.ndarray | None = None,
+) -> Callable[[int], object]:
     """Per end index, the end read at its traced cut (a callable, each end traced once,
     when first asked): position where the middle line leaves the mask, the direction
     there, no hook to leave out (``skip`` 0); the end itself where its fit left out no
-    tip or no cut lies ahead."""
+    tip or no cut lies ahead. With ``pieces`` and the mask's ``distance`` transform, an
+    end whose line back to where its fit begins leaves the mask is traced from its own
+    piece (:func:`_start_on_the_piece`)."""
     traced: dict[int, object] = {}
 
     def at_cut(index: int):
@@ -41,6 +111,20 @@ def ends_at_the_cuts(ends: list, mask: np.ndarray, radius: float) -> Callable[[i
                 half_width = (end.width or radius) + 0.5
                 start = replace(end, position=end.position - end.skip * end.direction)
                 limit = end.skip + REACH_PAST_SKIP_RADII * half_width + 2.0
+                if (
+                    pieces is not None
+                    and distance is not None
+                    and not _on(mask, start.position)
+                    and not closed_on_itself(pieces[end.piece])
+                ):
+                    # The line back from the tip leaves the cable (a bend into a
+                    # corner's wedge): start on the piece, where the cable is whole. (A
+                    # ring closed on itself has no free end: its fit runs round it.)
+                    on_piece = _start_on_the_piece(end, pieces[end.piece], distance, end.width)
+                    if on_piece is not None:
+                        point, heading, back = on_piece
+                        start = replace(end, position=point, direction=heading, curvature=0.0)
+                        limit = back + REACH_PAST_SKIP_RADII * half_width + 2.0
                 # The cut's shape read at the border itself (where it crosses the
                 # middle line), as the turn pass's tests were measured: on traces that
                 # stop at the first narrowed section (a cut's test is evidence for a
@@ -58,12 +142,13 @@ def ends_at_the_cuts(ends: list, mask: np.ndarray, radius: float) -> Callable[[i
     return at_cut
 
 
-def traced_cut_tests(ends, mask, colours, radius, image) -> tuple:
+def traced_cut_tests(ends, mask, colours, radius, image, pieces=None, distance=None) -> tuple:
     """The tests of two cut ends (:func:`.gap_evidence.cut_ends_alike`, both cut, then
     one cut and the other lopsided: :data:`.gap_evidence.TURN_CUT_ENDS`) with each end
-    read at its traced cut (:func:`ends_at_the_cuts`), as callables ``(i, j, curve)``;
-    False where neither end reads otherwise than usual (the usual tests said so)."""
-    at_cut = ends_at_the_cuts(ends, mask, radius)
+    read at its traced cut (:func:`ends_at_the_cuts`, given ``pieces`` and ``distance``),
+    as callables ``(i, j, curve)``; False where neither end reads otherwise than usual
+    (the usual tests said so)."""
+    at_cut = ends_at_the_cuts(ends, mask, radius, pieces, distance)
     square: dict[int, bool] = {}
 
     def cut_square_at(index: int) -> bool:

@@ -1,10 +1,12 @@
 """A turn under an object whose cut lies on the turn's own bend: the cuts read where the
 middle line traced from the end's fit leaves the mask (service/perception/traced_cuts.py)."""
 
+import cv2
 import numpy as np
 import pytest
 
 from service.evaluation.synthetic_eval import evaluate_scene
+from service.perception.appearance import cut_square
 from service.perception.merging import ChainEnd
 from service.perception.traced_cuts import ends_at_the_cuts
 from service.synthetic.families import make_family_scene
@@ -65,3 +67,42 @@ def test_a_turn_cut_on_its_own_bend_is_joined(family, seed):
     score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.n_chains == score.frame.n_cables
     assert min(score.frame.coverage) >= 0.95, score.frame.coverage
+
+
+def test_an_end_whose_line_back_leaves_the_cable_is_traced_from_its_own_piece():
+    """A straight strand of half width 4 along row 40, cut square at x = 60; its end left
+    at the tip in the cut's corner with a chord 50 degrees off the cable (a piece too
+    short to fit, bent into a corner's wedge): the line back to where the fit begins
+    (12 px: a hook left out) leaves the mask, so the trace from there reads nothing. Traced from the
+    piece's own point where the cable is whole, the cut is found at x = 60, square
+    across the cable, heading along it."""
+    height, width = 80, 100
+    ys, xs = np.mgrid[:height, :width].astype(np.float64)
+    mask = (np.abs(ys - 40.0) <= 4.0) & (xs >= 5.0) & (xs <= 60.0)
+    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    piece = np.array(
+        [[10.0, 40.0], [20.0, 40.0], [30.0, 40.0], [40.0, 40.0], [50.0, 40.0], [59.0, 43.0]]
+    )
+    tilted = np.array([np.cos(np.radians(50.0)), np.sin(np.radians(50.0))])
+    end = ChainEnd(0, False, piece[-1], tilted, skip=12.0, width=4.5)
+    assert not mask[
+        int(np.rint(piece[-1][1] - 12.0 * tilted[1])), int(np.rint(piece[-1][0] - 12.0 * tilted[0]))
+    ]
+    assert ends_at_the_cuts([end], mask, 4.0)(0) is end
+    moved = ends_at_the_cuts([end], mask, 4.0, [piece], distance)(0)
+    assert moved is not end
+    assert abs(float(moved.position[0]) - 60.0) <= 1.5
+    assert abs(float(moved.position[1]) - 40.0) <= 1.5
+    assert float(moved.direction[0]) >= np.cos(np.radians(10.0))
+    assert cut_square(mask, moved.position, moved.direction, end.width, moved.skip)
+
+
+@pytest.mark.parametrize(("family", "seed"), [("loops", 410220), ("loops", 420298)])
+def test_a_loops_turn_cut_in_an_objects_corner_is_joined(family, seed):
+    """Tuning scenes (true mask): a loop's strand runs into an object's corner (410220) or
+    into a short, steep cut on a disc's rim (420298); its piece's end, left in the
+    corner's wedge, points along a chord of the bend. Traced from the piece, its cut reads
+    square and the turn is joined: one chain per cable, the frame right."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.n_chains == score.frame.n_cables
+    assert score.frame.correct
