@@ -12,7 +12,6 @@ and their costs are never changed here.
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -23,6 +22,7 @@ from service.perception.geometry import (
     arc_lengths,
     fit_at,
     fit_where_skipped,
+    points_along,
     polyline_length,
 )
 
@@ -372,9 +372,7 @@ def start_on_the_piece(
     outward unit direction.
     """
     arcs = arc_lengths(backwards)
-    # The one point as points_along finds it (np.interp per coordinate), without its
-    # arrays: called for every crossing end of a frame.
-    on_piece = _point_at(backwards, arcs, skip)
+    on_piece = points_along(backwards, arcs, skip)[0]
     if float(np.hypot(*(position - on_piece))) <= FIT_MISS_PX:
         return position, direction
     beyond = np.flatnonzero((arcs > skip) & (arcs <= skip + 0.5 * span))
@@ -385,32 +383,6 @@ def start_on_the_piece(
     if length < 1e-9:
         return position, direction
     return on_piece, chord / length
-
-
-def _point_at(points: np.ndarray, arcs: np.ndarray, at: float) -> np.ndarray:
-    """The point at arc ``at`` along ``points`` (vertices at ``arcs``, never decreasing):
-    what ``np.interp(at, arcs, points[:, k])`` gives per coordinate, bit for bit (the
-    same segment, the last vertex at or before ``at``; the same sums in the same order),
-    from one search for both coordinates."""
-    if math.isnan(at):
-        return np.array([math.nan, math.nan])
-    last = len(arcs) - 1
-    j = int(np.searchsorted(arcs, at, side="right")) - 1
-    if j < 0 or j >= last or arcs[j] == at:
-        return points[min(max(j, 0), last)].astype(np.float64)
-    lower, upper = float(arcs[j]), float(arcs[j + 1])
-    here, there = points[j].tolist(), points[j + 1].tolist()
-    point = []
-    for coordinate in (0, 1):
-        slope = (there[coordinate] - here[coordinate]) / (upper - lower)
-        value = slope * (at - lower) + here[coordinate]
-        if math.isnan(value):
-            # NumPy's fallback where the slope overflows: from the segment's other end.
-            value = slope * (at - upper) + there[coordinate]
-            if math.isnan(value) and here[coordinate] == there[coordinate]:
-                value = here[coordinate]
-        point.append(value)
-    return np.array(point)
 
 
 # The kernel computes the turns itself (see _turns).

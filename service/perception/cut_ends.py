@@ -72,7 +72,8 @@ def _border_distance(
     return reach
 
 
-def _on_mask(mask: np.ndarray, x: float, y: float) -> bool:
+def on_mask(mask: np.ndarray, x: float, y: float) -> bool:
+    """Whether the pixel nearest ``(x, y)`` is on ``mask`` (False outside the picture)."""
     column, row = round(x), round(y)
     return 0 <= column < mask.shape[1] and 0 <= row < mask.shape[0] and bool(mask[row, column])
 
@@ -115,7 +116,7 @@ def _full_beyond(
     pixel's diagonal (0.7 px) short, and a half width read from the skeleton a pixel
     over the cable's leaves that within :data:`CUT_NARROWING_PX` of a single section."""
     x, y = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
-    if not _on_mask(mask, x, y):
+    if not on_mask(mask, x, y):
         return False
     plus = _border_distance(mask, x, y, -hy, hx, steps, reach)
     minus = _border_distance(mask, x, y, hy, -hx, steps, reach)
@@ -159,7 +160,7 @@ def middle_line(
     hx, hy = (float(value) for value in unit(np.asarray(heading, np.float64)))
     points = [(x, y)]
     shortfall = [0.0]
-    if not _on_mask(mask, x, y):
+    if not on_mask(mask, x, y):
         return np.array(points), False, np.array(shortfall)
     reach = 2.5 * half_width + 2.0
     steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX).tolist()
@@ -172,13 +173,13 @@ def middle_line(
     minus = _border_distance(mask, x, y, -nx, -ny, steps, reach)
     if plus + minus >= 2.0 * half_width - CUT_NARROWING_PX:
         shift = _recentred(plus, minus, half_width)
-        if _on_mask(mask, x + shift * nx, y + shift * ny):
+        if on_mask(mask, x + shift * nx, y + shift * ny):
             x, y = x + shift * nx, y + shift * ny
             points = [(x, y)]
     for _ in range(int(limit / TRACE_STEP_PX)):
         x, y = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
         nx, ny = -hy, hx
-        if _on_mask(mask, x, y):
+        if on_mask(mask, x, y):
             plus = _border_distance(mask, x, y, nx, ny, steps, reach)
             minus = _border_distance(mask, x, y, -nx, -ny, steps, reach)
             if plus + minus < 2.0 * half_width - CUT_NARROWING_PX and (
@@ -192,7 +193,7 @@ def middle_line(
             x, y = x + shift * nx, y + shift * ny
         else:
             narrower = 0.0
-        if not _on_mask(mask, x, y):
+        if not on_mask(mask, x, y):
             return np.array(points), True, np.array(shortfall)
         points.append((x, y))
         shortfall.append(narrower)
@@ -243,16 +244,16 @@ def carried_to_the_border(
     steps = int(CARRY_RADII * half_width / CARRY_STEP_PX)
     path = [(x, y, hx, hy)]
     exits = [steps, steps]  # where each side line leaves the mask (steps)
-    if not _on_mask(mask, x, y):
+    if not on_mask(mask, x, y):
         return np.array([x, y]), np.array([hx, hy])
     for step in range(1, steps + 1):
         x, y = x + CARRY_STEP_PX * hx, y + CARRY_STEP_PX * hy
         hx, hy = cos * hx - sin * hy, sin * hx + cos * hy
-        if not _on_mask(mask, x, y):
+        if not on_mask(mask, x, y):
             break
         path.append((x, y, hx, hy))
         for k, sign in enumerate((1.0, -1.0)):
-            if exits[k] == steps and not _on_mask(mask, x - sign * side * hy, y + sign * side * hx):
+            if exits[k] == steps and not on_mask(mask, x - sign * side * hy, y + sign * side * hx):
                 exits[k] = step
         if not to_the_border and min(exits) < steps:
             break

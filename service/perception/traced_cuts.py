@@ -30,22 +30,13 @@ from dataclasses import replace
 import numpy as np
 
 from service.perception.appearance import cut_square
-from service.perception.cut_ends import REACH_PAST_SKIP_RADII, end_at_the_cut
+from service.perception.cut_ends import REACH_PAST_SKIP_RADII, end_at_the_cut, on_mask
 from service.perception.end_readings import closed_on_itself
 from service.perception.gap_evidence import TURN_CUT_ENDS, cut_ends_alike
 from service.perception.turn_joins import PIXEL_ROUNDING
 
 # Step (px) of the walk back along a piece from its tip (:func:`_start_on_the_piece`).
 WALK_STEP_PX = 0.5
-
-
-def _on(grid: np.ndarray, point: np.ndarray) -> float:
-    """``grid``'s value at the pixel nearest ``point``; 0 outside the picture."""
-    col, row = int(np.rint(point[0])), int(np.rint(point[1]))
-    height, width = grid.shape[:2]
-    if not (0 <= col < width and 0 <= row < height):
-        return 0.0
-    return float(grid[row, col])
 
 
 def _start_on_the_piece(end, piece: np.ndarray, distance: np.ndarray, half_width: float):
@@ -114,7 +105,7 @@ def ends_at_the_cuts(
                 if (
                     pieces is not None
                     and distance is not None
-                    and not _on(mask, start.position)
+                    and not on_mask(mask, *start.position)
                     and not closed_on_itself(pieces[end.piece])
                 ):
                     # The line back from the tip leaves the cable (a bend into a

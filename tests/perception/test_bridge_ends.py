@@ -15,7 +15,7 @@ from service.perception.bridge_ends import (
     ends_through_short_pieces,
     free_ends_beside_crossings,
 )
-from service.perception.geometry import arc_lengths, fit_where_skipped
+from service.perception.geometry import fit_where_skipped
 from service.perception.merging import ChainEnd, chain_ends
 from service.perception.paths import assemble_paths
 from service.synthetic import make_family_scene
@@ -502,26 +502,3 @@ def test_a_widened_fit_that_misses_a_bending_piece_starts_the_bridge_on_it():
     assert trims[1] == pytest.approx(6.1)
     assert abs(inner[1].position[1] - 60.0) < 1e-9
     np.testing.assert_allclose(inner[1].direction, [1.0, 0.0], atol=1e-9)
-
-
-def test_the_point_on_a_piece_is_np_interps_bit_for_bit():
-    # start_on_the_piece reads one point at an arc length: one search for both
-    # coordinates must give np.interp's values exactly (before the first vertex, past
-    # the last, on a vertex, on repeated vertices, between).
-    rng = np.random.default_rng(3)
-    for trial in range(20000):
-        count = int(rng.integers(2, 30))
-        steps = rng.normal(0, 3, (count, 2)) * rng.choice([1, 0], (count, 1), p=[0.9, 0.1])
-        points = np.cumsum(steps, axis=0) + rng.uniform(0, 600, 2)
-        if trial % 3 == 0:
-            points = np.round(points)
-        arcs = arc_lengths(np.ascontiguousarray(points))
-        at = [
-            float(rng.uniform(-1, arcs[-1] + 1)),
-            float(arcs[rng.integers(0, count)]),
-            float(rng.uniform(0, 1) * arcs[-1]),
-        ][trial % 3]
-        expected = np.array([np.interp(at, arcs, points[:, 0]), np.interp(at, arcs, points[:, 1])])
-        found = bridge_ends._point_at(points, arcs, at)
-        assert found.dtype == expected.dtype
-        np.testing.assert_array_equal(found, expected)
