@@ -22,7 +22,6 @@ from service.perception.geometry import (
     arc_lengths,
     fit_at,
     fit_where_skipped,
-    points_along,
     polyline_length,
 )
 
@@ -372,7 +371,11 @@ def start_on_the_piece(
     outward unit direction.
     """
     arcs = arc_lengths(backwards)
-    on_piece = points_along(backwards, arcs, skip)[0]
+    # The one point as points_along finds it (np.interp per coordinate), without its
+    # arrays: called for every crossing end of a frame.
+    on_piece = np.array(
+        [np.interp(skip, arcs, backwards[:, 0]), np.interp(skip, arcs, backwards[:, 1])]
+    )
     if float(np.hypot(*(position - on_piece))) <= FIT_MISS_PX:
         return position, direction
     beyond = np.flatnonzero((arcs > skip) & (arcs <= skip + 0.5 * span))
