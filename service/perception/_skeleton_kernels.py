@@ -18,23 +18,42 @@ from service.perception._shared_kernels import (
 
 # --------------------------------------------------------------------------- thinning
 
-# The ring P2..P9 of Zhang and Suen (1984) as offsets: N, NE, E, SE, S, SW, W, NW;
-# bit k of a thinning pattern is P(k+2). (The branch-count patterns use RING_*.)
-_ZS_DR = np.array([-1, -1, 0, 1, 1, 1, 0, -1], np.int64)
-_ZS_DC = np.array([0, 1, 1, 1, 0, -1, -1, -1], np.int64)
+# The ring P2..P9 of Zhang and Suen (1984): N, NE, E, SE, S, SW, W, NW; bit k of a
+# thinning pattern is P(k+2). (The branch-count patterns use RING_*.)
 
 
 @njit(cache=True, nogil=True)
-def _zs_pattern(flat, index, offsets):
-    """Thinning pattern of the pixel ``index`` of a flattened padded 0/1 image.
+def _zs_pattern(flat, index, width):
+    """Thinning pattern of the pixel ``index`` of a flattened padded image ``width`` wide.
 
-    The bits are shifted in without a branch: a border pixel's neighbours are as often
-    set as not, and a mispredicted branch per neighbour cost more than the loads.
+    A pixel's value is its bit 0 (bit 1 marks it queued in :func:`thin_padded`). The
+    eight offsets are written out, not read from an array: the compiler keeps them in
+    registers, where an array of them was reloaded after every store to the image. The
+    bits are shifted in without a branch: a border pixel's neighbours are as often set as
+    not, and a mispredicted branch per neighbour cost more than the loads.
     """
-    pattern = 0
-    for k in range(8):
-        pattern |= np.int64(flat[index + offsets[k]]) << k
-    return pattern
+    return (
+        np.int64(flat[index - width] & 1)
+        | (np.int64(flat[index - width + 1] & 1) << 1)
+        | (np.int64(flat[index + 1] & 1) << 2)
+        | (np.int64(flat[index + width + 1] & 1) << 3)
+        | (np.int64(flat[index + width] & 1) << 4)
+        | (np.int64(flat[index + width - 1] & 1) << 5)
+        | (np.int64(flat[index - 1] & 1) << 6)
+        | (np.int64(flat[index - width - 1] & 1) << 7)
+    )
+
+
+@njit(cache=True, nogil=True)
+def _queue(flat, index, wanted, queue, n_queued):
+    """Append pixel ``index`` to ``queue`` when ``wanted`` (0 or 1) and it is set and not
+    queued already (bit 1 of its value); returns the new length. Without a branch:
+    whether a neighbour of a removed pixel is set is as good as a coin toss."""
+    value = flat[index]
+    fresh = wanted & np.uint8(value == 1)
+    flat[index] = value | (fresh << 1)
+    queue[n_queued] = index
+    return n_queued + fresh
 
 
 @njit(cache=True, nogil=True)
@@ -43,73 +62,69 @@ def thin_padded(padded, first_table, second_table, staircase_table):
 
     See skeleton.skeletonize for the rule. Each sub-iteration marks, from the image as it
     was, the pixels its table removes, then removes them. Only pixels whose
-    neighbourhood changed can change their answer, so a pixel is looked at again only
-    until it has met both tables since a neighbour was last removed; the work follows
-    the shrinking border of the mask, not the whole image. The pixels a sub-iteration
-    removes are listed as they are marked, so that clearing them and queueing their
-    neighbours walks those alone, in the same order.
+    neighbourhood changed can change their answer, so the work follows the shrinking
+    border of the mask, not the whole image: a pixel is looked at in a sub-iteration
+    only when a neighbour was removed in the one before, or when it was looked at then,
+    kept, and the other table removes its pattern (unchanged, if no neighbour went). A
+    pixel left out of a sub-iteration is thus one whose present pattern that
+    sub-iteration's table keeps, and the image after each sub-iteration is that of the
+    plain sweep over every pixel (``tests/perception/references/skeleton.py``). While
+    a sub-iteration's list is made, bit 1 of a pixel's value marks it listed (cleared
+    before the next); interior pixels (all eight neighbours set) are never listed until
+    a neighbour goes, as both tables keep them.
     """
     width = padded.shape[1]
     flat = padded.ravel()
-    offsets = np.empty(8, np.int64)
-    for k in range(8):
-        offsets[k] = _ZS_DR[k] * width + _ZS_DC[k]
     foreground = nonzero_flat(flat)
     total = foreground.size
     listed = np.empty(total, np.int64)
-    age = np.empty(total, np.uint8)
     n_listed = 0
     for j in range(total):
         # Written always, kept (counted) when not inside the mask.
         listed[n_listed] = foreground[j]
-        age[n_listed] = 0
-        n_listed += _zs_pattern(flat, foreground[j], offsets) != 255
-    queued = np.zeros(flat.size, np.uint8)
-    remove = np.empty(total, np.uint8)
+        n_listed += _zs_pattern(flat, foreground[j], width) != 255
+    again = np.empty(total, np.uint8)
     removing = np.empty(total, np.int64)
     next_listed = np.empty(total, np.int64)
-    next_age = np.empty(total, np.uint8)
     quiet = 0
     first = True
     while quiet < 2 and n_listed > 0:
         table = first_table if first else second_table
+        other = second_table if first else first_table
         first = not first
         removed = 0
         for j in range(n_listed):
-            verdict = table[_zs_pattern(flat, listed[j], offsets)]
-            remove[j] = verdict
+            pattern = _zs_pattern(flat, listed[j], width)
+            # Looked at again next time, if kept, only when the next table removes it.
+            again[j] = other[pattern]
             removing[removed] = listed[j]
-            removed += verdict
+            removed += table[pattern]
         quiet = quiet + 1 if removed == 0 else 0
         for j in range(removed):
             flat[removing[j]] = 0
         n_next = 0
         for j in range(removed):
-            for k in range(8):
-                neighbour = removing[j] + offsets[k]
-                if flat[neighbour] and not queued[neighbour]:
-                    queued[neighbour] = 1
-                    next_listed[n_next] = neighbour
-                    next_age[n_next] = 0
-                    n_next += 1
+            here = removing[j]
+            n_next = _queue(flat, here - width, 1, next_listed, n_next)
+            n_next = _queue(flat, here - width + 1, 1, next_listed, n_next)
+            n_next = _queue(flat, here + 1, 1, next_listed, n_next)
+            n_next = _queue(flat, here + width + 1, 1, next_listed, n_next)
+            n_next = _queue(flat, here + width, 1, next_listed, n_next)
+            n_next = _queue(flat, here + width - 1, 1, next_listed, n_next)
+            n_next = _queue(flat, here - 1, 1, next_listed, n_next)
+            n_next = _queue(flat, here - width - 1, 1, next_listed, n_next)
         for j in range(n_listed):
-            index = listed[j]
-            if not remove[j] and not queued[index] and age[j] == 0:
-                queued[index] = 1
-                next_listed[n_next] = index
-                next_age[n_next] = 1
-                n_next += 1
+            # A removed pixel is 0 by now, so it is never queued again.
+            n_next = _queue(flat, listed[j], again[j], next_listed, n_next)
         for j in range(n_next):
-            queued[next_listed[j]] = 0
+            flat[next_listed[j]] = 1
         listed, next_listed = next_listed, listed
-        age, next_age = next_age, age
         n_listed = n_next
-    # The staircase pass: the survivors in raster order, each judged on the image as
-    # it is (a removal only ever clears pixels, so the list stays valid).
-    survivors = nonzero_flat(flat)
-    for j in range(survivors.size):
-        index = survivors[j]
-        if flat[index] and staircase_table[_zs_pattern(flat, index, offsets)]:
+    # The staircase pass: the survivors in raster order (the foreground's list, its
+    # pixels still set), each judged on the image as it is.
+    for j in range(total):
+        index = foreground[j]
+        if flat[index] and staircase_table[_zs_pattern(flat, index, width)]:
             flat[index] = 0
 
 
