@@ -14,7 +14,8 @@ width in from its borders (from the one at the cable's own distance where a touc
 strand widens the section), until the section narrows (an object's border has begun to
 cut the cable) or the middle line leaves the mask: there the cable passes out of sight
 (:func:`end_at_the_cut`); past where a slanted cut has begun to narrow the section, on
-along the one border that is still the cable's, to where the middle passes out of sight
+along the one border that is still the cable's, where the image shows which that is (the
+ground beyond it, the object beyond the other), to where the middle passes out of sight
 (:func:`along_the_wedge`). The bridge runs along that traced stretch and from its end,
 along the direction a short quadratic fit of the traced middle line gives there, across
 the gap (:func:`bridges_from_the_cuts`). Across a large turn that curve is the Euler
