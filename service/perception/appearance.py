@@ -923,3 +923,56 @@ def ends_alike(colours: EndColours, first: int, second: int, widths: tuple[float
         return False
     narrow, wide = sorted(float(width) for width in widths)
     return narrow > 0 and narrow >= WIDTH_AGREEMENT * wide
+
+
+def _lab_beside(image_bgr: np.ndarray, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Lab colour of the mean of the pixels off the foreground ``mask`` in the 3x3 patch
+    round each (x, y) point (a slanted border's pixels beside it read the cable's colour,
+    not what lies beyond it); NaN where the point's own pixel is on the mask or the patch
+    leaves the picture."""
+    height, width = mask.shape
+    cols = np.rint(points[:, 0]).astype(np.int64)
+    rows = np.rint(points[:, 1]).astype(np.int64)
+    inside = (cols >= 1) & (rows >= 1) & (cols <= width - 2) & (rows <= height - 2)
+    cols, rows = np.where(inside, cols, 1), np.where(inside, rows, 1)
+    readable = inside & ~mask[rows, cols]
+    sums = np.zeros((len(points), 3), np.float32)
+    counts = np.zeros(len(points), np.float32)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            off = ~mask[rows + dy, cols + dx]
+            sums += off[:, None] * image_bgr[rows + dy, cols + dx].astype(np.float32)
+            counts += off
+    patches = sums / np.maximum(counts, 1.0)[:, None] / 255.0
+    lab = cv2.cvtColor(patches.reshape(-1, 1, 3), cv2.COLOR_BGR2LAB).reshape(-1, 3)
+    lab[~readable] = np.nan
+    return lab
+
+
+def ground_beside(
+    image_bgr: np.ndarray, mask: np.ndarray, points: np.ndarray
+) -> tuple[np.ndarray, float] | None:
+    """The colour of what lies just beyond a cable's borders at the (x, y) ``points``
+    (:func:`_lab_beside`): its median Lab colour and its samples' median distance from
+    it (as :func:`background_beside`); None with fewer than :data:`MIN_GAP_SAMPLES`
+    points off the mask."""
+    colours = _lab_beside(image_bgr, mask, np.asarray(points, np.float64).reshape(-1, 2))
+    colours = colours[~np.isnan(colours[:, 0])]
+    if len(colours) < MIN_GAP_SAMPLES:
+        return None
+    colour = np.median(colours, axis=0)
+    return colour, float(np.median(_lab_distance(colours, colour)))
+
+
+def unlike_ground(
+    image_bgr: np.ndarray, mask: np.ndarray, point: np.ndarray, ground: tuple[np.ndarray, float]
+) -> bool | None:
+    """Whether the image at the (x, y) ``point`` (:func:`_lab_beside`) differs from
+    ``ground`` (:func:`ground_beside`) by more than :func:`gap_hidden`'s tolerance
+    (something else lies there: an object over the cable); None where the point is on
+    the mask or at the picture's edge (nothing to read)."""
+    colour = _lab_beside(image_bgr, mask, np.asarray(point, np.float64).reshape(1, 2))[0]
+    if np.isnan(colour[0]):
+        return None
+    reference, spread = ground
+    return bool(_lab_distance(colour, reference) > COLOUR_TOLERANCE + 2 * spread)

@@ -13,7 +13,10 @@ So the stretch between where the fit begins and the cut is traced on the mask
 width in from its borders (from the one at the cable's own distance where a touching
 strand widens the section), until the section narrows (an object's border has begun to
 cut the cable) or the middle line leaves the mask: there the cable passes out of sight
-(:func:`end_at_the_cut`). The bridge runs along that traced stretch and from its end,
+(:func:`end_at_the_cut`); past where a slanted cut has begun to narrow the section, on
+along the one border that is still the cable's, where the image shows which that is (the
+ground beyond it, the object beyond the other), to where the middle passes out of sight
+(:func:`along_the_wedge`). The bridge runs along that traced stretch and from its end,
 along the direction a short quadratic fit of the traced middle line gives there, across
 the gap (:func:`bridges_from_the_cuts`). Across a large turn that curve is the Euler
 spiral, whose curvature changes linearly along it: where the two cuts' readings
@@ -27,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from schemas import GapCurve
+from service.perception.appearance import ground_beside, unlike_ground
 from service.perception.euler_spiral import headings_within_bend, is_large_turn
 from service.perception.geometry import arc_lengths, end_fit, polyline_length, rotated, unit
 from service.perception.paths import gap_curve
@@ -53,6 +57,13 @@ CARRY_RADII = 1.7
 """How far (half widths) at most the middle line is carried on past the narrowing: far
 enough for the lines beside it (half a half width out) to leave the mask across a cut
 about 50 degrees from square (1.5 half widths times tan 50 degrees is 1.8)."""
+FULL_SECTIONS = 5
+"""The last traced sections (a step, a pixel, apart) whose median width is the cable's own
+where a wedge is followed: enough to outvote one section's dip from the borders' rounding."""
+BEYOND_BORDER_PX = 2.0
+"""How far (px) beyond a border its outside is read in the image: the 3x3 patch read
+(:func:`.appearance.unlike_ground`) then lies 1-3 px out, clear of the border's pixel
+rounding."""
 REACH_PAST_SKIP_RADII = 2.0
 """How far (radii) past the tip the fit left out a cut may lie: the skeleton's tip stops
 about a radius short of a cut, and a slanted cut's far corner a width further."""
@@ -121,6 +132,196 @@ def _full_beyond(
     plus = _border_distance(mask, x, y, -hy, hx, steps, reach)
     minus = _border_distance(mask, x, y, hy, -hx, steps, reach)
     return plus + minus >= 2.0 * half_width - CUT_NARROWING_PX
+
+
+def _far_border(
+    mask: np.ndarray, x: float, y: float, dx: float, dy: float, steps: list[float], reach: float
+) -> float | None:
+    """Distance (px) from ``(x, y)`` along ``(dx, dy)`` to the first of the sample
+    ``steps`` off ``mask`` past the first on it (the mask's border on that side, past a
+    first sample that rounds off the pixel ``(x, y)`` lies on), ``reach`` when it runs
+    on, or None where no sample is on the mask."""
+    height, width = mask.shape
+    entered = False
+    for step in steps:
+        column, row = round(x + step * dx), round(y + step * dy)
+        on = 0 <= column < width and 0 <= row < height and bool(mask[row, column])
+        if on:
+            entered = True
+        elif entered:
+            return step - 0.5 * SECTION_STEP_PX
+    return reach if entered else None
+
+
+def _heading(line: np.ndarray, half_width: float) -> tuple[float, float]:
+    """The direction at the end of ``line``: the chord over its last half width
+    (``half_width`` px). A single step's, moved by up to a pixel across as each point is
+    put on the middle, would swing by 45 degrees; a fit's, extrapolated over the step,
+    swings with the rounding of its last points."""
+    back = max(len(line) - 1 - round(half_width / TRACE_STEP_PX), 0)
+    hx, hy = unit(line[-1] - line[back])
+    return float(hx), float(hy)
+
+
+def along_the_wedge(
+    mask: np.ndarray,
+    points: np.ndarray,
+    half_width: float,
+    limit: float,
+    image: np.ndarray | None = None,
+) -> np.ndarray:
+    """The cable's middle line carried on from the traced ``points`` (``(K, 2)``, the
+    last on the cable's last full section) into the wedge a slanted cut leaves, half the
+    cable's width (``half_width``, the full sections' own) in from the one border that is
+    still the cable's, at most ``limit`` px.
+
+    Where an object's border crosses the cable at a slant, one border of the cable ends
+    where the object's meets it and the other runs on, a width times the slant's tangent
+    further: the visible end is a wedge. Past the first border's end the section's
+    middle is no longer the cable's (it leans into the wedge, towards its tip), but the
+    border that runs on is still the cable's own, and the cable's middle lies half its
+    width in from it: where the cable bends into the hidden stretch, that border bends
+    with it, and is the only part of the image that shows the bend (the middle line of
+    the narrowed sections runs straight on into the wedge's tip, and a fit over it
+    leaves 15-50 degrees off where a doubled-back cable turns under the object). So
+    each step goes :data:`TRACE_STEP_PX` along the line's heading (:func:`_heading`),
+    and is put half a width in from the border read at the cable's own distance (within
+    :data:`SECTION_ROUNDING_PX`, a pixel's rounding, of it): from both while both are
+    (a section the cut has not narrowed); from one alone once the other reads shorter
+    by more than that rounding (two borders short alike are their rounding, or a cut
+    across both, and tell neither side), and from that side on. It stops where the
+    middle leaves the mask (the cable passes out of sight), where the border followed
+    is no longer at the cable's distance (the wedge's tip), or where the line has
+    turned further than the tightest bend a cable takes
+    (:data:`.turn_joins.HIDDEN_BEND_RADII` ``[0]`` half widths) would over the steps
+    taken, and a pixel's rounding over the chord its heading is read on: the border
+    followed is then the object's, meeting the cable at its corner.
+
+    From the mask alone the two borders of a wedge cannot be told apart: an object's
+    edge crossing at 30-45 degrees reads at the cable's distance from a middle half a
+    width in as well as the cable's own border does. The BGR ``image`` tells them apart
+    where the object is not of the background's colour: beyond the cable's own border
+    lies the ground seen beside the cable's full sections, beyond the object's edge the
+    object. So a border is followed alone only where the image says so: beyond the other
+    border, read :data:`BEYOND_BORDER_PX` out, something unlike the ground beside the
+    cable (:func:`.appearance.unlike_ground`), beyond the followed one the ground; the
+    line stops where the followed border's outside no longer reads as the ground. Where
+    the image does not decide (no image, an object of the ground's colour, a patch
+    touching another cable), nothing is followed: no points are added.
+
+    Returns
+    -------
+    ndarray
+        ``(M, 2)`` the points added past ``points[-1]`` (``M >= 0``).
+    """
+    if len(points) < 2:
+        return np.zeros((0, 2))
+    x, y = (float(value) for value in points[-1])
+    hx, hy = _heading(points, half_width)
+    start = (hx, hy)
+    reach = 2.5 * half_width + 2.0
+    steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX).tolist()
+    # The cable's own half width, from its last full sections (the one given may lie
+    # a pixel over it): each border is followed at the distance the cable's own shows.
+    widths = []
+    ax, ay = (float(value) for value in unit(points[-1] - points[-min(FULL_SECTIONS, len(points))]))
+    for px, py in points[-FULL_SECTIONS:]:
+        widths.append(
+            _border_distance(mask, px, py, -ay, ax, steps, reach)
+            + _border_distance(mask, px, py, ay, -ax, steps, reach)
+        )
+    half_width = 0.5 * float(np.median(widths))
+    if image is None:
+        return np.zeros((0, 2))
+    # What lies just beyond the cable's borders along its full sections: the ground.
+    beside = []
+    for px, py in points[-FULL_SECTIONS:]:
+        for sign in (1.0, -1.0):
+            out = _border_distance(mask, px, py, -sign * ay, sign * ax, steps, reach)
+            beside.append(
+                (
+                    px - sign * ay * (out + BEYOND_BORDER_PX),
+                    py + sign * ax * (out + BEYOND_BORDER_PX),
+                )
+            )
+    ground = ground_beside(image, mask, np.array(beside))
+    if ground is None:
+        return np.zeros((0, 2))
+    added = []
+    side = 0  # +1 / -1 once the line follows one border alone
+    for _ in range(int(limit / TRACE_STEP_PX)):
+        nx_, ny_ = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
+        nx, ny = -hy, hx
+        if not on_mask(mask, nx_, ny_):
+            break  # the middle has passed out of sight: the cut
+        plus = _far_border(mask, nx_, ny_, nx, ny, steps, reach)
+        minus = _far_border(mask, nx_, ny_, -nx, -ny, steps, reach)
+        plus_own = (
+            plus is not None and plus < reach and abs(plus - half_width) <= SECTION_ROUNDING_PX
+        )
+        minus_own = (
+            minus is not None and minus < reach and abs(minus - half_width) <= SECTION_ROUNDING_PX
+        )
+        # A side is taken for the cable's alone where the other reads shorter by more
+        # than a border's rounding: two sections short alike are the borders' rounding
+        # or a cut across both, which tells neither side.
+        apart = plus is not None and minus is not None and abs(plus - minus) > SECTION_ROUNDING_PX
+        if side == 0 and plus_own and minus_own and not apart:
+            shift = 0.5 * (plus - minus)
+        elif plus_own and (side > 0 or (side == 0 and apart and plus > minus)):
+            if not _told_by_the_image(image, mask, ground, (nx_, ny_), (nx, ny), plus, minus, side):
+                break
+            side, shift = 1, plus - half_width
+        elif minus_own and (side < 0 or (side == 0 and apart and minus > plus)):
+            if not _told_by_the_image(
+                image, mask, ground, (nx_, ny_), (-nx, -ny), minus, plus, side
+            ):
+                break
+            side, shift = -1, half_width - minus
+        else:
+            break
+        shift = min(max(shift, -TRACE_STEP_PX), TRACE_STEP_PX)
+        x, y = nx_ + shift * nx, ny_ + shift * ny
+        line = np.concatenate([points, np.array([*added, (x, y)])])
+        hx, hy = _heading(line, half_width)
+        # The border followed bends no tighter than a cable: turned further from where
+        # the wedge began than the tightest bend turns over the steps taken (and a
+        # pixel's rounding over the chord the heading is read on), it is the object's.
+        turned = abs(np.arctan2(hx * start[1] - hy * start[0], hx * start[0] + hy * start[1]))
+        bend = (len(added) + 1) * TRACE_STEP_PX / (HIDDEN_BEND_RADII[0] * half_width)
+        if turned > bend + np.arctan(1.0 / half_width):
+            break
+        added.append((x, y))
+    if side == 0:
+        return np.zeros((0, 2))  # no border followed alone: the image told nothing
+    return np.array(added).reshape(-1, 2)
+
+
+def _told_by_the_image(
+    image: np.ndarray,
+    mask: np.ndarray,
+    ground: tuple[np.ndarray, float],
+    at: tuple[float, float],
+    normal: tuple[float, float],
+    followed: float,
+    other: float | None,
+    side: int,
+) -> bool:
+    """Whether the image says the border ``followed`` px from ``at`` along ``normal``
+    is the cable's own: beyond it (:data:`BEYOND_BORDER_PX` out) lies the ``ground``
+    seen beside the cable; and, where no side is followed yet (``side`` 0), beyond the
+    other border (``other`` px the other way; None: the middle's own pixel) lies
+    something unlike it: the object whose edge that is. A patch that cannot be read
+    (on another cable, off the picture) tells nothing."""
+    x, y = at
+    dx, dy = normal
+    out = followed + BEYOND_BORDER_PX
+    if unlike_ground(image, mask, np.array([x + out * dx, y + out * dy]), ground) is not False:
+        return False
+    if side != 0:
+        return True
+    out = (other or 0.0) + BEYOND_BORDER_PX
+    return unlike_ground(image, mask, np.array([x - out * dx, y - out * dy]), ground) is True
 
 
 def middle_line(
@@ -272,6 +473,7 @@ def end_at_the_cut(
     carry: bool = True,
     to_the_border: bool = False,
     first_narrowing: bool = False,
+    image: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Where the cable ``end`` (a :class:`.merging.ChainEnd`, where its bridge would
     start) passes out of sight, and its direction there.
@@ -281,7 +483,9 @@ def end_at_the_cut(
     cut is a quadratic's (:func:`.geometry.end_fit`) over the traced line's last
     :data:`FIT_RADII` radii: centred on the cable, not on the skeleton's hooked tip, and
     short enough to follow a tight bend, fitted on the sections the cut has not begun to
-    narrow (those before the run of narrowed sections the trace ends on). Where less than
+    narrow (those before the run of narrowed sections the trace ends on), and on past
+    them into a slanted cut's wedge along the border still the cable's
+    (:func:`along_the_wedge`). Where less than
     half that is traced behind the end, the end's own fit bends
     on to the cut instead. With ``carry``, the middle line is then carried on towards
     where the cut's border crosses it (:func:`carried_to_the_border`, to the border
@@ -330,6 +534,10 @@ def end_at_the_cut(
         narrowed = np.flatnonzero(shortfall > own + SECTION_ROUNDING_PX)
         full = max(int(narrowed[0]) if len(narrowed) else len(ahead), 2)
     line = np.concatenate([behind[::-1], ahead[1:full]])
+    if carry and not first_narrowing and image is not None:
+        # Past the last full section, along the border of a slanted cut's wedge that the
+        # image shows is still the cable's (:func:`along_the_wedge`).
+        line = np.concatenate([line, along_the_wedge(mask, line, half_width, span, image)])
     # The fit's own end: the traced points carry a pixel's rounding from step to step.
     position, direction, curvature = end_fit(line, False, span)
     if carry:
@@ -446,6 +654,7 @@ def bridges_from_the_cuts(
     turns: frozenset[tuple[int, int]] = frozenset(),
     short_pieces: dict[int, tuple[np.ndarray, float]] | None = None,
     unfitted: dict[int, np.ndarray] | None = None,
+    image: np.ndarray | None = None,
 ) -> dict[tuple[int, int], np.ndarray]:
     """Bridges of the gaps (joins of two ends in no junction, with no curve of their
     own in ``given``) drawn from the cuts: from each bridging end (``ends``, where the
@@ -544,7 +753,7 @@ def bridges_from_the_cuts(
             limit = end.skip + REACH_PAST_SKIP_RADII * half_width + 2.0
             # Only an end whose fit left out its tip starts its bridge behind the cut.
             traceable = end.skip > 0 and half_width >= CUT_NARROWING_PX
-            found = end_at_the_cut(mask, end, half_width, limit) if traceable else None
+            found = end_at_the_cut(mask, end, half_width, limit, image=image) if traceable else None
             if found is None and traceable and unfitted and k in unfitted:
                 # The end is the tip in the cut's corner: the cut is read from the middle.
                 cut = unfitted_end_cut(mask, unfitted[k], end, half_width)

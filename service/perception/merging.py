@@ -930,6 +930,7 @@ def merge_chains(
                 if end is not inner_ends[k]
             },
             _unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end),
+            image,
         )
         if turn_hidden is not None:
             cut_bridges = {

@@ -6,6 +6,7 @@ import pytest
 
 from service.evaluation.synthetic_eval import evaluate_scene
 from service.perception.cut_ends import (
+    along_the_wedge,
     bridges_from_the_cuts,
     carried_to_the_border,
     end_at_the_cut,
@@ -99,6 +100,78 @@ def test_a_slanted_cut_stops_the_trace_where_it_begins_and_the_bridge_at_the_mid
     # three radii, to follow tight bends) by up to 15 degrees.
     tangent = np.array([-np.sin(angle), np.cos(angle)])
     assert angle_deg(direction, tangent) <= 15.0
+
+
+BACKGROUND_BGR = (60, 60, 60)
+OBJECT_BGR = (40, 150, 220)  # orange: far from the grey ground
+
+
+def wedge_scene(slant: float, object_bgr, beside_bgr=BACKGROUND_BGR):
+    """The arc cut at ``slant`` (:func:`arc_mask`), drawn: a grey ground, an object of
+    ``object_bgr`` beyond its border, and ``beside_bgr`` beyond the cable's outer border
+    where the wedge runs on (the ground, or the object lying alongside). Returns the
+    mask, the BGR image and the middle line traced up to where the cut's border first
+    reaches the cable (1 px steps)."""
+    cut_angle = 0.6
+    mask = arc_mask(cut_angle, slant)
+    ys, xs = np.mgrid[0:200, 0:200].astype(np.float64)
+    offset = np.stack([xs, ys], -1)
+    cut_point = CENTRE + BEND * np.array([np.cos(cut_angle), np.sin(cut_angle)])
+    tangent = np.array([-np.sin(cut_angle), np.cos(cut_angle)])
+    along = np.array(
+        [
+            np.cos(slant) * tangent[0] - np.sin(slant) * tangent[1],
+            np.sin(slant) * tangent[0] + np.cos(slant) * tangent[1],
+        ]
+    )
+    image = np.empty((200, 200, 3), np.uint8)
+    image[:] = BACKGROUND_BGR
+    image[np.hypot(*(offset - CENTRE).transpose(2, 0, 1)) > BEND + HALF_WIDTH] = beside_bgr
+    image[(offset - cut_point) @ along > 0] = object_bgr
+    image[mask] = (30, 30, 160)
+    # The first border reaches the cable a half width times the slant's tangent before
+    # the cut's middle.
+    first = cut_angle - (HALF_WIDTH * np.tan(abs(slant)) + 1.0) / BEND
+    angles = np.arange(first - 20.0 / BEND, first, 1.0 / BEND)
+    points = CENTRE + BEND * np.column_stack([np.cos(angles), np.sin(angles)])
+    return mask, image, points
+
+
+def test_a_wedges_border_is_followed_where_the_image_shows_an_object_beyond_the_other():
+    """Cut at 30 degrees from square, the object orange on a grey ground: beyond the
+    border that reads short lies the object, beyond the one still at the cable's
+    distance the ground seen beside the cable, so the line is carried on into the
+    wedge half a width in from that border, on the cable's middle (within 1.5 px)."""
+    mask, image, points = wedge_scene(np.radians(-30.0), OBJECT_BGR)
+    added = along_the_wedge(mask, points, HALF_WIDTH, 15.0, image)
+    assert len(added) >= 2
+    assert np.abs(np.hypot(*(added - CENTRE).T) - BEND).max() <= 1.5
+
+
+@pytest.mark.parametrize(
+    ("object_bgr", "beside_bgr"),
+    [(BACKGROUND_BGR, BACKGROUND_BGR), (OBJECT_BGR, OBJECT_BGR)],
+    ids=["object-of-the-grounds-colour", "object-beyond-both-borders"],
+)
+def test_a_wedge_the_image_does_not_tell_apart_is_left_alone(object_bgr, beside_bgr):
+    """The same wedge where the image does not say which border is the cable's: an
+    object of the ground's own colour (the mask alone cannot tell the cable's border
+    from the object's edge: wedge15, docs/BENCHMARKS.md), or the object beyond both
+    borders (the one followed would be its edge). Nothing is added; nor without an
+    image."""
+    mask, image, points = wedge_scene(np.radians(-30.0), object_bgr, beside_bgr)
+    assert len(along_the_wedge(mask, points, HALF_WIDTH, 15.0, image)) == 0
+    assert len(along_the_wedge(mask, points, HALF_WIDTH, 15.0)) == 0
+
+
+@pytest.mark.parametrize("seed", [420132, 420263, 420265])
+def test_a_doubled_back_turn_cut_at_a_coloured_objects_wedge_is_covered(seed):
+    """Tuning scenes, true mask, each turn hidden by an object of a colour unlike the
+    ground: one cut's direction is read along the wedge's border the image shows is
+    the cable's (main read it 15-30 degrees off; wedge15's class)."""
+    scene = make_family_scene("doubled_back", seed)
+    score, _ = evaluate_scene(scene, seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
 
 
 def test_a_short_pieces_cut_is_traced_from_its_middle():
