@@ -55,6 +55,7 @@ def bridge_from_the_fits(
     distance: np.ndarray | None = None,
     nominal_skip: float | None = None,
     curve_given: frozenset[int] = frozenset(),
+    stubs: frozenset[int] = frozenset(),
 ) -> tuple[list, np.ndarray]:
     """Ends to bridge gaps from: where each end's fit begins, not extrapolated to the tip.
 
@@ -69,14 +70,18 @@ def bridge_from_the_fits(
     than ``nominal_skip`` says (a cut's hook) starts its bridge past it
     (:func:`_beyond_hooks`), unless the end is in ``curve_given``: its bridge is a curve
     found elsewhere (a turn out of sight, :mod:`.turn_joins`), which starts where that
-    curve does. Returns the ends and the arc lengths to trim per end (for
-    :func:`.paths.assemble_paths`).
+    curve does. A join from an end in ``stubs`` (in a crossing's junction, its strand
+    running on as a stub to where it passes out of sight:
+    :func:`.crossing_stubs.ends_past_crossings`) to an end in no junction is a gap as
+    well (:func:`past_a_stub`): its free end starts where its fit begins. Returns the
+    ends and the arc lengths to trim per end (for :func:`.paths.assemble_paths`).
     """
     adjusted = list(ends)
     trims = np.zeros(len(ends))
     hooks = np.zeros(len(ends))
     for i, j, _ in joins:
-        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
+        stubbed = past_a_stub(i, j, junction_of_end, stubs)
+        if not stubbed and (junction_of_end[i] >= 0 or junction_of_end[j] >= 0):
             if distance is not None and junction_of_end[i] == junction_of_end[j]:
                 for k in (i, j):
                     clear = ends_clear_of_crossing(
@@ -87,7 +92,7 @@ def bridge_from_the_fits(
             continue
         for k in (i, j):
             end = ends[k]
-            if end.skip <= 0:
+            if end.skip <= 0 or junction_of_end[k] >= 0:
                 continue
             # Pieces shorter than the fit's span are crossed along their partners' line.
             length = polyline_length(pieces[end.piece])
@@ -119,6 +124,14 @@ def bridge_from_the_fits(
             adjusted[2 * piece + k] = replace(adjusted[2 * piece + k], position=position)
             trims[2 * piece + k] = trim
     return adjusted, trims
+
+
+def past_a_stub(i: int, j: int, junction_of_end: list[int], stubs: frozenset[int]) -> bool:
+    """Whether the join of ends ``i`` and ``j`` is a gap from a crossing's stub: one end
+    in a junction and in ``stubs`` (its strand seen on past the crossing to where it
+    passes out of sight), the other in no junction."""
+    crossing = [k for k in (i, j) if junction_of_end[k] >= 0]
+    return len(crossing) == 1 and crossing[0] in stubs
 
 
 # The end fit is a quadratic: it needs this many joints (``_geometry_kernels.end_fit``).

@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from schemas import GapCurve
+from service.perception.bridge_ends import past_a_stub
 from service.perception.euler_spiral import headings_within_bend, is_large_turn
 from service.perception.geometry import arc_lengths, end_fit, polyline_length, rotated, unit
 from service.perception.paths import gap_curve
@@ -446,6 +447,7 @@ def bridges_from_the_cuts(
     turns: frozenset[tuple[int, int]] = frozenset(),
     short_pieces: dict[int, tuple[np.ndarray, float]] | None = None,
     unfitted: dict[int, np.ndarray] | None = None,
+    stub_fronts: dict | None = None,
 ) -> dict[tuple[int, int], np.ndarray]:
     """Bridges of the gaps (joins of two ends in no junction, with no curve of their
     own in ``given``) drawn from the cuts: from each bridging end (``ends``, where the
@@ -497,8 +499,10 @@ def bridges_from_the_cuts(
     for i, j, _ in joins if short_pieces else ():  # only a short piece is a sliver
         if junction_of_end[i] in fork and junction_of_end[j] in fork:
             through[i], through[j] = j, i
+    fronts = stub_fronts or {}
     for i, j, _ in joins:
-        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
+        stubbed = past_a_stub(i, j, junction_of_end, frozenset(fronts))
+        if not stubbed and (junction_of_end[i] >= 0 or junction_of_end[j] >= 0):
             continue
         turn = (i, j) in turns or (j, i) in turns
         if (i in given or j in given) and not turn:
@@ -506,6 +510,14 @@ def bridges_from_the_cuts(
         traced, cuts, seen = [], [], []
         for k in (i, j):
             end = ends[k]
+            if stubbed and junction_of_end[k] >= 0:
+                # The strand runs on straight past the crossing, as a stub, to its cut:
+                # the stub's front, along the end's direction (the stub is too short
+                # to read one of its own); the seen stretch is the stub, straight.
+                traced.append(True)
+                cuts.append((np.asarray(fronts[k].position, np.float64), end.direction))
+                seen.append(False)
+                continue
             short = short_pieces.get(k) if short_pieces else None
             strand = _strand_of_sliver(k, short, ends, through) if short is not None else None
             if strand is not None:

@@ -43,6 +43,7 @@ from service.perception.bridge_ends import (
     ends_of_short_pieces_from_partners,
     ends_through_short_pieces,
     free_ends_beside_crossings,
+    past_a_stub,
 )
 from service.perception.crossing_stubs import ends_past_crossings, evidence_ends
 from service.perception.cut_ends import bridges_from_the_cuts
@@ -886,8 +887,27 @@ def merge_chains(
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
     bridges = {**touching.bridges, **turn_bridges}
     curve_given = frozenset(end for pair in bridges for end in pair)
+    # A gap's end in a crossing whose strand runs on as a stub to where it passes out
+    # of sight: the gap is bridged from the stub's front (:mod:`.crossing_stubs`).
+    stub_fronts = {
+        k: seen_from[k]
+        for i, j, _ in joins
+        for k, other in ((i, j), (j, i))
+        if junction_of_end[k] >= 0
+        and junction_of_end[other] < 0
+        and not {k, other} & curve_given
+        and seen_from[k] is not ends[k]
+    }
     inner_ends, trims = bridge_from_the_fits(
-        pieces, ends, joins, span, junction_of_end, distance, radius, curve_given
+        pieces,
+        ends,
+        joins,
+        span,
+        junction_of_end,
+        distance,
+        radius,
+        curve_given,
+        frozenset(stub_fronts),
     )
     inner_ends = ends_of_short_pieces_from_partners(
         pieces, inner_ends, joins, span, junction_of_end
@@ -929,7 +949,8 @@ def merge_chains(
                 for k, end in enumerate(bridging_ends)
                 if end is not inner_ends[k]
             },
-            _unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end),
+            _unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end, stub_fronts),
+            stub_fronts,
         )
         if turn_hidden is not None:
             cut_bridges = {
@@ -944,7 +965,9 @@ def merge_chains(
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])
 
 
-def _unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end) -> dict[int, np.ndarray]:
+def _unfitted_pieces(
+    pieces, bridging_ends, ends, joins, junction_of_end, stubs=()
+) -> dict[int, np.ndarray]:
     """Per bridging end left at its tip for want of joints to fit, its piece's points.
 
     An end whose fit left a tip out (a cut's hook) is bridged from where the fit
@@ -958,7 +981,12 @@ def _unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end) -> dic
     unfitted = {}
     # Only the ends of gaps' joins (neither end in a junction) are read there.
     gaps = sorted(
-        k for i, j, _ in joins if max(junction_of_end[i], junction_of_end[j]) < 0 for k in (i, j)
+        k
+        for i, j, _ in joins
+        if max(junction_of_end[i], junction_of_end[j]) < 0
+        or past_a_stub(i, j, junction_of_end, frozenset(stubs))
+        for k in (i, j)
+        if junction_of_end[k] < 0
     )
     for k in gaps:
         end = bridging_ends[k]
