@@ -73,7 +73,9 @@ def bridge_from_the_fits(
     curve does. A join from an end in ``stubs`` (in a crossing's junction, its strand
     running on as a stub to where it passes out of sight:
     :func:`.crossing_stubs.ends_past_crossings`) to an end in no junction is a gap as
-    well (:func:`past_a_stub`): its free end starts where its fit begins. Returns the
+    well (:func:`past_a_stub`): its free end starts where its fit begins, where that
+    lies on the cable (``distance`` above 0; the end keeps its own reading otherwise,
+    as the gap's end it was before). Returns the
     ends and the arc lengths to trim per end (for :func:`.paths.assemble_paths`).
     """
     adjusted = list(ends)
@@ -110,6 +112,10 @@ def bridge_from_the_fits(
                 # misses the piece at its start, the bridge starts on the piece.
                 backwards = points if end.at_start else points[::-1]
                 inner = start_on_the_piece(backwards, end.skip, span, *inner)
+            if inner is not None and stubbed and not _on_the_cable(distance, inner[0]):
+                # A fit whose start lies off the cable runs beside it (a short piece
+                # round a turn, :mod:`.end_readings`): the end keeps its own reading.
+                inner = None
             if inner is not None:
                 adjusted[k] = _moved(end, inner[0], inner[1])
                 trims[k] = end.skip
@@ -124,6 +130,16 @@ def bridge_from_the_fits(
             adjusted[2 * piece + k] = replace(adjusted[2 * piece + k], position=position)
             trims[2 * piece + k] = trim
     return adjusted, trims
+
+
+def _on_the_cable(distance: np.ndarray | None, point: np.ndarray) -> bool:
+    """Whether ``point`` (x, y) lies on the mask whose ``distance`` transform is given
+    (the pixel nearest it; True where no transform is given, False outside the picture)."""
+    if distance is None:
+        return True
+    column, row = round(float(point[0])), round(float(point[1]))
+    height, width = distance.shape[:2]
+    return 0 <= column < width and 0 <= row < height and bool(distance[row, column] > 0)
 
 
 def past_a_stub(i: int, j: int, junction_of_end: list[int], stubs: frozenset[int]) -> bool:

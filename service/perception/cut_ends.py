@@ -24,6 +24,8 @@ are then turned, within their uncertainty, as little as a cable's shape takes
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from schemas import GapCurve
@@ -409,6 +411,45 @@ def unfitted_end_cut(
     return short_piece_cut(mask, points, heading, half_width)
 
 
+STUB_BACK_RADII = 1.5
+"""A stub's cut is traced from this many half widths back from its front: inside the
+stub, clear of the crossing (whose section a trace would read as the cable's) and of the
+cut's own narrowing."""
+
+
+def stub_cut(
+    mask: np.ndarray, end, front: np.ndarray, half_width: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where a strand seen on past a crossing as a stub passes out of sight, and its
+    direction there: ``end`` is the strand's end in the crossing's junction, ``front``
+    where the foreground along its direction stops past the junction
+    (:func:`.crossing_stubs.ends_past_crossings`).
+
+    The front lies on the end's line, which a direction a few degrees off (a fit bent by
+    the crossing) carries a few px off the middle over the stub's 20-40 px. The middle
+    line is traced from inside the stub on to the cut (:func:`end_at_the_cut`, not
+    carried across a slant), which puts the cut on the cable's middle. The stub is
+    straight (what :mod:`.crossing_stubs` reads it as) and too short for a fit of its
+    own: its direction is the chord from the end, on the cable's middle line where the
+    strand enters the crossing, to that cut. Where no cut is traced, the front and the
+    end's direction."""
+    front = np.asarray(front, np.float64)
+    start = replace(
+        end,
+        position=front - STUB_BACK_RADII * half_width * end.direction,
+        skip=0.0,
+        curvature=0.0,
+    )
+    limit = (STUB_BACK_RADII + REACH_PAST_SKIP_RADII) * half_width + 2.0
+    found = end_at_the_cut(mask, start, half_width, limit, carry=False)
+    if found is None:
+        return front, end.direction
+    chord = found[1] - np.asarray(end.position, np.float64)
+    if not np.hypot(*chord) > 0.0:
+        return front, end.direction
+    return found[1], unit(chord)
+
+
 FORK_ENDS = 3
 """The most ends a junction thinning forks in a cut's wedge holds: the strand's and a
 sliver running into each corner. A crossing's holds four, its strands' pieces on either
@@ -471,6 +512,11 @@ def bridges_from_the_cuts(
     index -> its piece's points: a piece too short for the end's fit, the end left at its
     tip) whose own trace finds no cut starts at the cut read from its piece's middle
     (:func:`unfitted_end_cut`), its piece ending at its tip as a short piece's.
+    A join from an end in a crossing's junction (``stub_fronts``: end index -> the end
+    moved to its stub's front, :func:`.crossing_stubs.ends_past_crossings`: the strand
+    runs on past the crossing as a stub to where it passes out of sight) to an end in no
+    junction is a gap too (:func:`.bridge_ends.past_a_stub`): that end's cut is read at
+    the stub's front (:func:`stub_cut`), the seen stretch the straight stub.
     A cable whose half width is under :data:`CUT_NARROWING_PX` (a sliver of a short
     piece, a thin cable of a photograph) is not traced: the narrowing that marks a cut
     would be half its section and more, each border's pixel rounding alone reads as one,
@@ -511,11 +557,10 @@ def bridges_from_the_cuts(
         for k in (i, j):
             end = ends[k]
             if stubbed and junction_of_end[k] >= 0:
-                # The strand runs on straight past the crossing, as a stub, to its cut:
-                # the stub's front, along the end's direction (the stub is too short
-                # to read one of its own); the seen stretch is the stub, straight.
+                # The strand runs on straight past the crossing, as a stub, to its cut
+                # (:func:`stub_cut`); the seen stretch is the stub, straight.
                 traced.append(True)
-                cuts.append((np.asarray(fronts[k].position, np.float64), end.direction))
+                cuts.append(stub_cut(mask, end, fronts[k].position, (end.width or radius) + 0.5))
                 seen.append(False)
                 continue
             short = short_pieces.get(k) if short_pieces else None
