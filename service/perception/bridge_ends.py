@@ -682,3 +682,36 @@ def free_ends_beside_crossings(
             direction = _middle_direction(ends[own].direction, readings)
             adjusted[own] = replace(ends[own], direction=direction)
     return adjusted
+
+
+def unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end, stubs) -> dict:
+    """Per bridging end left at its tip for want of joints to fit, its piece's points.
+
+    An end whose fit left a tip out (a cut's hook) is bridged from where the fit
+    begins (:func:`bridge_from_the_fits`); on a piece with fewer than
+    :data:`FIT_JOINTS` joints past that tip no fit is made there, and no
+    later stage moves the end (a short piece joined at both ends is taken along its
+    partners' line instead, unless one of its joins is a turn: then it keeps its own
+    ends, and is read here too): it stays at the tip, in the cut's corner, heading along
+    the chord through the hook. The ends of gaps' joins are read: neither end in a
+    junction, or one an end in ``stubs`` (:func:`past_a_stub`), whose other end is read.
+    """
+    unfitted = {}
+    # Only the ends of gaps' joins (neither end in a junction, or one a stub's) are read.
+    junction = junction_of_end
+    gaps = sorted(
+        k
+        for i, j, _ in joins
+        if max(junction[i], junction[j]) < 0 or past_a_stub(i, j, junction, stubs)
+        for k in (i, j)
+        if junction[k] < 0
+    )
+    for k in gaps:
+        end = bridging_ends[k]
+        if end is not ends[k] or end.skip <= 0:
+            continue
+        points = pieces[end.piece]
+        along = arc_lengths(points[::-1] if end.at_start else points)
+        if np.count_nonzero(along[-1] - along > end.skip) < FIT_JOINTS:
+            unfitted[k] = points
+    return unfitted

@@ -213,3 +213,29 @@ def evidence_ends(judged: Sequence, ends: Sequence, moved: Sequence) -> LazyEnds
         return replace(judged[index], position=shifted.position, skip=shifted.skip)
 
     return LazyEnds(len(judged), seen)
+
+
+def stub_fronts(
+    joins: list[tuple[int, int, float]],
+    junction_of_end: list[int],
+    ends: Sequence,
+    moved: Sequence,
+    given: frozenset[int],
+) -> dict[int, object]:
+    """Per end of a gap's join that lies in a crossing's junction and whose strand runs on
+    as a stub to where it passes out of sight (``moved[k]`` not ``ends[k]``:
+    :func:`ends_past_crossings`), its end at the stub's front; only joins whose other end
+    is in no junction and neither end has a curve of its own (``given``).
+
+    The join's bridge is drawn from the stub's cut (:func:`.cut_ends.bridges_from_the_cuts`):
+    the stub lies straight on past the crossing, and where the cable passes out of sight
+    there, not in the crossing, is where the hidden stretch begins."""
+    return {
+        k: moved[k]
+        for i, j, _ in joins
+        for k, other in ((i, j), (j, i))
+        if junction_of_end[k] >= 0
+        and junction_of_end[other] < 0
+        and not {k, other} & given
+        and moved[k] is not ends[k]
+    }
