@@ -887,7 +887,7 @@ def merge_chains(
     bridges = {**touching.bridges, **turn_bridges}
     curve_given = frozenset(end for pair in bridges for end in pair)
     # A gap from a crossing's end whose strand runs on as a stub to the object.
-    fronts = stub_fronts(joins, junction_of_end, ends, seen_from, curve_given)
+    fronts = stub_fronts(pieces, joins, junction_of_end, ends, seen_from, curve_given)
     inner_ends, trims = bridge_from_the_fits(
         pieces, ends, joins, span, junction_of_end, distance, radius, curve_given, frozenset(fronts)
     )
