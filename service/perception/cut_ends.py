@@ -419,7 +419,7 @@ cut's own narrowing."""
 
 def stub_cut(
     mask: np.ndarray, end, front: np.ndarray, half_width: float
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray] | None:
     """Where a strand seen on past a crossing as a stub passes out of sight, and its
     direction there: ``end`` is the strand's end in the crossing's junction, ``front``
     where the foreground along its direction stops past the junction
@@ -431,8 +431,9 @@ def stub_cut(
     carried across a slant), which puts the cut on the cable's middle. The stub is
     straight (what :mod:`.crossing_stubs` reads it as) and too short for a fit of its
     own: its direction is the chord from the end, on the cable's middle line where the
-    strand enters the crossing, to that cut. Where no cut is traced, the front and the
-    end's direction."""
+    strand enters the crossing, to that cut. None where no cut is traced from inside
+    the stub: the front is then where the end's line left the cable's side (a bending
+    strand), not where it is cut."""
     front = np.asarray(front, np.float64)
     start = replace(
         end,
@@ -443,10 +444,10 @@ def stub_cut(
     limit = (STUB_BACK_RADII + REACH_PAST_SKIP_RADII) * half_width + 2.0
     found = end_at_the_cut(mask, start, half_width, limit, carry=False)
     if found is None:
-        return front, end.direction
+        return None
     chord = found[1] - np.asarray(end.position, np.float64)
     if not np.hypot(*chord) > 0.0:
-        return front, end.direction
+        return None
     return found[1], unit(chord)
 
 
@@ -558,9 +559,11 @@ def bridges_from_the_cuts(
             end = ends[k]
             if stubbed and junction_of_end[k] >= 0:
                 # The strand runs on straight past the crossing, as a stub, to its cut
-                # (:func:`stub_cut`); the seen stretch is the stub, straight.
-                traced.append(True)
-                cuts.append(stub_cut(mask, end, fronts[k].position, (end.width or radius) + 0.5))
+                # (:func:`stub_cut`); the seen stretch is the stub, straight. No cut traced
+                # there: the front is where the end's line left the cable's side, no cut.
+                cut = stub_cut(mask, end, fronts[k].position, (end.width or radius) + 0.5)
+                traced.append(cut is not None)
+                cuts.append((end.position, end.direction) if cut is None else cut)
                 seen.append(False)
                 continue
             short = short_pieces.get(k) if short_pieces else None
@@ -613,7 +616,9 @@ def bridges_from_the_cuts(
             traced.append(found is not None)
             cuts.append((end.position, end.direction) if found is None else found[1:])
             seen.append(True)
-        if not any(traced) or (turn and not all(traced)):
+        # A stub with no cut traced is no reading of where the cable passes out of sight.
+        stub_missed = stubbed and not traced[0 if junction_of_end[i] >= 0 else 1]
+        if not any(traced) or (turn and not all(traced)) or stub_missed:
             continue
         (a, leaving), (b, arriving) = (
             (np.asarray(point, np.float64), heading) for point, heading in cuts
