@@ -55,6 +55,7 @@ def bridge_from_the_fits(
     distance: np.ndarray | None = None,
     nominal_skip: float | None = None,
     curve_given: frozenset[int] = frozenset(),
+    stubs: frozenset[int] = frozenset(),
 ) -> tuple[list, np.ndarray]:
     """Ends to bridge gaps from: where each end's fit begins, not extrapolated to the tip.
 
@@ -69,14 +70,20 @@ def bridge_from_the_fits(
     than ``nominal_skip`` says (a cut's hook) starts its bridge past it
     (:func:`_beyond_hooks`), unless the end is in ``curve_given``: its bridge is a curve
     found elsewhere (a turn out of sight, :mod:`.turn_joins`), which starts where that
-    curve does. Returns the ends and the arc lengths to trim per end (for
-    :func:`.paths.assemble_paths`).
+    curve does. A join from an end in ``stubs`` (in a crossing's junction, its strand
+    running on as a stub to where it passes out of sight:
+    :func:`.crossing_stubs.ends_past_crossings`) to an end in no junction is a gap as
+    well (:func:`past_a_stub`): its free end starts where its fit begins, where that
+    lies on the cable (``distance`` above 0; the end keeps its own reading otherwise,
+    as the gap's end it was before). Returns the
+    ends and the arc lengths to trim per end (for :func:`.paths.assemble_paths`).
     """
     adjusted = list(ends)
     trims = np.zeros(len(ends))
     hooks = np.zeros(len(ends))
     for i, j, _ in joins:
-        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
+        stubbed = past_a_stub(i, j, junction_of_end, stubs)
+        if not stubbed and (junction_of_end[i] >= 0 or junction_of_end[j] >= 0):
             if distance is not None and junction_of_end[i] == junction_of_end[j]:
                 for k in (i, j):
                     clear = ends_clear_of_crossing(
@@ -87,7 +94,7 @@ def bridge_from_the_fits(
             continue
         for k in (i, j):
             end = ends[k]
-            if end.skip <= 0:
+            if end.skip <= 0 or junction_of_end[k] >= 0:
                 continue
             # Pieces shorter than the fit's span are crossed along their partners' line.
             length = polyline_length(pieces[end.piece])
@@ -105,6 +112,10 @@ def bridge_from_the_fits(
                 # misses the piece at its start, the bridge starts on the piece.
                 backwards = points if end.at_start else points[::-1]
                 inner = start_on_the_piece(backwards, end.skip, span, *inner)
+            if inner is not None and stubbed and not _on_the_cable(distance, inner[0]):
+                # A fit whose start lies off the cable runs beside it (a short piece
+                # round a turn, :mod:`.end_readings`): the end keeps its own reading.
+                inner = None
             if inner is not None:
                 adjusted[k] = _moved(end, inner[0], inner[1])
                 trims[k] = end.skip
@@ -119,6 +130,24 @@ def bridge_from_the_fits(
             adjusted[2 * piece + k] = replace(adjusted[2 * piece + k], position=position)
             trims[2 * piece + k] = trim
     return adjusted, trims
+
+
+def _on_the_cable(distance: np.ndarray | None, point: np.ndarray) -> bool:
+    """Whether ``point`` (x, y) lies on the mask whose ``distance`` transform is given
+    (the pixel nearest it; True where no transform is given, False outside the picture)."""
+    if distance is None:
+        return True
+    column, row = round(float(point[0])), round(float(point[1]))
+    height, width = distance.shape[:2]
+    return 0 <= column < width and 0 <= row < height and bool(distance[row, column] > 0)
+
+
+def past_a_stub(i: int, j: int, junction_of_end: list[int], stubs: frozenset[int]) -> bool:
+    """Whether the join of ends ``i`` and ``j`` is a gap from a crossing's stub: one end
+    in a junction and in ``stubs`` (its strand seen on past the crossing to where it
+    passes out of sight), the other in no junction."""
+    crossing = [k for k in (i, j) if junction_of_end[k] >= 0]
+    return len(crossing) == 1 and crossing[0] in stubs
 
 
 # The end fit is a quadratic: it needs this many joints (``_geometry_kernels.end_fit``).
@@ -653,3 +682,36 @@ def free_ends_beside_crossings(
             direction = _middle_direction(ends[own].direction, readings)
             adjusted[own] = replace(ends[own], direction=direction)
     return adjusted
+
+
+def unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end, stubs) -> dict:
+    """Per bridging end left at its tip for want of joints to fit, its piece's points.
+
+    An end whose fit left a tip out (a cut's hook) is bridged from where the fit
+    begins (:func:`bridge_from_the_fits`); on a piece with fewer than
+    :data:`FIT_JOINTS` joints past that tip no fit is made there, and no
+    later stage moves the end (a short piece joined at both ends is taken along its
+    partners' line instead, unless one of its joins is a turn: then it keeps its own
+    ends, and is read here too): it stays at the tip, in the cut's corner, heading along
+    the chord through the hook. The ends of gaps' joins are read: neither end in a
+    junction, or one an end in ``stubs`` (:func:`past_a_stub`), whose other end is read.
+    """
+    unfitted = {}
+    # Only the ends of gaps' joins (neither end in a junction, or one a stub's) are read.
+    junction = junction_of_end
+    gaps = sorted(
+        k
+        for i, j, _ in joins
+        if max(junction[i], junction[j]) < 0 or past_a_stub(i, j, junction, stubs)
+        for k in (i, j)
+        if junction[k] < 0
+    )
+    for k in gaps:
+        end = bridging_ends[k]
+        if end is not ends[k] or end.skip <= 0:
+            continue
+        points = pieces[end.piece]
+        along = arc_lengths(points[::-1] if end.at_start else points)
+        if np.count_nonzero(along[-1] - along > end.skip) < FIT_JOINTS:
+            unfitted[k] = points
+    return unfitted

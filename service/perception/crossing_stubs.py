@@ -29,6 +29,8 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
+from service.perception.bridge_ends import FIT_JOINTS
+
 # The ray along a strand is read in steps of this many px.
 RAY_STEP_PX = 0.5
 
@@ -213,3 +215,34 @@ def evidence_ends(judged: Sequence, ends: Sequence, moved: Sequence) -> LazyEnds
         return replace(judged[index], position=shifted.position, skip=shifted.skip)
 
     return LazyEnds(len(judged), seen)
+
+
+def stub_fronts(
+    pieces: list[np.ndarray],
+    joins: list[tuple[int, int, float]],
+    junction_of_end: list[int],
+    ends: Sequence,
+    moved: Sequence,
+    given: frozenset[int],
+) -> dict[int, object]:
+    """Per end of a gap's join that lies in a crossing's junction and whose strand runs on
+    as a stub to where it passes out of sight (``moved[k]`` not ``ends[k]``:
+    :func:`ends_past_crossings`), its end at the stub's front; only joins whose other end
+    is in no junction and neither end has a curve of its own (``given``).
+
+    The join's bridge is drawn from the stub's cut (:func:`.cut_ends.bridges_from_the_cuts`):
+    the stub lies straight on past the crossing, and where the cable passes out of sight
+    there, not in the crossing, is where the hidden stretch begins. Only where the end's
+    piece holds the joints its fit needs (:data:`.bridge_ends.FIT_JOINTS`): the stub is
+    read along the end's direction, which on a scrap of two or three joints (a fork
+    thinning makes in a cut's wedge) is a chord of a few px, no strand's line."""
+    return {
+        k: moved[k]
+        for i, j, _ in joins
+        for k, other in ((i, j), (j, i))
+        if junction_of_end[k] >= 0
+        and junction_of_end[other] < 0
+        and len(pieces[ends[k].piece]) >= FIT_JOINTS
+        and not {k, other} & given
+        and moved[k] is not ends[k]
+    }

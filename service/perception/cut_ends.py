@@ -27,10 +27,13 @@ are then turned, within their uncertainty, as little as a cable's shape takes
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from schemas import GapCurve
 from service.perception.appearance import ground_beside, unlike_ground
+from service.perception.bridge_ends import past_a_stub
 from service.perception.euler_spiral import headings_within_bend, is_large_turn
 from service.perception.geometry import arc_lengths, end_fit, polyline_length, rotated, unit
 from service.perception.paths import gap_curve
@@ -616,6 +619,46 @@ def unfitted_end_cut(
     return short_piece_cut(mask, points, heading, half_width)
 
 
+STUB_BACK_RADII = 1.5
+"""A stub's cut is traced from this many half widths back from its front: inside the
+stub, clear of the crossing (whose section a trace would read as the cable's) and of the
+cut's own narrowing."""
+
+
+def stub_cut(
+    mask: np.ndarray, end, front: np.ndarray, half_width: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Where a strand seen on past a crossing as a stub passes out of sight, and its
+    direction there: ``end`` is the strand's end in the crossing's junction, ``front``
+    where the foreground along its direction stops past the junction
+    (:func:`.crossing_stubs.ends_past_crossings`).
+
+    The front lies on the end's line, which a direction a few degrees off (a fit bent by
+    the crossing) carries a few px off the middle over the stub's 20-40 px. The middle
+    line is traced from inside the stub on to the cut (:func:`end_at_the_cut`, not
+    carried across a slant), which puts the cut on the cable's middle. The stub is
+    straight (what :mod:`.crossing_stubs` reads it as) and too short for a fit of its
+    own: its direction is the chord from the end, on the cable's middle line where the
+    strand enters the crossing, to that cut. None where no cut is traced from inside
+    the stub: the front is then where the end's line left the cable's side (a bending
+    strand), not where it is cut."""
+    front = np.asarray(front, np.float64)
+    start = replace(
+        end,
+        position=front - STUB_BACK_RADII * half_width * end.direction,
+        skip=0.0,
+        curvature=0.0,
+    )
+    limit = (STUB_BACK_RADII + REACH_PAST_SKIP_RADII) * half_width + 2.0
+    found = end_at_the_cut(mask, start, half_width, limit, carry=False)
+    if found is None:
+        return None
+    chord = found[1] - np.asarray(end.position, np.float64)
+    if not np.hypot(*chord) > 0.0:
+        return None
+    return found[1], unit(chord)
+
+
 FORK_ENDS = 3
 """The most ends a junction thinning forks in a cut's wedge holds: the strand's and a
 sliver running into each corner. A crossing's holds four, its strands' pieces on either
@@ -655,6 +698,7 @@ def bridges_from_the_cuts(
     short_pieces: dict[int, tuple[np.ndarray, float]] | None = None,
     unfitted: dict[int, np.ndarray] | None = None,
     image: np.ndarray | None = None,
+    stub_fronts: dict | None = None,
 ) -> dict[tuple[int, int], np.ndarray]:
     """Bridges of the gaps (joins of two ends in no junction, with no curve of their
     own in ``given``) drawn from the cuts: from each bridging end (``ends``, where the
@@ -678,6 +722,13 @@ def bridges_from_the_cuts(
     index -> its piece's points: a piece too short for the end's fit, the end left at its
     tip) whose own trace finds no cut starts at the cut read from its piece's middle
     (:func:`unfitted_end_cut`), its piece ending at its tip as a short piece's.
+    With the BGR ``image``, an end's trace may follow a slanted cut's wedge along the
+    border the image shows to be the cable's (:func:`along_the_wedge`).
+    A join from an end in a crossing's junction (``stub_fronts``: end index -> the end
+    moved to its stub's front, :func:`.crossing_stubs.ends_past_crossings`: the strand
+    runs on past the crossing as a stub to where it passes out of sight) to an end in no
+    junction is a gap too (:func:`.bridge_ends.past_a_stub`): that end's cut is read at
+    the stub's front (:func:`stub_cut`), the seen stretch the straight stub.
     A cable whose half width is under :data:`CUT_NARROWING_PX` (a sliver of a short
     piece, a thin cable of a photograph) is not traced: the narrowing that marks a cut
     would be half its section and more, each border's pixel rounding alone reads as one,
@@ -706,8 +757,10 @@ def bridges_from_the_cuts(
     for i, j, _ in joins if short_pieces else ():  # only a short piece is a sliver
         if junction_of_end[i] in fork and junction_of_end[j] in fork:
             through[i], through[j] = j, i
+    fronts = stub_fronts or {}
     for i, j, _ in joins:
-        if junction_of_end[i] >= 0 or junction_of_end[j] >= 0:
+        stubbed = past_a_stub(i, j, junction_of_end, frozenset(fronts))
+        if not stubbed and (junction_of_end[i] >= 0 or junction_of_end[j] >= 0):
             continue
         turn = (i, j) in turns or (j, i) in turns
         if (i in given or j in given) and not turn:
@@ -715,6 +768,15 @@ def bridges_from_the_cuts(
         traced, cuts, seen = [], [], []
         for k in (i, j):
             end = ends[k]
+            if stubbed and junction_of_end[k] >= 0:
+                # The strand runs on straight past the crossing, as a stub, to its cut
+                # (:func:`stub_cut`); the seen stretch is the stub, straight. No cut traced
+                # there: the front is where the end's line left the cable's side, no cut.
+                cut = stub_cut(mask, end, fronts[k].position, (end.width or radius) + 0.5)
+                traced.append(cut is not None)
+                cuts.append((end.position, end.direction) if cut is None else cut)
+                seen.append(False)
+                continue
             short = short_pieces.get(k) if short_pieces else None
             strand = _strand_of_sliver(k, short, ends, through) if short is not None else None
             if strand is not None:
@@ -765,7 +827,9 @@ def bridges_from_the_cuts(
             traced.append(found is not None)
             cuts.append((end.position, end.direction) if found is None else found[1:])
             seen.append(True)
-        if not any(traced) or (turn and not all(traced)):
+        # A stub with no cut traced is no reading of where the cable passes out of sight.
+        stub_missed = stubbed and not traced[0 if junction_of_end[i] >= 0 else 1]
+        if not any(traced) or (turn and not all(traced)) or stub_missed:
             continue
         (a, leaving), (b, arriving) = (
             (np.asarray(point, np.float64), heading) for point, heading in cuts

@@ -38,13 +38,13 @@ from service.perception.appearance import (
     gap_hidden,
 )
 from service.perception.bridge_ends import (
-    FIT_JOINTS,
     bridge_from_the_fits,
     ends_of_short_pieces_from_partners,
     ends_through_short_pieces,
     free_ends_beside_crossings,
+    unfitted_pieces,
 )
-from service.perception.crossing_stubs import ends_past_crossings, evidence_ends
+from service.perception.crossing_stubs import ends_past_crossings, evidence_ends, stub_fronts
 from service.perception.cut_ends import bridges_from_the_cuts
 from service.perception.cut_middles import short_ends_at_cut_middles
 from service.perception.deadline import Deadline, check
@@ -60,7 +60,7 @@ from service.perception.gap_evidence import (
     turn_evidence,
     turn_out_of_view,
 )
-from service.perception.geometry import arc_lengths, polyline_length
+from service.perception.geometry import polyline_length
 from service.perception.pairing import Components, cheapest_pairing
 from service.perception.paths import MergedPath, assemble_paths, gap_curve
 from service.perception.short_pieces import (
@@ -886,8 +886,10 @@ def merge_chains(
     # A dropped piece's ends are never joined, so it would come out alone: skip it.
     bridges = {**touching.bridges, **turn_bridges}
     curve_given = frozenset(end for pair in bridges for end in pair)
+    # A gap from a crossing's end whose strand runs on as a stub to the object.
+    fronts = stub_fronts(pieces, joins, junction_of_end, ends, seen_from, curve_given)
     inner_ends, trims = bridge_from_the_fits(
-        pieces, ends, joins, span, junction_of_end, distance, radius, curve_given
+        pieces, ends, joins, span, junction_of_end, distance, radius, curve_given, frozenset(fronts)
     )
     inner_ends = ends_of_short_pieces_from_partners(
         pieces, inner_ends, joins, span, junction_of_end
@@ -929,8 +931,9 @@ def merge_chains(
                 for k, end in enumerate(bridging_ends)
                 if end is not inner_ends[k]
             },
-            _unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end),
+            unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end, fronts),
             image,
+            fronts,
         )
         if turn_hidden is not None:
             cut_bridges = {
@@ -943,33 +946,6 @@ def merge_chains(
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])
-
-
-def _unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end) -> dict[int, np.ndarray]:
-    """Per bridging end left at its tip for want of joints to fit, its piece's points.
-
-    An end whose fit left a tip out (a cut's hook) is bridged from where the fit
-    begins (:func:`.bridge_ends.bridge_from_the_fits`); on a piece with fewer than
-    :data:`.bridge_ends.FIT_JOINTS` joints past that tip no fit is made there, and no
-    later stage moves the end (a short piece joined at both ends is taken along its
-    partners' line instead, unless one of its joins is a turn: then it keeps its own
-    ends, and is read here too): it stays at the tip, in the cut's corner, heading along
-    the chord through the hook.
-    """
-    unfitted = {}
-    # Only the ends of gaps' joins (neither end in a junction) are read there.
-    gaps = sorted(
-        k for i, j, _ in joins if max(junction_of_end[i], junction_of_end[j]) < 0 for k in (i, j)
-    )
-    for k in gaps:
-        end = bridging_ends[k]
-        if end is not ends[k] or end.skip <= 0:
-            continue
-        points = pieces[end.piece]
-        along = arc_lengths(points[::-1] if end.at_start else points)
-        if np.count_nonzero(along[-1] - along > end.skip) < FIT_JOINTS:
-            unfitted[k] = points
-    return unfitted
 
 
 def _cut_turn_seen(
