@@ -684,7 +684,14 @@ def free_ends_beside_crossings(
     return adjusted
 
 
-def unfitted_pieces(pieces, bridging_ends, ends, joins, junction_of_end, stubs) -> dict:
+def unfitted_pieces(
+    pieces: list[np.ndarray],
+    bridging_ends: list,
+    ends: list,
+    joins: list[tuple[int, int, float]],
+    junction_of_end: list[int],
+    stubs: dict | frozenset,
+) -> dict[int, np.ndarray]:
     """Per bridging end left at its tip for want of joints to fit, its piece's points.
 
     An end whose fit left a tip out (a cut's hook) is bridged from where the fit

@@ -217,8 +217,8 @@ def along_the_wedge(
     ndarray
         ``(M, 2)`` the points added past ``points[-1]`` (``M >= 0``).
     """
-    if len(points) < 2:
-        return np.zeros((0, 2))
+    if len(points) < 2 or image is None:
+        return np.zeros((0, 2))  # without the image nothing tells the borders apart
     x, y = (float(value) for value in points[-1])
     hx, hy = _heading(points, half_width)
     start = (hx, hy)
@@ -234,8 +234,6 @@ def along_the_wedge(
             + _border_distance(mask, px, py, ay, -ax, steps, reach)
         )
     half_width = 0.5 * float(np.median(widths))
-    if image is None:
-        return np.zeros((0, 2))
     # What lies just beyond the cable's borders along its full sections: the ground.
     beside = []
     for px, py in points[-FULL_SECTIONS:]:
