@@ -22,6 +22,7 @@ from service.perception.geometry import (
     arc_lengths,
     fit_at,
     fit_where_skipped,
+    on_mask,
     polyline_length,
 )
 
@@ -135,11 +136,8 @@ def bridge_from_the_fits(
 def _on_the_cable(distance: np.ndarray | None, point: np.ndarray) -> bool:
     """Whether ``point`` (x, y) lies on the mask whose ``distance`` transform is given
     (the pixel nearest it; True where no transform is given, False outside the picture)."""
-    if distance is None:
-        return True
-    column, row = round(float(point[0])), round(float(point[1]))
-    height, width = distance.shape[:2]
-    return 0 <= column < width and 0 <= row < height and bool(distance[row, column] > 0)
+    # A distance transform is nonzero exactly on the mask.
+    return distance is None or on_mask(distance, float(point[0]), float(point[1]))
 
 
 def past_a_stub(i: int, j: int, junction_of_end: list[int], stubs: frozenset[int]) -> bool:

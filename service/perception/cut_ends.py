@@ -35,7 +35,14 @@ from schemas import GapCurve
 from service.perception.appearance import ground_beside, unlike_ground
 from service.perception.bridge_ends import past_a_stub
 from service.perception.euler_spiral import headings_within_bend, is_large_turn
-from service.perception.geometry import arc_lengths, end_fit, polyline_length, rotated, unit
+from service.perception.geometry import (
+    arc_lengths,
+    end_fit,
+    on_mask,
+    polyline_length,
+    rotated,
+    unit,
+)
 from service.perception.paths import gap_curve
 from service.perception.turn_joins import DIRECTION_SLACK, HIDDEN_BEND_RADII
 
@@ -84,12 +91,6 @@ def _border_distance(
         if not (0 <= column < width and 0 <= row < height and mask[row, column]):
             return step - 0.5 * SECTION_STEP_PX
     return reach
-
-
-def on_mask(mask: np.ndarray, x: float, y: float) -> bool:
-    """Whether the pixel nearest ``(x, y)`` is on ``mask`` (False outside the picture)."""
-    column, row = round(x), round(y)
-    return 0 <= column < mask.shape[1] and 0 <= row < mask.shape[0] and bool(mask[row, column])
 
 
 def _recentred(plus: float, minus: float, half_width: float) -> float:

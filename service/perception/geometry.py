@@ -244,3 +244,9 @@ def _compiled_layout(points) -> bool:
         and points.shape[1] == 2
         and points.flags.num & _C_ALIGNED_WRITEABLE == _C_ALIGNED_WRITEABLE
     )
+
+
+def on_mask(mask: np.ndarray, x: float, y: float) -> bool:
+    """Whether the pixel nearest ``(x, y)`` is on ``mask`` (False outside the picture)."""
+    column, row = round(x), round(y)
+    return 0 <= column < mask.shape[1] and 0 <= row < mask.shape[0] and bool(mask[row, column])
