@@ -685,6 +685,41 @@ def _strand_of_sliver(k: int, short, ends: list, through: dict[int, int]) -> int
     return partner if short[1] < SLIVER_SHARE * ends[partner].width else None
 
 
+def read_together(
+    a: np.ndarray, leaving: np.ndarray, b: np.ndarray, arriving: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The directions at a doubled-back cable's two cuts, read as the pair they are.
+
+    Two cuts whose outward directions both head the same way (``leaving`` at ``a``,
+    ``arriving`` at ``b``; their dot product positive) are the two strands of one cable
+    going into an object side by side, to turn round out of sight. Each direction is a
+    short fit of its own strand's traced middle (:func:`end_at_the_cut`), which lags a bend
+    the cable begins at the cut (10-30 degrees on the turns missed: the fit spans the
+    strand's straight or outward-swinging stretch, the cable turns in under the object) and
+    leans into a slanted cut's wedge. On the turns missed that error opens the pair: the
+    readings swing apart from each other by 30-50 degrees more than the cable does, and the
+    hidden curve bulges round outside the turn. So where the readings open away from each
+    other (``arriving - leaving`` points from ``a`` to ``b``), both cuts take their common
+    direction, the mean of the two: a strand's error the other's reading does not share is
+    halved, and the pair's shared lean (the whole turn tilted) is kept. Readings that close
+    in on each other (the cable's turn begun before the cuts) or head apart (a gap's two
+    ends, the cable running on through the object) are left as they are.
+
+    Returns
+    -------
+    (leaving, arriving)
+        The two directions, outward at ``a`` and ``b``.
+    """
+    leaving = np.asarray(leaving, np.float64)
+    arriving = np.asarray(arriving, np.float64)
+    same_way = float(np.dot(leaving, arriving)) > 0.0
+    opening = float(np.dot(arriving - leaving, np.asarray(b) - np.asarray(a))) > 0.0
+    if not (same_way and opening):
+        return leaving, arriving
+    common = unit(leaving + arriving)
+    return common, common.copy()
+
+
 def bridges_from_the_cuts(
     ends: list,
     joins: list[tuple[int, int, float]],
@@ -708,7 +743,9 @@ def bridges_from_the_cuts(
     that is the Euler spiral of a large turn bending tighter than
     :data:`.turn_joins.HIDDEN_BEND_RADII` ``[0]`` of the cable's half width, from the
     nearest headings within :data:`.turn_joins.DIRECTION_SLACK` of the cuts' whose spiral
-    does not, :func:`.euler_spiral.headings_within_bend`), and on
+    does not, :func:`.euler_spiral.headings_within_bend`; two cuts heading the same way,
+    a doubled-back cable's strands, read together first, :func:`read_together`, unless
+    both pieces run back to one crossing: a loop's turn), and on
     to the other end's bridging point (the seen stretches drawn as curves from each
     bridging point to its cut). An end with no cut traced keeps its own
     start. The joins in ``turns`` (each as the turn pass keyed it) are bridged so too,
@@ -833,6 +870,13 @@ def bridges_from_the_cuts(
         (a, leaving), (b, arriving) = (
             (np.asarray(point, np.float64), heading) for point, heading in cuts
         )
+        # The two strands of a doubled-back cable turning round under the object, read
+        # together (:func:`read_together`); not a loop's turn, whose strands cross behind
+        # their cuts (both pieces run back to one crossing): past a half turn its hidden
+        # arc's two ends swing apart as the loop's circle does.
+        loop = junction_of_end[i ^ 1] >= 0 and junction_of_end[i ^ 1] == junction_of_end[j ^ 1]
+        if not (loop and int(junction_of_end[i ^ 1]) not in fork):
+            leaving, arriving = read_together(a, leaving, b, arriving)
         if GapCurve(shape) is GapCurve.smooth and is_large_turn(a, leaving, b, -arriving):
             # The spiral across a large turn bends as a cable does (no tighter than its
             # tightest bend), its headings turned from the readings as little as that takes.
