@@ -80,17 +80,7 @@ def test_a_short_piece_joined_by_a_turn_keeps_its_own_ends():
 @pytest.mark.parametrize(
     "seed",
     [
-        pytest.param(
-            410014,
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="the turn's other end is read 4.4 px off the middle, 25 degrees off "
-                "(its trace drifts into a slanted cut's wedge: cut_ends, the direction at a "
-                "cut); with the short piece's cut read 3.5 px of arc from the true cut (10 "
-                "before the trace went on past a rounding's narrowing, cutfb14) the bulb "
-                "misses by 0.5 px (8.1 against 7.6); with the true tangents at both cuts 4.0",
-            ),
-        ),
+        410014,
         410099,
     ],
 )
@@ -105,7 +95,9 @@ def test_a_doubled_back_turn_whose_short_piece_keeps_its_own_ends_is_right(seed)
     410278 came out right with this rule alone; with loops13's cut read from an unfitted
     end's piece middle (``cut_ends.unfitted_end_cut``) it missed by 0.11 px (9.06 against
     8.95), and is right again once a rounding's narrowing no longer stops the traces
-    (``cut_ends._full_beyond``, BENCHMARKS, cutfb14)."""
+    (``cut_ends._full_beyond``, BENCHMARKS, cutfb14). 410014 (an xfail since cutfb14: the
+    turn's other end read 25 degrees off, the bulb 0.5 px over) is right with the two cuts
+    read together (``cut_ends.read_together``, dback17)."""
     score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
 
