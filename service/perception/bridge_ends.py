@@ -65,7 +65,9 @@ def bridge_from_the_fits(
     extrapolation turns the bridge off the cable. A gap's bridge (ends in no junction)
     starts instead where the fitted stretch begins, with the fit's own tangent there,
     and the piece's joints before that are left out of the path (not for pieces shorter
-    than the fit's ``span``: :func:`ends_through_short_pieces`). With ``distance`` (the
+    than the fit's ``span``: :func:`ends_through_short_pieces`); where the fit misses
+    the piece there by more than :data:`FIT_MISS_PX` (the piece bends within the span),
+    on the piece (:func:`start_on_the_piece`). With ``distance`` (the
     mask's distance transform) a crossing's bridge starts clear of the other strand
     (:func:`ends_clear_of_crossing`). A piece too short to fit beyond a tip narrower
     than ``nominal_skip`` says (a cut's hook) starts its bridge past it
@@ -108,9 +110,12 @@ def bridge_from_the_fits(
             points = pieces[end.piece]
             fit_span = span_holding_joints(points, end.at_start, span, end.skip, ends[k ^ 1].skip)
             inner = fit_where_skipped(points, end.at_start, fit_span, end.skip)
-            if inner is not None and fit_span > span:
-                # The widened fit reaches further in, where the piece may bend: where it
-                # misses the piece at its start, the bridge starts on the piece.
+            if inner is not None:
+                # A quadratic over a piece that bends within its span (a strand hooking
+                # into a hidden turn, or a widened fit reaching further in) spreads the
+                # bend over the whole stretch and may miss the piece where it begins:
+                # there the bridge starts on the piece (the skeleton lies on the cable's
+                # middle), and its cut is traced from there, not from beside the cable.
                 backwards = points if end.at_start else points[::-1]
                 inner = start_on_the_piece(backwards, end.skip, span, *inner)
             if inner is not None and stubbed and not _on_the_cable(distance, inner[0]):

@@ -494,3 +494,46 @@ def test_a_widened_fit_that_misses_a_bending_piece_starts_the_bridge_on_it():
     assert trims[1] == pytest.approx(6.1)
     assert abs(inner[1].position[1] - 60.0) < 1e-9
     np.testing.assert_allclose(inner[1].direction, [1.0, 0.0], atol=1e-9)
+
+
+def _hooked_strand(bend: float) -> np.ndarray:
+    """A strand along y = 60 (joints 5 px apart) up to x = 55, then bending by a quarter
+    turn round a circle of radius ``bend`` px towards -y: a doubled-back cable's strand
+    hooking into its hidden turn within the end fit's span."""
+    straight = np.column_stack([np.arange(0.0, 60.0, 5.0), np.full(12, 60.0)])
+    angles = np.arange(0.0, np.pi / 2 + 1e-9, 5.0 / bend)
+    arc = np.column_stack([60.0 + bend * np.sin(angles), 60.0 - bend * (1.0 - np.cos(angles))])
+    return np.vstack([straight, arc])
+
+
+def test_a_fit_that_misses_a_hooked_strand_starts_the_bridge_on_it():
+    """The fit over the last 40 px (its span, holding joints enough: not widened) spans
+    the hook, and where its stretch begins it lies 2.6 px beside the strand (the quadratic
+    spreads the bend). A gap's bridge started there, and the cut traced from there, left
+    the cable's middle (doubled_back 450049, 450108 of the fresh 450000 block: 5.4-6.4 px
+    off, no cut traced). It starts on the strand now, as a widened fit's does."""
+    points = _hooked_strand(15.0)
+    beyond = np.column_stack([np.full(12, 85.0), -30.0 - 10.0 * np.arange(12)])[::-1]
+    pieces = [points, beyond]
+    ends = chain_ends(pieces, 40.0, skip=6.0)
+    span = bridge_ends.span_holding_joints(points, False, 40.0, ends[1].skip, ends[0].skip)
+    assert span == 40.0
+    fitted = fit_where_skipped(points, False, span, ends[1].skip)
+    gap = np.hypot(*(points - fitted[0]).T).min()
+    assert gap > 2.0 * bridge_ends.FIT_MISS_PX
+    inner, trims = bridge_from_the_fits(pieces, ends, [(1, 2, 0.0)], 40.0, [-1] * 4)
+    assert trims[1] == pytest.approx(ends[1].skip)
+    # On the arc: its distance from the circle's centre is the bend.
+    centre = np.array([60.0, 45.0])
+    assert abs(np.hypot(*(inner[1].position - centre)) - 15.0) < 0.2
+
+
+@pytest.mark.parametrize("seed", [450108, 450227])
+def test_a_doubled_back_turn_whose_fit_missed_its_hooked_strand_is_right(seed):
+    """Fresh block doubled_back 450108, 450227, true mask: a strand hooking into the
+    hidden turn within its end fit's span; the fit's start lay 3.4-6.4 px beside the
+    strand and 35-56 degrees off, and the cut traced from there was not found or read
+    2.5 px off and 22 degrees off (10.1 and 7.7 px off the hidden turn against 4.4 and
+    5.1). Started on the strand, the frames come out right."""
+    score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
