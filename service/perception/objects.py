@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from service.perception import _segmentation_kernels, _shared_kernels
-from service.perception.skeleton import distance_transform
+from service.perception.skeleton import as_uint8, distance_transform
 
 # An object's inscribed radius is at least this many half widths of the widest line that
 # leaves it (and of the picture's typical line): two lines together make up to 2, and the
@@ -42,7 +42,27 @@ def _distance(mask: np.ndarray) -> np.ndarray:
     return cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 5)
 
 
-def typical_half_width(distance: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+def distance_and_ridges(mask: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, float]]:
+    """``distance_transform(mask)``, and its ridges as :func:`typical_half_width` reads them.
+
+    One pass over the image for the mask's pixels serves both (the chamfer pass's
+    row buffers hold the distances the ridge test compares).
+
+    Returns
+    -------
+    distance : ndarray of float32
+        ``(H, W)``, :func:`service.perception.skeleton.distance_transform` of ``mask``.
+    ridges : (ndarray of float32, float)
+        The distances at the middle lines' pixels (in raster order) and the largest
+        distance on the mask, for :func:`without_objects`.
+    """
+    distance, values, largest = _shared_kernels.distance_and_ridges(as_uint8(mask))
+    return distance, (values, float(largest))
+
+
+def typical_half_width(
+    distance: np.ndarray, mask: np.ndarray, ridges: tuple[np.ndarray, float] | None = None
+) -> tuple[float, float]:
     """The median distance to the border along the mask's middle lines (0 when none),
     and the largest distance on the mask.
 
@@ -58,14 +78,23 @@ def typical_half_width(distance: np.ndarray, mask: np.ndarray) -> tuple[float, f
         ``(H, W)``, the mask's distance transform (at least 1 on every mask pixel).
     mask : ndarray of bool
         ``(H, W)``, C-contiguous.
+    ridges : (ndarray of float32, float), optional
+        The middle lines' distances and the largest, when :func:`distance_and_ridges`
+        found them with ``distance``.
     """
-    indices = _shared_kernels.nonzero_flat(mask.view(np.uint8).reshape(-1))
-    values, largest = _segmentation_kernels.ridge_values(np.ascontiguousarray(distance), indices)
+    if ridges is None:
+        indices = _shared_kernels.nonzero_flat(mask.view(np.uint8).reshape(-1))
+        ridges = _segmentation_kernels.ridge_values(np.ascontiguousarray(distance), indices)
+    values, largest = ridges
     values = values[values >= MIN_HALF_WIDTH]
     return (float(np.median(values)) if values.size else 0.0), float(largest)
 
 
-def object_blobs(mask: np.ndarray, distance: np.ndarray | None = None) -> np.ndarray:
+def object_blobs(
+    mask: np.ndarray,
+    distance: np.ndarray | None = None,
+    ridges: tuple[np.ndarray, float] | None = None,
+) -> np.ndarray:
     """The parts of a foreground mask that are objects, not lines.
 
     A candidate is the union of every disc inside the mask of radius
@@ -84,6 +113,8 @@ def object_blobs(mask: np.ndarray, distance: np.ndarray | None = None) -> np.nda
         ``(H, W)`` foreground mask.
     distance : ndarray of float32, optional
         ``distance_transform(mask)`` when the caller has it.
+    ridges : (ndarray of float32, float), optional
+        Its ridges, when :func:`distance_and_ridges` gave ``distance``.
 
     Returns
     -------
@@ -100,12 +131,22 @@ def object_blobs(mask: np.ndarray, distance: np.ndarray | None = None) -> np.nda
     >>> bool(blobs[40, 80]), bool(blobs[40, 10]), bool(blobs[40, 150])
     (True, False, False)
     """
+    found = _objects_found(mask, distance, ridges)
+    return np.zeros(np.shape(mask), bool) if found is None else found
+
+
+def _objects_found(
+    mask: np.ndarray, distance: np.ndarray | None, ridges: tuple[np.ndarray, float] | None
+) -> np.ndarray | None:
+    """:func:`object_blobs`, or None when it finds no object (the common case, told
+    without an image-sized array to make and scan)."""
     mask = np.ascontiguousarray(mask, dtype=bool)
-    found = np.zeros(mask.shape, bool)
+    found = None
     if distance is None:
         # The same values, compiled, over the foreground only.
         distance = distance_transform(mask)
-    typical, largest = typical_half_width(distance, mask)
+        ridges = None
+    typical, largest = typical_half_width(distance, mask, ridges)
     reach = WIDER_THAN_LINES * typical
     # No disc of the opening fits anywhere: the common case, decided without a pass
     # over the whole picture.
@@ -156,6 +197,8 @@ def object_blobs(mask: np.ndarray, distance: np.ndarray | None = None) -> np.nda
         if radius < WIDER_THAN_LINES * widest:
             continue
         line = max(widest, typical)
+        if found is None:
+            found = np.zeros(mask.shape, bool)
         found[y0:y1, x0:x1] |= _with_corners(blob, window, reach, line)
     return found
 
@@ -208,7 +251,10 @@ def _with_corners(blob: np.ndarray, mask: np.ndarray, reach: float, widest: floa
 
 
 def without_objects(
-    mask: np.ndarray, min_component_area: int, distance: np.ndarray | None = None
+    mask: np.ndarray,
+    min_component_area: int,
+    distance: np.ndarray | None = None,
+    ridges: tuple[np.ndarray, float] | None = None,
 ) -> np.ndarray:
     """The mask less the objects lying on the cables (:func:`object_blobs`).
 
@@ -225,14 +271,17 @@ def without_objects(
     distance : ndarray of float32, optional
         ``distance_transform(mask)`` when the caller has it (the skeleton step needs it
         too: computed once, it serves both when no object is found).
+    ridges : (ndarray of float32, float), optional
+        Its ridges, when :func:`distance_and_ridges` gave ``distance``.
 
     Returns
     -------
     ndarray of bool
         A new mask; ``mask`` is returned itself when it holds no object.
     """
-    blobs = object_blobs(mask, distance)
-    if not blobs.any():
+    blobs = _objects_found(mask, distance, ridges)
+    # A blob found is never empty (it holds its disc centres).
+    if blobs is None:
         return mask
     cleaned = np.ascontiguousarray(mask & ~blobs).view(np.uint8)
     if min_component_area > 0:
