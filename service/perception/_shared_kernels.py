@@ -270,10 +270,10 @@ def distance_and_ridges(mask):
 
     The ridge pixels are those away from the image's border whose distance is no
     smaller than any of their eight neighbours' (in raster order; background is 0),
-    the largest distance is over every foreground pixel (0 when none):
-    ``_segmentation_kernels.ridge_values(distance, nonzero_flat(mask))``, without a
-    second scan of the image for the mask's pixels and with the rows' distances read
-    from the chamfer pass's buffers while they are final.
+    the largest distance is over every foreground pixel (0 when none). Read in the
+    backward pass, from the rows' distances in its buffers while they are final: no
+    second scan of the image for the mask's pixels, no second read of the distances
+    (``tests/perception/references/segmentation.py``, ``ridges``).
     """
     height, width = mask.shape
     distance = np.zeros((height, width), np.float32)

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from service.perception import _segmentation_kernels, _shared_kernels
-from service.perception.skeleton import as_uint8, distance_transform
+from service.perception.skeleton import as_uint8
 
 # An object's inscribed radius is at least this many half widths of the widest line that
 # leaves it (and of the picture's typical line): two lines together make up to 2, and the
@@ -60,31 +60,22 @@ def distance_and_ridges(mask: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray,
     return distance, (values, float(largest))
 
 
-def typical_half_width(
-    distance: np.ndarray, mask: np.ndarray, ridges: tuple[np.ndarray, float] | None = None
-) -> tuple[float, float]:
+def typical_half_width(ridges: tuple[np.ndarray, float]) -> tuple[float, float]:
     """The median distance to the border along the mask's middle lines (0 when none),
     and the largest distance on the mask.
 
     Cables are long and objects few, so their middle lines are mostly the cables'. A
     middle line's pixel is one no farther from the border than any of its eight
-    neighbours; they are looked for at the mask's own pixels only (a few per cent of a
-    photograph, found 8 bytes at a time), not over the whole picture, and compared in
-    one compiled pass (it runs on every photograph the brightness path segments).
+    neighbours; they are found with the distances (:func:`distance_and_ridges`), at
+    the mask's own pixels only (a few per cent of a photograph), not over the whole
+    picture (it runs on every photograph the brightness path segments).
 
     Parameters
     ----------
-    distance : ndarray of float32
-        ``(H, W)``, the mask's distance transform (at least 1 on every mask pixel).
-    mask : ndarray of bool
-        ``(H, W)``, C-contiguous.
-    ridges : (ndarray of float32, float), optional
-        The middle lines' distances and the largest, when :func:`distance_and_ridges`
-        found them with ``distance``.
+    ridges : (ndarray of float32, float)
+        The middle lines' distances and the largest distance on the mask, from
+        :func:`distance_and_ridges`.
     """
-    if ridges is None:
-        indices = _shared_kernels.nonzero_flat(mask.view(np.uint8).reshape(-1))
-        ridges = _segmentation_kernels.ridge_values(np.ascontiguousarray(distance), indices)
     values, largest = ridges
     values = values[values >= MIN_HALF_WIDTH]
     return (float(np.median(values)) if values.size else 0.0), float(largest)
@@ -111,10 +102,9 @@ def object_blobs(
     ----------
     mask : ndarray of bool
         ``(H, W)`` foreground mask.
-    distance : ndarray of float32, optional
-        ``distance_transform(mask)`` when the caller has it.
-    ridges : (ndarray of float32, float), optional
-        Its ridges, when :func:`distance_and_ridges` gave ``distance``.
+    distance, ridges : optional
+        ``distance_and_ridges(mask)`` when the caller has them (both, or they are
+        found here).
 
     Returns
     -------
@@ -142,11 +132,10 @@ def _objects_found(
     without an image-sized array to make and scan)."""
     mask = np.ascontiguousarray(mask, dtype=bool)
     found = None
-    if distance is None:
+    if distance is None or ridges is None:
         # The same values, compiled, over the foreground only.
-        distance = distance_transform(mask)
-        ridges = None
-    typical, largest = typical_half_width(distance, mask, ridges)
+        distance, ridges = distance_and_ridges(mask)
+    typical, largest = typical_half_width(ridges)
     reach = WIDER_THAN_LINES * typical
     # No disc of the opening fits anywhere: the common case, decided without a pass
     # over the whole picture.
@@ -268,11 +257,9 @@ def without_objects(
         ``(H, W)`` foreground mask.
     min_component_area : int
         As :func:`service.perception.segmentation.clean_mask`.
-    distance : ndarray of float32, optional
-        ``distance_transform(mask)`` when the caller has it (the skeleton step needs it
-        too: computed once, it serves both when no object is found).
-    ridges : (ndarray of float32, float), optional
-        Its ridges, when :func:`distance_and_ridges` gave ``distance``.
+    distance, ridges : optional
+        ``distance_and_ridges(mask)`` when the caller has them (the skeleton step needs
+        the distances too: computed once, they serve both when no object is found).
 
     Returns
     -------
