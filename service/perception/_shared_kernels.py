@@ -137,7 +137,7 @@ def _row_starts(rows, height):
 
 
 @njit(cache=True, nogil=True)
-def chamfer_values(rows, cols, height, width):
+def chamfer_values(rows, cols, height, width, ridges):
     """OpenCV's two-pass 5x5 chamfer distance at the foreground pixels only.
 
     ``rows, cols`` list the foreground in row-major order; the distances come back in
@@ -145,6 +145,11 @@ def chamfer_values(rows, cols, height, width):
     back) live in three small row buffers, background 0 and the outside of the image
     OpenCV's "far" value. The additions and minima are OpenCV's (float32), so the
     values are identical to ``cv2.distanceTransform(mask, cv2.DIST_L2, 5)``.
+
+    ``ridges``: empty, or one byte per pixel, set to 1 at each pixel away from the
+    image's border no farther from the border than any of its eight neighbours (see
+    :func:`_mark_ridges`), while the backward pass has the three rows round it final
+    in its buffers.
     """
     n = rows.size
     values = np.empty(n, np.float32)
@@ -210,7 +215,41 @@ def chamfer_values(rows, cols, height, width):
                 t0 = min(t0, here[c + 1] + _HV_DIST)
                 here[c] = t0
                 values[k] = t0
+        if ridges.size > 0 and r + 1 <= last:
+            # Rows r to r + 2 are final now (r + 2 holds 0s past the last row).
+            _mark_ridges(ridges, starts, cols, r + 1, height, width, here, down1, down2)
+    if ridges.size > 0:
+        # Nothing lies above the first row: its row above is all background.
+        below = buffers[(first + 1) % 3] if first + 1 < height else far
+        above = np.zeros(width + 4, np.float32)
+        _mark_ridges(ridges, starts, cols, first, height, width, above, buffers[first % 3], below)
     return values
+
+
+@njit(cache=True, nogil=True)
+def _mark_ridges(ridges, starts, cols, row, height, width, above, middle, below):
+    """Set ``ridges`` at the pixels of ``row`` (away from the image's border) whose
+    distance is no smaller than any of their eight neighbours', the rows' distances
+    given in chamfer buffers (index = column + 2, background 0)."""
+    if row == 0 or row == height - 1:
+        return
+    for k in range(starts[row], starts[row + 1]):
+        col = cols[k]
+        if col == 0 or col == width - 1:
+            continue
+        c = col + 2
+        value = middle[c]
+        if (
+            value >= above[c - 1]
+            and value >= above[c]
+            and value >= above[c + 1]
+            and value >= middle[c - 1]
+            and value >= middle[c + 1]
+            and value >= below[c - 1]
+            and value >= below[c]
+            and value >= below[c + 1]
+        ):
+            ridges[k] = 1
 
 
 @njit(cache=True, nogil=True)
@@ -219,10 +258,39 @@ def distance_transform(mask):
     height, width = mask.shape
     distance = np.zeros((height, width), np.float32)
     rows, cols = set_pixels(mask)
-    values = chamfer_values(rows, cols, height, width)
+    values = chamfer_values(rows, cols, height, width, np.empty(0, np.uint8))
     for k in range(rows.size):
         distance[rows[k], cols[k]] = values[k]
     return distance
+
+
+@njit(cache=True, nogil=True)
+def distance_and_ridges(mask):
+    """:func:`distance_transform`, and the distances at its ridge pixels and its largest.
+
+    The ridge pixels are those away from the image's border whose distance is no
+    smaller than any of their eight neighbours' (in raster order; background is 0),
+    the largest distance is over every foreground pixel (0 when none). Read in the
+    backward pass, from the rows' distances in its buffers while they are final: no
+    second scan of the image for the mask's pixels, no second read of the distances
+    (``tests/perception/references/segmentation.py``, ``ridges``).
+    """
+    height, width = mask.shape
+    distance = np.zeros((height, width), np.float32)
+    rows, cols = set_pixels(mask)
+    marks = np.zeros(max(rows.size, 1), np.uint8)
+    values = chamfer_values(rows, cols, height, width, marks)
+    ridge = np.empty(rows.size, np.float32)
+    n = 0
+    largest = 0.0
+    for k in range(rows.size):
+        value = values[k]
+        distance[rows[k], cols[k]] = value
+        if value > largest:
+            largest = value
+        ridge[n] = value
+        n += marks[k]
+    return distance, ridge[:n], largest
 
 
 # --------------------------------------------------------------------------- sums

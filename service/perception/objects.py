@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from service.perception import _segmentation_kernels, _shared_kernels
-from service.perception.skeleton import distance_transform
+from service.perception.skeleton import as_uint8
 
 # An object's inscribed radius is at least this many half widths of the widest line that
 # leaves it (and of the picture's typical line): two lines together make up to 2, and the
@@ -42,30 +42,50 @@ def _distance(mask: np.ndarray) -> np.ndarray:
     return cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 5)
 
 
-def typical_half_width(distance: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+def distance_and_ridges(mask: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, float]]:
+    """``distance_transform(mask)``, and its ridges as :func:`typical_half_width` reads them.
+
+    One pass over the image for the mask's pixels serves both (the chamfer pass's
+    row buffers hold the distances the ridge test compares).
+
+    Returns
+    -------
+    distance : ndarray of float32
+        ``(H, W)``, :func:`service.perception.skeleton.distance_transform` of ``mask``.
+    ridges : (ndarray of float32, float)
+        The distances at the middle lines' pixels (in raster order) and the largest
+        distance on the mask, for :func:`without_objects`.
+    """
+    distance, values, largest = _shared_kernels.distance_and_ridges(as_uint8(mask))
+    return distance, (values, float(largest))
+
+
+def typical_half_width(ridges: tuple[np.ndarray, float]) -> tuple[float, float]:
     """The median distance to the border along the mask's middle lines (0 when none),
     and the largest distance on the mask.
 
     Cables are long and objects few, so their middle lines are mostly the cables'. A
     middle line's pixel is one no farther from the border than any of its eight
-    neighbours; they are looked for at the mask's own pixels only (a few per cent of a
-    photograph, found 8 bytes at a time), not over the whole picture, and compared in
-    one compiled pass (it runs on every photograph the brightness path segments).
+    neighbours; they are found with the distances (:func:`distance_and_ridges`), at
+    the mask's own pixels only (a few per cent of a photograph), not over the whole
+    picture (it runs on every photograph the brightness path segments).
 
     Parameters
     ----------
-    distance : ndarray of float32
-        ``(H, W)``, the mask's distance transform (at least 1 on every mask pixel).
-    mask : ndarray of bool
-        ``(H, W)``, C-contiguous.
+    ridges : (ndarray of float32, float)
+        The middle lines' distances and the largest distance on the mask, from
+        :func:`distance_and_ridges`.
     """
-    indices = _shared_kernels.nonzero_flat(mask.view(np.uint8).reshape(-1))
-    values, largest = _segmentation_kernels.ridge_values(np.ascontiguousarray(distance), indices)
+    values, largest = ridges
     values = values[values >= MIN_HALF_WIDTH]
     return (float(np.median(values)) if values.size else 0.0), float(largest)
 
 
-def object_blobs(mask: np.ndarray, distance: np.ndarray | None = None) -> np.ndarray:
+def object_blobs(
+    mask: np.ndarray,
+    distance: np.ndarray | None = None,
+    ridges: tuple[np.ndarray, float] | None = None,
+) -> np.ndarray:
     """The parts of a foreground mask that are objects, not lines.
 
     A candidate is the union of every disc inside the mask of radius
@@ -82,8 +102,9 @@ def object_blobs(mask: np.ndarray, distance: np.ndarray | None = None) -> np.nda
     ----------
     mask : ndarray of bool
         ``(H, W)`` foreground mask.
-    distance : ndarray of float32, optional
-        ``distance_transform(mask)`` when the caller has it.
+    distance, ridges : optional
+        ``distance_and_ridges(mask)`` when the caller has them (both, or they are
+        found here).
 
     Returns
     -------
@@ -100,12 +121,21 @@ def object_blobs(mask: np.ndarray, distance: np.ndarray | None = None) -> np.nda
     >>> bool(blobs[40, 80]), bool(blobs[40, 10]), bool(blobs[40, 150])
     (True, False, False)
     """
+    found = _objects_found(mask, distance, ridges)
+    return np.zeros(np.shape(mask), bool) if found is None else found
+
+
+def _objects_found(
+    mask: np.ndarray, distance: np.ndarray | None, ridges: tuple[np.ndarray, float] | None
+) -> np.ndarray | None:
+    """:func:`object_blobs`, or None when it finds no object (the common case, told
+    without an image-sized array to make and scan)."""
     mask = np.ascontiguousarray(mask, dtype=bool)
-    found = np.zeros(mask.shape, bool)
-    if distance is None:
+    found = None
+    if distance is None or ridges is None:
         # The same values, compiled, over the foreground only.
-        distance = distance_transform(mask)
-    typical, largest = typical_half_width(distance, mask)
+        distance, ridges = distance_and_ridges(mask)
+    typical, largest = typical_half_width(ridges)
     reach = WIDER_THAN_LINES * typical
     # No disc of the opening fits anywhere: the common case, decided without a pass
     # over the whole picture.
@@ -156,6 +186,8 @@ def object_blobs(mask: np.ndarray, distance: np.ndarray | None = None) -> np.nda
         if radius < WIDER_THAN_LINES * widest:
             continue
         line = max(widest, typical)
+        if found is None:
+            found = np.zeros(mask.shape, bool)
         found[y0:y1, x0:x1] |= _with_corners(blob, window, reach, line)
     return found
 
@@ -208,7 +240,10 @@ def _with_corners(blob: np.ndarray, mask: np.ndarray, reach: float, widest: floa
 
 
 def without_objects(
-    mask: np.ndarray, min_component_area: int, distance: np.ndarray | None = None
+    mask: np.ndarray,
+    min_component_area: int,
+    distance: np.ndarray | None = None,
+    ridges: tuple[np.ndarray, float] | None = None,
 ) -> np.ndarray:
     """The mask less the objects lying on the cables (:func:`object_blobs`).
 
@@ -222,17 +257,18 @@ def without_objects(
         ``(H, W)`` foreground mask.
     min_component_area : int
         As :func:`service.perception.segmentation.clean_mask`.
-    distance : ndarray of float32, optional
-        ``distance_transform(mask)`` when the caller has it (the skeleton step needs it
-        too: computed once, it serves both when no object is found).
+    distance, ridges : optional
+        ``distance_and_ridges(mask)`` when the caller has them (the skeleton step needs
+        the distances too: computed once, they serve both when no object is found).
 
     Returns
     -------
     ndarray of bool
         A new mask; ``mask`` is returned itself when it holds no object.
     """
-    blobs = object_blobs(mask, distance)
-    if not blobs.any():
+    blobs = _objects_found(mask, distance, ridges)
+    # A blob found is never empty (it holds its disc centres).
+    if blobs is None:
         return mask
     cleaned = np.ascontiguousarray(mask & ~blobs).view(np.uint8)
     if min_component_area > 0:

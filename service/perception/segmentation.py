@@ -33,9 +33,8 @@ from service.perception import _segmentation_kernels
 from service.perception.cable_segmentation import segment_cables
 from service.perception.deadline import Deadline
 from service.perception.errors import InvalidInputError
-from service.perception.objects import without_objects
+from service.perception.objects import distance_and_ridges, without_objects
 from service.perception.segmenter import Segmenter, run_segmenter
-from service.perception.skeleton import distance_transform
 
 
 def as_bgr(image: np.ndarray) -> np.ndarray:
@@ -244,8 +243,10 @@ def _segment_auto(
     if found is not None:
         mask, brightness, low = found
         # A bright object lying on a cable passes the threshold with it.
-        distance = distance_transform(mask)
-        kept = without_objects(mask, min_component_area, distance)
+        # Its distances serve the objects' test (their ridges found in the same pass)
+        # and, when no object is taken out, the skeleton step.
+        distance, ridges = distance_and_ridges(mask)
+        kept = without_objects(mask, min_component_area, distance, ridges)
         return Segmentation(kept, brightness, low, distance if kept is mask else None)
     mask = segment_cables(image_bgr, min_component_area, max_hole_area, deadline=deadline)
     return Segmentation(mask)

@@ -4,10 +4,11 @@ import cv2
 import numpy as np
 
 from schemas import DetectParams
-from service.perception.objects import object_blobs, without_objects
+from service.perception.objects import distance_and_ridges, object_blobs, without_objects
 from service.perception.segmentation import segment
 from service.synthetic.families import make_family_scene
 from service.synthetic.family_occluders import Polygon
+from tests.perception.references import segmentation as reference
 
 
 def _cable(mask, points, radius):
@@ -73,3 +74,28 @@ def test_objects_on_a_tuning_scene_are_taken_out_of_the_brightness_mask():
         )
         assert mask[inside].mean() < 0.02
     assert (mask & scene.mask).sum() > 0.99 * scene.mask.sum()
+
+
+def test_the_distances_ridges_read_in_the_chamfer_pass_equal_the_plain_reading():
+    # Lines of every width (ridges one or two pixels wide, plateaus), noise masks,
+    # masks touching the image's border and images of one to three rows or columns.
+    rng = np.random.default_rng(5)
+    masks = [np.zeros((0, 4), bool), np.zeros((5, 5), bool), np.ones((6, 9), bool)]
+    for shape in ((1, 7), (7, 1), (2, 5), (3, 3), (3, 8), (8, 3)):
+        masks.append(rng.random(shape) < 0.7)
+    for _ in range(40):
+        mask = np.zeros(rng.integers(20, 90, 2), np.uint8)
+        for _ in range(3):
+            x0, y0, x1, y1 = (int(v) for v in rng.integers(-10, 100, 4))
+            cv2.line(mask, (x0, y0), (x1, y1), 1, int(rng.integers(1, 16)))
+        masks.append(mask > 0)
+        masks.append(rng.random(mask.shape) < rng.uniform(0.3, 0.95))
+    for mask in masks:
+        distance, (values, largest) = distance_and_ridges(mask)
+        np.testing.assert_array_equal(
+            distance, cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 5)
+        )
+        expected, expected_largest = reference.ridges(distance, mask)
+        assert values.dtype == np.float32
+        np.testing.assert_array_equal(values, expected)
+        assert largest == expected_largest

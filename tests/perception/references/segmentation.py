@@ -126,3 +126,22 @@ def grow_along_profiles(cue, before, points, seen, avoid_xy, avoid_reach, start,
                     break
                 grown[row, col] = True
     return grown
+
+
+def ridges(distance, mask):
+    """The distances of the mask's pixels, away from the image's border, that no
+    neighbour's exceeds (raster order), and the largest on the mask (0 when none): the
+    plain code of objects.typical_half_width's ridge reading."""
+    distance = np.asarray(distance)
+    mask = np.asarray(mask, bool)
+    largest = float(distance[mask].max()) if mask.any() else 0.0
+    height, width = distance.shape
+    if height < 3 or width < 3:
+        return np.zeros(0, distance.dtype), largest
+    middle = distance[1:-1, 1:-1]
+    kept = mask[1:-1, 1:-1].copy()
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr or dc:
+                kept &= middle >= distance[1 + dr : height - 1 + dr, 1 + dc : width - 1 + dc]
+    return middle[kept], largest
