@@ -705,6 +705,14 @@ def read_together(
     in on each other (the cable's turn begun before the cuts) or head apart (a gap's two
     ends, the cable running on through the object) are left as they are.
 
+    Parameters
+    ----------
+    a, b : ndarray of float
+        ``(2,)``, the two cut points (x, y).
+    leaving, arriving : ndarray of float
+        ``(2,)``, unit directions read at ``a`` and at ``b``, each pointing out of its
+        strand into the gap.
+
     Returns
     -------
     (leaving, arriving)
