@@ -293,6 +293,42 @@ def distance_and_ridges(mask):
     return distance, ridge[:n], largest
 
 
+# --------------------------------------------------------------------------- borders
+
+
+@njit(cache=True, nogil=True)
+def border_distance(mask, x, y, dx, dy, steps, reach, half_step):
+    """Distance (px) from ``(x, y)`` along ``(dx, dy)`` to the first of the sample
+    ``steps`` (px, increasing) whose pixel (rounded half to even, as Python's ``round``)
+    is off ``mask`` (``uint8``) or the image, less ``half_step``; ``reach`` when none is."""
+    height, width = mask.shape
+    for k in range(steps.size):
+        step = steps[k]
+        column = int(np.rint(x + step * dx))
+        row = int(np.rint(y + step * dy))
+        if not (0 <= column < width and 0 <= row < height and mask[row, column] != 0):
+            return step - half_step
+    return reach
+
+
+@njit(cache=True, nogil=True)
+def far_border(mask, x, y, dx, dy, steps, reach, half_step):
+    """As :func:`border_distance`, but to the first sample off ``mask`` past the first on
+    it; ``reach`` when it runs on, NaN where no sample is on the mask."""
+    height, width = mask.shape
+    entered = False
+    for k in range(steps.size):
+        step = steps[k]
+        column = int(np.rint(x + step * dx))
+        row = int(np.rint(y + step * dy))
+        on = 0 <= column < width and 0 <= row < height and mask[row, column] != 0
+        if on:
+            entered = True
+        elif entered:
+            return step - half_step
+    return reach if entered else np.nan
+
+
 # --------------------------------------------------------------------------- sums
 
 

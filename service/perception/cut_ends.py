@@ -32,6 +32,7 @@ from dataclasses import replace
 import numpy as np
 
 from schemas import GapCurve
+from service.perception import _shared_kernels
 from service.perception.appearance import ground_beside, unlike_ground
 from service.perception.bridge_ends import past_a_stub
 from service.perception.euler_spiral import headings_within_bend, is_large_turn
@@ -80,17 +81,19 @@ about a radius short of a cut, and a slanted cut's far corner a width further.""
 
 
 def _border_distance(
-    mask: np.ndarray, x: float, y: float, dx: float, dy: float, steps: list[float], reach: float
+    mask: np.ndarray, x: float, y: float, dx: float, dy: float, steps: np.ndarray, reach: float
 ) -> float:
     """Distance (px) from ``(x, y)`` along ``(dx, dy)`` to the first of the sample
-    ``steps`` (px, increasing, up to ``reach``) off ``mask``, or ``reach`` when none is."""
-    height, width = mask.shape
-    for step in steps:
-        # Python's round, as NumPy's rint, rounds halves to even.
-        column, row = round(x + step * dx), round(y + step * dy)
-        if not (0 <= column < width and 0 <= row < height and mask[row, column]):
-            return step - 0.5 * SECTION_STEP_PX
-    return reach
+    ``steps`` (px, increasing, up to ``reach``) off ``mask``, or ``reach`` when none is.
+
+    Each sample's pixel is rounded half to even (Python's ``round``, NumPy's ``rint``);
+    compiled (:func:`._shared_kernels.border_distance`): a gap's cut reading samples
+    thousands of sections a frame."""
+    return float(
+        _shared_kernels.border_distance(
+            mask.view(np.uint8), x, y, dx, dy, steps, reach, 0.5 * SECTION_STEP_PX
+        )
+    )
 
 
 def _recentred(plus: float, minus: float, half_width: float) -> float:
@@ -118,7 +121,7 @@ def _full_beyond(
     y: float,
     hx: float,
     hy: float,
-    steps: list[float],
+    steps: np.ndarray,
     reach: float,
     half_width: float,
 ) -> bool:
@@ -139,22 +142,19 @@ def _full_beyond(
 
 
 def _far_border(
-    mask: np.ndarray, x: float, y: float, dx: float, dy: float, steps: list[float], reach: float
+    mask: np.ndarray, x: float, y: float, dx: float, dy: float, steps: np.ndarray, reach: float
 ) -> float | None:
     """Distance (px) from ``(x, y)`` along ``(dx, dy)`` to the first of the sample
     ``steps`` off ``mask`` past the first on it (the mask's border on that side, past a
     first sample that rounds off the pixel ``(x, y)`` lies on), ``reach`` when it runs
-    on, or None where no sample is on the mask."""
-    height, width = mask.shape
-    entered = False
-    for step in steps:
-        column, row = round(x + step * dx), round(y + step * dy)
-        on = 0 <= column < width and 0 <= row < height and bool(mask[row, column])
-        if on:
-            entered = True
-        elif entered:
-            return step - 0.5 * SECTION_STEP_PX
-    return reach if entered else None
+    on, or None where no sample is on the mask (compiled:
+    :func:`._shared_kernels.far_border`)."""
+    found = float(
+        _shared_kernels.far_border(
+            mask.view(np.uint8), x, y, dx, dy, steps, reach, 0.5 * SECTION_STEP_PX
+        )
+    )
+    return None if np.isnan(found) else found
 
 
 def _heading(line: np.ndarray, half_width: float) -> tuple[float, float]:
@@ -224,7 +224,7 @@ def along_the_wedge(
     hx, hy = _heading(points, half_width)
     start = (hx, hy)
     reach = 2.5 * half_width + 2.0
-    steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX).tolist()
+    steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX)
     # The cable's own half width, from its last full sections (the one given may lie
     # a pixel over it): each border is followed at the distance the cable's own shows.
     widths = []
@@ -366,7 +366,7 @@ def middle_line(
     if not on_mask(mask, x, y):
         return np.array(points), False, np.array(shortfall)
     reach = 2.5 * half_width + 2.0
-    steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX).tolist()
+    steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX)
     cos, sin = float(np.cos(curvature * TRACE_STEP_PX)), float(np.sin(curvature * TRACE_STEP_PX))
     # The start itself (a fit's, up to a couple of pixels off the middle) put on the
     # middle at once where its section is the cable's: else the first steps, each

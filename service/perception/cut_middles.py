@@ -59,7 +59,7 @@ def section_middle(
     if not (0 <= column < mask.shape[1] and 0 <= row < mask.shape[0] and mask[row, column]):
         return None
     reach = 2.5 * half_width + 2.0
-    steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX).tolist()
+    steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX)
     nx, ny = -float(heading[1]), float(heading[0])
     plus = _border_distance(mask, x, y, nx, ny, steps, reach)
     minus = _border_distance(mask, x, y, -nx, -ny, steps, reach)

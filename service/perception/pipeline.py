@@ -29,6 +29,7 @@ from service.perception._kernel_cache import kernels_cached, write_stamp
 from service.perception.bridge_ends import ends_clear_of_crossing
 from service.perception.contours import extract_contours
 from service.perception.crossings import detect_crossings, find_intersections
+from service.perception.cut_ends import _border_distance, _far_border
 from service.perception.deadline import Deadline, check
 from service.perception.end_extension import extend_ends
 from service.perception.errors import InvalidInputError
@@ -496,6 +497,10 @@ def warm_up() -> None:
             (np.array([-9.0, 9.0]), north),
         ):
             gap_curve(strands[0][0], east, end, arriving, shape=shape)
+    # The sections a gap's cut reading samples across the mask (compiled).
+    section_steps = np.arange(0.5, 6.0, 0.5)
+    _border_distance(mask, 24.0, 20.0, 1.0, 0.0, section_steps, 6.0)
+    _far_border(mask, 24.0, 20.0, 1.0, 0.0, section_steps, 6.0)
     # End extension, resampling and the inferred flags; the crossings' sweep.
     _finalise_path(MergedPath(line, np.array([False])), mask, distance, DetectParams(), radius)
     find_intersections(strands)
