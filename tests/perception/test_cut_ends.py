@@ -6,6 +6,9 @@ import pytest
 
 from service.evaluation.synthetic_eval import evaluate_scene
 from service.perception.cut_ends import (
+    SECTION_STEP_PX,
+    _border_distance,
+    _far_border,
     along_the_wedge,
     bridges_from_the_cuts,
     carried_to_the_border,
@@ -655,3 +658,38 @@ def test_a_doubled_back_turns_cuts_read_together_cover_the_hidden_turn(family, s
     on its own, as on main."""
     score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
+
+
+def test_the_compiled_section_samples_equal_the_plain_loop():
+    """``_border_distance`` and ``_far_border`` (compiled) against the plain Python loop
+    they replaced: each sample's pixel rounded half to even, half-pixel positions and
+    samples off the image included."""
+
+    def plain(mask, x, y, dx, dy, steps, reach, far):
+        height, width = mask.shape
+        entered = False
+        for step in steps:
+            column, row = round(x + step * dx), round(y + step * dy)
+            on = 0 <= column < width and 0 <= row < height and bool(mask[row, column])
+            if on:
+                entered = True
+            elif entered or not far:
+                return step - 0.5 * SECTION_STEP_PX
+        return reach if entered or not far else None
+
+    rng = np.random.default_rng(7)
+    for _ in range(40):
+        mask = rng.random((30, 40)) < rng.uniform(0.3, 0.95)
+        reach = float(rng.uniform(1.0, 25.0))
+        steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX)
+        for _ in range(50):
+            x = float(rng.integers(-4, 44)) + float(rng.choice([0.0, 0.5, rng.random()]))
+            y = float(rng.integers(-4, 34)) + float(rng.choice([0.0, 0.5, rng.random()]))
+            angle = rng.uniform(0.0, 2.0 * np.pi)
+            dx, dy = float(np.cos(angle)), float(np.sin(angle))
+            assert _border_distance(mask, x, y, dx, dy, steps, reach) == plain(
+                mask, x, y, dx, dy, steps.tolist(), reach, False
+            )
+            assert _far_border(mask, x, y, dx, dy, steps, reach) == plain(
+                mask, x, y, dx, dy, steps.tolist(), reach, True
+            )
