@@ -297,32 +297,19 @@ def distance_and_ridges(mask):
 
 
 @njit(cache=True, nogil=True)
-def border_distance(mask, x, y, dx, dy, steps, reach, half_step):
+def border_distance(mask, x, y, dx, dy, steps, reach, half_step, past_first_on):
     """Distance (px) from ``(x, y)`` along ``(dx, dy)`` to the first of the sample
     ``steps`` (px, increasing) whose pixel (rounded half to even, as Python's ``round``)
-    is off ``mask`` (``uint8``) or the image, less ``half_step``; ``reach`` when none is."""
+    is off ``mask`` (``uint8``) or the image, less ``half_step``; ``reach`` when none is.
+    With ``past_first_on`` the first off the mask past the first on it, and NaN where no
+    sample is on the mask."""
     height, width = mask.shape
+    entered = not past_first_on
     for k in range(steps.size):
         step = steps[k]
         column = int(np.rint(x + step * dx))
         row = int(np.rint(y + step * dy))
-        if not (0 <= column < width and 0 <= row < height and mask[row, column] != 0):
-            return step - half_step
-    return reach
-
-
-@njit(cache=True, nogil=True)
-def far_border(mask, x, y, dx, dy, steps, reach, half_step):
-    """As :func:`border_distance`, but to the first sample off ``mask`` past the first on
-    it; ``reach`` when it runs on, NaN where no sample is on the mask."""
-    height, width = mask.shape
-    entered = False
-    for k in range(steps.size):
-        step = steps[k]
-        column = int(np.rint(x + step * dx))
-        row = int(np.rint(y + step * dy))
-        on = 0 <= column < width and 0 <= row < height and mask[row, column] != 0
-        if on:
+        if 0 <= column < width and 0 <= row < height and mask[row, column] != 0:
             entered = True
         elif entered:
             return step - half_step

@@ -91,7 +91,7 @@ def _border_distance(
     thousands of sections a frame."""
     return float(
         _shared_kernels.border_distance(
-            mask.view(np.uint8), x, y, dx, dy, steps, reach, 0.5 * SECTION_STEP_PX
+            mask.view(np.uint8), x, y, dx, dy, steps, reach, 0.5 * SECTION_STEP_PX, False
         )
     )
 
@@ -148,10 +148,10 @@ def _far_border(
     ``steps`` off ``mask`` past the first on it (the mask's border on that side, past a
     first sample that rounds off the pixel ``(x, y)`` lies on), ``reach`` when it runs
     on, or None where no sample is on the mask (compiled:
-    :func:`._shared_kernels.far_border`)."""
+    :func:`._shared_kernels.border_distance` past the first sample on the mask)."""
     found = float(
-        _shared_kernels.far_border(
-            mask.view(np.uint8), x, y, dx, dy, steps, reach, 0.5 * SECTION_STEP_PX
+        _shared_kernels.border_distance(
+            mask.view(np.uint8), x, y, dx, dy, steps, reach, 0.5 * SECTION_STEP_PX, True
         )
     )
     return None if np.isnan(found) else found
