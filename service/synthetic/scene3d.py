@@ -345,6 +345,13 @@ def distance_to_polylines(points: np.ndarray, polylines: list[np.ndarray]) -> np
 # --------------------------------------------------------------------------- rendering
 
 
+#: Rows ray-cast at a time. A pixel's ray and what it meets do not depend on its
+#: neighbours, so the image is cast in bands: whole-image arrays of rays, normals and
+#: colours (about a dozen float arrays of 3 x 8 bytes per pixel) made a 1280 x 960 scene
+#: peak near 800 MB, which set ``dlo bench``'s peak memory rather than the detector.
+RENDER_BAND_ROWS = 64
+
+
 def render(
     camera: CameraModel,
     cables: list[Cable3D],
@@ -353,12 +360,33 @@ def render(
     noise_sigma: float,
     lighting: str = "ring",
 ):
-    """Ray-cast the scene: (BGR image, depth in metres, cable labels)."""
+    """Ray-cast the scene: (BGR image, depth in metres, cable labels).
+
+    Cast in bands of :data:`RENDER_BAND_ROWS` rows, top to bottom, the noise drawn band
+    after band from ``rng`` (the same values as one draw for the whole image).
+    """
     width, height = camera.width, camera.height
-    columns, rows = np.meshgrid(np.arange(width, dtype=float), np.arange(height, dtype=float))
-    pixels = np.column_stack((columns.ravel(), rows.ravel()))
     K = np.array([[camera.fx, 0, camera.cx], [0, camera.fy, camera.cy], [0, 0, 1.0]])
     dist = np.asarray(camera.dist, dtype=float)
+    origin = np.asarray(camera.T_base_camera)[:3, 3]
+    spheres = [_cable_spheres(cable, camera, K, dist, origin) for cable in cables]
+    image = np.empty((height, width, 3), dtype=np.uint8)
+    depth_m = np.empty((height, width), dtype=np.float32)
+    labels = np.empty((height, width), dtype=np.int16)
+    for top in range(0, height, RENDER_BAND_ROWS):
+        bottom = min(top + RENDER_BAND_ROWS, height)
+        band = _render_band(
+            camera, top, bottom, K, dist, cables, spheres, box, rng, noise_sigma, lighting
+        )
+        image[top:bottom], depth_m[top:bottom], labels[top:bottom] = band
+    return image, depth_m, labels
+
+
+def _render_band(camera, top, bottom, K, dist, cables, spheres, box, rng, noise_sigma, lighting):
+    """Rows ``top:bottom`` of :func:`render`'s three images."""
+    width = camera.width
+    columns, rows = np.meshgrid(np.arange(width, dtype=float), np.arange(top, bottom, dtype=float))
+    pixels = np.column_stack((columns.ravel(), rows.ravel()))
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
     source = pixels.reshape(-1, 1, 2)
     try:
@@ -388,21 +416,9 @@ def render(
     albedo[on_table] = _TABLE_BGR
     if box is not None:
         _hit_box(box, origin, directions, converged, hit, normals, albedo)
-    for index, cable in enumerate(cables):
-        _hit_cable(
-            cable,
-            index,
-            camera,
-            K,
-            dist,
-            origin,
-            directions,
-            converged,
-            hit,
-            normals,
-            albedo,
-            labels,
-        )
+    rays = (origin, directions, converged, width, top, bottom)
+    for index, (cable, cable_spheres) in enumerate(zip(cables, spheres, strict=True)):
+        _hit_cable(cable, index, cable_spheres, rays, hit, normals, albedo, labels)
 
     # A lit room: light from the whole ceiling (a surface facing sideways gets half of it)
     # and a lamp: a ring light round the lens (cables darker towards their rims on both
@@ -413,11 +429,11 @@ def render(
     shade = 0.6 * sky + 0.4 * lambert
     colour = albedo * shade[:, None]
     colour += rng.normal(0.0, noise_sigma, colour.shape)
-    image = np.clip(np.round(colour), 0, 255).astype(np.uint8).reshape(height, width, 3)
+    shape = (bottom - top, width)
+    image = np.clip(np.round(colour), 0, 255).astype(np.uint8).reshape(*shape, 3)
     points = origin + np.where(np.isfinite(hit), hit, np.nan)[:, None] * directions
     depth = ((points - origin) @ rotation)[:, 2]
-    depth_m = depth.astype(np.float32).reshape(height, width)
-    return image, depth_m, labels.reshape(height, width)
+    return image, depth.astype(np.float32).reshape(shape), labels.reshape(shape)
 
 
 def _hit_box(box, origin, directions, converged, hit, normals, albedo):
@@ -438,28 +454,31 @@ def _hit_box(box, origin, directions, converged, hit, normals, albedo):
     albedo[inside] = _BOX_BGR
 
 
-def _hit_cable(
-    cable, index, camera, K, dist, origin, directions, converged, hit, normals, albedo, labels
-):
-    """Every pixel whose ray meets a sphere along the cable nearer than what it hit so far."""
-    width, height = camera.width, camera.height
+def _cable_spheres(cable, camera, K, dist, origin):
+    """The spheres :func:`_hit_cable` casts a cable as: (centres, pixel centres, pixel reach)."""
     step = max(1, int(cable.radius * SPHERE_SPACING / SAMPLE_SPACING_M))
     centres = cable.centreline[::step]
     if not np.array_equal(centres[-1], cable.centreline[-1]):
         centres = np.vstack((centres, cable.centreline[-1:]))
-    transform = np.asarray(camera.T_base_camera)
-    rotation = transform[:3, :3]
+    rotation = np.asarray(camera.T_base_camera)[:3, :3]
     in_camera = (centres - origin) @ rotation
     projected, _ = cv2.projectPoints(in_camera, np.zeros(3), np.zeros(3), K, dist)
     projected = projected.reshape(-1, 2)
     reach = 1.6 * camera.fx * cable.radius / np.maximum(in_camera[:, 2], 1e-6) + 3
+    return centres, projected, reach
+
+
+def _hit_cable(cable, index, spheres, rays, hit, normals, albedo, labels):
+    """Every pixel of the band whose ray meets a sphere along the cable nearer than what it
+    hit so far (``rays``: origin, directions, converged, width and the band's rows)."""
+    origin, directions, converged, width, band_top, band_bottom = rays
     radius_sq = cable.radius**2
-    for centre, (u, v), extent in zip(centres, projected, reach, strict=True):
+    for centre, (u, v), extent in zip(*spheres, strict=True):
         left, right = max(int(u - extent), 0), min(int(u + extent) + 1, width)
-        top, bottom = max(int(v - extent), 0), min(int(v + extent) + 1, height)
+        top, bottom = max(int(v - extent), band_top), min(int(v + extent) + 1, band_bottom)
         if left >= right or top >= bottom:
             continue
-        grid_rows, grid_columns = np.mgrid[top:bottom, left:right]
+        grid_rows, grid_columns = np.mgrid[top - band_top : bottom - band_top, left:right]
         candidates = (grid_rows * width + grid_columns).ravel()
         candidates = candidates[converged[candidates]]
         towards = centre - origin
