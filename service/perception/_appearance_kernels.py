@@ -211,3 +211,46 @@ def colour_steps(colour, spread, first, second, tolerance, max_steps, lightness_
         step = (distance - allowed) / tolerance
         steps[k] = 0.0 if np.isnan(step) else min(max(step, 0.0), max_steps)
     return steps
+
+
+@njit(cache=True, nogil=True)
+def patches_beside(image, mask, points):
+    """Per (x, y) point, the mean BGR colour (``float32``, scaled to 0-1) of the pixels
+    off ``mask`` (``uint8``) in the 3x3 patch round its nearest pixel, and whether it can
+    be read: the patch inside the picture and the point's own pixel off the mask.
+
+    In NumPy's order and types (``float32`` sums, ``max(count, 1)``, then ``/ 255``),
+    so that the colours equal the plain reading's bit for bit; a point whose patch
+    leaves the picture (or is not finite) reads the patch at pixel (1, 1), as it does.
+    """
+    height, width = mask.shape
+    n = points.shape[0]
+    patches = np.empty((n, 3), np.float32)
+    readable = np.empty(n, np.bool_)
+    one = np.float32(1.0)
+    scale = np.float32(255.0)
+    for i in range(n):
+        fx = np.rint(points[i, 0])
+        fy = np.rint(points[i, 1])
+        # Tested on the rounded floats: a NaN or a value past int64 is outside as well.
+        inside = fx >= 1.0 and fy >= 1.0 and fx <= width - 2 and fy <= height - 2
+        col = int(fx) if inside else 1
+        row = int(fy) if inside else 1
+        readable[i] = inside and mask[row, col] == 0
+        blue = np.float32(0.0)
+        green = np.float32(0.0)
+        red = np.float32(0.0)
+        count = np.float32(0.0)
+        for dy in range(-1, 2):
+            for dx in range(-1, 2):
+                if mask[row + dy, col + dx] == 0:
+                    blue += np.float32(image[row + dy, col + dx, 0])
+                    green += np.float32(image[row + dy, col + dx, 1])
+                    red += np.float32(image[row + dy, col + dx, 2])
+                    count += one
+        if count < one:
+            count = one
+        patches[i, 0] = blue / count / scale
+        patches[i, 1] = green / count / scale
+        patches[i, 2] = red / count / scale
+    return patches, readable

@@ -930,20 +930,13 @@ def _lab_beside(image_bgr: np.ndarray, mask: np.ndarray, points: np.ndarray) -> 
     round each (x, y) point (a slanted border's pixels beside it read the cable's colour,
     not what lies beyond it); NaN where the point's own pixel is on the mask or the patch
     leaves the picture."""
-    height, width = mask.shape
-    cols = np.rint(points[:, 0]).astype(np.int64)
-    rows = np.rint(points[:, 1]).astype(np.int64)
-    inside = (cols >= 1) & (rows >= 1) & (cols <= width - 2) & (rows <= height - 2)
-    cols, rows = np.where(inside, cols, 1), np.where(inside, rows, 1)
-    readable = inside & ~mask[rows, cols]
-    sums = np.zeros((len(points), 3), np.float32)
-    counts = np.zeros(len(points), np.float32)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            off = ~mask[rows + dy, cols + dx]
-            sums += off[:, None] * image_bgr[rows + dy, cols + dx].astype(np.float32)
-            counts += off
-    patches = sums / np.maximum(counts, 1.0)[:, None] / 255.0
+    # Compiled (a cut's reading asks for one or a few points at a time, where NumPy's
+    # two dozen array operations per call cost more than the patches).
+    patches, readable = _appearance_kernels.patches_beside(
+        np.ascontiguousarray(image_bgr),
+        np.ascontiguousarray(mask).view(np.uint8),
+        np.ascontiguousarray(points, np.float64),
+    )
     lab = cv2.cvtColor(patches.reshape(-1, 1, 3), cv2.COLOR_BGR2LAB).reshape(-1, 3)
     lab[~readable] = np.nan
     return lab
