@@ -39,6 +39,7 @@ from service.perception.euler_spiral import headings_within_bend, is_large_turn
 from service.perception.geometry import (
     arc_lengths,
     end_fit,
+    median,
     on_mask,
     polyline_length,
     rotated,
@@ -182,19 +183,19 @@ def along_the_wedge(
     steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX)
     # The cable's own half width, from its last full sections (the one given may lie
     # a pixel over it): each border is followed at the distance the cable's own shows.
-    widths = []
+    widths, sections = [], []
     ax, ay = (float(value) for value in unit(points[-1] - points[-min(FULL_SECTIONS, len(points))]))
     for px, py in points[-FULL_SECTIONS:]:
-        widths.append(
-            _border_distance(mask, px, py, -ay, ax, steps, reach)
-            + _border_distance(mask, px, py, ay, -ax, steps, reach)
-        )
-    half_width = 0.5 * float(np.median(widths))
-    # What lies just beyond the cable's borders along its full sections: the ground.
+        plus = _border_distance(mask, px, py, -ay, ax, steps, reach)
+        minus = _border_distance(mask, px, py, ay, -ax, steps, reach)
+        widths.append(plus + minus)
+        sections.append((px, py, plus, minus))
+    half_width = 0.5 * float(median(np.array(widths)))
+    # What lies just beyond the cable's borders along its full sections: the ground
+    # (each border where the widths above found it).
     beside = []
-    for px, py in points[-FULL_SECTIONS:]:
-        for sign in (1.0, -1.0):
-            out = _border_distance(mask, px, py, -sign * ay, sign * ax, steps, reach)
+    for px, py, plus, minus in sections:
+        for sign, out in ((1.0, plus), (-1.0, minus)):
             beside.append(
                 (
                     px - sign * ay * (out + BEYOND_BORDER_PX),
@@ -476,7 +477,7 @@ def end_at_the_cut(
     # tilts by 15-25 degrees. The direction is fitted on the cable's full sections.
     # Against the sections read behind the end (the cable's own, which the half width
     # given may miss by a pixel).
-    own = float(np.median(seen_shortfall[1:])) if len(seen_shortfall) > 1 else 0.0
+    own = float(median(seen_shortfall[1:])) if len(seen_shortfall) > 1 else 0.0
     # The cut's narrowing runs on to where the trace stopped; a narrower section
     # before a full one is the border's rounding (:func:`middle_line`).
     kept = np.flatnonzero(shortfall <= own + SECTION_ROUNDING_PX)
