@@ -254,3 +254,47 @@ def patches_beside(image, mask, points):
         patches[i, 1] = green / count / scale
         patches[i, 2] = red / count / scale
     return patches, readable
+
+
+@njit(cache=True, nogil=True)
+def _step_off(mask, step, fx, fy):
+    """1 where the sample at pixel ``(fx, fy)`` (rounded floats) is the march's first off
+    ``mask``, 2 where the march's first sample is off it or off the picture (no front), 0
+    where it goes on (on the mask, or off the picture past the first sample)."""
+    height, width = mask.shape
+    inside = 0.0 <= fx < width and 0.0 <= fy < height
+    if step == 0 and not (inside and mask[int(fy), int(fx)] != 0):
+        return 2
+    if inside and mask[int(fy), int(fx)] == 0:
+        return 1
+    return 0
+
+
+@njit(cache=True, nogil=True)
+def first_off(mask, points):
+    """``appearance._first_off``: the arc (px, ``points`` 0.5 px apart) to the first point
+    whose pixel (rounded half to even) is on the picture and off ``mask`` (``uint8``);
+    NaN when the first point is off the mask or the picture, or no point is off. Points
+    off the picture past the first read as on the mask, as NumPy's reading leaves them."""
+    for i in range(points.shape[0]):
+        state = _step_off(mask, i, np.rint(points[i, 0]), np.rint(points[i, 1]))
+        if state == 2:
+            return np.nan
+        if state == 1:
+            return 0.5 * i
+    return np.nan
+
+
+@njit(cache=True, nogil=True)
+def front(mask, x, y, dx, dy, count):
+    """``appearance._front``: :func:`first_off` along the ``count`` points ``(x, y) +
+    (0.5 i) (dx, dy)``, each made as NumPy makes it (the step times the direction, then
+    the start added)."""
+    for i in range(count):
+        step = 0.5 * i
+        state = _step_off(mask, i, np.rint(x + step * dx), np.rint(y + step * dy))
+        if state == 2:
+            return np.nan
+        if state == 1:
+            return 0.5 * i
+    return np.nan

@@ -519,8 +519,17 @@ def _front(mask: np.ndarray, start: np.ndarray, direction: np.ndarray, count: in
     """Arc (px, 0.5 px steps) from ``start`` along ``direction`` to the first point off
     ``mask``; NaN when the start is off it, or the mask runs on past ``count`` steps or
     the picture's edge."""
-    points = start[None, :] + (0.5 * np.arange(count))[:, None] * direction[None, :]
-    return _first_off(mask, points)
+    # Compiled (:func:`._appearance_kernels.front`, the points made as NumPy makes
+    # them): the fronts and cross-sections of the end readings march thousands of times
+    # a frame on a textured ground.
+    return _appearance_kernels.front(
+        np.ascontiguousarray(mask).view(np.uint8),
+        float(start[0]),
+        float(start[1]),
+        float(direction[0]),
+        float(direction[1]),
+        int(count),
+    )
 
 
 def _front_on_bend(
@@ -549,19 +558,9 @@ def _front_on_bend(
 def _first_off(mask: np.ndarray, points: np.ndarray) -> float:
     """Arc (px, ``points`` 0.5 px apart) to the first of them off ``mask``; NaN when the
     first is off it, or none is off before the picture's edge."""
-    height, width = mask.shape
-    count = len(points)
-    cols = np.rint(points[:, 0]).astype(np.int64)
-    rows = np.rint(points[:, 1]).astype(np.int64)
-    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
-    if not inside[0] or not mask[rows[0], cols[0]]:
-        return np.nan
-    on = np.ones(count, bool)
-    on[inside] = mask[rows[inside], cols[inside]]
-    off = np.flatnonzero(~on)
-    if len(off) == 0 or not inside[off[0]]:
-        return np.nan
-    return 0.5 * float(off[0])
+    return _appearance_kernels.first_off(
+        np.ascontiguousarray(mask).view(np.uint8), np.ascontiguousarray(points, np.float64)
+    )
 
 
 def end_front(

@@ -26,7 +26,7 @@ from schemas import (
 )
 from service.perception import _pipeline_kernels
 from service.perception._kernel_cache import kernels_cached, write_stamp
-from service.perception.appearance import ground_beside
+from service.perception.appearance import _first_off, _front, ground_beside
 from service.perception.bridge_ends import ends_clear_of_crossing
 from service.perception.contours import extract_contours
 from service.perception.crossings import detect_crossings, find_intersections
@@ -507,6 +507,9 @@ def warm_up() -> None:
     for first_narrowing in (False, True):
         middle_line(mask, np.array([6.0, 20.0]), east, 0.01, 3.0, 50.0, first_narrowing)
     ground_beside(image, mask, np.array([[24.0, 10.0], [10.0, 10.0], [40.0, 30.0]]))
+    # The end readings' marches to the mask's border (compiled).
+    _front(mask, np.array([6.0, 20.0]), east, 90)
+    _first_off(mask, line)
     # End extension, resampling and the inferred flags; the crossings' sweep.
     _finalise_path(MergedPath(line, np.array([False])), mask, distance, DetectParams(), radius)
     find_intersections(strands)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from service.evaluation.synthetic_eval import evaluate_scene
-from service.perception.appearance import _lab_beside
+from service.perception.appearance import _first_off, _front, _lab_beside
 from service.perception.cut_ends import (
     SECTION_STEP_PX,
     _border_distance,
@@ -21,6 +21,7 @@ from service.perception.cut_ends import (
 )
 from service.perception.merging import ChainEnd
 from service.synthetic.families import make_family_scene
+from tests.perception.references.appearance import first_off, front
 from tests.perception.references.appearance import lab_beside as plain_lab_beside
 from tests.perception.references.cut_ends import middle_line as plain_middle_line
 
@@ -748,3 +749,30 @@ def test_the_compiled_patches_beside_equal_the_numpy_reading():
             got = _lab_beside(image, mask, points[:count])
             want = plain_lab_beside(image, mask, points[:count])
             assert got.dtype == want.dtype and np.array_equal(got, want, equal_nan=True)
+
+
+def test_the_compiled_fronts_equal_the_numpy_reading():
+    """``appearance._front`` and ``_first_off`` (compiled) against the NumPy readings they
+    replaced, bit for bit: marches starting on and off the mask and the picture, leaving
+    the picture and coming back, along bends, at half pixels, and not finite."""
+    rng = np.random.default_rng(33)
+    masks = [arc_mask(angle, slant) for angle in (0.3, 2.0) for slant in (-0.6, 0.7)]
+    masks += [rng.random((30, 40)) < rng.uniform(0.3, 0.97) for _ in range(20)]
+    for mask in masks:
+        height, width = mask.shape
+        for _ in range(150):
+            start = np.array([rng.uniform(-3, width + 3), rng.uniform(-3, height + 3)])
+            if rng.random() < 0.3:
+                start = np.round(start * 2.0) / 2.0  # the rounding's ties
+            angle = rng.uniform(0.0, 2.0 * np.pi)
+            direction = np.array([np.cos(angle), np.sin(angle)])
+            count = int(rng.integers(1, 120))
+            assert_same(_front(mask, start, direction, count), front(mask, start, direction, count))
+            points = start + rng.normal(0.0, 3.0, (count, 2)).cumsum(axis=0)
+            if rng.random() < 0.1:
+                points[rng.integers(0, count)] = rng.choice([np.nan, np.inf, -1e30])
+            assert_same(_first_off(mask, points), first_off(mask, points))
+
+
+def assert_same(got: float, want: float) -> None:
+    assert type(got) is type(want) and (got == want or (got != got and want != want))

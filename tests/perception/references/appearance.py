@@ -135,3 +135,29 @@ def lab_beside(image_bgr, mask, points):
     lab = cv2.cvtColor(patches.reshape(-1, 1, 3), cv2.COLOR_BGR2LAB).reshape(-1, 3)
     lab[~readable] = np.nan
     return lab
+
+
+def first_off(mask, points):
+    """Arc (px, ``points`` 0.5 px apart) to the first point on the picture and off
+    ``mask``; NaN when the first is off the mask or the picture, or none is off: the
+    NumPy reading ``appearance._first_off`` compiled."""
+    height, width = mask.shape
+    count = len(points)
+    cols = np.rint(points[:, 0]).astype(np.int64)
+    rows = np.rint(points[:, 1]).astype(np.int64)
+    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
+    if not inside[0] or not mask[rows[0], cols[0]]:
+        return np.nan
+    on = np.ones(count, bool)
+    on[inside] = mask[rows[inside], cols[inside]]
+    off = np.flatnonzero(~on)
+    if len(off) == 0 or not inside[off[0]]:
+        return np.nan
+    return 0.5 * float(off[0])
+
+
+def front(mask, start, direction, count):
+    """:func:`first_off` along ``count`` points 0.5 px apart from ``start`` along
+    ``direction``: ``appearance._front`` as NumPy read it."""
+    points = start[None, :] + (0.5 * np.arange(count))[:, None] * direction[None, :]
+    return first_off(mask, points)
