@@ -211,3 +211,90 @@ def colour_steps(colour, spread, first, second, tolerance, max_steps, lightness_
         step = (distance - allowed) / tolerance
         steps[k] = 0.0 if np.isnan(step) else min(max(step, 0.0), max_steps)
     return steps
+
+
+@njit(cache=True, nogil=True)
+def patches_beside(image, mask, points):
+    """Per (x, y) point, the mean BGR colour (``float32``, scaled to 0-1) of the pixels
+    off ``mask`` (``uint8``) in the 3x3 patch round its nearest pixel, and whether it can
+    be read: the patch inside the picture and the point's own pixel off the mask.
+
+    In NumPy's order and types (``float32`` sums, ``max(count, 1)``, then ``/ 255``),
+    so that the colours equal the plain reading's bit for bit; a point whose patch
+    leaves the picture (or is not finite) reads the patch at pixel (1, 1), as it does.
+    """
+    height, width = mask.shape
+    n = points.shape[0]
+    patches = np.empty((n, 3), np.float32)
+    readable = np.empty(n, np.bool_)
+    one = np.float32(1.0)
+    scale = np.float32(255.0)
+    for i in range(n):
+        fx = np.rint(points[i, 0])
+        fy = np.rint(points[i, 1])
+        # Tested on the rounded floats: a NaN or a value past int64 is outside as well.
+        inside = fx >= 1.0 and fy >= 1.0 and fx <= width - 2 and fy <= height - 2
+        col = int(fx) if inside else 1
+        row = int(fy) if inside else 1
+        readable[i] = inside and mask[row, col] == 0
+        blue = np.float32(0.0)
+        green = np.float32(0.0)
+        red = np.float32(0.0)
+        count = np.float32(0.0)
+        for dy in range(-1, 2):
+            for dx in range(-1, 2):
+                if mask[row + dy, col + dx] == 0:
+                    blue += np.float32(image[row + dy, col + dx, 0])
+                    green += np.float32(image[row + dy, col + dx, 1])
+                    red += np.float32(image[row + dy, col + dx, 2])
+                    count += one
+        if count < one:
+            count = one
+        patches[i, 0] = blue / count / scale
+        patches[i, 1] = green / count / scale
+        patches[i, 2] = red / count / scale
+    return patches, readable
+
+
+@njit(cache=True, nogil=True)
+def _step_off(mask, step, fx, fy):
+    """1 where the sample at pixel ``(fx, fy)`` (rounded floats) is the march's first off
+    ``mask``, 2 where the march's first sample is off it or off the picture (no front), 0
+    where it goes on (on the mask, or off the picture past the first sample)."""
+    height, width = mask.shape
+    inside = 0.0 <= fx < width and 0.0 <= fy < height
+    if step == 0 and not (inside and mask[int(fy), int(fx)] != 0):
+        return 2
+    if inside and mask[int(fy), int(fx)] == 0:
+        return 1
+    return 0
+
+
+@njit(cache=True, nogil=True)
+def first_off(mask, points):
+    """``appearance._first_off``: the arc (px, ``points`` 0.5 px apart) to the first point
+    whose pixel (rounded half to even) is on the picture and off ``mask`` (``uint8``);
+    NaN when the first point is off the mask or the picture, or no point is off. Points
+    off the picture past the first read as on the mask, as NumPy's reading leaves them."""
+    for i in range(points.shape[0]):
+        state = _step_off(mask, i, np.rint(points[i, 0]), np.rint(points[i, 1]))
+        if state == 2:
+            return np.nan
+        if state == 1:
+            return 0.5 * i
+    return np.nan
+
+
+@njit(cache=True, nogil=True)
+def front(mask, x, y, dx, dy, count):
+    """``appearance._front``: :func:`first_off` along the ``count`` points ``(x, y) +
+    (0.5 i) (dx, dy)``, each made as NumPy makes it (the step times the direction, then
+    the start added)."""
+    for i in range(count):
+        step = 0.5 * i
+        state = _step_off(mask, i, np.rint(x + step * dx), np.rint(y + step * dy))
+        if state == 2:
+            return np.nan
+        if state == 1:
+            return 0.5 * i
+    return np.nan

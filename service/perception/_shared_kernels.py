@@ -316,6 +316,128 @@ def border_distance(mask, x, y, dx, dy, steps, reach, half_step, past_first_on):
     return reach if entered else np.nan
 
 
+@njit(cache=True, nogil=True)
+def _on_mask(mask, x, y):
+    """Whether the pixel nearest ``(x, y)`` (half to even, as Python's ``round``) is on
+    ``mask``; False outside the picture (tested on the rounded floats)."""
+    height, width = mask.shape
+    column = np.rint(x)
+    row = np.rint(y)
+    return 0.0 <= column < width and 0.0 <= row < height and mask[int(row), int(column)] != 0
+
+
+@njit(cache=True, nogil=True)
+def _recentred(plus, minus, half_width, agrees):
+    """``cut_ends._recentred``: the shift along the normal's plus side that puts a point
+    half the width in from its borders ``plus`` and ``minus`` px away."""
+    full = 2.0 * half_width
+    if abs(plus + minus - full) <= agrees * full:
+        return 0.5 * (plus - minus)
+    near = agrees * full
+    plus_own = abs(plus - half_width) <= near
+    minus_own = abs(minus - half_width) <= near
+    if plus_own and not minus_own:
+        return plus - half_width
+    if minus_own and not plus_own:
+        return half_width - minus
+    return 0.0
+
+
+@njit(cache=True, nogil=True)
+def middle_line(
+    mask,
+    x,
+    y,
+    hx,
+    hy,
+    cos,
+    sin,
+    half_width,
+    n_steps,
+    steps,
+    reach,
+    half_step,
+    trace_step,
+    narrowing,
+    agrees,
+    first_narrowing,
+):
+    """``cut_ends.middle_line``'s trace from ``(x, y)`` (on ``mask``) along ``(hx, hy)``,
+    turning by the rotation ``(cos, sin)`` per step: at most ``n_steps`` steps of
+    ``trace_step`` px, each put back on the middle from its borders read across it
+    (:func:`border_distance` over ``steps``, ``reach``, ``half_step``), stopping at a
+    section narrower than ``2 * half_width - narrowing`` that the next one confirms
+    (or the first, with ``first_narrowing``), or off the mask.
+
+    The same operations in the same order as the Python loop it replaced, and Python's
+    ``min``/``max`` (the first of equals), so the points are the same bit for bit.
+
+    Returns the points ``(K, 2)``, whether it stopped at a cut, and each point's
+    shortfall ``(K,)``."""
+    points = np.empty((n_steps + 1, 2))
+    shortfall = np.zeros(n_steps + 1)
+    points[0, 0] = x
+    points[0, 1] = y
+    nx = -hy
+    ny = hx
+    full = 2.0 * half_width - narrowing
+    plus = border_distance(mask, x, y, nx, ny, steps, reach, half_step, False)
+    minus = border_distance(mask, x, y, -nx, -ny, steps, reach, half_step, False)
+    if plus + minus >= full:
+        shift = _recentred(plus, minus, half_width, agrees)
+        if _on_mask(mask, x + shift * nx, y + shift * ny):
+            x = x + shift * nx
+            y = y + shift * ny
+            points[0, 0] = x
+            points[0, 1] = y
+    k = 1
+    cut = False
+    for _ in range(n_steps):
+        x = x + trace_step * hx
+        y = y + trace_step * hy
+        nx = -hy
+        ny = hx
+        if _on_mask(mask, x, y):
+            plus = border_distance(mask, x, y, nx, ny, steps, reach, half_step, False)
+            minus = border_distance(mask, x, y, -nx, -ny, steps, reach, half_step, False)
+            if plus + minus < full:
+                confirmed = first_narrowing
+                if not confirmed:
+                    # The next section narrower too (else this one was the rounding).
+                    ax = x + trace_step * hx
+                    ay = y + trace_step * hy
+                    confirmed = True
+                    if _on_mask(mask, ax, ay):
+                        ahead = border_distance(
+                            mask, ax, ay, -hy, hx, steps, reach, half_step, False
+                        ) + border_distance(mask, ax, ay, hy, -hx, steps, reach, half_step, False)
+                        confirmed = not ahead >= full
+                if confirmed:
+                    cut = True
+                    break
+            narrower = 2.0 * half_width - plus - minus
+            if narrower < 0.0:
+                narrower = 0.0
+            shift = _recentred(plus, minus, half_width, agrees)
+            if -trace_step > shift:
+                shift = -trace_step
+            if trace_step < shift:
+                shift = trace_step
+            x = x + shift * nx
+            y = y + shift * ny
+        else:
+            narrower = 0.0
+        if not _on_mask(mask, x, y):
+            cut = True
+            break
+        points[k, 0] = x
+        points[k, 1] = y
+        shortfall[k] = narrower
+        k += 1
+        hx, hy = cos * hx - sin * hy, sin * hx + cos * hy
+    return points[:k].copy(), cut, shortfall[:k].copy()
+
+
 # --------------------------------------------------------------------------- sums
 
 

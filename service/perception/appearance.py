@@ -519,8 +519,17 @@ def _front(mask: np.ndarray, start: np.ndarray, direction: np.ndarray, count: in
     """Arc (px, 0.5 px steps) from ``start`` along ``direction`` to the first point off
     ``mask``; NaN when the start is off it, or the mask runs on past ``count`` steps or
     the picture's edge."""
-    points = start[None, :] + (0.5 * np.arange(count))[:, None] * direction[None, :]
-    return _first_off(mask, points)
+    # Compiled (:func:`._appearance_kernels.front`, the points made as NumPy makes
+    # them): the fronts and cross-sections of the end readings march thousands of times
+    # a frame on a textured ground.
+    return _appearance_kernels.front(
+        np.ascontiguousarray(mask).view(np.uint8),
+        float(start[0]),
+        float(start[1]),
+        float(direction[0]),
+        float(direction[1]),
+        int(count),
+    )
 
 
 def _front_on_bend(
@@ -549,19 +558,9 @@ def _front_on_bend(
 def _first_off(mask: np.ndarray, points: np.ndarray) -> float:
     """Arc (px, ``points`` 0.5 px apart) to the first of them off ``mask``; NaN when the
     first is off it, or none is off before the picture's edge."""
-    height, width = mask.shape
-    count = len(points)
-    cols = np.rint(points[:, 0]).astype(np.int64)
-    rows = np.rint(points[:, 1]).astype(np.int64)
-    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
-    if not inside[0] or not mask[rows[0], cols[0]]:
-        return np.nan
-    on = np.ones(count, bool)
-    on[inside] = mask[rows[inside], cols[inside]]
-    off = np.flatnonzero(~on)
-    if len(off) == 0 or not inside[off[0]]:
-        return np.nan
-    return 0.5 * float(off[0])
+    return _appearance_kernels.first_off(
+        np.ascontiguousarray(mask).view(np.uint8), np.ascontiguousarray(points, np.float64)
+    )
 
 
 def end_front(
@@ -930,20 +929,13 @@ def _lab_beside(image_bgr: np.ndarray, mask: np.ndarray, points: np.ndarray) -> 
     round each (x, y) point (a slanted border's pixels beside it read the cable's colour,
     not what lies beyond it); NaN where the point's own pixel is on the mask or the patch
     leaves the picture."""
-    height, width = mask.shape
-    cols = np.rint(points[:, 0]).astype(np.int64)
-    rows = np.rint(points[:, 1]).astype(np.int64)
-    inside = (cols >= 1) & (rows >= 1) & (cols <= width - 2) & (rows <= height - 2)
-    cols, rows = np.where(inside, cols, 1), np.where(inside, rows, 1)
-    readable = inside & ~mask[rows, cols]
-    sums = np.zeros((len(points), 3), np.float32)
-    counts = np.zeros(len(points), np.float32)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            off = ~mask[rows + dy, cols + dx]
-            sums += off[:, None] * image_bgr[rows + dy, cols + dx].astype(np.float32)
-            counts += off
-    patches = sums / np.maximum(counts, 1.0)[:, None] / 255.0
+    # Compiled (a cut's reading asks for one or a few points at a time, where NumPy's
+    # two dozen array operations per call cost more than the patches).
+    patches, readable = _appearance_kernels.patches_beside(
+        np.ascontiguousarray(image_bgr),
+        np.ascontiguousarray(mask).view(np.uint8),
+        np.ascontiguousarray(points, np.float64),
+    )
     lab = cv2.cvtColor(patches.reshape(-1, 1, 3), cv2.COLOR_BGR2LAB).reshape(-1, 3)
     lab[~readable] = np.nan
     return lab

@@ -39,6 +39,7 @@ from service.perception.euler_spiral import headings_within_bend, is_large_turn
 from service.perception.geometry import (
     arc_lengths,
     end_fit,
+    median,
     on_mask,
     polyline_length,
     rotated,
@@ -94,51 +95,6 @@ def _border_distance(
             mask.view(np.uint8), x, y, dx, dy, steps, reach, 0.5 * SECTION_STEP_PX, False
         )
     )
-
-
-def _recentred(plus: float, minus: float, half_width: float) -> float:
-    """The shift (px, along the normal's plus side) that puts a point half the cable's
-    width in from its borders, ``plus`` and ``minus`` px away on either side: from both
-    where the section is the cable's own width; where it is wider (a strand touching it, a
-    crossing), from the border at about the
-    cable's own distance, else none."""
-    full = 2.0 * half_width
-    if abs(plus + minus - full) <= WIDTH_AGREES * full:
-        return 0.5 * (plus - minus)
-    near = WIDTH_AGREES * full
-    plus_own = abs(plus - half_width) <= near
-    minus_own = abs(minus - half_width) <= near
-    if plus_own and not minus_own:
-        return plus - half_width
-    if minus_own and not plus_own:
-        return half_width - minus
-    return 0.0
-
-
-def _full_beyond(
-    mask: np.ndarray,
-    x: float,
-    y: float,
-    hx: float,
-    hy: float,
-    steps: np.ndarray,
-    reach: float,
-    half_width: float,
-) -> bool:
-    """Whether the section a step on from ``(x, y)`` along ``(hx, hy)`` is the cable's
-    full width again: the narrowing at ``(x, y)`` was its borders' rounding, no cut.
-
-    An object's border that has begun to cut the cable takes more of it a step further
-    on (or all of it, past the middle: off the mask), never less. A cable's own border
-    is a pixel staircase: read across at a slant, each border may fall up to half a
-    pixel's diagonal (0.7 px) short, and a half width read from the skeleton a pixel
-    over the cable's leaves that within :data:`CUT_NARROWING_PX` of a single section."""
-    x, y = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
-    if not on_mask(mask, x, y):
-        return False
-    plus = _border_distance(mask, x, y, -hy, hx, steps, reach)
-    minus = _border_distance(mask, x, y, hy, -hx, steps, reach)
-    return plus + minus >= 2.0 * half_width - CUT_NARROWING_PX
 
 
 def _far_border(
@@ -227,19 +183,19 @@ def along_the_wedge(
     steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX)
     # The cable's own half width, from its last full sections (the one given may lie
     # a pixel over it): each border is followed at the distance the cable's own shows.
-    widths = []
+    widths, sections = [], []
     ax, ay = (float(value) for value in unit(points[-1] - points[-min(FULL_SECTIONS, len(points))]))
     for px, py in points[-FULL_SECTIONS:]:
-        widths.append(
-            _border_distance(mask, px, py, -ay, ax, steps, reach)
-            + _border_distance(mask, px, py, ay, -ax, steps, reach)
-        )
-    half_width = 0.5 * float(np.median(widths))
-    # What lies just beyond the cable's borders along its full sections: the ground.
+        plus = _border_distance(mask, px, py, -ay, ax, steps, reach)
+        minus = _border_distance(mask, px, py, ay, -ax, steps, reach)
+        widths.append(plus + minus)
+        sections.append((px, py, plus, minus))
+    half_width = 0.5 * float(median(np.array(widths)))
+    # What lies just beyond the cable's borders along its full sections: the ground
+    # (each border where the widths above found it).
     beside = []
-    for px, py in points[-FULL_SECTIONS:]:
-        for sign in (1.0, -1.0):
-            out = _border_distance(mask, px, py, -sign * ay, sign * ax, steps, reach)
+    for px, py, plus, minus in sections:
+        for sign, out in ((1.0, plus), (-1.0, minus)):
             beside.append(
                 (
                     px - sign * ay * (out + BEYOND_BORDER_PX),
@@ -284,8 +240,12 @@ def along_the_wedge(
             break
         shift = min(max(shift, -TRACE_STEP_PX), TRACE_STEP_PX)
         x, y = nx_ + shift * nx, ny_ + shift * ny
-        line = np.concatenate([points, np.array([*added, (x, y)])])
-        hx, hy = _heading(line, half_width)
+        # The heading over the line so far (:func:`_heading`), its two points picked
+        # from the traced ``points`` and the steps added, without joining them anew.
+        tail = [*added, (x, y)]
+        back = max(len(points) + len(tail) - 1 - round(half_width / TRACE_STEP_PX), 0)
+        behind = points[back] if back < len(points) else tail[back - len(points)]
+        hx, hy = (float(value) for value in unit(np.array(tail[-1]) - np.asarray(behind)))
         # The border followed bends no tighter than a cable: turned further from where
         # the wedge began than the tightest bend turns over the steps taken (and a
         # pixel's rounding over the chord the heading is read on), it is the object's.
@@ -340,10 +300,11 @@ def middle_line(
 
     Each step goes :data:`TRACE_STEP_PX` along the heading, which turns as the end's
     fit bends (``curvature``, signed, 1/px), and is then put half the cable's width
-    (``half_width``) in from its borders read across it (:func:`_recentred`). The trace
+    (``half_width``) in from its borders read across it (where the section is the
+    cable's width, from both; where wider, from the border at the cable's own distance). The trace
     stops at a cut where the section across it is narrower than the cable (an object's
-    border has begun to cut it) and the next one is too (:func:`_full_beyond`: a cut
-    narrows on; one narrow section is its borders' rounding), or the middle point
+    border has begun to cut it) and the next one is too (a cut narrows on, never less;
+    one narrow section is its borders' pixel staircase, read at a slant), or the middle point
     leaves the mask. With ``first_narrowing``, at the first narrowed section: the
     reading the turn pass's tests of a cut's shape were measured on
     (:func:`end_at_the_cut`).
@@ -368,40 +329,29 @@ def middle_line(
     reach = 2.5 * half_width + 2.0
     steps = np.arange(SECTION_STEP_PX, reach + 1e-9, SECTION_STEP_PX)
     cos, sin = float(np.cos(curvature * TRACE_STEP_PX)), float(np.sin(curvature * TRACE_STEP_PX))
-    # The start itself (a fit's, up to a couple of pixels off the middle) put on the
-    # middle at once where its section is the cable's: else the first steps, each
-    # moved by at most a step, lean across the cable and tilt a short fit through them.
-    nx, ny = -hy, hx
-    plus = _border_distance(mask, x, y, nx, ny, steps, reach)
-    minus = _border_distance(mask, x, y, -nx, -ny, steps, reach)
-    if plus + minus >= 2.0 * half_width - CUT_NARROWING_PX:
-        shift = _recentred(plus, minus, half_width)
-        if on_mask(mask, x + shift * nx, y + shift * ny):
-            x, y = x + shift * nx, y + shift * ny
-            points = [(x, y)]
-    for _ in range(int(limit / TRACE_STEP_PX)):
-        x, y = x + TRACE_STEP_PX * hx, y + TRACE_STEP_PX * hy
-        nx, ny = -hy, hx
-        if on_mask(mask, x, y):
-            plus = _border_distance(mask, x, y, nx, ny, steps, reach)
-            minus = _border_distance(mask, x, y, -nx, -ny, steps, reach)
-            if plus + minus < 2.0 * half_width - CUT_NARROWING_PX and (
-                first_narrowing or not _full_beyond(mask, x, y, hx, hy, steps, reach, half_width)
-            ):
-                # The cut begins here, on one side or both: past it, what is left of
-                # the section is no longer centred on the cable.
-                return np.array(points), True, np.array(shortfall)
-            narrower = max(2.0 * half_width - plus - minus, 0.0)
-            shift = min(max(_recentred(plus, minus, half_width), -TRACE_STEP_PX), TRACE_STEP_PX)
-            x, y = x + shift * nx, y + shift * ny
-        else:
-            narrower = 0.0
-        if not on_mask(mask, x, y):
-            return np.array(points), True, np.array(shortfall)
-        points.append((x, y))
-        shortfall.append(narrower)
-        hx, hy = cos * hx - sin * hy, sin * hx + cos * hy
-    return np.array(points), False, np.array(shortfall)
+    # The start itself (a fit's, up to a couple of pixels off the middle) is put on the
+    # middle at once where its section is the cable's: else the first steps, each moved
+    # by at most a step, lean across the cable and tilt a short fit through them. Then
+    # step by step: compiled (:func:`._shared_kernels.middle_line`, the same operations
+    # in the same order): a gap's cut reading traces dozens of sections per end.
+    return _shared_kernels.middle_line(
+        mask.view(np.uint8),
+        x,
+        y,
+        hx,
+        hy,
+        cos,
+        sin,
+        float(half_width),
+        int(limit / TRACE_STEP_PX),
+        steps,
+        float(reach),
+        0.5 * SECTION_STEP_PX,
+        TRACE_STEP_PX,
+        CUT_NARROWING_PX,
+        WIDTH_AGREES,
+        bool(first_narrowing),
+    )
 
 
 def carried_to_the_border(
@@ -493,7 +443,7 @@ def end_at_the_cut(
     where the cut's border crosses it (:func:`carried_to_the_border`, to the border
     itself with ``to_the_border``). With ``first_narrowing``, the traces stop at the
     first narrowed section and the direction is fitted before it, as before the
-    borders' rounding was told from a cut (:func:`_full_beyond`): the reading the turn
+    borders' rounding was told from a cut (:func:`middle_line`): the reading the turn
     pass's tests of a cut's shape were measured on (:mod:`.traced_cuts`).
 
     Returns
@@ -527,9 +477,9 @@ def end_at_the_cut(
     # tilts by 15-25 degrees. The direction is fitted on the cable's full sections.
     # Against the sections read behind the end (the cable's own, which the half width
     # given may miss by a pixel).
-    own = float(np.median(seen_shortfall[1:])) if len(seen_shortfall) > 1 else 0.0
+    own = float(median(seen_shortfall[1:])) if len(seen_shortfall) > 1 else 0.0
     # The cut's narrowing runs on to where the trace stopped; a narrower section
-    # before a full one is the border's rounding (:func:`_full_beyond`).
+    # before a full one is the border's rounding (:func:`middle_line`).
     kept = np.flatnonzero(shortfall <= own + SECTION_ROUNDING_PX)
     full = max(int(kept[-1]) + 1, 2)
     if first_narrowing:

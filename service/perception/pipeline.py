@@ -26,10 +26,11 @@ from schemas import (
 )
 from service.perception import _pipeline_kernels
 from service.perception._kernel_cache import kernels_cached, write_stamp
+from service.perception.appearance import _first_off, _front, ground_beside
 from service.perception.bridge_ends import ends_clear_of_crossing
 from service.perception.contours import extract_contours
 from service.perception.crossings import detect_crossings, find_intersections
-from service.perception.cut_ends import _border_distance, _far_border
+from service.perception.cut_ends import _border_distance, _far_border, middle_line
 from service.perception.deadline import Deadline, check
 from service.perception.end_extension import extend_ends
 from service.perception.errors import InvalidInputError
@@ -501,6 +502,14 @@ def warm_up() -> None:
     section_steps = np.arange(0.5, 6.0, 0.5)
     _border_distance(mask, 24.0, 20.0, 1.0, 0.0, section_steps, 6.0)
     _far_border(mask, 24.0, 20.0, 1.0, 0.0, section_steps, 6.0)
+    # The middle line traced to a cut (both readings of a narrowing), and the colour
+    # beyond a cable's border, from the image's 3x3 patches (compiled).
+    for first_narrowing in (False, True):
+        middle_line(mask, np.array([6.0, 20.0]), east, 0.01, 3.0, 50.0, first_narrowing)
+    ground_beside(image, mask, np.array([[24.0, 10.0], [10.0, 10.0], [40.0, 30.0]]))
+    # The end readings' marches to the mask's border (compiled).
+    _front(mask, np.array([6.0, 20.0]), east, 90)
+    _first_off(mask, line)
     # End extension, resampling and the inferred flags; the crossings' sweep.
     _finalise_path(MergedPath(line, np.array([False])), mask, distance, DetectParams(), radius)
     find_intersections(strands)

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from service.evaluation.synthetic_eval import evaluate_scene
+from service.perception.appearance import _first_off, _front, _lab_beside
 from service.perception.cut_ends import (
     SECTION_STEP_PX,
     _border_distance,
@@ -20,6 +21,9 @@ from service.perception.cut_ends import (
 )
 from service.perception.merging import ChainEnd
 from service.synthetic.families import make_family_scene
+from tests.perception.references.appearance import first_off, front
+from tests.perception.references.appearance import lab_beside as plain_lab_beside
+from tests.perception.references.cut_ends import middle_line as plain_middle_line
 
 CENTRE = np.array([100.0, 100.0])
 BEND = 30.0  # px: a loop's bend of 6 radii for a cable of half width 5
@@ -693,3 +697,82 @@ def test_the_compiled_section_samples_equal_the_plain_loop():
             assert _far_border(mask, x, y, dx, dy, steps, reach) == plain(
                 mask, x, y, dx, dy, steps.tolist(), reach, True
             )
+
+
+def test_the_compiled_middle_line_equals_the_plain_trace():
+    """``middle_line`` (its steps compiled) against the step-by-step Python trace it
+    replaced (``references/cut_ends.py``), point for point and bit for bit: drawn cuts
+    at many angles and slants, noisy masks, starts on and off the mask, bending
+    headings, both readings of a narrowing, half widths as the passes give them."""
+    rng = np.random.default_rng(31)
+    masks = [arc_mask(angle, slant) for angle in (0.3, 1.2, 2.0) for slant in (-0.6, 0.0, 0.7)]
+    masks += [rng.random((60, 70)) < rng.uniform(0.5, 0.97) for _ in range(12)]
+    for mask in masks:
+        height, width = mask.shape
+        for _ in range(120):
+            start = np.array([rng.uniform(-3, width + 3), rng.uniform(-3, height + 3)])
+            angle = rng.uniform(0.0, 2.0 * np.pi)
+            heading = np.array([np.cos(angle), np.sin(angle)]) * rng.uniform(0.5, 2.0)
+            curvature = float(rng.choice([0.0, rng.normal(0.0, 0.05)]))
+            if height == 200 and rng.random() < 0.7:
+                # On the drawn cable, a pixel or two off its middle, along it either way.
+                at = rng.uniform(-np.pi / 2, 2.5)
+                start = CENTRE + (BEND + rng.normal(0.0, 1.5)) * np.array([np.cos(at), np.sin(at)])
+                sign = float(rng.choice([-1.0, 1.0]))
+                heading = sign * np.array([-np.sin(at + rng.normal(0.0, 0.1)), np.cos(at)])
+                curvature = sign / BEND + float(rng.normal(0.0, 0.005))
+            if rng.random() < 0.3:
+                start = np.round(start * 2.0) / 2.0  # half pixels: the rounding's ties
+            half_width = float(rng.choice([HALF_WIDTH, rng.uniform(1.0, 8.0)]))
+            limit = float(rng.uniform(0.0, 60.0))
+            first = bool(rng.random() < 0.3)
+            got = middle_line(mask, start, heading, curvature, half_width, limit, first)
+            want = plain_middle_line(mask, start, heading, curvature, half_width, limit, first)
+            assert got[1] == want[1]
+            assert got[0].shape == want[0].shape and got[2].shape == want[2].shape
+            assert np.array_equal(got[0], want[0]) and np.array_equal(got[2], want[2])
+
+
+def test_the_compiled_patches_beside_equal_the_numpy_reading():
+    """``appearance._lab_beside`` (its 3x3 patches compiled) against the NumPy reading
+    it replaced, bit for bit: points on and off the mask, at the picture's edge, off it,
+    half pixels, and not finite."""
+    rng = np.random.default_rng(32)
+    for _ in range(60):
+        height, width = rng.integers(3, 40, 2)
+        mask = rng.random((height, width)) < rng.uniform(0.0, 0.9)
+        image = rng.integers(0, 256, (height, width, 3), dtype=np.uint8)
+        points = np.column_stack([rng.uniform(-3, width + 3, 40), rng.uniform(-3, height + 3, 40)])
+        points[:10] = np.round(points[:10] * 2.0) / 2.0
+        points[10, 0], points[11, 1], points[12] = np.nan, np.inf, -1e30
+        for count in (1, 3, 40):
+            got = _lab_beside(image, mask, points[:count])
+            want = plain_lab_beside(image, mask, points[:count])
+            assert got.dtype == want.dtype and np.array_equal(got, want, equal_nan=True)
+
+
+def test_the_compiled_fronts_equal_the_numpy_reading():
+    """``appearance._front`` and ``_first_off`` (compiled) against the NumPy readings they
+    replaced, bit for bit: marches starting on and off the mask and the picture, leaving
+    the picture and coming back, along bends, at half pixels, and not finite."""
+    rng = np.random.default_rng(33)
+    masks = [arc_mask(angle, slant) for angle in (0.3, 2.0) for slant in (-0.6, 0.7)]
+    masks += [rng.random((30, 40)) < rng.uniform(0.3, 0.97) for _ in range(20)]
+    for mask in masks:
+        height, width = mask.shape
+        for _ in range(150):
+            start = np.array([rng.uniform(-3, width + 3), rng.uniform(-3, height + 3)])
+            if rng.random() < 0.3:
+                start = np.round(start * 2.0) / 2.0  # the rounding's ties
+            angle = rng.uniform(0.0, 2.0 * np.pi)
+            direction = np.array([np.cos(angle), np.sin(angle)])
+            count = int(rng.integers(1, 120))
+            assert_same(_front(mask, start, direction, count), front(mask, start, direction, count))
+            points = start + rng.normal(0.0, 3.0, (count, 2)).cumsum(axis=0)
+            if rng.random() < 0.1:
+                points[rng.integers(0, count)] = rng.choice([np.nan, np.inf, -1e30])
+            assert_same(_first_off(mask, points), first_off(mask, points))
+
+
+def assert_same(got: float, want: float) -> None:
+    assert type(got) is type(want) and (got == want or (got != got and want != want))

@@ -112,3 +112,52 @@ def first_wide_less_margin(at, bounds, limits):
         if len(past):
             wide[max(start + int(past[0]) - int(np.ceil(limit)), start)] = True
     return wide
+
+
+def lab_beside(image_bgr, mask, points):
+    """Lab colour of the mean of the off-mask pixels in the 3x3 patch round each point
+    (NaN where the point's pixel is on the mask or the patch leaves the picture): the
+    NumPy reading ``appearance._lab_beside`` compiled."""
+    height, width = mask.shape
+    cols = np.rint(points[:, 0]).astype(np.int64)
+    rows = np.rint(points[:, 1]).astype(np.int64)
+    inside = (cols >= 1) & (rows >= 1) & (cols <= width - 2) & (rows <= height - 2)
+    cols, rows = np.where(inside, cols, 1), np.where(inside, rows, 1)
+    readable = inside & ~mask[rows, cols]
+    sums = np.zeros((len(points), 3), np.float32)
+    counts = np.zeros(len(points), np.float32)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            off = ~mask[rows + dy, cols + dx]
+            sums += off[:, None] * image_bgr[rows + dy, cols + dx].astype(np.float32)
+            counts += off
+    patches = sums / np.maximum(counts, 1.0)[:, None] / 255.0
+    lab = cv2.cvtColor(patches.reshape(-1, 1, 3), cv2.COLOR_BGR2LAB).reshape(-1, 3)
+    lab[~readable] = np.nan
+    return lab
+
+
+def first_off(mask, points):
+    """Arc (px, ``points`` 0.5 px apart) to the first point on the picture and off
+    ``mask``; NaN when the first is off the mask or the picture, or none is off: the
+    NumPy reading ``appearance._first_off`` compiled."""
+    height, width = mask.shape
+    count = len(points)
+    cols = np.rint(points[:, 0]).astype(np.int64)
+    rows = np.rint(points[:, 1]).astype(np.int64)
+    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
+    if not inside[0] or not mask[rows[0], cols[0]]:
+        return np.nan
+    on = np.ones(count, bool)
+    on[inside] = mask[rows[inside], cols[inside]]
+    off = np.flatnonzero(~on)
+    if len(off) == 0 or not inside[off[0]]:
+        return np.nan
+    return 0.5 * float(off[0])
+
+
+def front(mask, start, direction, count):
+    """:func:`first_off` along ``count`` points 0.5 px apart from ``start`` along
+    ``direction``: ``appearance._front`` as NumPy read it."""
+    points = start[None, :] + (0.5 * np.arange(count))[:, None] * direction[None, :]
+    return first_off(mask, points)
