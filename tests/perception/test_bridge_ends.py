@@ -537,3 +537,54 @@ def test_a_doubled_back_turn_whose_fit_missed_its_hooked_strand_is_right(seed):
     5.1). Started on the strand, the frames come out right."""
     score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
+
+
+def test_a_bridge_started_on_a_strand_bending_within_half_a_span_leaves_along_it():
+    """A strand running straight out of its cut for a segment, then turning a quarter
+    turn round 10 px within half the 40 px span (joints 10 px apart as the chains' are):
+    the fit misses it where its stretch begins (1.9 px), so the bridge starts on the
+    strand, and leaves along the strand's own segment there, not along the chord to its
+    joint 20 px in (20 degrees off: tilted by half the turning along it; occluded 420019,
+    loops 430078 of the tuning blocks, whose cut was then read off the cable)."""
+    bend = 10.0
+    turn = np.array([1.0, np.pi / 2])
+    inward = np.vstack(
+        [
+            [[0.0, 0.0], [10.0, 0.0]],
+            np.column_stack([10.0 + bend * np.sin(turn), bend * (1.0 - np.cos(turn))]),
+            np.column_stack([np.full(6, 20.0), 20.0 + 10.0 * np.arange(6)]),
+        ]
+    )
+    points = inward[::-1]
+    beyond = np.column_stack([-30.0 - 10.0 * np.arange(12)[::-1], np.zeros(12)])
+    pieces = [points, beyond]
+    ends = chain_ends(pieces, 40.0, skip=6.0)
+    fitted = fit_where_skipped(points, False, 40.0, ends[1].skip)
+    assert np.hypot(*(fitted[0] - [ends[1].skip, 0.0])) > bridge_ends.FIT_MISS_PX
+    inner, _ = bridge_from_the_fits(pieces, ends, [(1, 2, 0.0)], 40.0, [-1] * 4)
+    np.testing.assert_allclose(inner[1].position, [ends[1].skip, 0.0], atol=1e-9)
+    np.testing.assert_allclose(inner[1].direction, [-1.0, 0.0], atol=1e-9)
+
+
+def test_a_segment_direction_is_the_segment_the_arc_lies_on():
+    """:func:`segment_direction`: outward (toward the tip) along the segment holding the
+    arc length; None past the last joint."""
+    backwards = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
+    arcs = np.array([0.0, 10.0, 20.0])
+    np.testing.assert_allclose(bridge_ends.segment_direction(backwards, arcs, 4.0), [-1.0, 0.0])
+    np.testing.assert_allclose(bridge_ends.segment_direction(backwards, arcs, 12.0), [0.0, -1.0])
+    assert bridge_ends.segment_direction(backwards, arcs, 25.0) is None
+
+
+@pytest.mark.parametrize(
+    ("family", "seed"), [("occluded", 420019), ("loops", 430078), ("doubled_back", 440165)]
+)
+def test_a_gap_whose_strand_bends_within_half_a_span_is_right(family, seed):
+    """Tuning scenes (true mask) lost when gap bridges began on their piece along the
+    chord over half a span (`dbk17c`): the piece bends within it, and the chord, tilted
+    by half the turning along it (16-24 degrees against the fit's 8-11 at 420019 and
+    430078), sent the cut's trace off the cable (5.77, 5.48, 6.34 px against 4.57, 5.35,
+    6.07). Along the piece's own segment where the bridge starts (0-20 degrees off),
+    they come out right."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
