@@ -115,9 +115,13 @@ def bridge_from_the_fits(
                 # into a hidden turn, or a widened fit reaching further in) spreads the
                 # bend over the whole stretch and may miss the piece where it begins:
                 # there the bridge starts on the piece (the skeleton lies on the cable's
-                # middle), and its cut is traced from there, not from beside the cable.
+                # middle), and its cut is traced from there, not from beside the cable,
+                # along the piece's own segment there (a longer chord is tilted by the
+                # bend the fit missed: :func:`segment_direction`) unless that segment
+                # runs into a cut's wedge (:func:`outer_joint_at_full_width`).
                 backwards = points if end.at_start else points[::-1]
-                inner = start_on_the_piece(backwards, end.skip, span, *inner)
+                own = outer_joint_at_full_width(backwards, end.skip, distance, end.width)
+                inner = start_on_the_piece(backwards, end.skip, span, *inner, own_segment=own)
             if inner is not None and stubbed and not _on_the_cable(distance, inner[0]):
                 # A fit whose start lies off the cable runs beside it (a short piece
                 # round a turn, :mod:`.end_readings`): the end keeps its own reading.
@@ -291,6 +295,9 @@ def _along_beyond(outer: np.ndarray, inner: np.ndarray, tip: np.ndarray) -> np.n
 # pixel steps along one straight cable.
 WIDENED_MARGIN_PX = 1.0
 
+# An end joint is narrow (part of a cut end) below this fraction of the full half width.
+FULL_WIDTH_FRACTION = 0.8
+
 # Where a crossing's bridge starts, the piece's own line lies on its strand to within
 # the skeleton's pixel steps; a fit that passes further from it than one such step is
 # bent by the stretch beyond (a bend behind the crossing), not describing the cable there.
@@ -386,10 +393,15 @@ def widened_tip_length(backwards: np.ndarray, distance: np.ndarray, width: float
 
 
 def start_on_the_piece(
-    backwards: np.ndarray, skip: float, span: float, position: np.ndarray, direction: np.ndarray
+    backwards: np.ndarray,
+    skip: float,
+    span: float,
+    position: np.ndarray,
+    direction: np.ndarray,
+    own_segment: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Where a crossing's bridge starts and which way it leaves: the fit's ``position``
-    and ``direction`` at arc length ``skip`` of the piece ``backwards`` (from its tip
+    """Where a bridge starts and which way it leaves: the fit's ``position`` and
+    ``direction`` at arc length ``skip`` of the piece ``backwards`` (from its tip
     inwards), or the piece's own point there when the fit misses it.
 
     A quadratic in arc length over a stretch that runs straight out of the crossing and
@@ -399,8 +411,12 @@ def start_on_the_piece(
     ``FIT_MISS_PX``); where the fit is further from it than that, the bridge starts on the
     piece, along the chord to its last joint within half the fit's ``span`` (halved as
     ``_geometry_kernels.bend_aware_fit`` halves it on a bend; a chord is tilted from the
-    tangent at its start by half the turning along it). Returns the position and the
-    outward unit direction.
+    tangent at its start by half the turning along it), or with ``own_segment`` (a gap's
+    end whose segment there runs out to the cable's full width,
+    :func:`outer_joint_at_full_width`) along the piece's segment the start lies on
+    (:func:`segment_direction`: the fit missed the piece because it bends within the
+    span, and the chord over half of it is tilted by half that bend). Returns the
+    position and the outward unit direction.
     """
     arcs = arc_lengths(backwards)
     # The one point as points_along finds it (np.interp per coordinate), without its
@@ -410,6 +426,9 @@ def start_on_the_piece(
     )
     if float(np.hypot(*(position - on_piece))) <= FIT_MISS_PX:
         return position, direction
+    if own_segment:
+        along = segment_direction(backwards, arcs, skip)
+        return (on_piece, along) if along is not None else (position, direction)
     beyond = np.flatnonzero((arcs > skip) & (arcs <= skip + 0.5 * span))
     if not beyond.size:
         return position, direction
@@ -418,6 +437,68 @@ def start_on_the_piece(
     if length < 1e-9:
         return position, direction
     return on_piece, chord / length
+
+
+def segment_direction(backwards: np.ndarray, arcs: np.ndarray, arc: float) -> np.ndarray | None:
+    """The outward unit direction of the piece's segment on which arc length ``arc``
+    lies: the piece's own direction there.
+
+    A piece is a chain of straight segments whose joints lie on the cable's middle line
+    (to within the pixel they are rounded to), so between two joints the segment is the
+    finest direction the piece gives. A chord from a point on it to a joint further in
+    also spans the turns at the joints between: on a cable of even curvature it is tilted
+    from the tangent at its start by half the turning along it, some 15-35 degrees over
+    half a 40 px fit span on a strand hooking into a hidden turn, against a few degrees
+    for the segment itself (its joints' rounding, half a pixel over a segment's length,
+    and half the turning along the segment at most).
+
+    Parameters
+    ----------
+    backwards : ndarray
+        ``(N, 2)`` joints of the piece from its tip inwards.
+    arcs : ndarray
+        ``(N,)`` arc length of each joint from the tip (:func:`.geometry.arc_lengths`).
+    arc : float
+        Arc length from the tip, above 0, where the direction is wanted.
+
+    Returns
+    -------
+    ndarray or None
+        The unit direction from the segment's inner joint to its outer one (toward the
+        tip), or None past the last joint or on a segment of no length.
+    """
+    inner = int(np.searchsorted(arcs, arc, side="right"))
+    if inner < 1 or inner >= len(backwards):
+        return None
+    step = backwards[inner - 1] - backwards[inner]
+    length = float(np.hypot(*step))
+    if length < 1e-9:
+        return None
+    return step / length
+
+
+def outer_joint_at_full_width(
+    backwards: np.ndarray, arc: float, distance: np.ndarray | None, width: float
+) -> bool:
+    """Whether the piece's segment on which arc length ``arc`` lies (``backwards``: the
+    piece from its tip inwards) runs out to a joint where the mask is the cable's full
+    width: at least :data:`FULL_WIDTH_FRACTION` of the piece's half ``width``, the
+    distance transform ``distance`` read at the joint's pixel.
+
+    Where an occluder cuts a cable at a slant, thinning runs the piece's tip into the
+    cut's narrow corner (:func:`.merging.chain_ends`: its fit leaves that stretch out):
+    a segment out to such a joint is pulled 1-2 px off the middle and 15-30 degrees off
+    the cable, the cut's direction rather than the cable's. Out to a joint at full
+    width it lies on the middle. False where the width or the transform is unknown.
+    """
+    if distance is None or width <= 0.0:
+        return False
+    inner = int(np.searchsorted(arc_lengths(backwards), arc, side="right"))
+    if inner < 1 or inner >= len(backwards):
+        return False
+    col = min(max(int(np.rint(backwards[inner - 1, 0])), 0), distance.shape[1] - 1)
+    row = min(max(int(np.rint(backwards[inner - 1, 1])), 0), distance.shape[0] - 1)
+    return float(distance[row, col]) >= FULL_WIDTH_FRACTION * width
 
 
 # The kernel computes the turns itself (see _turns).

@@ -38,6 +38,7 @@ from service.perception.appearance import (
     gap_hidden,
 )
 from service.perception.bridge_ends import (
+    FULL_WIDTH_FRACTION,
     bridge_from_the_fits,
     ends_of_short_pieces_from_partners,
     ends_through_short_pieces,
@@ -90,9 +91,8 @@ END_FIT_SPAN_RADII = 6.0
 # Thinning stops about a radius from the edge of the picture; an end this much
 # further in still counts as at the edge.
 BORDER_MARGIN_PX = 2.0
-# An end joint is narrow (part of a cut end) below this fraction of the full half width;
-# at most this many joints at an end are left out of its fit for being narrow.
-FULL_WIDTH_FRACTION = 0.8
+# At most this many joints at an end are left out of its fit for being narrow (below
+# bridge_ends.FULL_WIDTH_FRACTION of the full half width: part of a cut end).
 NARROW_END_JOINTS = 4
 # A piece measures its own full width when it has this many joints beyond those.
 MIN_INTERIOR_JOINTS = 3

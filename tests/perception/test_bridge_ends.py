@@ -15,7 +15,7 @@ from service.perception.bridge_ends import (
     ends_through_short_pieces,
     free_ends_beside_crossings,
 )
-from service.perception.geometry import fit_where_skipped
+from service.perception.geometry import arc_lengths, fit_where_skipped
 from service.perception.merging import ChainEnd, chain_ends
 from service.perception.paths import assemble_paths
 from service.synthetic import make_family_scene
@@ -536,4 +536,80 @@ def test_a_doubled_back_turn_whose_fit_missed_its_hooked_strand_is_right(seed):
     2.5 px off and 22 degrees off (10.1 and 7.7 px off the hidden turn against 4.4 and
     5.1). Started on the strand, the frames come out right."""
     score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
+
+
+def _bending_strand_and_mask() -> tuple[list[np.ndarray], np.ndarray]:
+    """A strand running straight out of its tip (at x = 150, y = 20, toward -x) for a
+    segment, then turning a quarter turn round 10 px within half a 40 px span (joints
+    10 px apart as the chains' are), drawn 5 px in half width, and a piece beyond the
+    gap along its line; with the mask's distance transform."""
+    bend = 10.0
+    turn = np.array([1.0, np.pi / 2])
+    inward = np.vstack(
+        [
+            [[0.0, 0.0], [10.0, 0.0]],
+            np.column_stack([10.0 + bend * np.sin(turn), bend * (1.0 - np.cos(turn))]),
+            np.column_stack([np.full(6, 20.0), 20.0 + 10.0 * np.arange(6)]),
+        ]
+    )
+    inward = inward + np.array([150.0, 20.0])
+    beyond = np.column_stack([120.0 - 10.0 * np.arange(12)[::-1], np.full(12, 20.0)])
+    mask = np.zeros((120, 240), np.uint8)
+    for piece in (inward, beyond):
+        cv2.polylines(mask, [np.rint(piece).astype(np.int32)], False, 255, 11)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    return [inward[::-1], beyond], distance
+
+
+def test_a_bridge_started_on_a_strand_bending_within_half_a_span_leaves_along_it():
+    """The fit over the strand's 40 px span misses it where its stretch begins (1.9 px),
+    so the bridge starts on the strand, and leaves along the strand's own segment there
+    (its tip joint at the cable's full width), not along the chord to its joint 20 px
+    in (20 degrees off: tilted by half the turning along it; occluded 420019 and
+    doubled_back 440165 of the tuning blocks, whose cut was then read off the cable)."""
+    pieces, distance = _bending_strand_and_mask()
+    ends = [replace(end, width=5.0) for end in chain_ends(pieces, 40.0, skip=6.0)]
+    start = np.array([150.0 + ends[1].skip, 20.0])
+    fitted = fit_where_skipped(pieces[0], False, 40.0, ends[1].skip)
+    assert np.hypot(*(fitted[0] - start)) > bridge_ends.FIT_MISS_PX
+    inner, _ = bridge_from_the_fits(pieces, ends, [(1, 2, 0.0)], 40.0, [-1] * 4, distance)
+    np.testing.assert_allclose(inner[1].position, start, atol=1e-9)
+    np.testing.assert_allclose(inner[1].direction, [-1.0, 0.0], atol=1e-9)
+
+
+def test_a_bridge_started_on_a_strand_whose_tip_lies_in_a_cut_wedge_keeps_the_chord():
+    """The same strand with its tip joint where the mask is narrow (a cut at a slant,
+    thinning's tip pulled into the cut's corner: occluded 450078, 440118, 430252, 400281,
+    loops 400107, whose tip segments ran 13-32 degrees off): the segment out to it is
+    the cut's, and the bridge leaves along the chord over half a span, as before."""
+    pieces, distance = _bending_strand_and_mask()
+    distance[15:26, 145:156] = np.minimum(distance[15:26, 145:156], 1.0)
+    ends = [replace(end, width=5.0) for end in chain_ends(pieces, 40.0, skip=6.0)]
+    inner, _ = bridge_from_the_fits(pieces, ends, [(1, 2, 0.0)], 40.0, [-1] * 4, distance)
+    backwards = pieces[0][::-1]
+    # The last joint within half the span past the start.
+    last = np.flatnonzero(arc_lengths(backwards) <= ends[1].skip + 20.0)[-1]
+    chord = np.array([150.0 + ends[1].skip, 20.0]) - backwards[last]
+    np.testing.assert_allclose(inner[1].direction, chord / np.hypot(*chord), atol=1e-9)
+
+
+def test_a_segment_direction_is_the_segment_the_arc_lies_on():
+    """:func:`segment_direction`: outward (toward the tip) along the segment holding the
+    arc length; None past the last joint."""
+    backwards = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
+    arcs = np.array([0.0, 10.0, 20.0])
+    np.testing.assert_allclose(bridge_ends.segment_direction(backwards, arcs, 4.0), [-1.0, 0.0])
+    np.testing.assert_allclose(bridge_ends.segment_direction(backwards, arcs, 12.0), [0.0, -1.0])
+    assert bridge_ends.segment_direction(backwards, arcs, 25.0) is None
+
+
+@pytest.mark.parametrize(("family", "seed"), [("occluded", 420019), ("doubled_back", 440165)])
+def test_a_gap_whose_strand_bends_within_half_a_span_is_right(family, seed):
+    """Tuning scenes (true mask) lost when gap bridges began on their piece along the
+    chord over half a span (`dbk17c`): the piece bends within it, and the chord, tilted
+    by half the turning along it (15 and 18 degrees off), sent the cut's trace off the
+    cable (5.77 and 6.34 px against 4.57 and 6.07). Along the piece's own segment where
+    the bridge starts (0 and 7 degrees off), they come out right."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage

@@ -250,9 +250,10 @@ def test_no_headings_within_the_slack_bend_as_a_cable():
                 strict=True,
                 reason="a near miss both ways: the strand's bridge now starts on the strand "
                 "(its fit's start lay 2.6 px beside it, bridge_ends.bridge_from_the_fits), "
-                "and its cut is read nearer the truth (+22 -> +13 degrees, 2.7 -> 1.8 px off "
-                "the middle), which had offset the other cut's +18: 5.74 -> 6.30 px against "
-                "5.81 (docs/BENCHMARKS.md, dbk17c; the direction at a cut)",
+                "along its own segment (+1 degree), and its cut is read nearer the truth "
+                "(+22 -> +10 degrees, 2.7 -> 0.5 px off the middle), which had offset the "
+                "other cut's +18: 5.74 -> 7.01 px against 5.81 (docs/BENCHMARKS.md, dbk17c, "
+                "dbk18q; the direction at a cut)",
             ),
         ),
         ("doubled_back", 94009),
