@@ -594,13 +594,29 @@ def _mutual_best(
 
 
 def _ends_of_split_pieces(
-    ends: list[ChainEnd], pieces: list[np.ndarray], touching: TouchingSplit, span: float
+    ends: list[ChainEnd],
+    pieces: list[np.ndarray],
+    touching: TouchingSplit,
+    span: float,
+    skip: float,
 ) -> list[ChainEnd]:
     """The ends with those of the pieces :func:`.touching.split_touching_strands` made
-    fitted anew (and the new pieces' appended)."""
+    fitted anew (and the new pieces' appended).
+
+    Each strand's fit leaves out the tip's ``skip`` (the cable's radius), as every end's
+    does (:func:`chain_ends`): two touching strands going into an object side by side (a
+    doubled-back cable turning round under it) end at its border as any cut end does,
+    their shared line's tip hooked into the cut's corner, and the strand's line is that
+    tip moved to its side. Fitted over the tip, the end keeps the hook's position and
+    direction (on 440065 and 450230 the tips lay 4.7-8.3 px off the cable's middle,
+    23-30 degrees off its tangent), and an end that left no tip out is never traced to
+    its cut (:func:`.cut_ends.bridges_from_the_cuts`): the gap's bridge was drawn from
+    the hook. The distance transform is not read for the narrow tips here: the split
+    strand's line is the shared line moved across, not where the mask's own narrowing
+    was measured."""
     ends = list(ends)
     changed = sorted(set(touching.split) | set(range(len(ends) // 2, len(pieces))))
-    fitted = chain_ends([pieces[index] for index in changed], span)
+    fitted = chain_ends([pieces[index] for index in changed], span, skip=skip)
     for local, index in enumerate(changed):
         for side in (0, 1):
             end = replace(fitted[2 * local + side], piece=index)
@@ -761,7 +777,7 @@ def merge_chains(
         # and its far ends meet the picture's border where the shared piece's did.
         pieces = touching.pieces
         at_crossing = tips_in_junctions(pieces, zones)
-        ends = _ends_of_split_pieces(ends, pieces, touching, span)
+        ends = _ends_of_split_pieces(ends, pieces, touching, span, radius)
         end_positions = np.array([end.position for end in ends], np.float64).reshape(-1, 2)
         end_directions = np.array([end.direction for end in ends], np.float64).reshape(-1, 2)
         from_ends = np.repeat(np.array(touching.origin), 2) * 2 + np.tile([0, 1], len(pieces))
