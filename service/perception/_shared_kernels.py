@@ -344,6 +344,16 @@ def _recentred(plus, minus, half_width, agrees):
 
 
 @njit(cache=True, nogil=True)
+def _section(mask, x, y, hx, hy, steps, reach, half_step):
+    """The distances (plus, minus) from ``(x, y)`` to the mask's borders across the
+    heading ``(hx, hy)``: along its normal ``(-hy, hx)`` and the opposite way
+    (:func:`border_distance`)."""
+    plus = border_distance(mask, x, y, -hy, hx, steps, reach, half_step, False)
+    minus = border_distance(mask, x, y, hy, -hx, steps, reach, half_step, False)
+    return plus, minus
+
+
+@njit(cache=True, nogil=True)
 def middle_line(
     mask,
     x,
@@ -381,8 +391,7 @@ def middle_line(
     nx = -hy
     ny = hx
     full = 2.0 * half_width - narrowing
-    plus = border_distance(mask, x, y, nx, ny, steps, reach, half_step, False)
-    minus = border_distance(mask, x, y, -nx, -ny, steps, reach, half_step, False)
+    plus, minus = _section(mask, x, y, hx, hy, steps, reach, half_step)
     if plus + minus >= full:
         shift = _recentred(plus, minus, half_width, agrees)
         if _on_mask(mask, x + shift * nx, y + shift * ny):
@@ -398,8 +407,7 @@ def middle_line(
         nx = -hy
         ny = hx
         if _on_mask(mask, x, y):
-            plus = border_distance(mask, x, y, nx, ny, steps, reach, half_step, False)
-            minus = border_distance(mask, x, y, -nx, -ny, steps, reach, half_step, False)
+            plus, minus = _section(mask, x, y, hx, hy, steps, reach, half_step)
             if plus + minus < full:
                 confirmed = first_narrowing
                 if not confirmed:
@@ -408,10 +416,10 @@ def middle_line(
                     ay = y + trace_step * hy
                     confirmed = True
                     if _on_mask(mask, ax, ay):
-                        ahead = border_distance(
-                            mask, ax, ay, -hy, hx, steps, reach, half_step, False
-                        ) + border_distance(mask, ax, ay, hy, -hx, steps, reach, half_step, False)
-                        confirmed = not ahead >= full
+                        ahead_plus, ahead_minus = _section(
+                            mask, ax, ay, hx, hy, steps, reach, half_step
+                        )
+                        confirmed = not ahead_plus + ahead_minus >= full
                 if confirmed:
                     cut = True
                     break

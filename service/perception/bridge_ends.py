@@ -120,8 +120,9 @@ def bridge_from_the_fits(
                 # bend the fit missed: :func:`segment_direction`) unless that segment
                 # runs into a cut's wedge (:func:`outer_joint_at_full_width`).
                 backwards = points if end.at_start else points[::-1]
-                own = outer_joint_at_full_width(backwards, end.skip, distance, end.width)
-                inner = start_on_the_piece(backwards, end.skip, span, *inner, own_segment=own)
+                inner = start_on_the_piece(
+                    backwards, end.skip, span, *inner, distance=distance, width=end.width
+                )
             if inner is not None and stubbed and not _on_the_cable(distance, inner[0]):
                 # A fit whose start lies off the cable runs beside it (a short piece
                 # round a turn, :mod:`.end_readings`): the end keeps its own reading.
@@ -398,7 +399,8 @@ def start_on_the_piece(
     span: float,
     position: np.ndarray,
     direction: np.ndarray,
-    own_segment: bool = False,
+    distance: np.ndarray | None = None,
+    width: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Where a bridge starts and which way it leaves: the fit's ``position`` and
     ``direction`` at arc length ``skip`` of the piece ``backwards`` (from its tip
@@ -411,9 +413,10 @@ def start_on_the_piece(
     ``FIT_MISS_PX``); where the fit is further from it than that, the bridge starts on the
     piece, along the chord to its last joint within half the fit's ``span`` (halved as
     ``_geometry_kernels.bend_aware_fit`` halves it on a bend; a chord is tilted from the
-    tangent at its start by half the turning along it), or with ``own_segment`` (a gap's
-    end whose segment there runs out to the cable's full width,
-    :func:`outer_joint_at_full_width`) along the piece's segment the start lies on
+    tangent at its start by half the turning along it), or, given the distance
+    transform ``distance`` and the piece's half ``width`` (a gap's end) and where the
+    segment there runs out to the cable's full width (:func:`outer_joint_at_full_width`,
+    read only where the fit misses), along the piece's segment the start lies on
     (:func:`segment_direction`: the fit missed the piece because it bends within the
     span, and the chord over half of it is tilted by half that bend). Returns the
     position and the outward unit direction.
@@ -426,7 +429,7 @@ def start_on_the_piece(
     )
     if float(np.hypot(*(position - on_piece))) <= FIT_MISS_PX:
         return position, direction
-    if own_segment:
+    if outer_joint_at_full_width(backwards, skip, distance, width, arcs):
         along = segment_direction(backwards, arcs, skip)
         return (on_piece, along) if along is not None else (position, direction)
     beyond = np.flatnonzero((arcs > skip) & (arcs <= skip + 0.5 * span))
@@ -478,7 +481,11 @@ def segment_direction(backwards: np.ndarray, arcs: np.ndarray, arc: float) -> np
 
 
 def outer_joint_at_full_width(
-    backwards: np.ndarray, arc: float, distance: np.ndarray | None, width: float
+    backwards: np.ndarray,
+    arc: float,
+    distance: np.ndarray | None,
+    width: float,
+    arcs: np.ndarray | None = None,
 ) -> bool:
     """Whether the piece's segment on which arc length ``arc`` lies (``backwards``: the
     piece from its tip inwards) runs out to a joint where the mask is the cable's full
@@ -490,10 +497,13 @@ def outer_joint_at_full_width(
     a segment out to such a joint is pulled 1-2 px off the middle and 15-30 degrees off
     the cable, the cut's direction rather than the cable's. Out to a joint at full
     width it lies on the middle. False where the width or the transform is unknown.
+    ``arcs``: the joints' arc lengths from the tip, where the caller has them
+    (:func:`.geometry.arc_lengths`).
     """
     if distance is None or width <= 0.0:
         return False
-    inner = int(np.searchsorted(arc_lengths(backwards), arc, side="right"))
+    arcs = arc_lengths(backwards) if arcs is None else arcs
+    inner = int(np.searchsorted(arcs, arc, side="right"))
     if inner < 1 or inner >= len(backwards):
         return False
     col = min(max(int(np.rint(backwards[inner - 1, 0])), 0), distance.shape[1] - 1)

@@ -113,13 +113,16 @@ def _far_border(
     return None if np.isnan(found) else found
 
 
-def _heading(line: np.ndarray, half_width: float) -> tuple[float, float]:
-    """The direction at the end of ``line``: the chord over its last half width
-    (``half_width`` px). A single step's, moved by up to a pixel across as each point is
-    put on the middle, would swing by 45 degrees; a fit's, extrapolated over the step,
-    swings with the rounding of its last points."""
-    back = max(len(line) - 1 - round(half_width / TRACE_STEP_PX), 0)
-    hx, hy = unit(line[-1] - line[back])
+def _heading(line: np.ndarray, half_width: float, added=()) -> tuple[float, float]:
+    """The direction at the end of ``line`` carried on by the points ``added`` (read as
+    one line, without joining them): the chord over its last half width (``half_width``
+    px). A single step's, moved by up to a pixel across as each point is put on the
+    middle, would swing by 45 degrees; a fit's, extrapolated over the step, swings with
+    the rounding of its last points."""
+    back = max(len(line) + len(added) - 1 - round(half_width / TRACE_STEP_PX), 0)
+    last = added[-1] if len(added) else line[-1]
+    behind = line[back] if back < len(line) else added[back - len(line)]
+    hx, hy = unit(np.asarray(last) - np.asarray(behind))
     return float(hx), float(hy)
 
 
@@ -240,12 +243,7 @@ def along_the_wedge(
             break
         shift = min(max(shift, -TRACE_STEP_PX), TRACE_STEP_PX)
         x, y = nx_ + shift * nx, ny_ + shift * ny
-        # The heading over the line so far (:func:`_heading`), its two points picked
-        # from the traced ``points`` and the steps added, without joining them anew.
-        tail = [*added, (x, y)]
-        back = max(len(points) + len(tail) - 1 - round(half_width / TRACE_STEP_PX), 0)
-        behind = points[back] if back < len(points) else tail[back - len(points)]
-        hx, hy = (float(value) for value in unit(np.array(tail[-1]) - np.asarray(behind)))
+        hx, hy = _heading(points, half_width, [*added, (x, y)])
         # The border followed bends no tighter than a cable: turned further from where
         # the wedge began than the tightest bend turns over the steps taken (and a
         # pixel's rounding over the chord the heading is read on), it is the object's.

@@ -67,29 +67,8 @@ def middle_line(
     limit: float,
     first_narrowing: bool = False,
 ) -> tuple[np.ndarray, bool, np.ndarray]:
-    """The cable's middle line traced on ``mask`` from ``start`` along ``heading``, at
-    most ``limit`` px, and whether it stopped at a cut.
-
-    Each step goes :data:`TRACE_STEP_PX` along the heading, which turns as the end's
-    fit bends (``curvature``, signed, 1/px), and is then put half the cable's width
-    (``half_width``) in from its borders read across it (:func:`_recentred`). The trace
-    stops at a cut where the section across it is narrower than the cable (an object's
-    border has begun to cut it) and the next one is too (:func:`_full_beyond`: a cut
-    narrows on; one narrow section is its borders' rounding), or the middle point
-    leaves the mask. With ``first_narrowing``, at the first narrowed section: the
-    reading the turn pass's tests of a cut's shape were measured on
-    (:func:`end_at_the_cut`).
-
-    Returns
-    -------
-    points : ndarray
-        ``(K, 2)`` traced points from ``start`` (``K >= 1``).
-    cut : bool
-        Whether the trace stopped at a cut before ``limit``.
-    shortfall : ndarray
-        ``(K,)`` how much (px) each point's section is narrower than the cable (0 at
-        ``start``, and where the section is wider).
-    """
+    """:func:`service.perception.cut_ends.middle_line` as its Python loop was (same
+    arguments, same returns)."""
     # Plain floats, step by step (a trace is a few dozen steps, each a few samples).
     x, y = (float(value) for value in np.asarray(start, np.float64))
     hx, hy = (float(value) for value in unit(np.asarray(heading, np.float64)))
