@@ -13,7 +13,6 @@ from service.perception._shared_kernels import (
     ORTHOGONAL_FIRST_DR,
     neighbour_pattern,
     nonzero_flat,
-    set_pixels,
 )
 
 # --------------------------------------------------------------------------- thinning
@@ -58,7 +57,8 @@ def _queue(flat, index, wanted, queue, n_queued):
 
 @njit(cache=True, nogil=True)
 def thin_padded(padded, first_table, second_table, staircase_table):
-    """Thin, in place, a 0/1 image whose outermost rows and columns are 0.
+    """Thin, in place, a 0/1 image whose outermost rows and columns are 0; returns the
+    flat indices of the skeleton's pixels (into ``padded``), in raster order.
 
     See skeleton.skeletonize for the rule. Each sub-iteration marks, from the image as it
     was, the pixels its table removes, then removes them. Only pixels whose
@@ -121,19 +121,30 @@ def thin_padded(padded, first_table, second_table, staircase_table):
         listed, next_listed = next_listed, listed
         n_listed = n_next
     # The staircase pass: the survivors in raster order (the foreground's list, its
-    # pixels still set), each judged on the image as it is.
+    # pixels still set), each judged on the image as it is. A pixel it keeps is never
+    # looked at again, so the kept ones, listed in place as they are judged, are the
+    # skeleton's pixels in raster order.
+    n_kept = 0
     for j in range(total):
         index = foreground[j]
-        if flat[index] and staircase_table[_zs_pattern(flat, index, width)]:
-            flat[index] = 0
+        if flat[index]:
+            if staircase_table[_zs_pattern(flat, index, width)]:
+                flat[index] = 0
+            else:
+                foreground[n_kept] = index
+                n_kept += 1
+    return foreground[:n_kept]
 
 
 # --------------------------------------------------------------------------- spurs
 
 
 @njit(cache=True, nogil=True)
-def remove_spurs_inplace(skeleton, spur_length, branch_table):
+def remove_spurs_inplace(skeleton, pixels, spur_length, branch_table):
     """One pass of cutting tip-to-junction branches shorter than ``spur_length``.
+
+    ``pixels``: the flat indices of the skeleton's pixels in raster order (the thinning's
+    list, or ``nonzero_flat`` of it), so that the image is not scanned for them.
 
     See skeleton.remove_spurs: branch counts are taken once per pass, the next pixel is
     the first unvisited set neighbour in the order E, S, W, N, SE, SW, NW, NE, and a
@@ -143,7 +154,8 @@ def remove_spurs_inplace(skeleton, spur_length, branch_table):
     height, width = skeleton.shape
     counts = np.zeros((height, width), np.uint8)
     visited = np.zeros((height, width), np.uint8)
-    rows, cols = set_pixels(skeleton)
+    rows = pixels // width
+    cols = pixels - rows * width
     # A walk takes at most one step per unit of length, and never revisits a pixel.
     max_steps = min(max(int(min(spur_length, 1e9)), 0), rows.size) + 2
     path_r = np.empty(max_steps + 1, np.int64)

@@ -66,7 +66,8 @@ from service.perception.skeleton import (
     estimate_radius,
     remove_spurs,
     short_blobs_kept,
-    skeletonize,
+    spurs_removed,
+    thin_listed,
 )
 
 
@@ -251,16 +252,19 @@ def detect_full(
         return _empty(width, height, params, watch, foreground, foreground)
 
     # 2. Skeletonization, then spurs shorter than a few cable radii are cut.
-    skeleton = skeletonize(foreground)
+    # The skeleton's pixels come with it (no scan of the image for them below).
+    skeleton, pixels = thin_listed(foreground)
     # The compiled distance transform: cv2's values, bit for bit, in O(foreground)
     # (segmentation's own, when the brightness path needed it).
     if distance is None:
         distance = distance_transform(foreground)
-    radius = max(estimate_radius(skeleton, distance=distance), 1.0)
+    radius = max(estimate_radius(skeleton, distance=distance, pixels=pixels), 1.0)
     spur_length = 2.5 * radius if params.spur_length is None else params.spur_length
     if spur_length > 0:
-        # A blob that thins to nothing but spurs is a short piece, not a side branch.
-        skeleton = short_blobs_kept(skeleton, remove_spurs(skeleton, spur_length), spur_length)
+        pruned, removed = spurs_removed(skeleton, spur_length, pixels)
+        # A blob that thins to nothing but spurs is a short piece, not a side branch
+        # (with nothing removed there is no such blob: the skeleton is kept as it is).
+        skeleton = short_blobs_kept(skeleton, pruned, spur_length) if removed else pruned
     watch.lap("skeleton")
     check(deadline, "skeleton")
 
@@ -466,10 +470,12 @@ def warm_up() -> None:
     polyline_length(line)
     arc_lengths(line)
     # 2 to 5.
-    skeleton = skeletonize(mask)
+    skeleton, pixels = thin_listed(mask)
     distance = distance_transform(mask)
-    radius = max(estimate_radius(skeleton, distance=distance), 1.0)
-    skeleton = remove_spurs(skeleton, 2.5 * radius)
+    radius = max(estimate_radius(skeleton, distance=distance, pixels=pixels), 1.0)
+    skeleton = spurs_removed(skeleton, 2.5 * radius, pixels)[0]
+    # Without the pixels (other callers): they are listed by a scan, compiled too.
+    remove_spurs(skeleton, 2.5 * radius)
     zones = junction_zones(skeleton, radius)
     prune_overlaps(fit_chains(extract_contours(skeleton), skeleton, zones, 5.0), mask.shape)
     # 6. End fits (leaving out narrow ends) and the gap curves: the natural curve's three

@@ -130,27 +130,46 @@ def skeletonize(mask: np.ndarray) -> np.ndarray:
     .. [1] T. Y. Zhang and C. Y. Suen, "A fast parallel algorithm for thinning digital
        patterns", Communications of the ACM 27(3), 236-239, 1984.
     """
+    return thin_listed(mask)[0]
+
+
+def thin_listed(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`skeletonize`, and the flat indices of the skeleton's pixels in raster order.
+
+    The thinning lists the skeleton's pixels as it makes them, so the steps after it
+    (:func:`estimate_radius`, :func:`spurs_removed`) need not scan the image for them.
+
+    Returns
+    -------
+    skeleton : ndarray of bool
+    pixels : ndarray of int64
+        ``np.flatnonzero(skeleton)``.
+    """
     mask = np.asarray(mask)
     if mask.ndim != 2:
         raise ValueError(f"skeletonize needs a 2D mask, not {mask.ndim}D")
     skeleton = np.zeros(mask.shape, bool)
     if mask.size == 0:
-        return skeleton
+        return skeleton, np.zeros(0, np.int64)
     # The foreground's bounding box: OpenCV's, of an 8-bit image's nonzero pixels, takes
     # half the time of the two reductions over rows and columns.
     nonzero = mask.view(np.uint8) if mask.dtype == np.bool_ else (mask != 0).view(np.uint8)
     left, top, box_width, box_height = cv2.boundingRect(np.ascontiguousarray(nonzero))
     if box_width == 0:
-        return skeleton
+        return skeleton, np.zeros(0, np.int64)
     bottom, right = top + box_height, left + box_width
     # One pixel of background round the box, so the kernel needs no bounds checks.
     padded = np.zeros((bottom - top + 2, right - left + 2), np.uint8)
     box = mask[top:bottom, left:right]
     # A boolean mask is copied as it is (True is 1): no comparison over the box.
     padded[1:-1, 1:-1] = box if mask.dtype == np.bool_ else box != 0
-    _skeleton_kernels.thin_padded(padded, _THIN_FIRST, _THIN_SECOND, _THIN_STAIRCASE)
-    skeleton[top:bottom, left:right] = padded[1:-1, 1:-1].view(np.bool_)
-    return skeleton
+    listed = _skeleton_kernels.thin_padded(padded, _THIN_FIRST, _THIN_SECOND, _THIN_STAIRCASE)
+    # From the padded box's flat indices to the image's (the order is kept).
+    rows, cols = np.divmod(listed, padded.shape[1])
+    pixels = (rows + (top - 1)) * mask.shape[1] + (cols + (left - 1))
+    # Written at its pixels: a few thousand, not the box's hundreds of thousands.
+    skeleton.reshape(-1)[pixels] = True
+    return skeleton, pixels
 
 
 def remove_spurs(skeleton: np.ndarray, spur_length: float, passes: int = 2) -> np.ndarray:
@@ -167,13 +186,45 @@ def remove_spurs(skeleton: np.ndarray, spur_length: float, passes: int = 2) -> n
     pass that removed anything, the skeleton is thinned again, since a removed spur
     can leave a stub pixel at its junction.
     """
+    return spurs_removed(skeleton, spur_length, passes=passes)[0]
+
+
+def spurs_removed(
+    skeleton: np.ndarray,
+    spur_length: float,
+    pixels: np.ndarray | None = None,
+    passes: int = 2,
+) -> tuple[np.ndarray, bool]:
+    """:func:`remove_spurs`, and whether it removed anything.
+
+    Parameters
+    ----------
+    skeleton : ndarray of bool
+    spur_length : float
+    pixels : ndarray of int64, optional
+        ``np.flatnonzero(skeleton)`` when the caller has it (:func:`thin_listed`).
+    passes : int
+
+    Returns
+    -------
+    pruned : ndarray of bool
+        A new array; equal to ``skeleton`` when nothing was removed.
+    removed : bool
+    """
     skeleton = as_uint8(skeleton).copy()
+    if pixels is None:
+        pixels = _shared_kernels.nonzero_flat(skeleton.reshape(-1))
+    removed = False
     for _ in range(passes):
-        if not _skeleton_kernels.remove_spurs_inplace(skeleton, float(spur_length), _BRANCH_COUNT):
+        if not _skeleton_kernels.remove_spurs_inplace(
+            skeleton, pixels, float(spur_length), _BRANCH_COUNT
+        ):
             break
-        # Thinned again as the boolean it is (0/1), which skeletonize copies as it is.
-        skeleton = as_uint8(skeletonize(skeleton.view(np.bool_)))
-    return skeleton.view(np.bool_)
+        removed = True
+        # Thinned again as the boolean it is (0/1), which thin_listed copies as it is.
+        thinned, pixels = thin_listed(skeleton.view(np.bool_))
+        skeleton = as_uint8(thinned)
+    return skeleton.view(np.bool_), removed
 
 
 def distance_transform(mask: np.ndarray) -> np.ndarray:
@@ -185,7 +236,9 @@ def distance_transform(mask: np.ndarray) -> np.ndarray:
     return _shared_kernels.distance_transform(as_uint8(mask))
 
 
-def estimate_radius(skeleton: np.ndarray, *, distance: np.ndarray) -> float:
+def estimate_radius(
+    skeleton: np.ndarray, *, distance: np.ndarray, pixels: np.ndarray | None = None
+) -> float:
     """Typical half width of the cables: the median distance from skeleton to border.
 
     Parameters
@@ -193,12 +246,14 @@ def estimate_radius(skeleton: np.ndarray, *, distance: np.ndarray) -> float:
     skeleton : ndarray of bool
     distance : ndarray
         ``distance_transform(mask)`` of the mask the skeleton was thinned from.
+    pixels : ndarray of int64, optional
+        ``np.flatnonzero(skeleton)`` when the caller has it (:func:`thin_listed`).
     """
-    skeleton = as_uint8(skeleton)
-    # Gathered at the skeleton's pixels (found 8 bytes at a time), not through a
-    # boolean index over the whole image.
-    indices = _shared_kernels.nonzero_flat(skeleton.reshape(-1))
-    values = np.ascontiguousarray(distance).reshape(-1)[indices]
+    if pixels is None:
+        # Gathered at the skeleton's pixels (found 8 bytes at a time), not through a
+        # boolean index over the whole image.
+        pixels = _shared_kernels.nonzero_flat(as_uint8(skeleton).reshape(-1))
+    values = np.ascontiguousarray(distance).reshape(-1)[pixels]
     if values.size == 0:
         return 0.0
     # The distance is to the nearest background pixel centre, half a pixel beyond

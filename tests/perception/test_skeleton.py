@@ -10,6 +10,8 @@ from service.perception.skeleton import (
     remove_spurs,
     short_blobs_kept,
     skeletonize,
+    spurs_removed,
+    thin_listed,
 )
 from tests.perception.cases import INPUTS, thick_polylines
 from tests.perception.references import skeleton as reference
@@ -169,3 +171,37 @@ def test_a_short_blob_of_spurs_keeps_its_longest_path_and_a_cable_its_spurs_cut(
     counts = reference.branch_counts(kept & blob)
     assert (counts >= 3).sum() == 0 and (counts == 1).sum() == 2  # one line
     assert np.array_equal(kept & ~blob, pruned & ~blob)  # the band's spur stays cut
+
+
+@pytest.mark.filterwarnings("ignore:overflow")  # the reference's median of all-set masks
+@pytest.mark.parametrize("seed", range(4))
+def test_the_listed_thinning_and_spur_removal_equal_the_plain_steps(seed):
+    # The thinning's own list of the skeleton's pixels stands for a scan of the image
+    # in the radius and the spur removal; the pipeline skips the short blobs' pass when
+    # no spur went. Random blobs, lines and noise, on and off the image's edge.
+    rng = np.random.default_rng(seed)
+    for trial in range(60):
+        height, width = rng.integers(1, 70, size=2)
+        mask = np.zeros((height, width), np.uint8)
+        for _ in range(rng.integers(0, 6)):
+            points = rng.integers(-5, max(height, width) + 5, size=(2, 2)).tolist()
+            cv2.line(mask, tuple(points[0]), tuple(points[1]), 1, int(rng.integers(1, 12)))
+        mask[rng.random(mask.shape) < 0.02 * (trial % 4)] ^= 1
+        mask = mask.astype(bool)
+        skeleton, pixels = thin_listed(mask)
+        np.testing.assert_array_equal(skeleton, reference.thin(mask))
+        assert pixels.dtype == np.int64
+        np.testing.assert_array_equal(pixels, np.flatnonzero(skeleton))
+        distance = distance_transform(mask)
+        radius = estimate_radius(skeleton, distance=distance, pixels=pixels)
+        assert radius == estimate_radius(skeleton, distance=distance)
+        if skeleton.any():
+            assert max(radius, 1.0) == max(reference.estimate_radius(mask, skeleton), 1.0)
+        for spur in (0.5, 3.0, 2.5 * max(radius, 1.0), 25.0):
+            pruned, removed = spurs_removed(skeleton, spur, pixels)
+            expected = reference.remove_spurs(skeleton, spur)
+            np.testing.assert_array_equal(pruned, expected)
+            np.testing.assert_array_equal(remove_spurs(skeleton, spur), expected)
+            assert removed == (not np.array_equal(expected, skeleton))
+            if not removed:
+                assert short_blobs_kept(skeleton, pruned, spur) is pruned
