@@ -13,15 +13,17 @@ from service.perception._shared_kernels import (
     RING_DR,
     branch_counts_at,
     neighbour_pattern,
-    set_pixels,
 )
 
 # --------------------------------------------------------------------------- zones
 
 
 @njit(cache=True, nogil=True)
-def junction_zones_kernel(skeleton, disc, bridge_length, branch_table):
+def junction_zones_kernel(skeleton, pixels, disc, bridge_length, branch_table):
     """Junction zones of fitting.junction_zones: discs round junctions plus short bridges.
+
+    ``pixels``: the flat indices of the skeleton's pixels in raster order (the skeleton
+    step's list, or ``nonzero_flat`` of it), so that the image is not scanned for them.
 
     ``disc`` is the (odd, square) structuring element of the dilation; it is stamped
     mirrored at every junction pixel, which is what ``cv2.dilate`` computes. Returns
@@ -29,7 +31,8 @@ def junction_zones_kernel(skeleton, disc, bridge_length, branch_table):
     """
     height, width = skeleton.shape
     zones = np.zeros((height, width), np.uint8)
-    rows, cols = set_pixels(skeleton)
+    rows = pixels // width
+    cols = pixels - rows * width
     counts = branch_counts_at(skeleton, rows, cols, branch_table)
     size = disc.shape[0]
     half = size // 2

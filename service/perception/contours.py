@@ -26,5 +26,13 @@ def extract_contours(skeleton: np.ndarray) -> list[np.ndarray]:
         One ``(N, 2)`` ``int32`` array of ``[x, y]`` pixels per border, outer borders
         and hole borders alike, in the order OpenCV follows them.
     """
-    contours, _ = cv2.findContours(skeleton.astype(np.uint8), cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
+    skeleton = np.asarray(skeleton)
+    # A C-contiguous boolean skeleton is read as the 0/1 bytes it is: OpenCV's border
+    # following copies its input (it does not change it), so a converted copy of the
+    # whole image first would only cost a pass over it.
+    if skeleton.dtype == np.bool_ and skeleton.flags.c_contiguous:
+        image = skeleton.view(np.uint8)
+    else:
+        image = skeleton.astype(np.uint8)
+    contours, _ = cv2.findContours(image, cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
     return [contour.reshape(-1, 2) for contour in contours if len(contour) >= 2]

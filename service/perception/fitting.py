@@ -12,7 +12,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from service.perception import _fitting_kernels
+from service.perception import _fitting_kernels, _shared_kernels
 from service.perception.skeleton import _BRANCH_COUNT, as_uint8
 
 # Skeleton branches between two junction zones shorter than this many cable radii
@@ -20,7 +20,9 @@ from service.perception.skeleton import _BRANCH_COUNT, as_uint8
 BRIDGE_RADII = 4.0
 
 
-def junction_zones(skeleton: np.ndarray, radius: float) -> np.ndarray:
+def junction_zones(
+    skeleton: np.ndarray, radius: float, pixels: np.ndarray | None = None
+) -> np.ndarray:
     """Pixels near skeleton junctions, where strands meet or cross.
 
     A zone is a disc of ``1.5 * radius`` around each junction pixel, plus every short
@@ -32,6 +34,9 @@ def junction_zones(skeleton: np.ndarray, radius: float) -> np.ndarray:
     skeleton : ndarray of bool
     radius : float
         Typical cable half width in pixels.
+    pixels : ndarray of int64, optional
+        ``np.flatnonzero(skeleton)`` when the caller has it (the skeleton step lists
+        them): the image is not scanned for them.
 
     Returns
     -------
@@ -39,8 +44,11 @@ def junction_zones(skeleton: np.ndarray, radius: float) -> np.ndarray:
     """
     zone_radius = max(2, round(1.5 * radius))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * zone_radius + 1,) * 2)
+    skeleton = as_uint8(skeleton)
+    if pixels is None:
+        pixels = _shared_kernels.nonzero_flat(skeleton.reshape(-1))
     zones, _ = _fitting_kernels.junction_zones_kernel(
-        as_uint8(skeleton), disc, BRIDGE_RADII * radius, _BRANCH_COUNT
+        skeleton, pixels, disc, BRIDGE_RADII * radius, _BRANCH_COUNT
     )
     return zones.view(np.bool_)
 

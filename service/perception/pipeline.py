@@ -261,10 +261,13 @@ def detect_full(
     radius = max(estimate_radius(skeleton, distance=distance, pixels=pixels), 1.0)
     spur_length = 2.5 * radius if params.spur_length is None else params.spur_length
     if spur_length > 0:
-        pruned, removed = spurs_removed(skeleton, spur_length, pixels)
+        pruned, removed, pruned_pixels = spurs_removed(skeleton, spur_length, pixels)
         # A blob that thins to nothing but spurs is a short piece, not a side branch
         # (with nothing removed there is no such blob: the skeleton is kept as it is).
-        skeleton = short_blobs_kept(skeleton, pruned, spur_length) if removed else pruned
+        kept = short_blobs_kept(skeleton, pruned, spur_length) if removed else pruned
+        # The pixels listed are the pruned skeleton's; a blob's path put back is not in
+        # them (junction_zones lists them itself then).
+        skeleton, pixels = kept, (pruned_pixels if kept is pruned else None)
     watch.lap("skeleton")
     check(deadline, "skeleton")
 
@@ -274,7 +277,7 @@ def detect_full(
     check(deadline, "contours")
 
     # 4. Fitting: chains of l_s segments, split at tips and junction zones.
-    zones = junction_zones(skeleton, radius)
+    zones = junction_zones(skeleton, radius, pixels)
     pieces = fit_chains(contours, skeleton, zones, params.segment_length)
     watch.lap("fitting")
     check(deadline, "fitting")
@@ -473,10 +476,11 @@ def warm_up() -> None:
     skeleton, pixels = thin_listed(mask)
     distance = distance_transform(mask)
     radius = max(estimate_radius(skeleton, distance=distance, pixels=pixels), 1.0)
-    skeleton = spurs_removed(skeleton, 2.5 * radius, pixels)[0]
+    skeleton, _, pixels = spurs_removed(skeleton, 2.5 * radius, pixels)
+    zones = junction_zones(skeleton, radius, pixels)
     # Without the pixels (other callers): they are listed by a scan, compiled too.
     remove_spurs(skeleton, 2.5 * radius)
-    zones = junction_zones(skeleton, radius)
+    junction_zones(skeleton, radius)
     prune_overlaps(fit_chains(extract_contours(skeleton), skeleton, zones, 5.0), mask.shape)
     # 6. End fits (leaving out narrow ends) and the gap curves: the natural curve's three
     # shapes (straight, arc, Bezier) and the smooth one.

@@ -194,8 +194,8 @@ def spurs_removed(
     spur_length: float,
     pixels: np.ndarray | None = None,
     passes: int = 2,
-) -> tuple[np.ndarray, bool]:
-    """:func:`remove_spurs`, and whether it removed anything.
+) -> tuple[np.ndarray, bool, np.ndarray]:
+    """:func:`remove_spurs`, whether it removed anything, and the pixels it left.
 
     Parameters
     ----------
@@ -210,6 +210,8 @@ def spurs_removed(
     pruned : ndarray of bool
         A new array; equal to ``skeleton`` when nothing was removed.
     removed : bool
+    pruned_pixels : ndarray of int64
+        ``np.flatnonzero(pruned)``.
     """
     skeleton = as_uint8(skeleton).copy()
     if pixels is None:
@@ -224,7 +226,7 @@ def spurs_removed(
         # Thinned again as the boolean it is (0/1), which thin_listed copies as it is.
         thinned, pixels = thin_listed(skeleton.view(np.bool_))
         skeleton = as_uint8(thinned)
-    return skeleton.view(np.bool_), removed
+    return skeleton.view(np.bool_), removed, pixels
 
 
 def distance_transform(mask: np.ndarray) -> np.ndarray:

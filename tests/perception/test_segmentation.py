@@ -177,6 +177,21 @@ def test_histogram_equals_the_reference(seed):
     np.testing.assert_array_equal(_histogram(cue), reference.histogram(cue))
 
 
+def test_the_brightness_histogram_equals_a_count_of_the_largest_channel_on_any_size():
+    # Eight interleaved 32-bit histograms: every tail length (sizes not a multiple of
+    # eight), long runs of one level, every level, and an empty image.
+    rng = np.random.default_rng(11)
+    for trial in range(300):
+        height, width = rng.integers(0, 40, size=2) if trial else (0, 5)
+        image = rng.integers(0, 256, size=(height, width, 3), dtype=np.uint8)
+        if trial % 3 == 0:
+            image[: height // 2] = rng.integers(0, 256, size=3, dtype=np.uint8)
+        brightness, counts = _segmentation_kernels.brightness_histogram(image)
+        np.testing.assert_array_equal(brightness, image.max(axis=2))
+        assert counts.dtype == np.int64
+        np.testing.assert_array_equal(counts, np.bincount(image.max(axis=2).ravel(), minlength=256))
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_brightness_and_cleaning_equal_the_reference_on_scenes(seed):
     image = make_scene(seed=seed, width=320, height=240, n_cables=3).image

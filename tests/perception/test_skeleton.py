@@ -4,6 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
+from service.perception.fitting import junction_zones
 from service.perception.skeleton import (
     distance_transform,
     estimate_radius,
@@ -198,10 +199,16 @@ def test_the_listed_thinning_and_spur_removal_equal_the_plain_steps(seed):
         if skeleton.any():
             assert max(radius, 1.0) == max(reference.estimate_radius(mask, skeleton), 1.0)
         for spur in (0.5, 3.0, 2.5 * max(radius, 1.0), 25.0):
-            pruned, removed = spurs_removed(skeleton, spur, pixels)
+            pruned, removed, left = spurs_removed(skeleton, spur, pixels)
             expected = reference.remove_spurs(skeleton, spur)
             np.testing.assert_array_equal(pruned, expected)
             np.testing.assert_array_equal(remove_spurs(skeleton, spur), expected)
             assert removed == (not np.array_equal(expected, skeleton))
+            assert left.dtype == np.int64
+            np.testing.assert_array_equal(left, np.flatnonzero(expected))
+            # (A mask with no background has infinite distances: a plain radius then.)
+            zone_radius = min(max(radius, 1.0), 9.0)
+            zones = junction_zones(pruned, zone_radius, left)
+            np.testing.assert_array_equal(zones, junction_zones(pruned, zone_radius))
             if not removed:
                 assert short_blobs_kept(skeleton, pruned, spur) is pruned
