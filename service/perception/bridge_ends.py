@@ -117,8 +117,9 @@ def bridge_from_the_fits(
                 # there the bridge starts on the piece (the skeleton lies on the cable's
                 # middle), and its cut is traced from there, not from beside the cable,
                 # along the piece's own segment there (a longer chord is tilted by the
-                # bend the fit missed: :func:`segment_direction`) unless that segment
-                # runs into a cut's wedge (:func:`outer_joint_at_full_width`).
+                # bend the fit missed: :func:`segment_direction`), or along the fit's
+                # own direction where that segment runs into a cut's wedge
+                # (:func:`outer_joint_at_full_width`): there the piece is the hook's.
                 backwards = points if end.at_start else points[::-1]
                 inner = start_on_the_piece(
                     backwards, end.skip, span, *inner, distance=distance, width=end.width
@@ -418,8 +419,15 @@ def start_on_the_piece(
     segment there runs out to the cable's full width (:func:`outer_joint_at_full_width`,
     read only where the fit misses), along the piece's segment the start lies on
     (:func:`segment_direction`: the fit missed the piece because it bends within the
-    span, and the chord over half of it is tilted by half that bend). Returns the
-    position and the outward unit direction.
+    span, and the chord over half of it is tilted by half that bend); where that segment
+    runs out to a narrow joint instead (a cut's wedge: thinning hooked the tip into the
+    cut's corner, and the fit missed the piece for the hook, not for a bend), along the
+    fit's own direction: the fit leaves the hooked tip out, and the piece's own lines
+    there, its segment and the chord from it, are the hook's (on the moved starts of
+    doubled_back 460000-470000 and occluded 470000 at a narrow tip, the fit's direction
+    read 1.5 and 6.1 degrees off the cable's on average, the chord 6.2 and 14.9, the
+    segment 12.3 and 17.2; BENCHMARKS, ``dbk19``). Returns the position and the outward
+    unit direction.
     """
     arcs = arc_lengths(backwards)
     # The one point as points_along finds it (np.interp per coordinate), without its
@@ -432,6 +440,12 @@ def start_on_the_piece(
     if outer_joint_at_full_width(backwards, skip, distance, width, arcs):
         along = segment_direction(backwards, arcs, skip)
         return (on_piece, along) if along is not None else (position, direction)
+    if distance is not None and width > 0.0:
+        # Out to a narrow joint (a cut's wedge) the fit missed the piece where thinning
+        # hooked the tip into the cut's corner, not where the cable bends: the fit,
+        # which leaves that tip out, still runs along the cable, and the piece's own
+        # lines there (its segment, the chord from it) are the hook's.
+        return on_piece, direction
     beyond = np.flatnonzero((arcs > skip) & (arcs <= skip + 0.5 * span))
     if not beyond.size:
         return position, direction

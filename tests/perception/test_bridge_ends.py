@@ -15,7 +15,7 @@ from service.perception.bridge_ends import (
     ends_through_short_pieces,
     free_ends_beside_crossings,
 )
-from service.perception.geometry import arc_lengths, fit_where_skipped
+from service.perception.geometry import fit_where_skipped
 from service.perception.merging import ChainEnd, chain_ends
 from service.perception.paths import assemble_paths
 from service.synthetic import make_family_scene
@@ -578,20 +578,53 @@ def test_a_bridge_started_on_a_strand_bending_within_half_a_span_leaves_along_it
     np.testing.assert_allclose(inner[1].direction, [-1.0, 0.0], atol=1e-9)
 
 
-def test_a_bridge_started_on_a_strand_whose_tip_lies_in_a_cut_wedge_keeps_the_chord():
+def test_a_bridge_started_on_a_strand_whose_tip_lies_in_a_cut_wedge_leaves_along_the_fit():
     """The same strand with its tip joint where the mask is narrow (a cut at a slant,
     thinning's tip pulled into the cut's corner: occluded 450078, 440118, 430252, 400281,
     loops 400107, whose tip segments ran 13-32 degrees off): the segment out to it is
-    the cut's, and the bridge leaves along the chord over half a span, as before."""
+    the cut's, and the chord from it runs through the hook; the bridge leaves along the
+    fit's own direction where it begins (here, on a strand that also bends within the
+    span, that direction lags the bend as the fit does)."""
     pieces, distance = _bending_strand_and_mask()
     distance[15:26, 145:156] = np.minimum(distance[15:26, 145:156], 1.0)
     ends = [replace(end, width=5.0) for end in chain_ends(pieces, 40.0, skip=6.0)]
     inner, _ = bridge_from_the_fits(pieces, ends, [(1, 2, 0.0)], 40.0, [-1] * 4, distance)
-    backwards = pieces[0][::-1]
-    # The last joint within half the span past the start.
-    last = np.flatnonzero(arc_lengths(backwards) <= ends[1].skip + 20.0)[-1]
-    chord = np.array([150.0 + ends[1].skip, 20.0]) - backwards[last]
-    np.testing.assert_allclose(inner[1].direction, chord / np.hypot(*chord), atol=1e-9)
+    fitted = fit_where_skipped(pieces[0], False, 40.0, ends[1].skip)
+    np.testing.assert_allclose(inner[1].position, [150.0 + ends[1].skip, 20.0], atol=1e-9)
+    np.testing.assert_allclose(inner[1].direction, fitted[1], atol=1e-9)
+
+
+def test_a_bridge_started_on_a_hooked_tip_in_a_cut_wedge_leaves_along_the_cable():
+    """A straight strand (joints 10 px apart along y = 20, its tip at x = 150) whose tip
+    joint thinning hooked 3 px aside into a slanted cut's narrow corner: the fit, leaving
+    the tip out, misses the piece where it begins (the hooked segment), and the bridge
+    starts on the piece. The piece's own lines there are the hook's (its segment 17
+    degrees off, the chord over half a span 5 degrees); the fit's direction is the
+    cable's (`dbk19`: at narrow tips 1.5-6 degrees off on average, against the chord's
+    6-15). Main left along the chord."""
+    strand = np.column_stack([150.0 - 10.0 * np.arange(8), np.full(8, 20.0)])
+    strand[0] = [150.0, 23.0]
+    beyond = np.column_stack([60.0 - 10.0 * np.arange(5)[::-1], np.full(5, 20.0)])
+    mask = np.zeros((60, 200), np.uint8)
+    cv2.polylines(mask, [np.array([[80, 20], [150, 20]], np.int32)], False, 255, 11)
+    cv2.polylines(mask, [np.rint(beyond).astype(np.int32)], False, 255, 11)
+    distance = cv2.distanceTransform(mask, cv2.DIST_L2, 5)
+    distance[20:27, 146:156] = np.minimum(distance[20:27, 146:156], 1.0)
+    pieces = [strand[::-1], beyond]
+    ends = [replace(end, width=5.0) for end in chain_ends(pieces, 40.0, skip=6.0)]
+    fitted = fit_where_skipped(pieces[0], False, 40.0, ends[1].skip)
+    inner, _ = bridge_from_the_fits(pieces, ends, [(1, 2, 0.0)], 40.0, [-1] * 4, distance)
+    assert not np.allclose(inner[1].position, fitted[0])  # started on the piece
+    assert np.degrees(np.arccos(np.clip(inner[1].direction @ [1.0, 0.0], -1, 1))) <= 2.0
+
+
+@pytest.mark.parametrize(("family", "seed"), [("occluded", 440101)])
+def test_a_gap_from_a_hooked_tip_in_a_cut_wedge_is_right(family, seed):
+    """A tuning scene (true mask) whose gap end's tip lies in a cut's wedge and whose
+    bridge, no cut traced from it, left along the chord 29 degrees off (4.5 px against
+    4.2); along the fit's own direction (19 degrees) it is covered (2.9)."""
+    score, _ = evaluate_scene(make_family_scene(family, seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
 
 
 def test_a_segment_direction_is_the_segment_the_arc_lies_on():
