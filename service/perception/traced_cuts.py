@@ -29,10 +29,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from service.perception.appearance import cut_square
+from service.perception.appearance import cut_square, reads_own_tip
 from service.perception.cut_ends import REACH_PAST_SKIP_RADII, end_at_the_cut, on_mask
 from service.perception.end_readings import closed_on_itself
-from service.perception.gap_evidence import TURN_CUT_ENDS, cut_ends_alike
+from service.perception.gap_evidence import (
+    TURN_CUT_ENDS,
+    alike_and_short_enough_to_hide,
+    cut_ends_alike,
+)
 from service.perception.turn_joins import PIXEL_ROUNDING
 
 # Step (px) of the walk back along a piece from its tip (:func:`_start_on_the_piece`).
@@ -162,4 +166,21 @@ def traced_cut_tests(ends, mask, colours, radius, image, pieces=None, distance=N
 
         return passes
 
-    return (test(2), test(TURN_CUT_ENDS))
+    def one_cut_the_other_no_tip(i: int, j: int, curve: np.ndarray) -> bool:
+        # A strand cut along its bend into a round turn reads neither straight across
+        # nor lopsided: the cut is told from a cable's own tip by not being one.
+        cuts = [cut_square_at(i), cut_square_at(j)]
+        if not any(cuts):
+            return False
+        other = j if cuts[0] else i
+        readings = (ends[other], at_cut(other))
+        if any(
+            reads_own_tip(mask, end.position, end.direction, end.width, end.skip)
+            for end in readings[: 1 if readings[1] is readings[0] else 2]
+        ):
+            return False
+        return alike_and_short_enough_to_hide(
+            at_cut(i), at_cut(j), i, j, curve, mask, colours, radius, image
+        )
+
+    return (test(2), test(TURN_CUT_ENDS), one_cut_the_other_no_tip)
