@@ -181,18 +181,24 @@ def traced_cut_tests(ends, mask, colours, radius, image, pieces=None, distance=N
 
         return passes
 
+    tipless: dict[int, bool] = {}
+
+    def no_tip_at(index: int) -> bool:
+        # Whether the end's front, at its fit and at its traced cut, is no cable's own
+        # tip: once per end, the same for every curve tried.
+        if index not in tipless:
+            readings = (ends[index], at_cut(index))
+            tipless[index] = not any(
+                reads_own_tip(mask, end.position, end.direction, end.width, end.skip)
+                for end in readings[: 1 if readings[1] is readings[0] else 2]
+            )
+        return tipless[index]
+
     def one_cut_the_other_no_tip(i: int, j: int, curve: np.ndarray) -> bool:
         # A strand cut along its bend into a round turn reads neither straight across
         # nor lopsided: the cut is told from a cable's own tip by not being one.
         cuts = [cut_square_at(i), cut_square_at(j)]
-        if not any(cuts):
-            return False
-        other = j if cuts[0] else i
-        readings = (ends[other], at_cut(other))
-        if any(
-            reads_own_tip(mask, end.position, end.direction, end.width, end.skip)
-            for end in readings[: 1 if readings[1] is readings[0] else 2]
-        ):
+        if not any(cuts) or not no_tip_at(j if cuts[0] else i):
             return False
         return alike_and_short_enough_to_hide(
             at_cut(i), at_cut(j), i, j, curve, mask, colours, radius, image
