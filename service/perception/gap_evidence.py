@@ -88,16 +88,7 @@ def cut_ends_alike(
     strand at its corner or along the strand's bend into the turn, the front is
     lopsided, not straight across.
     """
-    if colours is None:
-        return False
-    if not ends_alike(colours, i, j, (a.width, b.width)):
-        return False
-    cable = cable_radius(radius, a.width, b.width)
-    # The open stretch reads the image along the curve: only for ends alike, and only
-    # where the curve is too long for its whole length to count.
-    if polyline_length(curve) > CUT_GAP_RADII * cable and (
-        open_length(curve, mask, image, (a, b), radius) > OPEN_HIDDEN_RADII * cable
-    ):
+    if not alike_and_short_enough_to_hide(a, b, i, j, curve, mask, colours, radius, image):
         return False
     square = [cut_square(mask, end.position, end.direction, end.width, end.skip) for end in (a, b)]
     if all(square):
@@ -106,6 +97,34 @@ def cut_ends_alike(
         return False
     other = b if square[0] else a
     return cut_or_lopsided(mask, other.position, other.direction, other.width, other.skip)
+
+
+def alike_and_short_enough_to_hide(
+    a,
+    b,
+    i: int,
+    j: int,
+    curve: np.ndarray,
+    mask: np.ndarray,
+    colours: EndColours | None,
+    radius: float,
+    image: np.ndarray | None = None,
+) -> bool:
+    """:func:`cut_ends_alike` but for the cuts: the ends ``a`` (end ``i``) and ``b`` (end
+    ``j``) look like one cable's (:func:`.appearance.ends_alike`), and ``curve`` is no
+    longer than an object of the background's own colour hides (:data:`CUT_GAP_RADII`
+    radii, or :data:`OPEN_HIDDEN_RADII` of it on open background, :func:`open_length`)."""
+    if colours is None:
+        return False
+    if not ends_alike(colours, i, j, (a.width, b.width)):
+        return False
+    cable = cable_radius(radius, a.width, b.width)
+    # The open stretch reads the image along the curve: only for ends alike, and only
+    # where the curve is too long for its whole length to count.
+    return not (
+        polyline_length(curve) > CUT_GAP_RADII * cable
+        and open_length(curve, mask, image, (a, b), radius) > OPEN_HIDDEN_RADII * cable
+    )
 
 
 # No bridge runs over more than this many radii of open background, however cheap its

@@ -296,7 +296,12 @@ def scraps_through_junctions(
     and its others lie where the object's rim or corner cuts it at a slant, so that its
     width is only ever read low (3.2 px for a cable of 4.4, 6.6 for one of 8.7). Joined
     through its junction to an end of its own colour, its cut end takes that strand's
-    half width where the stub's own is narrower: a cut only narrows.
+    half width where the stub's own is narrower: a cut only narrows. So does a stub
+    joined across a gap (neither end of the join in a junction) to an end of its own
+    colour: a strand's tip split off where the cable passes close to another (a
+    doubled-back cable's two strands nearly touching before the object) is such a stub,
+    its few joints all in the cut's narrowing (doubled_back 460113: 3.6 px for a cable
+    of 5.8). A scrap's colour is taken only through a junction.
 
     Parameters
     ----------
@@ -329,10 +334,13 @@ def scraps_through_junctions(
         for own, other in ((first, second), (second, first)):
             piece = ends[own].piece
             far = own ^ 1  # the piece's other end
+            through_junction = junction_of_end[own] >= 0 and (
+                junction_of_end[other] == junction_of_end[own]
+            )
+            across_a_gap = junction_of_end[own] < 0 and junction_of_end[other] < 0
             if (
-                junction_of_end[own] < 0
+                not (through_junction or across_a_gap)
                 or junction_of_end[far] >= 0
-                or junction_of_end[other] != junction_of_end[own]
                 or not known[other]
             ):
                 continue
@@ -344,7 +352,7 @@ def scraps_through_junctions(
                 ):
                     adjusted[far] = replace(ends[far], width=ends[other].width)
                 continue
-            if known[own] or polyline_length(pieces[piece]) >= SCRAP_RADII * radius:
+            if across_a_gap or known[own] or polyline_length(pieces[piece]) >= SCRAP_RADII * radius:
                 continue
             colour[far], spread[far] = colours.colour[other], colours.spread[other]
             adjusted[far] = replace(ends[far], width=ends[other].width)

@@ -11,7 +11,15 @@ along that direction, is the object's border across the cable.
 
 :func:`traced_cut_tests` gives the turn pass (:mod:`.turn_joins`) the two tests of the
 cuts (:func:`.gap_evidence.cut_ends_alike`: both ends cut square, or one square and the
-other lopsided) read at the traced cuts, after the tests of the usual readings.
+other lopsided) read at the traced cuts, after the tests of the usual readings, and a
+third: one end cut square at its traced cut, the other no cable's own tip. Where a
+doubled-back cable's turn is round (a half circle across the two cuts) and an object's
+border cuts both strands along their bends into it, the second strand's front, read along
+its fit or its traced direction, bulges past a round cap's bulge (the border crosses the
+bend, not the cable's straight run) and its sides differ by less than a lopsided cut's:
+neither straight across, lopsided nor a tip. What tells a turn's cut from two cables
+ending side by side is that neither end is a cable's own round tip
+(:func:`.appearance.reads_own_tip`), and one end is cut square.
 
 Where a strand bends into the turn right up to an object's corner, or into a short, steep
 cut, the skeleton runs on into the narrow wedge the object leaves, and an end left at its
@@ -29,10 +37,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from service.perception.appearance import cut_square
+from service.perception.appearance import cut_square, reads_own_tip
 from service.perception.cut_ends import REACH_PAST_SKIP_RADII, end_at_the_cut, on_mask
 from service.perception.end_readings import closed_on_itself
-from service.perception.gap_evidence import TURN_CUT_ENDS, cut_ends_alike
+from service.perception.gap_evidence import (
+    TURN_CUT_ENDS,
+    alike_and_short_enough_to_hide,
+    cut_ends_alike,
+)
 from service.perception.turn_joins import PIXEL_ROUNDING
 
 # Step (px) of the walk back along a piece from its tip (:func:`_start_on_the_piece`).
@@ -138,7 +150,14 @@ def traced_cut_tests(ends, mask, colours, radius, image, pieces=None, distance=N
     one cut and the other lopsided: :data:`.gap_evidence.TURN_CUT_ENDS`) with each end
     read at its traced cut (:func:`ends_at_the_cuts`, given ``pieces`` and ``distance``),
     as callables ``(i, j, curve)``; False where neither end reads otherwise than usual
-    (the usual tests said so)."""
+    (the usual tests said so). Then one end cut square at its traced cut (or at its fit,
+    where none is traced) and the other's front, read at its fit and at its traced cut,
+    no cable's own tip (:func:`.appearance.reads_own_tip`), the two ends alike and the
+    curve no longer than an object of the background's own colour hides
+    (:func:`.gap_evidence.alike_and_short_enough_to_hide`): a strand cut along its bend
+    into a round turn (the module's docstring). A turn found on it alone is bridged as
+    any gap is, from the cuts (:data:`.gap_evidence.TURN_EVIDENCE_ALONG_CURVE` has no
+    entry for it), which across a round turn's two cuts draw its half circle."""
     at_cut = ends_at_the_cuts(ends, mask, radius, pieces, distance)
     square: dict[int, bool] = {}
 
@@ -162,4 +181,27 @@ def traced_cut_tests(ends, mask, colours, radius, image, pieces=None, distance=N
 
         return passes
 
-    return (test(2), test(TURN_CUT_ENDS))
+    tipless: dict[int, bool] = {}
+
+    def no_tip_at(index: int) -> bool:
+        # Whether the end's front, at its fit and at its traced cut, is no cable's own
+        # tip: once per end, the same for every curve tried.
+        if index not in tipless:
+            readings = (ends[index], at_cut(index))
+            tipless[index] = not any(
+                reads_own_tip(mask, end.position, end.direction, end.width, end.skip)
+                for end in readings[: 1 if readings[1] is readings[0] else 2]
+            )
+        return tipless[index]
+
+    def one_cut_the_other_no_tip(i: int, j: int, curve: np.ndarray) -> bool:
+        # A strand cut along its bend into a round turn reads neither straight across
+        # nor lopsided: the cut is told from a cable's own tip by not being one.
+        cuts = [cut_square_at(i), cut_square_at(j)]
+        if not any(cuts) or not no_tip_at(j if cuts[0] else i):
+            return False
+        return alike_and_short_enough_to_hide(
+            at_cut(i), at_cut(j), i, j, curve, mask, colours, radius, image
+        )
+
+    return (test(2), test(TURN_CUT_ENDS), one_cut_the_other_no_tip)

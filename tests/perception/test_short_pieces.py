@@ -144,6 +144,31 @@ def test_a_stub_joined_through_its_crossing_takes_that_strands_width_where_its_o
         assert kept[3].width == case[0][3].width
 
 
+def test_a_stub_joined_across_a_gap_takes_its_strands_width_where_its_own_is_narrower():
+    # Piece 1: a strand's tip of 3 joints with a colour of its own, joined across a gap
+    # (no junction at either end of the join) to its strand's end 1, cut by an object
+    # at its other end 3: its joints all lie in the cut's narrowing (doubled_back
+    # 460113: 3.6 px for a cable of 5.8, its round turn never joined as unlike).
+    ends = [_end(0, True, 5.8), _end(0, False, 5.8), _end(1, True, 3.6), _end(1, False, 3.6)]
+    red = [50.0, 60.0, 40.0]
+    colours = EndColours(np.array([red] * 4), np.full(4, 2.0))
+    junction_of_end = [-1, -1, -1, -1]
+    pieces = [np.array([[0.0, 0.0], [200.0, 0.0]]), np.array([[0, 0], [6, 0], [13.0, 0]])]
+    joins = [(1, 2, 0.2)]
+    seen, _ = scraps_through_junctions(ends, colours, joins, junction_of_end, pieces, 5.0, 11)
+    assert seen[3].width == 5.8 and seen[:3] == ends[:3]
+    # A piece with a middle of its own, or one joined into a junction on one side only
+    # (a crossing's other strand): no change.
+    for case_pieces, case_junctions in (
+        ([pieces[0], np.linspace([0.0, 0.0], [60.0, 0.0], 12)], junction_of_end),
+        (pieces, [-1, 0, -1, -1]),
+    ):
+        kept, _ = scraps_through_junctions(
+            ends, colours, joins, case_junctions, case_pieces, 5.0, 11
+        )
+        assert kept[3].width == 3.6
+
+
 def test_a_loops_turn_under_an_object_beside_a_crossing_is_joined_from_a_stub():
     # Tuning scene loops 280175: a cable's loop turns under a box just past a crossing;
     # the strand's stub between the crossing and the box, read 6.6 px wide where the

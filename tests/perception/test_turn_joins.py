@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from schemas import DetectParams
-from service.evaluation.synthetic_eval import evaluate_scene
+from service.evaluation.synthetic_eval import distance_to_polyline, evaluate_scene
+from service.perception import detect
 from service.perception.gap_evidence import strands_turn_out_of_sight
 from service.perception.merging import merge_chains
 from service.perception.pairing import cheapest_pairing
@@ -414,3 +415,49 @@ def test_a_doubled_back_cables_bulb_is_drawn_from_where_its_strands_are_last_see
     bulb14, docs/BENCHMARKS.md)."""
     score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
+
+
+def _round_turn_cut_on_its_bend():
+    """A cable of half width 5 doubled back under an object of the ground's own colour:
+    two strands 30 px apart run in from the right, and its turn is the half circle across
+    them (radius 15, bulging left from x = 130). The object, a square standing on its
+    corner (half diagonal 32 px, its right corner at (131, 115)), hides the turn's left
+    part: its borders cut both strands along their bends into the turn, at a slant.
+    Returns the image, the mask (the cable where the object leaves it seen), the
+    centreline and the object's outline."""
+    image = np.full((240, 320, 3), (70, 70, 70), np.uint8)
+    upper = np.column_stack([np.linspace(250.0, 130.0, 121), np.full(121, 100.0)])
+    angles = np.linspace(-0.5 * np.pi, -1.5 * np.pi, 200)
+    arc = np.column_stack([130.0 + 15.0 * np.cos(angles), 115.0 + 15.0 * np.sin(angles)])
+    lower = np.column_stack([np.linspace(130.0, 250.0, 121), np.full(121, 130.0)])
+    line = np.vstack([upper, arc, lower])
+    cable = np.zeros(image.shape[:2], np.uint8)
+    cv2.polylines(cable, [np.round(line * 4).astype(np.int32)], False, 1, 10, cv2.LINE_8, 2)
+    corners = np.radians([0.0, 90.0, 180.0, 270.0])
+    outline = np.column_stack([99.0 + 32.0 * np.cos(corners), 115.0 + 32.0 * np.sin(corners)])
+    hiding = np.zeros_like(cable)
+    cv2.fillPoly(hiding, [np.round(outline).astype(np.int32)], 1)
+    mask = (cable > 0) & (hiding == 0)
+    image[mask] = (40, 130, 230)
+    return image, mask, line, outline
+
+
+def test_a_round_turn_cut_along_its_bends_by_an_object_of_the_grounds_colour_is_one_chain():
+    """Neither strand's cut reads straight across at its fit (one front cannot be read,
+    the other is lopsided), and at their traced cuts one reads square, the other bulges
+    past a cable's round cap (the cut runs along its bend into the turn), neither square
+    nor lopsided: no cut test passed and the turn was left as two chains. The front that
+    is no cable's own tip beside a square cut is the turn's evidence
+    (``traced_cuts.traced_cut_tests``); the bridge, from the cuts, follows the half
+    circle to within the cable's half width."""
+    image, mask, line, outline = _round_turn_cut_on_its_bend()
+    chains = detect(image, mask=mask).chains
+    assert len(chains) == 1
+    hidden = np.array(
+        [
+            cv2.pointPolygonTest(outline.astype(np.float32), tuple(map(float, p)), False) > 0
+            for p in line
+        ]
+    )
+    assert hidden.sum() > 20
+    assert distance_to_polyline(line[hidden], np.asarray(chains[0].points, float)).max() < 5.0
