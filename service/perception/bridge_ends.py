@@ -437,15 +437,17 @@ def start_on_the_piece(
     )
     if float(np.hypot(*(position - on_piece))) <= FIT_MISS_PX:
         return position, direction
-    if outer_joint_at_full_width(backwards, skip, distance, width, arcs):
-        along = segment_direction(backwards, arcs, skip)
-        return (on_piece, along) if along is not None else (position, direction)
     if distance is not None and width > 0.0:
+        if outer_joint_at_full_width(backwards, skip, distance, width, arcs):
+            along = segment_direction(backwards, arcs, skip)
+            return (on_piece, along) if along is not None else (position, direction)
         # Out to a narrow joint (a cut's wedge) the fit missed the piece where thinning
         # hooked the tip into the cut's corner, not where the cable bends: the fit,
         # which leaves that tip out, still runs along the cable, and the piece's own
         # lines there (its segment, the chord from it) are the hook's.
         return on_piece, direction
+    # Without the width (a crossing's end: ends_clear_of_crossing), along the chord over
+    # half the span.
     beyond = np.flatnonzero((arcs > skip) & (arcs <= skip + 0.5 * span))
     if not beyond.size:
         return position, direction

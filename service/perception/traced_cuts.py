@@ -187,10 +187,11 @@ def traced_cut_tests(ends, mask, colours, radius, image, pieces=None, distance=N
         # Whether the end's front, at its fit and at its traced cut, is no cable's own
         # tip: once per end, the same for every curve tried.
         if index not in tipless:
-            readings = (ends[index], at_cut(index))
+            fitted, traced = ends[index], at_cut(index)
+            readings = (fitted,) if traced is fitted else (fitted, traced)
             tipless[index] = not any(
                 reads_own_tip(mask, end.position, end.direction, end.width, end.skip)
-                for end in readings[: 1 if readings[1] is readings[0] else 2]
+                for end in readings
             )
         return tipless[index]
 
