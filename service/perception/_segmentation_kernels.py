@@ -251,6 +251,26 @@ def fill_small_holes(mask, max_hole_area):
     _fill_holes_next_to(mask, foreground, n, max_hole_area)
 
 
+# Pixels per block of the seeds' scan: a block with no seed is passed over after one
+# comparison of its bytes with the seed level, which the compiler vectorizes.
+SEED_BLOCK = 64
+
+
+@njit(cache=True, nogil=True)
+def first_level_above(low, high):
+    """The first level 0-255 above both thresholds, 256 when none is.
+
+    A level is above both exactly when it is at least this one (the test is monotone in
+    the level; a NaN threshold has none above it): ``level > high and level > low``,
+    each level compared as ``threshold_and_clean`` compares its ``uint8`` pixels.
+    """
+    for level in range(256):
+        value = np.uint8(level)
+        if (value > high) & (value > low):
+            return level
+    return 256
+
+
 @njit(cache=True, nogil=True)
 def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
     """Hysteresis threshold, speck removal and hole filling in one pass over the result.
@@ -258,17 +278,19 @@ def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
     The hysteresis keeps the pixels above ``low`` that are 8-connected to a pixel above
     ``high``; the result is that mask after ``segmentation.clean_mask(mask, min_area,
     max_hole_area)`` (with both 0, the plain hysteresis). Each flood fill of the
-    hysteresis is a whole 8-connected
-    component of the result (two floods never touch, or they would be one), so a flood
-    of fewer than ``min_area`` pixels is exactly a speck; the kept floods list every
-    foreground pixel, so the holes are found next to them without a scan.
-    ``weak_count`` is the number of pixels above ``low`` (from the histogram).
+    hysteresis is a whole 8-connected component of the result (two floods never touch,
+    or they would be one), so a flood of fewer than ``min_area`` pixels is exactly a
+    speck. ``weak_count`` is the number of pixels above ``low`` (from the histogram).
 
-    The seeds (above both thresholds) are marked in one branch-free pass that the
-    compiler vectorizes, then visited in raster order eight at a time, skipping eight
-    unmarked pixels at once; a flood finds the neighbours of a pixel away from the
-    image's border by flat offsets, without bounds checks. The floods, and so the order
-    of ``members``, are those of a plain raster scan.
+    The seeds (above both thresholds: at least ``first_level_above(low, high)``) are
+    visited in raster order, blocks of ``SEED_BLOCK`` pixels without one passed over
+    (told by a first pass the compiler vectorizes, without an image of marks); a flood
+    finds the neighbours of a pixel away from the image's border by flat offsets,
+    without bounds checks. The floods, and so the order of ``members``, are those of a
+    plain raster scan. A small hole borders the foreground 4-connected, so only the
+    kept pixels with a 4-neighbour at or under ``low`` (every such neighbour is
+    background: a pixel above ``low`` next to a flood joins it), and those on the
+    image's border, are listed for the holes' fills, as the floods meet them.
     """
     height, width = cue.shape
     size = height * width
@@ -278,23 +300,33 @@ def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
     offsets = _neighbour_offsets(width, 8)
     # Kept components fill ``members`` from the front, removed ones from the back.
     members = np.empty(max(weak_count, 1), np.int64)
+    # The kept pixels a hole can border: a speck's are dropped with it.
+    edges = np.empty(max(weak_count, 1), np.int64)
     speck = np.empty(max(min_area, 1), np.int64)
-    # Whole 8-byte words, the tail's bytes unmarked.
-    seeds = np.zeros((size + 7) // 8 * 8, np.uint8)
-    for i in range(size):
-        level = flat_cue[i]
-        seeds[i] = (level > high) & (level > low)
-    seed_words = seeds.view(np.uint64)
+    seed_level = first_level_above(low, high)
+    seed = np.uint8(min(seed_level, 255))
+    n_blocks = (size + SEED_BLOCK - 1) // SEED_BLOCK if seed_level < 256 else 0
+    whole_blocks = size // SEED_BLOCK
+    has_seed = np.zeros(n_blocks + 1, np.uint8)
+    for block in range(min(whole_blocks, n_blocks)):
+        hit = 0
+        for i in range(SEED_BLOCK * block, SEED_BLOCK * block + SEED_BLOCK):
+            hit |= flat_cue[i] >= seed
+        has_seed[block] = hit
+    if n_blocks > whole_blocks:
+        has_seed[whole_blocks] = 1  # the short last block: looked at pixel by pixel
     kept = 0
     removed = 0
-    for word in range(seed_words.size):
-        if seed_words[word] == 0:
+    n_edges = 0
+    for block in range(n_blocks):
+        if has_seed[block] == 0:
             continue
-        for index in range(8 * word, 8 * word + 8):
-            if not seeds[index] or flat_result[index]:
+        for index in range(SEED_BLOCK * block, min(SEED_BLOCK * block + SEED_BLOCK, size)):
+            if flat_cue[index] < seed or flat_result[index]:
                 continue
             flat_result[index] = 1
             members[kept] = index
+            edges_before = n_edges
             count = 1
             head = 0
             while head < count:
@@ -303,13 +335,29 @@ def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
                 r = here // width
                 c = here - r * width
                 if 0 < r < height - 1 and 0 < c < width - 1:
-                    for k in range(8):
+                    # The four 4-connected neighbours come first (ORTHOGONAL_FIRST).
+                    edge = False
+                    for k in range(4):
+                        there = here + offsets[k]
+                        if not flat_result[there]:
+                            if flat_cue[there] > low:
+                                flat_result[there] = 1
+                                members[kept + count] = there
+                                count += 1
+                            else:
+                                edge = True
+                    for k in range(4, 8):
                         there = here + offsets[k]
                         if not flat_result[there] and flat_cue[there] > low:
                             flat_result[there] = 1
                             members[kept + count] = there
                             count += 1
+                    if edge:
+                        edges[n_edges] = here
+                        n_edges += 1
                     continue
+                edges[n_edges] = here
+                n_edges += 1
                 for k in range(8):
                     rr = r + ORTHOGONAL_FIRST_DR[k]
                     cc = c + ORTHOGONAL_FIRST_DC[k]
@@ -321,6 +369,7 @@ def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
             if count >= min_area:
                 kept += count
             else:
+                n_edges = edges_before
                 # Still marked in ``result`` so no pixel of it seeds again; cleared below.
                 # Through a buffer: the two stretches of ``members`` may overlap.
                 speck[:count] = members[kept : kept + count]
@@ -330,7 +379,7 @@ def threshold_and_clean(cue, low, high, weak_count, min_area, max_hole_area):
     for i in range(removed):
         flat_result[members[members.size - 1 - i]] = 0
     if max_hole_area > 0:
-        _fill_holes_next_to(result, members, kept, max_hole_area)
+        _fill_holes_next_to(result, edges, n_edges, max_hole_area)
     return result
 
 
