@@ -230,6 +230,63 @@ def test_threshold_and_clean_equals_hysteresis_then_clean_mask(seed, shape):
             np.testing.assert_array_equal(fused.view(bool), expected)
 
 
+def test_the_first_level_above_both_thresholds_is_where_the_pixel_test_starts_to_pass():
+    levels = np.arange(256, dtype=np.uint8)
+    rng = np.random.default_rng(0)
+    pairs = [(float(a), float(b)) for a, b in rng.uniform(-20.0, 280.0, (300, 2))]
+    pairs += [(float(a), float(b)) for a, b in rng.integers(-2, 258, (200, 2))]
+    pairs += [(np.nan, 100.0), (100.0, np.nan), (np.nan, np.nan), (-np.inf, np.inf)]
+    pairs += [(254.5, -1.0), (255.0, 0.0), (-np.inf, -np.inf), (127.0, 127.0)]
+    for low, high in pairs:
+        passing = np.flatnonzero((levels > high) & (levels > low))
+        expected = int(passing[0]) if passing.size else 256
+        assert _segmentation_kernels.first_level_above(low, high) == expected, (low, high)
+        # The test is monotone in the level: every level from the first passes.
+        assert passing.size == 256 - expected
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_threshold_and_clean_equals_the_reference_on_many_random_images(seed):
+    # Sizes on and off the seeds' blocks of 64 pixels (a short last block, images of
+    # one row or column), noise, blurred noise and two-level images with components
+    # and holes on every border, thresholds anywhere (NaN included).
+    rng = np.random.default_rng(seed)
+    for shape in ((0, 0), (0, 9), (9, 0)):
+        empty = _segmentation_kernels.threshold_and_clean(
+            np.zeros(shape, np.uint8), -1.0, -1.0, 0, 1, 1
+        )
+        assert empty.shape == shape
+    for case in range(400):
+        height, width = (int(n) for n in rng.integers(1, 70, 2))
+        kind = case % 3
+        if kind == 0:
+            cue = rng.integers(0, 256, (height, width)).astype(np.uint8)
+        elif kind == 1:
+            cue = cv2.GaussianBlur(
+                rng.integers(0, 256, (height, width)).astype(np.uint8), (5, 5), 0
+            )
+        else:
+            bright = rng.random((height, width)) < rng.uniform(0.2, 0.8)
+            cue = np.where(
+                bright, rng.integers(150, 256, bright.shape), rng.integers(0, 120, bright.shape)
+            )
+            cue = cue.astype(np.uint8)
+        low, high = (float(v) for v in rng.uniform(-10.0, 270.0, 2))
+        if case % 7 == 0:
+            low = float(rng.integers(0, 256))
+            high = low + float(rng.integers(0, 3))
+        if case % 41 == 0:
+            low = np.nan
+        weak_count = int(np.count_nonzero(cue > low))
+        min_area = int(rng.choice([0, 1, 3, 30, 120]))
+        max_hole = int(rng.choice([0, 1, 4, 12, 60]))
+        fused = _segmentation_kernels.threshold_and_clean(
+            cue, low, high, weak_count, min_area, max_hole
+        )
+        expected = reference.clean_mask(reference.hysteresis(cue, low, high), min_area, max_hole)
+        np.testing.assert_array_equal(fused.view(bool), expected, err_msg=f"case {case}")
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_full_blocks_equal_opencvs_area_resize(seed):
     rng = np.random.default_rng(seed)
