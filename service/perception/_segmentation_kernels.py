@@ -396,13 +396,26 @@ def full_blocks(mask, block):
     rows, cols = height // block, width // block
     # Per column, the set pixels of the block's rows: whole rows added at a time, in
     # bytes (at most ``block`` each, under 256; 64 columns to a vector instruction).
-    column_counts = np.empty(width, np.uint8)
+    # Whole 32-bit words, the spare bytes 0.
+    column_counts = np.zeros((width + 3) // 4 * 4, np.uint8)
+    quads = column_counts.view(np.uint32)
     full = np.empty((rows, cols), np.uint8)
     for block_row in range(rows):
         column_counts[:] = 0
         for row in range(block_row * block, (block_row + 1) * block):
             for col in range(width):
                 column_counts[col] += mask[row, col]
+        if block == 4:
+            # A block's four counts are one 32-bit word: times 0x01010101 their sum (at
+            # most 16, no carry, in either byte order) lands in its top byte. One
+            # multiplication per block, not a loop of four, which cost ten times the
+            # rows' adds.
+            for block_col in range(cols):
+                total = ((quads[block_col] * np.uint32(0x01010101)) >> np.uint32(24)) & np.uint32(
+                    0xFF
+                )
+                full[block_row, block_col] = 2 * total > 16
+            continue
         for block_col in range(cols):
             total = 0
             for col in range(block_col * block, (block_col + 1) * block):

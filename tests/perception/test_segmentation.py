@@ -302,6 +302,25 @@ def test_full_blocks_equal_opencvs_area_resize(seed):
     assert _segmentation_kernels.full_blocks(half, 4).tolist() == [[0, 0], [0, 1]]
 
 
+def test_full_blocks_of_four_equal_opencvs_area_resize_on_many_masks():
+    # Blocks of 4 add each block's four column counts as one word: every count 0 to 4,
+    # sums of exactly half (8 of 16, which OpenCV rounds to 0), and widths of an odd
+    # number of blocks (the count words' last one short of the row's end).
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        height, width = 4 * rng.integers(1, 30, 2)
+        mask = (rng.random((height, width)) < rng.uniform(0.2, 0.8)).astype(np.uint8)
+        found = _segmentation_kernels.full_blocks(mask, 4)
+        np.testing.assert_array_equal(found, reference.full_blocks(mask, 4))
+    every = np.zeros((4, 4 * 17), np.uint8)
+    for count in range(17):  # block k has its first k pixels set, row by row
+        block = np.zeros(16, np.uint8)
+        block[:count] = 1
+        every[:, 4 * count : 4 * count + 4] = block.reshape(4, 4)
+    expected = [[int(2 * count > 16) for count in range(17)]]
+    assert _segmentation_kernels.full_blocks(every, 4).tolist() == expected
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_own_threshold_kernels_equal_the_reference(seed):
     rng = np.random.default_rng(seed)
