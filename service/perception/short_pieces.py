@@ -345,8 +345,10 @@ def scraps_through_junctions(
             piece = ends[own].piece
             far = own ^ 1  # the piece's other end
             through_junction = (
-                junction_of_end[own] >= 0 and junction_of_end[other] == junction_of_end[own]
-            ) or (own, other) in paired_in_junctions or (other, own) in paired_in_junctions
+                (junction_of_end[own] >= 0 and junction_of_end[other] == junction_of_end[own])
+                or (own, other) in paired_in_junctions
+                or (other, own) in paired_in_junctions
+            )
             across_a_gap = (
                 not through_junction and junction_of_end[own] < 0 and junction_of_end[other] < 0
             )
