@@ -4,10 +4,12 @@ Where a cable doubled back on itself touches all along up to an object that hide
 turn, thinning draws one line down the middle of the two strands, from the three-way
 junction where they part to the object's border, and no junction there: the line ends
 in a free end. Where only one strand stops at the object and the other bends away
-beside it, the line runs on from the middle of the two into the strand that goes on.
-Either way the line belongs to both strands along the stretch where the mask is both
-strands wide. :func:`split_stretches_ending` splits such a line into one piece per
-strand, as :func:`.touching.split_touching_strands` splits a line between two
+beside it, the line runs on from the middle of the two into the strand that goes on,
+or, where the zone there takes the line's end with the going-on strand's tip, ends in a
+junction of two ends whose other is that strand's own piece. Either way the line belongs
+to both strands along the stretch where the mask is both strands wide.
+:func:`split_stretches_ending` and :func:`split_stretches_going_on` split such a line
+into one piece per strand, as :func:`.touching.split_touching_strands` splits a line between two
 junctions, and leaves the strands' tips at the object free: whether the cable turns
 round out of sight there is the turn pass's question (:mod:`.turn_joins`), asked of
 the strands' own ends.
