@@ -871,6 +871,7 @@ def merge_chains(
             pieces,
             radius,
             MIDDLE_JOINTS,
+            frozenset(touching.pairs),
         )
         widths = np.array([end.width for end in seen], np.float64)
         judged = evidence_ends(seen, ends, seen_from)

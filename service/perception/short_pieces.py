@@ -275,6 +275,7 @@ def scraps_through_junctions(
     pieces: list[np.ndarray],
     radius: float,
     middle_joints: int = 0,
+    paired_in_junctions: frozenset[tuple[int, int]] = frozenset(),
 ) -> tuple[list, EndColours]:
     """``ends`` and ``colours`` with every scrap joined through its junction seen as
     the strand it continues.
@@ -301,7 +302,13 @@ def scraps_through_junctions(
     colour: a strand's tip split off where the cable passes close to another (a
     doubled-back cable's two strands nearly touching before the object) is such a stub,
     its few joints all in the cut's narrowing (doubled_back 460113: 3.6 px for a cable
-    of 5.8). A scrap's colour is taken only through a junction.
+    of 5.8). A scrap's colour is taken only through a junction: one whose ends
+    ``junction_of_end`` still names, or one of ``paired_in_junctions``, the pairs made
+    in a junction that was handled before the matching (the two strands through each end
+    of a touching stretch, :func:`.touching.split_touching_strands`, whose ends no longer
+    name it). A doubled-back cable's strands that nearly touch right before the object
+    leave such a scrap at the cut, between the stretch's end and the object: paired with
+    the strand it continues, it is that strand (doubled_back 480022).
 
     Parameters
     ----------
@@ -319,6 +326,9 @@ def scraps_through_junctions(
     middle_joints : int, optional
         The fewest joints a piece has a middle with; shorter stubs take their strand's
         width (0: none do).
+    paired_in_junctions : frozenset of (int, int), optional
+        Joined pairs of ends that met in a junction ``junction_of_end`` no longer names
+        (either order).
 
     Returns
     -------
@@ -334,10 +344,14 @@ def scraps_through_junctions(
         for own, other in ((first, second), (second, first)):
             piece = ends[own].piece
             far = own ^ 1  # the piece's other end
-            through_junction = junction_of_end[own] >= 0 and (
-                junction_of_end[other] == junction_of_end[own]
+            through_junction = (
+                (junction_of_end[own] >= 0 and junction_of_end[other] == junction_of_end[own])
+                or (own, other) in paired_in_junctions
+                or (other, own) in paired_in_junctions
             )
-            across_a_gap = junction_of_end[own] < 0 and junction_of_end[other] < 0
+            across_a_gap = (
+                not through_junction and junction_of_end[own] < 0 and junction_of_end[other] < 0
+            )
             if (
                 not (through_junction or across_a_gap)
                 or junction_of_end[far] >= 0
@@ -355,7 +369,8 @@ def scraps_through_junctions(
             if across_a_gap or known[own] or polyline_length(pieces[piece]) >= SCRAP_RADII * radius:
                 continue
             colour[far], spread[far] = colours.colour[other], colours.spread[other]
-            adjusted[far] = replace(ends[far], width=ends[other].width)
+            # A strand whose width could not be read (0) leaves the scrap its own.
+            adjusted[far] = replace(ends[far], width=ends[other].width or ends[far].width)
     return adjusted, EndColours(colour, spread)
 
 

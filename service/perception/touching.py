@@ -40,7 +40,7 @@ from service.perception.strand_sides import (
     point_in,
     side_offsets,
 )
-from service.perception.touching_ends import split_stretches_ending
+from service.perception.touching_ends import split_stretches_ending, split_stretches_going_on
 
 
 @dataclass
@@ -148,9 +148,16 @@ def split_touching_strands(
         if sorted(len(members.get(labels[end], ())) for end in (2 * index, 2 * index + 1)) == [0, 3]
         and not (leaving is not None and leaving[2 * index : 2 * index + 2].any())
     ]
+    # A stretch whose one strand goes on as a piece of its own where the object cuts the
+    # other (:mod:`.touching_ends`): a three-way junction at one end, two ends at the other.
+    going_on = [
+        index
+        for index in range(len(pieces))
+        if sorted(len(members.get(labels[end], ())) for end in (2 * index, 2 * index + 1)) == [2, 3]
+    ]
     four_way = [label for label, ends in members.items() if len(ends) == 4]
     crowded = [label for label, ends in members.items() if len(ends) in (5, 6)]
-    if not candidates and not four_way and not ending and not crowded:
+    if not candidates and not four_way and not ending and not crowded and not going_on:
         return result
     # Every piece's half width (median distance at its joints), once: the shared pieces
     # and the four-way junctions (several per photograph) read them piece by piece.
@@ -184,6 +191,10 @@ def split_touching_strands(
     if ending:
         handled |= split_stretches_ending(
             ending, result, positions, directions, labels, members, distance, leaving, widths
+        )
+    if going_on:
+        handled |= split_stretches_going_on(
+            going_on, result, positions, directions, labels, members, distance, leaving, widths
         )
     # A touching stretch short enough for the junction zone to take whole leaves no
     # shared piece: one junction of four ends.

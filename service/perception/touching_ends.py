@@ -4,10 +4,12 @@ Where a cable doubled back on itself touches all along up to an object that hide
 turn, thinning draws one line down the middle of the two strands, from the three-way
 junction where they part to the object's border, and no junction there: the line ends
 in a free end. Where only one strand stops at the object and the other bends away
-beside it, the line runs on from the middle of the two into the strand that goes on.
-Either way the line belongs to both strands along the stretch where the mask is both
-strands wide. :func:`split_stretches_ending` splits such a line into one piece per
-strand, as :func:`.touching.split_touching_strands` splits a line between two
+beside it, the line runs on from the middle of the two into the strand that goes on,
+or, where the zone there takes the line's end with the going-on strand's tip, ends in a
+junction of two ends whose other is that strand's own piece. Either way the line belongs
+to both strands along the stretch where the mask is both strands wide.
+:func:`split_stretches_ending` and :func:`split_stretches_going_on` split such a line
+into one piece per strand, as :func:`.touching.split_touching_strands` splits a line between two
 junctions, and leaves the strands' tips at the object free: whether the cable turns
 round out of sight there is the turn pass's question (:mod:`.turn_joins`), asked of
 the strands' own ends.
@@ -19,10 +21,12 @@ import numpy as np
 
 from service.perception.appearance import WIDTH_AGREEMENT, cut_or_lopsided
 from service.perception.geometry import arc_lengths, points_along, polyline_length
+from service.perception.junction_widths import narrowest
 from service.perception.strand_sides import (
     SIDE_BY_SIDE_WIDTH_FRACTION,
     end_kind,
     offset_strands,
+    point_in,
     side_offsets,
 )
 
@@ -131,6 +135,101 @@ def split_stretches_ending(
         result.partings.append(tips)
         if turn:
             result.turns.append(tips)
+        handled.add(labels[end])
+    return handled
+
+
+def split_stretches_going_on(
+    candidates, result, positions, directions, labels, members, distance, leaving, widths
+) -> set[int]:
+    """Split the ``candidates`` (pieces with a three-way junction at one end and a
+    junction of two ends at the other) that are two touching strands all along, one of
+    which stops where an object cuts it at the two-end junction while the other goes on
+    there as a piece of its own, into ``result`` (a :class:`.touching.TouchingSplit`);
+    the three-way junctions handled.
+
+    Where a cable doubled back on itself touches up to the object that hides its turn,
+    and the strand that goes on bends away beside the object a little before the other
+    stops, the zone there takes the line's end, the strand going on and the cut strand's
+    tip together: a junction of two ends, the line's and the going-on strand's. Paired
+    as it stands, the line (both strands) would run on into the one strand, and the cut
+    strand's tip, the turn's other end, would be no end at all (doubled_back 480099,
+    440060: a chain too many). As :func:`split_stretches_ending` reads a line that runs
+    on into the strand going on itself, a candidate is split when its three-way
+    junction's two other strands are long (:data:`RUN_ON_STRETCH_WIDTHS`, or going on
+    through another junction or out of the picture) and alike in width, the mask along
+    the whole line keeps ``SIDE_BY_SIDE_WIDTH_FRACTION`` of their two widths together,
+    and the piece going on is as wide as one of the two
+    (:data:`.appearance.WIDTH_AGREEMENT`). The strand on the side the piece going on lies
+    keeps the two-end junction (the matching pairs it with that piece); the other is
+    run straight on to the mask's border, where the object cuts it, its tip free.
+
+    ``widths``: every piece's half width (median distance at its joints).
+    """
+    handled: set[int] = set()
+    pieces = list(result.pieces)
+    for index in candidates:
+        at_junction = 0 if len(members.get(labels[2 * index], ())) == 3 else 1
+        end, far = 2 * index + at_junction, 2 * index + 1 - at_junction
+        if labels[end] in handled:
+            continue
+        beyond = [other for other in members[labels[far]] if other != far]
+        if len(beyond) != 1 or beyond[0] // 2 == index:
+            continue
+        beyond = beyond[0]
+        side = end_kind(
+            end, index, labels, members, positions, directions, pieces, float(widths[index])
+        )
+        if side is None:
+            continue
+        # Both strands long where they part (as split_stretches_ending), and alike.
+        if any(
+            polyline_length(pieces[other // 2]) < RUN_ON_STRETCH_WIDTHS * 2 * widths[index]
+            and labels[other ^ 1] < 0
+            and not (leaving is not None and leaving[other ^ 1])
+            for other in side
+        ):
+            continue
+        side_widths = [float(widths[other // 2]) for other in side]
+        if min(side_widths) < WIDTH_AGREEMENT * max(side_widths):
+            continue
+        strands = float(sum(side_widths))
+        points = np.asarray(pieces[index], np.float64)
+        if narrowest(points, distance, float(widths[index]), short_at_middle=True) < (
+            SIDE_BY_SIDE_WIDTH_FRACTION * strands
+        ):
+            continue
+        going_on = float(widths[beyond // 2])
+        strand = float(np.mean(side_widths))
+        if min(going_on, strand) < WIDTH_AGREEMENT * max(going_on, strand):
+            continue
+        # Which side of the line the piece going on leaves by, read clear of the zone
+        # (thinning bends its tip toward the line's), in the piece's own order (the
+        # sides offset_strands puts its strands on).
+        heading = directions[far] if far % 2 else -directions[far]
+        offset = side_offsets(
+            heading, positions[far], [point_in(pieces, beyond, float(widths[index]))]
+        )[0]
+        left, right = offset_strands(points, float(widths[index]))
+        cut_left = offset >= 0  # the piece going on lies on the right: the left stops
+        stops = left if cut_left else right
+        stops = stops if far % 2 else stops[::-1]  # its tip at the two-end junction last
+        stops = _run_on(stops, distance, strands)
+        stops = stops if far % 2 else stops[::-1]
+        left, right = (stops, right) if cut_left else (left, stops)
+        right_index = result.split_in_two(index, left, right)
+        result.pairs.extend([(side[0], end), (side[1], 2 * right_index + end % 2)])
+        result.strand_widths.update({index: side_widths[0], right_index: side_widths[1]})
+        # The strands part at the two-end junction: the cut strand's tip and the far end
+        # of the piece going on are where the cable may turn round out of sight (the
+        # strands' far ends at the three-way junction are long strands' own, no turn's).
+        cut_tip = far if cut_left else 2 * right_index + far % 2
+        result.partings.append((cut_tip, beyond ^ 1))
+        if cut_left:
+            # The right strand goes on: its tip takes the two-end junction, the left's
+            # is free.
+            result.junction_of_end[2 * right_index + far % 2] = labels[far]
+            result.junction_of_end[far] = -1
         handled.add(labels[end])
     return handled
 

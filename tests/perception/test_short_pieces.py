@@ -113,6 +113,46 @@ def test_a_scrap_joined_through_its_crossing_takes_that_strands_colour_and_width
     assert scraps_through_junctions(ends, None, joins, junction_of_end, pieces, 5.0)[1] is None
 
 
+def test_a_scrap_paired_with_its_strand_at_a_touching_stretchs_end_takes_its_colour():
+    # Piece 1: a scrap of 3 joints between the end of a touching stretch (end 2) and an
+    # object that cuts it (end 3), no colour of its own. The touching split paired it
+    # with its strand (piece 0's end 1) and left both ends out of the junction (-1):
+    # through that pairing it is the strand (doubled_back 480022: the turn's pair at the
+    # object never looked alike, a chain too many).
+    ends = [_end(0, True, 6.0), _end(0, False, 6.0), _end(1, True, 5.2), _end(1, False, 5.2)]
+    red = [50.0, 60.0, 40.0]
+    nan = [np.nan] * 3
+    colours = EndColours(np.array([red, red, nan, nan]), np.array([2.0, 2.0, np.nan, np.nan]))
+    junction_of_end = [-1, -1, -1, -1]
+    pieces = _straight_pieces([200.0, 10.0])
+    joins = [(1, 2, 0.3)]
+    seen, hues = scraps_through_junctions(
+        ends, colours, joins, junction_of_end, pieces, 5.0, 11, frozenset({(2, 1)})
+    )
+    assert hues.known.tolist() == [True, True, False, True]
+    np.testing.assert_allclose(hues.colour[3], red)
+    assert seen[3].width == 6.0
+    # A strand whose width could not be read (0) leaves the scrap its own.
+    unread = [replace(ends[0], width=0.0), replace(ends[1], width=0.0), *ends[2:]]
+    seen, _ = scraps_through_junctions(
+        unread, colours, joins, junction_of_end, pieces, 5.0, 11, frozenset({(1, 2)})
+    )
+    assert seen[3].width == 5.2
+    # The same join not made in a junction (a join across a gap by cost): no colour.
+    _, same = scraps_through_junctions(ends, colours, joins, junction_of_end, pieces, 5.0, 11)
+    assert not same.known[3]
+
+
+def test_a_doubled_back_cables_strands_touching_right_before_an_object_are_one_chain():
+    # Tuning scene doubled_back 480022: the cable's two strands nearly touch right
+    # before a box of the ground's colour that hides its turn; the split touching
+    # stretch leaves a scrap of 3 joints at the upper strand's cut. With no colour, the
+    # turn's two ends never looked alike: three chains for two cables.
+    scene = make_family_scene("doubled_back", 480022)
+    _, result = evaluate_scene(scene, 480022, mask_from_labels=True)
+    assert len(result.detection.chains) == 2
+
+
 def test_a_stub_joined_through_its_crossing_takes_that_strands_width_where_its_own_is_narrower():
     # Piece 1: a stub of 3 joints with a colour of its own, from a crossing (end 2,
     # joined to the strand's end 1 there) to an object whose rim cut it at a slant (end

@@ -88,6 +88,65 @@ def test_a_stretch_where_one_strand_stops_and_the_other_goes_on_is_split_by_side
     assert (1, 7) in split.partings
 
 
+def test_a_stretch_whose_going_on_strand_is_a_piece_of_its_own_is_split_by_side():
+    """As above, but the zone where the strands part takes the line's end and the upper
+    strand's tip together: the line ends in a junction of two ends, the other the upper
+    strand's own piece. The line is split; the upper strand's tip keeps that junction
+    (the matching pairs it with its piece), the lower one is run on to the object's
+    border, its tip free and a parting with the upper piece's far end."""
+    upper = [*UPPER_LEFT, (300, 95.5), (380, 40)]
+    lower = [*LOWER_LEFT, (320, 104.5)]
+    mask = touching_strands_mask(upper, lower, shape=(200, 400))
+    mask[100:, 301:] = False
+    stretch = _middle_line(108, 284)
+    arms = [
+        np.array([UPPER_LEFT[0], (70, 75), (92, 99)], np.float64),
+        np.array([LOWER_LEFT[0], (70, 125), (92, 101)], np.float64),
+    ]
+    going_on = np.array([(306, 91), (330, 74.7), (376, 43)], np.float64)
+    pieces = [stretch, *arms, going_on]
+    positions = np.array([points[index] for points in pieces for index in (0, -1)])
+    directions = np.array(
+        [points[index] - points[inner] for points in pieces for index, inner in ((0, 1), (-1, -2))]
+    )
+    directions /= np.hypot(directions[:, 0], directions[:, 1])[:, None]
+    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    labels = [0, 1, -1, 0, -1, 0, 1, -1]
+    split = split_touching_strands(pieces, positions, directions, labels, distance)
+    assert split.split == [0]
+    upper_strand, lower_strand = split.pieces[0], split.pieces[4]
+    assert abs(upper_strand[:, 1].mean() - 95.5) < 1.5
+    assert abs(lower_strand[:, 1].mean() - 104.5) < 1.5 and lower_strand[-1, 0] >= 298.0
+    # The three-way junction is handled (its ends paired by side); the two-end junction
+    # is left to the matching, now between the upper strand's tip and its piece.
+    assert split.junction_of_end[0] == -1 and split.junction_of_end[1] == 1
+    assert split.junction_of_end[9] == -1 and split.junction_of_end[6] == 1
+    assert (9, 7) in split.partings
+    # Without the piece going on in that junction: left whole.
+    assert (
+        split_touching_strands(
+            pieces, positions, directions, [0, 1, -1, 0, -1, 0, -1, -1], distance
+        ).split
+        == []
+    )
+
+
+@pytest.mark.parametrize(("seed", "frame_right"), [(440060, True), (480099, False)])
+def test_doubled_back_strands_touching_up_to_an_object_whose_going_on_strand_is_its_own(
+    seed, frame_right
+):
+    """Tuning scenes where a doubled-back cable's strands touch up to the object hiding
+    its turn and the zone there takes the line's end with the strand that goes on: the
+    cut strand's tip was no end at all, and the cable two chains (440060) or the turn
+    never joined (480099: four chains for three cables). Each cable one chain; 480099's
+    turn, 21 px across for a cable 9 px wide, is bridged 5.9 px off against 4.6."""
+    score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
+    assert score.frame.n_chains == score.frame.n_cables
+    assert min(score.frame.coverage) > 0.9
+    if frame_right:
+        assert score.frame.correct
+
+
 @pytest.mark.parametrize(
     ("seed", "frame_right"),
     [
