@@ -1,0 +1,155 @@
+"""Where a cable passes out of sight at a cut: halfway between the two corners where its
+borders meet the object's edge.
+
+An object's straight edge crossing a cable leaves the visible end bounded by three runs of
+the mask's border: the cable's one border, the object's edge, the cable's other border. The
+cable's middle line crosses the edge halfway between the two corners (the two borders lie a
+half width either side of it), at any slant and wherever the cable bends. The corners are
+where the mask shows them, whatever the direction read at the cut: a middle line carried on
+past the cable's last full section along that direction (:func:`.cut_ends.carried_to_the_border`)
+leaves the middle by the carry's length times the sine of the direction's error, and on a
+tight bend into a hidden turn that error is 15-40 degrees (the fit lags the bend the cable
+begins at the cut): the carried point lies up to a quarter width off the middle.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from service.perception import _shared_kernels
+
+
+def _line_residuals(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Sum of squared distances of the points ``lo..hi`` (inclusive, arrays of indices) to
+    their best straight line (total least squares), from the prefix ``sums`` of x, y, x^2,
+    y^2 and xy."""
+    count = (hi - lo + 1).astype(np.float64)
+    sx, sy, sxx, syy, sxy = (total[hi + 1] - total[lo] for total in sums)
+    a = sxx - sx * sx / count
+    c = syy - sy * sy / count
+    b = sxy - sx * sy / count
+    return np.maximum(0.5 * (a + c) - np.sqrt((0.5 * (a - c)) ** 2 + b * b), 0.0)
+
+
+def three_runs(arc: np.ndarray, shortest_edge: float) -> tuple[int, int] | None:
+    """The two corners splitting the border ``arc`` (``(N, 2)``, in order) into three straight
+    runs, the middle one (the object's edge) at least ``shortest_edge`` px from corner to
+    corner: the split whose three lines fit the points best (least squares).
+
+    Returns
+    -------
+    (i, j) or None
+        Indices of the two corners, ``0 < i < j < N - 1``; None where no split leaves so
+        long an edge.
+    """
+    n = len(arc)
+    if n < 4:
+        return None
+    x, y = arc[:, 0], arc[:, 1]
+    sums = [np.concatenate([[0.0], np.cumsum(v)]) for v in (x, y, x * x, y * y, x * y)]
+    i, j = np.triu_indices(n - 2, k=1)
+    i, j = i + 1, j + 1
+    long_enough = np.hypot(*(arc[j] - arc[i]).T) >= shortest_edge
+    if not long_enough.any():
+        return None
+    i, j = i[long_enough], j[long_enough]
+    cost = (
+        _line_residuals(sums, np.zeros_like(i), i)
+        + _line_residuals(sums, i, j)
+        + _line_residuals(sums, j, np.full_like(j, n - 1))
+    )
+    best = int(np.argmin(cost))
+    return int(i[best]), int(j[best])
+
+
+def between_the_corners(
+    mask: np.ndarray,
+    position: np.ndarray,
+    direction: np.ndarray,
+    half_width: float,
+    reach: float,
+    steps: np.ndarray,
+    rounding: float,
+) -> np.ndarray | None:
+    """The point halfway between the two corners where the cable's borders meet the
+    object's edge at the cut ahead of ``position`` (on the cable's middle at its last full
+    section, heading out along ``direction``), or None where the mask does not show them.
+
+    The mask's border is followed (:func:`cv2.findContours`, the outermost pixels' centres)
+    from the cable's two borders, read across a section a half width (``half_width``) behind
+    ``position`` (``steps``, px, the samples the sections are read at: both borders the
+    cable's, which at ``position`` itself one may no longer be on a slanted cut read along a
+    direction off the cable's), round the cut ahead, and split into three straight runs
+    (:func:`three_runs`): the two borders and the edge between, the edge at least the
+    cable's width less a pixel's ``rounding`` at each corner (a slanted edge is longer: the
+    width over the slant's cosine). The midpoint of the edge's two corners is where the
+    middle line crosses it.
+
+    None where a border is not read across the section, the border from one side does not
+    come round to the other within ``reach`` px of the section (another strand touching the
+    end, a crossing), no split leaves an edge as long as the cable's width, or the midpoint
+    lies behind ``position``.
+    """
+    position = np.asarray(position, np.float64)
+    direction = np.asarray(direction, np.float64)
+    normal = np.array([-direction[1], direction[0]])
+    back = position - half_width * direction
+    across = float(steps[-1])
+    sides = []
+    for sign in (1.0, -1.0):
+        out = float(
+            _shared_kernels.border_distance(
+                mask.view(np.uint8),
+                float(back[0]),
+                float(back[1]),
+                float(sign * normal[0]),
+                float(sign * normal[1]),
+                steps,
+                across,
+                0.5 * float(steps[0]),
+                False,
+            )
+        )
+        if out >= across:
+            return None  # no border read on that side: the end runs into something else
+        sides.append(back + sign * out * normal)
+    # The crop round the section, a pixel of background round it so that each border
+    # followed closes within it.
+    height, width = mask.shape
+    span = reach + half_width + 2.0
+    x0, y0 = (max(int(np.floor(value - span)), 0) for value in back)
+    x1 = min(int(np.ceil(back[0] + span)) + 1, width)
+    y1 = min(int(np.ceil(back[1] + span)) + 1, height)
+    if x1 - x0 < 3 or y1 - y0 < 3:
+        return None
+    crop = np.zeros((y1 - y0 + 2, x1 - x0 + 2), np.uint8)
+    crop[1:-1, 1:-1] = mask[y0:y1, x0:x1]
+    contours, _ = cv2.findContours(crop, cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
+    offset = np.array([x0 - 1.0, y0 - 1.0])
+    for contour in contours:
+        border = contour.reshape(-1, 2).astype(np.float64) + offset
+        # Each side's border point lies on the first sample off the mask: the outermost
+        # pixels' centres within a pixel and a half of it.
+        near = [np.hypot(*(border - side).T) for side in sides]
+        ends = [int(np.argmin(distance)) for distance in near]
+        if all(distance[k] <= 1.5 for distance, k in zip(near, ends, strict=True)):
+            break
+    else:
+        return None
+    first, last = ends
+    # The border's two ways from one side to the other: the one round the cut runs ahead.
+    ways = (
+        np.concatenate([border[first:], border[:first]])[: (last - first) % len(border) + 1],
+        np.concatenate([border[last:], border[:last]])[: (first - last) % len(border) + 1][::-1],
+    )
+    arc = max(ways, key=lambda way: float(np.mean((way - back) @ direction)))
+    if float(np.hypot(*(arc - back).T).max()) > reach + half_width:
+        return None  # the border runs on beyond the cut's reach: not the end of this cable
+    corners = three_runs(arc, 2.0 * half_width - 2.0 * rounding)
+    if corners is None:
+        return None
+    middle = 0.5 * (arc[corners[0]] + arc[corners[1]])
+    if float((middle - position) @ direction) < 0.0:
+        return None  # behind the last full section: no cut ahead read
+    return middle
