@@ -20,28 +20,57 @@ import numpy as np
 from service.perception import _shared_kernels
 
 
-def _line_residuals(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Sum of squared distances of the points ``lo..hi`` (inclusive, arrays of indices) to
-    their best straight line (total least squares), from the prefix ``sums`` of x, y, x^2,
-    y^2 and xy."""
+def _moments(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray):
+    """Count, centroid and centred second moments of the points ``lo..hi`` (inclusive,
+    arrays of indices), from the prefix ``sums`` of x, y, x^2, y^2 and xy."""
     count = (hi - lo + 1).astype(np.float64)
     sx, sy, sxx, syy, sxy = (total[hi + 1] - total[lo] for total in sums)
-    a = sxx - sx * sx / count
-    c = syy - sy * sy / count
-    b = sxy - sx * sy / count
+    return (
+        count,
+        sx / count,
+        sy / count,
+        sxx - sx * sx / count,
+        syy - sy * sy / count,
+        sxy - sx * sy / count,
+    )
+
+
+def _line_residuals(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Sum of squared distances of the points ``lo..hi`` to their best straight line
+    (total least squares)."""
+    _, _, _, a, c, b = _moments(sums, lo, hi)
     return np.maximum(0.5 * (a + c) - np.sqrt((0.5 * (a - c)) ** 2 + b * b), 0.0)
 
 
-def three_runs(arc: np.ndarray, shortest_edge: float) -> tuple[int, int] | None:
-    """The two corners splitting the border ``arc`` (``(N, 2)``, in order) into three straight
-    runs, the middle one (the object's edge) at least ``shortest_edge`` px from corner to
-    corner: the split whose three lines fit the points best (least squares).
+def _off_line(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray, points: np.ndarray):
+    """Distance of each of ``points`` (``(K, 2)``) from the best straight line through the
+    points ``lo..hi`` (arrays of ``K`` indices)."""
+    _, mx, my, a, c, b = _moments(sums, lo, hi)
+    along = 0.5 * np.arctan2(2.0 * b, a - c)
+    return np.abs((points[:, 0] - mx) * -np.sin(along) + (points[:, 1] - my) * np.cos(along))
+
+
+def three_runs(
+    arc: np.ndarray, width: float, first_corner: int = 1, last_corner: int = -2
+) -> tuple[int, int] | None:
+    """The two corners splitting the border ``arc`` (``(N, 2)``, in order, from one border
+    of the cable round its cut to the other) into three straight runs: the split whose
+    three lines fit the points best (least squares) among those that leave the two
+    borders ``width`` px apart at least: each corner that far from the other border's
+    line, and from the other corner (the edge between crosses the cable; a slanted one is
+    longer). Without that bound a corner the mask barely shows (a steep slant's obtuse
+    one, where the edge turns off the border by 30 degrees or less) is taken along a
+    border's bend.
+
+    The corners lie on the arc from ``first_corner`` to ``last_corner`` (indices; a
+    negative one counts from the end): the stretches before and after are known to be
+    the cable's borders.
 
     Returns
     -------
     (i, j) or None
-        Indices of the two corners, ``0 < i < j < N - 1``; None where no split leaves so
-        long an edge.
+        Indices of the two corners, ``0 < i < j < N - 1``; None where no split leaves the
+        borders that far apart.
     """
     n = len(arc)
     if n < 4:
@@ -50,14 +79,21 @@ def three_runs(arc: np.ndarray, shortest_edge: float) -> tuple[int, int] | None:
     sums = [np.concatenate([[0.0], np.cumsum(v)]) for v in (x, y, x * x, y * y, x * y)]
     i, j = np.triu_indices(n - 2, k=1)
     i, j = i + 1, j + 1
-    long_enough = np.hypot(*(arc[j] - arc[i]).T) >= shortest_edge
-    if not long_enough.any():
+    first, last = np.zeros_like(i), np.full_like(j, n - 1)
+    across = (
+        (i >= first_corner)
+        & (j <= last_corner % n)
+        & (np.hypot(*(arc[j] - arc[i]).T) >= width)
+        & (_off_line(sums, first, i, arc[j]) >= width)
+        & (_off_line(sums, j, last, arc[i]) >= width)
+    )
+    if not across.any():
         return None
-    i, j = i[long_enough], j[long_enough]
+    i, j, first, last = i[across], j[across], first[across], last[across]
     cost = (
-        _line_residuals(sums, np.zeros_like(i), i)
+        _line_residuals(sums, first, i)
         + _line_residuals(sums, i, j)
-        + _line_residuals(sums, j, np.full_like(j, n - 1))
+        + _line_residuals(sums, j, last)
     )
     best = int(np.argmin(cost))
     return int(i[best]), int(j[best])
@@ -146,7 +182,40 @@ def between_the_corners(
     arc = max(ways, key=lambda way: float(np.mean((way - back) @ direction)))
     if float(np.hypot(*(arc - back).T).max()) > reach + half_width:
         return None  # the border runs on beyond the cut's reach: not the end of this cable
-    corners = three_runs(arc, 2.0 * half_width - 2.0 * rounding)
+    # The section at ``position`` is the cable's last full one: its two border points
+    # are the cable's borders, and the object's edge lies on the arc between them.
+    # Read across the cable as its two borders run at the back section (the arc's two
+    # ends, a half width of each), not across the direction given, which may lean off
+    # the cable by 30-40 degrees and put a border point of the section on the edge.
+    reach_back = np.hypot(*(arc - arc[0]).T) <= half_width
+    left = arc[: max(int(np.argmin(reach_back)), 2)]
+    reach_back = np.hypot(*(arc - arc[-1]).T) <= half_width
+    right = arc[::-1][: max(int(np.argmin(reach_back[::-1])), 2)]
+    along = (left[-1] - left[0]) + (right[-1] - right[0])
+    if not np.hypot(*along) > 0.0:
+        return None
+    along = along / np.hypot(*along)
+    across_cable = np.array([-along[1], along[0]])
+    bounds = []
+    for sign in (1.0, -1.0):
+        out = float(
+            _shared_kernels.border_distance(
+                mask.view(np.uint8),
+                float(position[0]),
+                float(position[1]),
+                float(sign * across_cable[0]),
+                float(sign * across_cable[1]),
+                steps,
+                across,
+                0.5 * float(steps[0]),
+                False,
+            )
+        )
+        distance = np.hypot(*(arc - (position + sign * out * across_cable)).T)
+        if out >= across or distance.min() > 1.5:
+            return None
+        bounds.append(int(np.argmin(distance)))
+    corners = three_runs(arc, 2.0 * half_width - 2.0 * rounding, bounds[0], bounds[1])
     if corners is None:
         return None
     middle = 0.5 * (arc[corners[0]] + arc[corners[1]])
