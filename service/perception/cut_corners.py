@@ -51,7 +51,7 @@ def _off_line(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray, points: np
 
 
 def three_runs(
-    arc: np.ndarray, width: float, first_corner: int = 1, last_corner: int = -2
+    arc: np.ndarray, width: float, straight: float, first_corner: int = 1, last_corner: int = -2
 ) -> tuple[int, int] | None:
     """The two corners splitting the border ``arc`` (``(N, 2)``, in order, from one border
     of the cable round its cut to the other) into three straight runs: the split whose
@@ -64,7 +64,8 @@ def three_runs(
 
     The corners lie on the arc from ``first_corner`` to ``last_corner`` (indices; a
     negative one counts from the end): the stretches before and after are known to be
-    the cable's borders.
+    the cable's borders. None too where the edge's points lie further than ``straight``
+    px (root mean square) from its line.
 
     Returns
     -------
@@ -96,7 +97,12 @@ def three_runs(
         + _line_residuals(sums, j, last)
     )
     best = int(np.argmin(cost))
-    return int(i[best]), int(j[best])
+    i, j = int(i[best]), int(j[best])
+    # An object's edge is straight: its border pixels lie within a pixel's rounding of
+    # one line. A middle run further off it (in the mean square) is no edge: another
+    # strand's border taken into the arc (strands touching at the cut), a bend.
+    edge = _line_residuals(sums, np.array([i]), np.array([j]))[0] / (j - i + 1)
+    return (i, j) if edge <= straight**2 else None
 
 
 def between_the_corners(
@@ -215,7 +221,7 @@ def between_the_corners(
         if out >= across or distance.min() > 1.5:
             return None
         bounds.append(int(np.argmin(distance)))
-    corners = three_runs(arc, 2.0 * half_width - 2.0 * rounding, bounds[0], bounds[1])
+    corners = three_runs(arc, 2.0 * half_width - 2.0 * rounding, rounding, bounds[0], bounds[1])
     if corners is None:
         return None
     middle = 0.5 * (arc[corners[0]] + arc[corners[1]])

@@ -9,6 +9,7 @@ from service.perception.appearance import _first_off, _front, _lab_beside
 from service.perception.cut_ends import (
     SECTION_STEP_PX,
     _border_distance,
+    _carried,
     _far_border,
     along_the_wedge,
     bridges_from_the_cuts,
@@ -345,6 +346,55 @@ def test_a_direction_leaning_off_is_not_carried_off_the_cable(lean_deg):
     )
     assert abs(position[1] - 30.0) <= 1.1
     assert 75.0 < position[0] <= 80.0
+
+
+@pytest.mark.parametrize("lean_deg", [35.0, -35.0])
+def test_a_cut_read_along_a_direction_off_the_cable_is_put_between_the_corners(lean_deg):
+    """The 45-degree cut of a straight cable read from its last full section (x = 73, 2
+    px before its near side is cut) with a direction 35 degrees off (what a short fit
+    reads on a tight bend): carried on along it, the start fell 2.9-3.4 px off the
+    middle line; put halfway between the two corners where the cable's borders meet the
+    object's edge, (75, 25) and (85, 35) as the mask shows them, it is where the border
+    crosses the middle, whatever the direction."""
+    lean = np.radians(lean_deg)
+    position, _ = _carried(
+        slanted_cut_mask(),
+        np.array([73.0, 30.0]),
+        np.array([np.cos(lean), np.sin(lean)]),
+        0.0,
+        5.5,
+        False,
+    )
+    assert np.hypot(*(position - [80.0, 30.0])) <= 0.5
+
+
+@pytest.mark.parametrize("slant_deg", [-40.0, 0.0])
+@pytest.mark.parametrize("lag_deg", [30.0, -30.0])
+def test_a_cut_on_a_tight_bend_read_with_a_lagging_direction_stays_on_the_middle(
+    slant_deg, lag_deg
+):
+    """The arc of bend 30 px (half width 5) cut square and at -40 degrees, its cut read
+    8 px before the cut with a direction 30 degrees off the cable's either way (a fit
+    lagging the bend, or leaning into a wedge): carried along it the bridge started
+    2.8-3.1 px off the middle line (its quarter width); between the corners, within a
+    pixel of the middle (the corners are the border pixels' centres) and 2 px of the cut. (At +40 degrees on this bend the
+    edge runs within 10-15 degrees of the inner border it cuts: the mask shows no near
+    corner there, and the carried point is kept.)"""
+    start_angle = 0.6 - 8.0 / BEND
+    start = CENTRE + BEND * np.array([np.cos(start_angle), np.sin(start_angle)])
+    tangent = np.array([-np.sin(start_angle), np.cos(start_angle)])
+    lag = np.radians(lag_deg)
+    heading = np.array(
+        [
+            np.cos(lag) * tangent[0] - np.sin(lag) * tangent[1],
+            np.sin(lag) * tangent[0] + np.cos(lag) * tangent[1],
+        ]
+    )
+    mask = arc_mask(0.6, np.radians(slant_deg))
+    position, _ = _carried(mask, start, heading, 0.0, HALF_WIDTH, False)
+    cut = CENTRE + BEND * np.array([np.cos(0.6), np.sin(0.6)])
+    assert abs(np.hypot(*(position - CENTRE)) - BEND) <= 1.0
+    assert np.hypot(*(position - cut)) <= 2.0
 
 
 def test_a_start_off_the_middle_is_put_on_it_at_once():
