@@ -42,25 +42,14 @@ def _line_residuals(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray) -> n
     return np.maximum(0.5 * (a + c) - np.sqrt((0.5 * (a - c)) ** 2 + b * b), 0.0)
 
 
-def _off_line(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray, points: np.ndarray):
-    """Distance of each of ``points`` (``(K, 2)``) from the best straight line through the
-    points ``lo..hi`` (arrays of ``K`` indices)."""
-    _, mx, my, a, c, b = _moments(sums, lo, hi)
-    along = 0.5 * np.arctan2(2.0 * b, a - c)
-    return np.abs((points[:, 0] - mx) * -np.sin(along) + (points[:, 1] - my) * np.cos(along))
-
-
 def three_runs(
     arc: np.ndarray, width: float, straight: float, first_corner: int = 1, last_corner: int = -2
 ) -> tuple[int, int] | None:
     """The two corners splitting the border ``arc`` (``(N, 2)``, in order, from one border
     of the cable round its cut to the other) into three straight runs: the split whose
-    three lines fit the points best (least squares) among those that leave the two
-    borders ``width`` px apart at least: each corner that far from the other border's
-    line, and from the other corner (the edge between crosses the cable; a slanted one is
-    longer). Without that bound a corner the mask barely shows (a steep slant's obtuse
-    one, where the edge turns off the border by 30 degrees or less) is taken along a
-    border's bend.
+    three lines fit the points best (least squares) among those whose two corners lie
+    ``width`` px apart at least (the edge between crosses the cable; a slanted one is
+    longer).
 
     The corners lie on the arc from ``first_corner`` to ``last_corner`` (indices; a
     negative one counts from the end): the stretches before and after are known to be
@@ -70,24 +59,21 @@ def three_runs(
     Returns
     -------
     (i, j) or None
-        Indices of the two corners, ``0 < i < j < N - 1``; None where no split leaves the
-        borders that far apart.
+        Indices of the two corners, ``0 < i < j < N - 1``; None where no split leaves
+        them that far apart.
     """
     n = len(arc)
     if n < 4:
         return None
     x, y = arc[:, 0], arc[:, 1]
     sums = [np.concatenate([[0.0], np.cumsum(v)]) for v in (x, y, x * x, y * y, x * y)]
-    i, j = np.triu_indices(n - 2, k=1)
-    i, j = i + 1, j + 1
+    low, high = max(first_corner, 1), min(last_corner % n, n - 2)
+    if high - low < 1:
+        return None
+    i, j = np.triu_indices(high - low + 1, k=1)
+    i, j = i + low, j + low
     first, last = np.zeros_like(i), np.full_like(j, n - 1)
-    across = (
-        (i >= first_corner)
-        & (j <= last_corner % n)
-        & (np.hypot(*(arc[j] - arc[i]).T) >= width)
-        & (_off_line(sums, first, i, arc[j]) >= width)
-        & (_off_line(sums, j, last, arc[i]) >= width)
-    )
+    across = np.hypot(*(arc[j] - arc[i]).T) >= width
     if not across.any():
         return None
     i, j, first, last = i[across], j[across], first[across], last[across]
