@@ -43,7 +43,12 @@ def _line_residuals(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray) -> n
 
 
 def three_runs(
-    arc: np.ndarray, width: float, straight: float, first_corner: int = 1, last_corner: int = -2
+    arc: np.ndarray,
+    width: float,
+    straight: float,
+    first_corner: int = 1,
+    last_corner: int = -2,
+    side: np.ndarray | None = None,
 ) -> tuple[int, int] | None:
     """The two corners splitting the border ``arc`` (``(N, 2)``, in order, from one border
     of the cable round its cut to the other) into three straight runs: the split whose
@@ -53,8 +58,10 @@ def three_runs(
 
     The corners lie on the arc from ``first_corner`` to ``last_corner`` (indices; a
     negative one counts from the end): the stretches before and after are known to be
-    the cable's borders. None too where the edge's points lie further than ``straight``
-    px (root mean square) from its line.
+    the cable's borders; with ``side`` (``(N,)``, each point's signed offset across the
+    cable's middle line), the first corner on the side of the arc's first point, the last
+    on its last point's: one on each border. None too where the edge's points lie
+    further than ``straight`` px (root mean square) from its line.
 
     Returns
     -------
@@ -74,6 +81,8 @@ def three_runs(
     i, j = i + low, j + low
     first, last = np.zeros_like(i), np.full_like(j, n - 1)
     across = np.hypot(*(arc[j] - arc[i]).T) >= width
+    if side is not None:
+        across &= (side[i] * side[0] > 0.0) & (side[j] * side[-1] > 0.0)
     if not across.any():
         return None
     i, j, first, last = i[across], j[across], first[across], last[across]
@@ -207,7 +216,12 @@ def between_the_corners(
         if out >= across or distance.min() > 1.5:
             return None
         bounds.append(int(np.argmin(distance)))
-    corners = three_runs(arc, 2.0 * half_width - 2.0 * rounding, rounding, bounds[0], bounds[1])
+    # Each corner on its own border: on that border's side of the middle line through
+    # the last full section, as the borders run.
+    side = (arc - position) @ across_cable
+    corners = three_runs(
+        arc, 2.0 * half_width - 2.0 * rounding, rounding, bounds[0], bounds[1], side
+    )
     if corners is None:
         return None
     middle = 0.5 * (arc[corners[0]] + arc[corners[1]])
