@@ -18,6 +18,12 @@ import cv2
 import numpy as np
 
 from service.perception import _shared_kernels
+from service.perception.appearance import (
+    COLOUR_TOLERANCE,
+    MIN_GAP_SAMPLES,
+    _lab_beside,
+    _lab_distance,
+)
 
 
 def _moments(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray):
@@ -100,6 +106,52 @@ def three_runs(
     return (i, j) if edge <= straight**2 else None
 
 
+def _edge_seen(
+    image: np.ndarray, mask: np.ndarray, arc: np.ndarray, bounds: list[int], beyond: float
+) -> tuple[int, int] | None:
+    """The first and last points of the border ``arc`` between ``bounds`` (its indices of
+    the last full section's two border points) beyond which the BGR ``image`` shows
+    something unlike the ground beside the cable (:func:`.appearance.unlike_ground`'s
+    test, read ``beyond`` px out): the object's edge, its two ends the corners. The ground
+    is what lies beyond the arc's stretches outside the bounds (the cable's own borders
+    behind its last full section). None where the image does not show the edge: an
+    object of the ground's colour, another cable beyond the border, or ground read
+    between the edge's ends."""
+    ahead = np.roll(arc, -1, axis=0) - np.roll(arc, 1, axis=0)
+    ahead[0], ahead[-1] = arc[1] - arc[0], arc[-1] - arc[-2]
+    length = np.hypot(*ahead.T)
+    if not (length > 0.0).all():
+        return None
+    normal = np.column_stack([-ahead[:, 1], ahead[:, 0]]) / length[:, None]
+    # The side of each border point the mask is not on.
+    probe = arc + normal
+    rows = np.clip(np.rint(probe[:, 1]).astype(np.int64), 0, mask.shape[0] - 1)
+    cols = np.clip(np.rint(probe[:, 0]).astype(np.int64), 0, mask.shape[1] - 1)
+    normal[mask[rows, cols]] *= -1.0
+    outside = arc + (0.5 + beyond) * normal
+    colours = _lab_beside(image, mask, outside)
+    first, last = bounds
+    behind = np.r_[0:first, last + 1 : len(arc)]
+    seen = colours[behind]
+    seen = seen[~np.isnan(seen[:, 0])]
+    if len(seen) < MIN_GAP_SAMPLES:
+        return None
+    ground = np.median(seen, axis=0)
+    spread = float(np.median(_lab_distance(seen, ground)))
+    between = colours[first : last + 1]
+    readable = ~np.isnan(between[:, 0])
+    unlike = readable & (
+        _lab_distance(np.nan_to_num(between), ground) > COLOUR_TOLERANCE + 2 * spread
+    )
+    if not unlike.any():
+        return None
+    k = np.flatnonzero(unlike)
+    i, j = int(k[0]), int(k[-1])
+    if (readable[i : j + 1] & ~unlike[i : j + 1]).any():
+        return None  # ground between the ends: no one edge
+    return first + i, first + j
+
+
 def between_the_corners(
     mask: np.ndarray,
     position: np.ndarray,
@@ -108,6 +160,8 @@ def between_the_corners(
     reach: float,
     steps: np.ndarray,
     rounding: float,
+    image: np.ndarray | None = None,
+    beyond: float = 2.0,
 ) -> np.ndarray | None:
     """The point halfway between the two corners where the cable's borders meet the
     object's edge at the cut ahead of ``position`` (on the cable's middle at its last full
@@ -216,14 +270,18 @@ def between_the_corners(
         if out >= across or distance.min() > 1.5:
             return None
         bounds.append(int(np.argmin(distance)))
-    # Each corner on its own border: on that border's side of the middle line through
-    # the last full section, as the borders run.
-    side = (arc - position) @ across_cable
-    corners = three_runs(
-        arc, 2.0 * half_width - 2.0 * rounding, rounding, bounds[0], bounds[1], side
-    )
+    if image is None:
+        return None
+    corners = _edge_seen(image, mask, arc, bounds, beyond)
     if corners is None:
         return None
+    i, j = corners
+    if np.hypot(*(arc[j] - arc[i])) < 2.0 * half_width - 2.0 * rounding:
+        return None  # shorter than the cable is wide: no edge across it
+    x, y = arc[i : j + 1, 0], arc[i : j + 1, 1]
+    sums = [np.concatenate([[0.0], np.cumsum(v)]) for v in (x, y, x * x, y * y, x * y)]
+    if _line_residuals(sums, np.array([0]), np.array([j - i]))[0] > (j - i + 1) * rounding**2:
+        return None  # no straight edge: an object's edge lies within a pixel of a line
     middle = 0.5 * (arc[corners[0]] + arc[corners[1]])
     if float((middle - position) @ direction) < 0.0:
         return None  # behind the last full section: no cut ahead read

@@ -423,6 +423,7 @@ def _carried(
     curvature: float,
     half_width: float,
     to_the_border: bool,
+    image: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cut ahead of the last full section (``position``, on the cable's middle) where
     a bridge starts, and its direction: the middle line carried on along ``direction``
@@ -448,7 +449,15 @@ def _carried(
     reach = (1.0 + 2.0 * CARRY_RADII) * half_width
     steps = np.arange(SECTION_STEP_PX, 2.5 * half_width + 2.0 + 1e-9, SECTION_STEP_PX)
     middle = between_the_corners(
-        mask, position, direction, half_width, reach, steps, SECTION_ROUNDING_PX
+        mask,
+        position,
+        direction,
+        half_width,
+        reach,
+        steps,
+        SECTION_ROUNDING_PX,
+        image,
+        BEYOND_BORDER_PX,
     )
     return (carried if middle is None else middle), heading
 
@@ -505,7 +514,7 @@ def end_at_the_cut(
         direction = rotated(end.direction, end.curvature * polyline_length(ahead))
         if carry:
             position, direction = _carried(
-                mask, position, direction, end.curvature, half_width, to_the_border
+                mask, position, direction, end.curvature, half_width, to_the_border, image
             )
         return ahead, position, direction
     # The points from where a slanted cut begins to narrow the section (by more than
@@ -530,7 +539,7 @@ def end_at_the_cut(
     position, direction, curvature = end_fit(line, False, span)
     if carry:
         position, direction = _carried(
-            mask, position, direction, curvature, half_width, to_the_border
+            mask, position, direction, curvature, half_width, to_the_border, image
         )
     return ahead, position, direction
 
