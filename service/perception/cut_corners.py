@@ -5,11 +5,19 @@ An object's straight edge crossing a cable leaves the visible end bounded by thr
 the mask's border: the cable's one border, the object's edge, the cable's other border. The
 cable's middle line crosses the edge halfway between the two corners (the two borders lie a
 half width either side of it), at any slant and wherever the cable bends. The corners are
-where the mask shows them, whatever the direction read at the cut: a middle line carried on
+where the image shows them, whatever the direction read at the cut: a middle line carried on
 past the cable's last full section along that direction (:func:`.cut_ends.carried_to_the_border`)
 leaves the middle by the carry's length times the sine of the direction's error, and on a
 tight bend into a hidden turn that error is 15-40 degrees (the fit lags the bend the cable
 begins at the cut): the carried point lies up to a quarter width off the middle.
+
+The mask alone does not say which of its border runs is the object's edge: a steep slant's
+edge runs within 10-15 degrees of the border it cuts on a bend, and strands touching at the
+cut join their masks (split into three straight runs by least squares, the border put the
+point 4-8 px off the middle there: loops 480052, 480057). The image does, where the object
+is not of the ground's colour: beyond the cable's borders lies the ground seen beside its
+full sections, beyond the edge the object (:func:`.appearance.unlike_ground`'s test, as
+:func:`.cut_ends.along_the_wedge` reads a wedge's borders).
 """
 
 from __future__ import annotations
@@ -46,64 +54,6 @@ def _line_residuals(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray) -> n
     (total least squares)."""
     _, _, _, a, c, b = _moments(sums, lo, hi)
     return np.maximum(0.5 * (a + c) - np.sqrt((0.5 * (a - c)) ** 2 + b * b), 0.0)
-
-
-def three_runs(
-    arc: np.ndarray,
-    width: float,
-    straight: float,
-    first_corner: int = 1,
-    last_corner: int = -2,
-    side: np.ndarray | None = None,
-) -> tuple[int, int] | None:
-    """The two corners splitting the border ``arc`` (``(N, 2)``, in order, from one border
-    of the cable round its cut to the other) into three straight runs: the split whose
-    three lines fit the points best (least squares) among those whose two corners lie
-    ``width`` px apart at least (the edge between crosses the cable; a slanted one is
-    longer).
-
-    The corners lie on the arc from ``first_corner`` to ``last_corner`` (indices; a
-    negative one counts from the end): the stretches before and after are known to be
-    the cable's borders; with ``side`` (``(N,)``, each point's signed offset across the
-    cable's middle line), the first corner on the side of the arc's first point, the last
-    on its last point's: one on each border. None too where the edge's points lie
-    further than ``straight`` px (root mean square) from its line.
-
-    Returns
-    -------
-    (i, j) or None
-        Indices of the two corners, ``0 < i < j < N - 1``; None where no split leaves
-        them that far apart.
-    """
-    n = len(arc)
-    if n < 4:
-        return None
-    x, y = arc[:, 0], arc[:, 1]
-    sums = [np.concatenate([[0.0], np.cumsum(v)]) for v in (x, y, x * x, y * y, x * y)]
-    low, high = max(first_corner, 1), min(last_corner % n, n - 2)
-    if high - low < 1:
-        return None
-    i, j = np.triu_indices(high - low + 1, k=1)
-    i, j = i + low, j + low
-    first, last = np.zeros_like(i), np.full_like(j, n - 1)
-    across = np.hypot(*(arc[j] - arc[i]).T) >= width
-    if side is not None:
-        across &= (side[i] * side[0] > 0.0) & (side[j] * side[-1] > 0.0)
-    if not across.any():
-        return None
-    i, j, first, last = i[across], j[across], first[across], last[across]
-    cost = (
-        _line_residuals(sums, first, i)
-        + _line_residuals(sums, i, j)
-        + _line_residuals(sums, j, last)
-    )
-    best = int(np.argmin(cost))
-    i, j = int(i[best]), int(j[best])
-    # An object's edge is straight: its border pixels lie within a pixel's rounding of
-    # one line. A middle run further off it (in the mean square) is no edge: another
-    # strand's border taken into the arc (strands touching at the cut), a bend.
-    edge = _line_residuals(sums, np.array([i]), np.array([j]))[0] / (j - i + 1)
-    return (i, j) if edge <= straight**2 else None
 
 
 def _edge_seen(
@@ -165,23 +115,29 @@ def between_the_corners(
 ) -> np.ndarray | None:
     """The point halfway between the two corners where the cable's borders meet the
     object's edge at the cut ahead of ``position`` (on the cable's middle at its last full
-    section, heading out along ``direction``), or None where the mask does not show them.
+    section, heading out along ``direction``), or None where the BGR ``image`` does not
+    show them.
 
     The mask's border is followed (:func:`cv2.findContours`, the outermost pixels' centres)
     from the cable's two borders, read across a section a half width (``half_width``) behind
-    ``position`` (``steps``, px, the samples the sections are read at: both borders the
-    cable's, which at ``position`` itself one may no longer be on a slanted cut read along a
-    direction off the cable's), round the cut ahead, and split into three straight runs
-    (:func:`three_runs`): the two borders and the edge between, the edge at least the
-    cable's width less a pixel's ``rounding`` at each corner (a slanted edge is longer: the
-    width over the slant's cosine). The midpoint of the edge's two corners is where the
-    middle line crosses it.
+    ``position`` (``steps``, px, the samples the sections are read at), round the cut ahead.
+    The section at ``position`` (read across the two borders' own direction at the back
+    section, not across ``direction``, which may lean off the cable by 30-40 degrees and
+    put one of its border points on the edge) bounds the edge: its two border points are
+    the cable's. Between them the edge is where the image shows, ``beyond`` px out,
+    something unlike the ground beyond the borders behind (:func:`_edge_seen`); its two
+    ends are the corners, and their midpoint is where the middle line crosses it.
 
-    None where a border is not read across the section, the border from one side does not
-    come round to the other within ``reach`` px of the section (another strand touching the
-    end, a crossing), no split leaves an edge as long as the cable's width, or the midpoint
-    lies behind ``position``.
+    None without the image, where a border is not read across either section, the border
+    from one side does not come round to the other within ``reach`` px of the back section
+    (another strand touching the end, a crossing), the image shows no one edge (an object
+    of the ground's colour), the edge is shorter than the cable's width less a pixel's
+    ``rounding`` at each corner (a slanted edge is longer: the width over the slant's
+    cosine) or further than that rounding from a straight line (root mean square), or the
+    midpoint lies behind ``position``.
     """
+    if image is None:
+        return None  # nothing tells the edge from the borders
     position = np.asarray(position, np.float64)
     direction = np.asarray(direction, np.float64)
     normal = np.array([-direction[1], direction[0]])
@@ -270,8 +226,6 @@ def between_the_corners(
         if out >= across or distance.min() > 1.5:
             return None
         bounds.append(int(np.argmin(distance)))
-    if image is None:
-        return None
     corners = _edge_seen(image, mask, arc, bounds, beyond)
     if corners is None:
         return None

@@ -429,14 +429,15 @@ def _carried(
     a bridge starts, and its direction: the middle line carried on along ``direction``
     (:func:`carried_to_the_border`, which gives the direction there), the point put
     halfway between the two corners where the cable's borders meet the object's edge
-    where the mask shows them (:func:`.cut_corners.between_the_corners`).
+    where the BGR ``image`` shows them (:func:`.cut_corners.between_the_corners`: the
+    object not of the ground's colour).
 
     The carried point leaves the middle by the carry's length times the sine of the
     direction's error (on doubled_back 440000-480000, 1296 carried cuts: the carry's
     drift across against that product, correlation 0.97): on a tight bend into a hidden
     turn, where the fit lags the bend by 15-40 degrees, by up to a quarter width (the
-    side line then leaves through the cable's own border). The corners are where the mask
-    shows them, whatever the direction. Looked for within the carry's reach
+    side line then leaves through the cable's own border). The corners are where the
+    image shows them, whatever the direction. Looked for within the carry's reach
     (:data:`CARRY_RADII` half widths) past the near one a width's slant further, from a
     section a half width behind. Not for the turn pass's reads of the border itself
     (``to_the_border``: its tests were measured on the carried line's halfway point).
@@ -486,7 +487,8 @@ def end_at_the_cut(
     half that is traced behind the end, the end's own fit bends
     on to the cut instead. With ``carry``, the middle line is then carried on towards
     where the cut's border crosses it (:func:`carried_to_the_border`, to the border
-    itself with ``to_the_border``). With ``first_narrowing``, the traces stop at the
+    itself with ``to_the_border``), the point put, with the BGR ``image``, halfway between
+    the corners where the cable's borders meet the object's edge (:func:`_carried`). With ``first_narrowing``, the traces stop at the
     first narrowed section and the direction is fitted before it, as before the
     borders' rounding was told from a cut (:func:`middle_line`): the reading the turn
     pass's tests of a cut's shape were measured on (:mod:`.traced_cuts`).
