@@ -487,9 +487,10 @@ def end_at_the_cut(
     half that is traced behind the end, the end's own fit bends
     on to the cut instead. With ``carry``, the middle line is then carried on towards
     where the cut's border crosses it (:func:`carried_to_the_border`, to the border
-    itself with ``to_the_border``), the point put, with the BGR ``image``, halfway between
-    the corners where the cable's borders meet the object's edge (:func:`_carried`). With ``first_narrowing``, the traces stop at the
-    first narrowed section and the direction is fitted before it, as before the
+    itself with ``to_the_border``), the point put, with the BGR ``image``, halfway
+    between the corners where the cable's borders meet the object's edge
+    (:func:`_carried`). With ``first_narrowing``, the traces stop at the first narrowed
+    section and the direction is fitted before it, as before the
     borders' rounding was told from a cut (:func:`middle_line`): the reading the turn
     pass's tests of a cut's shape were measured on (:mod:`.traced_cuts`).
 
