@@ -389,7 +389,7 @@ def test_a_cut_on_a_tight_bend_read_with_a_lagging_direction_stays_on_the_middle
     """The arc of bend 30 px (half width 5) cut at -40 to 40 degrees by an orange object,
     its cut read 8 px before the cut with a direction 30 degrees off the cable's either
     way (a fit lagging the bend, or leaning into a wedge): carried along it the bridge
-    started 2.5-3.1 px off the middle line; between the corners the image shows, within
+    started 2.0-3.1 px off the middle line; between the corners the image shows, within
     a pixel of the middle (the corners are the border pixels' centres) and 2 px of the
     cut."""
     start_angle = 0.6 - 8.0 / BEND
