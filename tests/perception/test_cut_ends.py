@@ -9,6 +9,7 @@ from service.perception.appearance import _first_off, _front, _lab_beside
 from service.perception.cut_ends import (
     SECTION_STEP_PX,
     _border_distance,
+    _carried,
     _far_border,
     along_the_wedge,
     bridges_from_the_cuts,
@@ -345,6 +346,78 @@ def test_a_direction_leaning_off_is_not_carried_off_the_cable(lean_deg):
     )
     assert abs(position[1] - 30.0) <= 1.1
     assert 75.0 < position[0] <= 80.0
+
+
+def painted_slanted_cut(object_bgr) -> np.ndarray:
+    """:func:`slanted_cut_mask` drawn: a grey ground, an object of ``object_bgr`` beyond
+    the cut's border (x > 80 + (y - 30)), the cable red."""
+    ys, xs = np.mgrid[0:60, 0:140]
+    image = np.empty((60, 140, 3), np.uint8)
+    image[:] = BACKGROUND_BGR
+    image[xs > 80 + (ys - 30)] = object_bgr
+    image[slanted_cut_mask()] = (30, 30, 160)
+    return image
+
+
+@pytest.mark.parametrize("lean_deg", [35.0, -35.0])
+def test_a_cut_read_along_a_direction_off_the_cable_is_put_between_the_corners(lean_deg):
+    """The 45-degree cut of a straight cable read from its last full section (x = 73, 2
+    px before its near side is cut) with a direction 35 degrees off (what a short fit
+    reads on a tight bend): carried on along it, the start fell 2.9-3.4 px off the
+    middle line; put halfway between the two corners where the cable's borders meet the
+    object's edge, (75, 25) and (85, 35), the ends of the border beyond which the image
+    shows the object (each read within a pixel), it is within a pixel of where the border
+    crosses the middle, whatever the direction.
+    Under an object of the ground's colour nothing tells the edge from the borders: the
+    carried point is kept."""
+    lean = np.radians(lean_deg)
+    heading = np.array([np.cos(lean), np.sin(lean)])
+    start = np.array([73.0, 30.0])
+    mask = slanted_cut_mask()
+    position, _ = _carried(mask, start, heading, 0.0, 5.5, False, painted_slanted_cut(OBJECT_BGR))
+    assert np.hypot(*(position - [80.0, 30.0])) <= 1.0
+    unseen, _ = _carried(mask, start, heading, 0.0, 5.5, False, painted_slanted_cut(BACKGROUND_BGR))
+    carried, _ = carried_to_the_border(mask, start, heading, 0.0, 5.5)
+    assert np.allclose(unseen, carried)
+
+
+@pytest.mark.parametrize("slant_deg", [-40.0, 0.0, 40.0])
+@pytest.mark.parametrize("lag_deg", [30.0, -30.0])
+def test_a_cut_on_a_tight_bend_read_with_a_lagging_direction_stays_on_the_middle(
+    slant_deg, lag_deg
+):
+    """The arc of bend 30 px (half width 5) cut at -40 to 40 degrees by an orange object,
+    its cut read 8 px before the cut with a direction 30 degrees off the cable's either
+    way (a fit lagging the bend, or leaning into a wedge): carried along it the bridge
+    started 2.0-3.1 px off the middle line; between the corners the image shows, within
+    a pixel of the middle (the corners are the border pixels' centres) and 2 px of the
+    cut."""
+    start_angle = 0.6 - 8.0 / BEND
+    start = CENTRE + BEND * np.array([np.cos(start_angle), np.sin(start_angle)])
+    tangent = np.array([-np.sin(start_angle), np.cos(start_angle)])
+    lag = np.radians(lag_deg)
+    heading = np.array(
+        [
+            np.cos(lag) * tangent[0] - np.sin(lag) * tangent[1],
+            np.sin(lag) * tangent[0] + np.cos(lag) * tangent[1],
+        ]
+    )
+    mask, image, _ = wedge_scene(np.radians(slant_deg), OBJECT_BGR)
+    position, _ = _carried(mask, start, heading, 0.0, HALF_WIDTH, False, image)
+    cut = CENTRE + BEND * np.array([np.cos(0.6), np.sin(0.6)])
+    assert abs(np.hypot(*(position - CENTRE)) - BEND) <= 1.0
+    assert np.hypot(*(position - cut)) <= 2.0
+
+
+@pytest.mark.parametrize("seed", [480040, 480240])
+def test_doubled_back_cuts_carried_off_the_middle_are_read_between_the_corners(seed):
+    """Tuning scenes (true mask) whose strands bend into their hidden turn at a coloured
+    object's edge: the directions read at the cuts lag the bend (480240: 41 degrees), and
+    carried along them the bridges started 1.3-3.9 px off the middle and missed the turn
+    (480040 4.6 px against 4.3, 480240 9.5 against 7.0); from the midpoints of the
+    corners the image shows, both turns are covered."""
+    score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
+    assert score.frame.correct
 
 
 def test_a_start_off_the_middle_is_put_on_it_at_once():
