@@ -26,34 +26,16 @@ import cv2
 import numpy as np
 
 from service.perception import _shared_kernels
-from service.perception.appearance import (
-    COLOUR_TOLERANCE,
-    MIN_GAP_SAMPLES,
-    _lab_beside,
-    _lab_distance,
-)
+from service.perception.appearance import ground_beside, unlike_ground_at
 
 
-def _moments(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray):
-    """Count, centroid and centred second moments of the points ``lo..hi`` (inclusive,
-    arrays of indices), from the prefix ``sums`` of x, y, x^2, y^2 and xy."""
-    count = (hi - lo + 1).astype(np.float64)
-    sx, sy, sxx, syy, sxy = (total[hi + 1] - total[lo] for total in sums)
-    return (
-        count,
-        sx / count,
-        sy / count,
-        sxx - sx * sx / count,
-        syy - sy * sy / count,
-        sxy - sx * sy / count,
-    )
-
-
-def _line_residuals(sums: list[np.ndarray], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Sum of squared distances of the points ``lo..hi`` to their best straight line
-    (total least squares)."""
-    _, _, _, a, c, b = _moments(sums, lo, hi)
-    return np.maximum(0.5 * (a + c) - np.sqrt((0.5 * (a - c)) ** 2 + b * b), 0.0)
+def _straight_line_residual(points: np.ndarray) -> float:
+    """Sum of squared distances of the (x, y) ``points`` to their best straight line
+    (total least squares: the centred scatter matrix's smaller eigenvalue)."""
+    centred = points - points.mean(axis=0)
+    xx, yy = centred[:, 0] @ centred[:, 0], centred[:, 1] @ centred[:, 1]
+    xy = centred[:, 0] @ centred[:, 1]
+    return max(0.5 * (xx + yy) - float(np.sqrt((0.5 * (xx - yy)) ** 2 + xy * xy)), 0.0)
 
 
 def _edge_seen(
@@ -61,7 +43,7 @@ def _edge_seen(
 ) -> tuple[int, int] | None:
     """The first and last points of the border ``arc`` between ``bounds`` (its indices of
     the last full section's two border points) beyond which the BGR ``image`` shows
-    something unlike the ground beside the cable (:func:`.appearance.unlike_ground`'s
+    something unlike the ground beside the cable (:func:`.appearance.unlike_ground_at`'s
     test, read ``beyond`` px out): the object's edge, its two ends the corners. The ground
     is what lies beyond the arc's stretches outside the bounds (the cable's own borders
     behind its last full section). None where the image does not show the edge: an
@@ -79,20 +61,11 @@ def _edge_seen(
     cols = np.clip(np.rint(probe[:, 0]).astype(np.int64), 0, mask.shape[1] - 1)
     normal[mask[rows, cols]] *= -1.0
     outside = arc + (0.5 + beyond) * normal
-    colours = _lab_beside(image, mask, outside)
     first, last = bounds
-    behind = np.r_[0:first, last + 1 : len(arc)]
-    seen = colours[behind]
-    seen = seen[~np.isnan(seen[:, 0])]
-    if len(seen) < MIN_GAP_SAMPLES:
+    ground = ground_beside(image, mask, outside[np.r_[0:first, last + 1 : len(arc)]])
+    if ground is None:
         return None
-    ground = np.median(seen, axis=0)
-    spread = float(np.median(_lab_distance(seen, ground)))
-    between = colours[first : last + 1]
-    readable = ~np.isnan(between[:, 0])
-    unlike = readable & (
-        _lab_distance(np.nan_to_num(between), ground) > COLOUR_TOLERANCE + 2 * spread
-    )
+    readable, unlike = unlike_ground_at(image, mask, outside[first : last + 1], ground)
     if not unlike.any():
         return None
     k = np.flatnonzero(unlike)
@@ -232,9 +205,7 @@ def between_the_corners(
     i, j = corners
     if np.hypot(*(arc[j] - arc[i])) < 2.0 * half_width - 2.0 * rounding:
         return None  # shorter than the cable is wide: no edge across it
-    x, y = arc[i : j + 1, 0], arc[i : j + 1, 1]
-    sums = [np.concatenate([[0.0], np.cumsum(v)]) for v in (x, y, x * x, y * y, x * y)]
-    if _line_residuals(sums, np.array([0]), np.array([j - i]))[0] > (j - i + 1) * rounding**2:
+    if _straight_line_residual(arc[i : j + 1]) > (j - i + 1) * rounding**2:
         return None  # no straight edge: an object's edge lies within a pixel of a line
     middle = 0.5 * (arc[corners[0]] + arc[corners[1]])
     if float((middle - position) @ direction) < 0.0:
