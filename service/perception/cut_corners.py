@@ -38,6 +38,30 @@ def _straight_line_residual(points: np.ndarray) -> float:
     return max(0.5 * (xx + yy) - float(np.sqrt((0.5 * (xx - yy)) ** 2 + xy * xy)), 0.0)
 
 
+def _borders_either_side(
+    mask: np.ndarray, origin: np.ndarray, normal: np.ndarray, steps: np.ndarray
+) -> tuple[float, float]:
+    """How far the mask's border lies from ``origin`` along the unit ``normal`` and
+    against it (px, sampled at ``steps``; ``steps[-1]`` where none is read:
+    :func:`._shared_kernels.border_distance`)."""
+    return tuple(
+        float(
+            _shared_kernels.border_distance(
+                mask.view(np.uint8),
+                float(origin[0]),
+                float(origin[1]),
+                float(sign * normal[0]),
+                float(sign * normal[1]),
+                steps,
+                float(steps[-1]),
+                0.5 * float(steps[0]),
+                False,
+            )
+        )
+        for sign in (1.0, -1.0)
+    )
+
+
 def _edge_seen(
     image: np.ndarray, mask: np.ndarray, arc: np.ndarray, bounds: list[int], beyond: float
 ) -> tuple[int, int] | None:
@@ -116,24 +140,10 @@ def between_the_corners(
     normal = np.array([-direction[1], direction[0]])
     back = position - half_width * direction
     across = float(steps[-1])
-    sides = []
-    for sign in (1.0, -1.0):
-        out = float(
-            _shared_kernels.border_distance(
-                mask.view(np.uint8),
-                float(back[0]),
-                float(back[1]),
-                float(sign * normal[0]),
-                float(sign * normal[1]),
-                steps,
-                across,
-                0.5 * float(steps[0]),
-                False,
-            )
-        )
-        if out >= across:
-            return None  # no border read on that side: the end runs into something else
-        sides.append(back + sign * out * normal)
+    outs = _borders_either_side(mask, back, normal, steps)
+    if max(outs) >= across:
+        return None  # no border read on a side: the end runs into something else
+    sides = [back + sign * out * normal for sign, out in zip((1.0, -1.0), outs, strict=True)]
     # The crop round the section, a pixel of background round it so that each border
     # followed closes within it.
     height, width = mask.shape
@@ -181,20 +191,8 @@ def between_the_corners(
     along = along / np.hypot(*along)
     across_cable = np.array([-along[1], along[0]])
     bounds = []
-    for sign in (1.0, -1.0):
-        out = float(
-            _shared_kernels.border_distance(
-                mask.view(np.uint8),
-                float(position[0]),
-                float(position[1]),
-                float(sign * across_cable[0]),
-                float(sign * across_cable[1]),
-                steps,
-                across,
-                0.5 * float(steps[0]),
-                False,
-            )
-        )
+    outs = _borders_either_side(mask, position, across_cable, steps)
+    for sign, out in zip((1.0, -1.0), outs, strict=True):
         distance = np.hypot(*(arc - (position + sign * out * across_cable)).T)
         if out >= across or distance.min() > 1.5:
             return None

@@ -66,7 +66,6 @@ def split_stretches_ending(
     handled: set[int] = set()
     pieces = list(result.pieces)
     mask = distance > 0
-    lengths: dict[int, float] = {}
     for index in candidates:
         at_junction = 0 if labels[2 * index] >= 0 else 1
         end, free = 2 * index + at_junction, 2 * index + 1 - at_junction
@@ -77,22 +76,8 @@ def split_stretches_ending(
         )
         if side is None:
             continue
-        for other in side:
-            if other // 2 not in lengths:
-                lengths[other // 2] = polyline_length(pieces[other // 2])
-        # Both strands long where they part, at least twice the stretch's width, or
-        # going on through another junction or out of the picture (a scrap there, as
-        # wide as a strand, may be clutter the segmentation joins to a cable: bright
-        # 96001 end to end, 22 px), and alike.
-        if any(
-            lengths[other // 2] < RUN_ON_STRETCH_WIDTHS * 2 * widths[index]
-            and labels[other ^ 1] < 0
-            and not (leaving is not None and leaving[other ^ 1])
-            for other in side
-        ):
-            continue
-        side_widths = [float(widths[other // 2]) for other in side]
-        if min(side_widths) < WIDTH_AGREEMENT * max(side_widths):
+        side_widths = _long_alike_strands(side, index, pieces, labels, leaving, widths)
+        if side_widths is None:
             continue
         strands = float(sum(side_widths))
         # From the junction towards the free end.
@@ -182,16 +167,8 @@ def split_stretches_going_on(
         )
         if side is None:
             continue
-        # Both strands long where they part (as split_stretches_ending), and alike.
-        if any(
-            polyline_length(pieces[other // 2]) < RUN_ON_STRETCH_WIDTHS * 2 * widths[index]
-            and labels[other ^ 1] < 0
-            and not (leaving is not None and leaving[other ^ 1])
-            for other in side
-        ):
-            continue
-        side_widths = [float(widths[other // 2]) for other in side]
-        if min(side_widths) < WIDTH_AGREEMENT * max(side_widths):
+        side_widths = _long_alike_strands(side, index, pieces, labels, leaving, widths)
+        if side_widths is None:
             continue
         strands = float(sum(side_widths))
         points = np.asarray(pieces[index], np.float64)
@@ -232,6 +209,26 @@ def split_stretches_going_on(
             result.junction_of_end[far] = -1
         handled.add(labels[end])
     return handled
+
+
+def _long_alike_strands(side, index, pieces, labels, leaving, widths) -> list[float] | None:
+    """The half widths of the two strands (``side``: their ends at the stretch
+    ``index``'s three-way junction) where both are long where they part, at least twice
+    the stretch's width (:data:`RUN_ON_STRETCH_WIDTHS`), or go on through another
+    junction or out of the picture (a scrap there, as wide as a strand, may be clutter
+    the segmentation joins to a cable: bright 96001 end to end, 22 px), and alike in
+    width (:data:`.appearance.WIDTH_AGREEMENT`); None otherwise."""
+    if any(
+        polyline_length(pieces[other // 2]) < RUN_ON_STRETCH_WIDTHS * 2 * widths[index]
+        and labels[other ^ 1] < 0
+        and not (leaving is not None and leaving[other ^ 1])
+        for other in side
+    ):
+        return None
+    side_widths = [float(widths[other // 2]) for other in side]
+    if min(side_widths) < WIDTH_AGREEMENT * max(side_widths):
+        return None
+    return side_widths
 
 
 def _where_parting(points, distance, strands: float, half_width: float) -> float | None:
