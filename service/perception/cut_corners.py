@@ -43,7 +43,8 @@ def _borders_either_side(
 ) -> tuple[float, float]:
     """How far the mask's border lies from ``origin`` along the unit ``normal`` and
     against it (px, sampled at ``steps``; ``steps[-1]`` where none is read:
-    :func:`._shared_kernels.border_distance`)."""
+    :func:`._shared_kernels.border_distance`, as :func:`.cut_ends._border_distance`
+    reads a section, which this module cannot import: cut_ends imports it)."""
     return tuple(
         float(
             _shared_kernels.border_distance(

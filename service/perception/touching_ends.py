@@ -71,14 +71,12 @@ def split_stretches_ending(
         end, free = 2 * index + at_junction, 2 * index + 1 - at_junction
         if labels[end] in handled:
             continue
-        side = end_kind(
-            end, index, labels, members, positions, directions, pieces, float(widths[index])
+        found = _parting_strands(
+            end, index, labels, members, positions, directions, pieces, leaving, widths
         )
-        if side is None:
+        if found is None:
             continue
-        side_widths = _long_alike_strands(side, index, pieces, labels, leaving, widths)
-        if side_widths is None:
-            continue
+        side, side_widths = found
         strands = float(sum(side_widths))
         # From the junction towards the free end.
         points = np.asarray(pieces[index], np.float64)
@@ -162,14 +160,12 @@ def split_stretches_going_on(
         if len(beyond) != 1 or beyond[0] // 2 == index:
             continue
         beyond = beyond[0]
-        side = end_kind(
-            end, index, labels, members, positions, directions, pieces, float(widths[index])
+        found = _parting_strands(
+            end, index, labels, members, positions, directions, pieces, leaving, widths
         )
-        if side is None:
+        if found is None:
             continue
-        side_widths = _long_alike_strands(side, index, pieces, labels, leaving, widths)
-        if side_widths is None:
-            continue
+        side, side_widths = found
         strands = float(sum(side_widths))
         points = np.asarray(pieces[index], np.float64)
         if narrowest(points, distance, float(widths[index]), short_at_middle=True) < (
@@ -209,6 +205,19 @@ def split_stretches_going_on(
             result.junction_of_end[far] = -1
         handled.add(labels[end])
     return handled
+
+
+def _parting_strands(end, index, labels, members, positions, directions, pieces, leaving, widths):
+    """The two strands parting at the three-way junction of the stretch ``index``'s
+    ``end`` (:func:`.strand_sides.end_kind`: their ends, left one first) and their half
+    widths, where both are long and alike (:func:`_long_alike_strands`); None otherwise."""
+    side = end_kind(
+        end, index, labels, members, positions, directions, pieces, float(widths[index])
+    )
+    if side is None:
+        return None
+    side_widths = _long_alike_strands(side, index, pieces, labels, leaving, widths)
+    return None if side_widths is None else (side, side_widths)
 
 
 def _long_alike_strands(side, index, pieces, labels, leaving, widths) -> list[float] | None:
