@@ -963,21 +963,23 @@ def unlike_ground_at(
     (off the mask, not at the picture's edge) and, where it can, differs from ``ground``
     (:func:`ground_beside`) by more than :func:`gap_hidden`'s tolerance (something else
     lies there: an object over the cable): two boolean arrays, ``unlike`` False where
-    nothing is read."""
+    nothing is read (a NaN distance compares False)."""
     colours = _lab_beside(image_bgr, mask, np.asarray(points, np.float64).reshape(-1, 2))
-    readable = ~np.isnan(colours[:, 0])
     reference, spread = ground
-    unlike = readable & (
-        _lab_distance(np.nan_to_num(colours), reference) > COLOUR_TOLERANCE + 2 * spread
-    )
-    return readable, unlike
+    unlike = _lab_distance(colours, reference) > COLOUR_TOLERANCE + 2 * spread
+    return ~np.isnan(colours[:, 0]), unlike
 
 
 def unlike_ground(
     image_bgr: np.ndarray, mask: np.ndarray, point: np.ndarray, ground: tuple[np.ndarray, float]
 ) -> bool | None:
-    """Whether the image at the (x, y) ``point`` differs from ``ground``
-    (:func:`unlike_ground_at`); None where the point is on the mask or at the picture's
-    edge (nothing to read)."""
-    readable, unlike = unlike_ground_at(image_bgr, mask, point, ground)
-    return bool(unlike[0]) if readable[0] else None
+    """Whether the image at the (x, y) ``point`` differs from ``ground``, as
+    :func:`unlike_ground_at` reads many; None where the point is on the mask or at the
+    picture's edge (nothing to read). One point's own path: a wedge's borders are read a
+    step at a time (:func:`.cut_ends.along_the_wedge`), where the arrays' handling costs
+    twice the reading."""
+    colour = _lab_beside(image_bgr, mask, np.asarray(point, np.float64).reshape(1, 2))[0]
+    if np.isnan(colour[0]):
+        return None
+    reference, spread = ground
+    return bool(_lab_distance(colour, reference) > COLOUR_TOLERANCE + 2 * spread)
