@@ -47,7 +47,11 @@ from service.perception.geometry import (
     unit,
 )
 from service.perception.paths import gap_curve
-from service.perception.turn_joins import DIRECTION_SLACK, HIDDEN_BEND_RADII
+from service.perception.turn_joins import (
+    DIRECTION_SLACK,
+    HIDDEN_BEND_RADII,
+    turns_round_in_one_arc,
+)
 
 TRACE_STEP_PX = 1.0
 """The step (px) along the cable between two traced middle points."""
@@ -883,10 +887,16 @@ def bridges_from_the_cuts(
         loop = junction_of_end[i ^ 1] >= 0 and junction_of_end[i ^ 1] == junction_of_end[j ^ 1]
         if not (loop and int(junction_of_end[i ^ 1]) not in fork):
             leaving, arriving = read_together(a, leaving, b, arriving)
+        cable = 0.5 * ((ends[i].width or radius) + (ends[j].width or radius))
+        if turn and not turns_round_in_one_arc(a, leaving, b, arriving, cable):
+            # The cuts say the strands lie too close across to turn round in one arc
+            # (staggered cuts of strands side by side): the cable swung out into a
+            # bulb, which the turn's own curve follows and a spiral between the cuts
+            # cuts across.
+            continue
         if GapCurve(shape) is GapCurve.smooth and is_large_turn(a, leaving, b, -arriving):
             # The spiral across a large turn bends as a cable does (no tighter than its
             # tightest bend), its headings turned from the readings as little as that takes.
-            cable = 0.5 * ((ends[i].width or radius) + (ends[j].width or radius))
             within = headings_within_bend(
                 a, leaving, b, -arriving, HIDDEN_BEND_RADII[0] * cable, DIRECTION_SLACK
             )

@@ -79,7 +79,7 @@ from service.perception.touching import (
 )
 from service.perception.touching_ends import keep_turns_free
 from service.perception.traced_cuts import traced_cut_tests
-from service.perception.turn_joins import turn_joins, turns_round_in_one_arc
+from service.perception.turn_joins import HIDDEN_BEND_RADII, turn_joins
 
 # An end whose cable runs on along its direction, within this many radii plus
 # BORDER_REACH_PX, to the picture's border (or within BORDER_MARGIN_PX of it) is a cable
@@ -931,9 +931,8 @@ def merge_chains(
         wide_turns = frozenset(
             (i, j)
             for i, j in turn_bridges
-            if turns_round_in_one_arc(
-                ends[i], ends[j], 0.5 * (ends[i].width + ends[j].width) or radius
-            )
+            if np.hypot(*(ends[i].position - ends[j].position))
+            >= 2.0 * HIDDEN_BEND_RADII[0] * (0.5 * (ends[i].width + ends[j].width) or radius)
         )
         cut_bridges = bridges_from_the_cuts(
             bridging_ends,
