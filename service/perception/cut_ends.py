@@ -885,10 +885,20 @@ def bridges_from_the_cuts(
         # their cuts (both pieces run back to one crossing): past a half turn its hidden
         # arc's two ends swing apart as the loop's circle does.
         loop = junction_of_end[i ^ 1] >= 0 and junction_of_end[i ^ 1] == junction_of_end[j ^ 1]
+        # Cuts heading towards each other: the strands already bend into the turn
+        # where they pass out of sight (the cable has begun turning in view), not
+        # strands lying side by side, whose spacing across says how they turn round;
+        # only cuts closer than one arc's width say so then.
+        converging = float(np.dot(np.subtract(arriving, leaving), b - a)) < 0.0
+        cable = 0.5 * ((ends[i].width or radius) + (ends[j].width or radius))
+        close = float(np.hypot(*(b - a))) < 2.0 * HIDDEN_BEND_RADII[0] * cable
         if not (loop and int(junction_of_end[i ^ 1]) not in fork):
             leaving, arriving = read_together(a, leaving, b, arriving)
-        cable = 0.5 * ((ends[i].width or radius) + (ends[j].width or radius))
-        if turn and not turns_round_in_one_arc(a, leaving, b, arriving, cable):
+        if (
+            turn
+            and (close or not converging)
+            and not turns_round_in_one_arc(a, leaving, b, arriving, cable)
+        ):
             # The cuts say the strands lie too close across to turn round in one arc
             # (staggered cuts of strands side by side): the cable swung out into a
             # bulb, which the turn's own curve follows and a spiral between the cuts
