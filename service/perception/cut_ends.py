@@ -759,7 +759,11 @@ def bridges_from_the_cuts(
     to the other end's bridging point (the seen stretches drawn as curves from each
     bridging point to its cut). An end with no cut traced keeps its own
     start. The joins in ``turns`` (each as the turn pass keyed it) are bridged so too,
-    though their ends are in ``given``, where both ends reach a cut. An end in
+    though their ends are in ``given``, where both ends reach a cut, unless the cuts
+    leave the strands no room across them to turn round in one arc
+    (:func:`.turn_joins.turns_round_in_one_arc`; cuts heading towards each other, the
+    strands already bending into the turn, only where closer than its width): those
+    keep the turn's own curve, a bulb's. An end in
     ``short_pieces`` (end index -> its short piece's points and half width, px: a piece
     bridged along its partners' line) starts at the cut traced from its piece's middle
     (:func:`short_piece_cut`), with no seen stretch drawn: its piece ends at its tip; or,
