@@ -47,7 +47,11 @@ from service.perception.geometry import (
     unit,
 )
 from service.perception.paths import gap_curve
-from service.perception.turn_joins import DIRECTION_SLACK, HIDDEN_BEND_RADII
+from service.perception.turn_joins import (
+    DIRECTION_SLACK,
+    HIDDEN_BEND_RADII,
+    turns_round_in_one_arc,
+)
 
 TRACE_STEP_PX = 1.0
 """The step (px) along the cable between two traced middle points."""
@@ -755,7 +759,11 @@ def bridges_from_the_cuts(
     to the other end's bridging point (the seen stretches drawn as curves from each
     bridging point to its cut). An end with no cut traced keeps its own
     start. The joins in ``turns`` (each as the turn pass keyed it) are bridged so too,
-    though their ends are in ``given``, where both ends reach a cut. An end in
+    though their ends are in ``given``, where both ends reach a cut, unless the cuts
+    leave the strands no room across them to turn round in one arc
+    (:func:`.turn_joins.turns_round_in_one_arc`; cuts heading towards each other, the
+    strands already bending into the turn, only where closer than its width): those
+    keep the turn's own curve, a bulb's. An end in
     ``short_pieces`` (end index -> its short piece's points and half width, px: a piece
     bridged along its partners' line) starts at the cut traced from its piece's middle
     (:func:`short_piece_cut`), with no seen stretch drawn: its piece ends at its tip; or,
@@ -881,12 +889,28 @@ def bridges_from_the_cuts(
         # their cuts (both pieces run back to one crossing): past a half turn its hidden
         # arc's two ends swing apart as the loop's circle does.
         loop = junction_of_end[i ^ 1] >= 0 and junction_of_end[i ^ 1] == junction_of_end[j ^ 1]
+        # Cuts heading towards each other: the strands already bend into the turn
+        # where they pass out of sight (the cable has begun turning in view), not
+        # strands lying side by side, whose spacing across says how they turn round;
+        # only cuts closer than one arc's width say so then.
+        converging = float(np.dot(np.subtract(arriving, leaving), b - a)) < 0.0
+        cable = 0.5 * ((ends[i].width or radius) + (ends[j].width or radius))
+        close = float(np.hypot(*(b - a))) < 2.0 * HIDDEN_BEND_RADII[0] * cable
         if not (loop and int(junction_of_end[i ^ 1]) not in fork):
             leaving, arriving = read_together(a, leaving, b, arriving)
+        if (
+            turn
+            and (close or not converging)
+            and not turns_round_in_one_arc(a, leaving, b, arriving, cable)
+        ):
+            # The cuts say the strands lie too close across to turn round in one arc
+            # (staggered cuts of strands side by side): the cable swung out into a
+            # bulb, which the turn's own curve follows and a spiral between the cuts
+            # cuts across.
+            continue
         if GapCurve(shape) is GapCurve.smooth and is_large_turn(a, leaving, b, -arriving):
             # The spiral across a large turn bends as a cable does (no tighter than its
             # tightest bend), its headings turned from the readings as little as that takes.
-            cable = 0.5 * ((ends[i].width or radius) + (ends[j].width or radius))
             within = headings_within_bend(
                 a, leaving, b, -arriving, HIDDEN_BEND_RADII[0] * cable, DIRECTION_SLACK
             )

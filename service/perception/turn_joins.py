@@ -313,6 +313,40 @@ def bends_as_a_cable(curve: np.ndarray, cable_radius: float) -> bool:
     return tightest_bend(curve, cable_radius) >= tightest
 
 
+def turns_round_in_one_arc(
+    first: np.ndarray,
+    first_heading: np.ndarray,
+    second: np.ndarray,
+    second_heading: np.ndarray,
+    cable_radius: float,
+) -> bool:
+    """Whether a cable turning out of sight from ``first`` to ``second`` (points, each
+    with its heading out of its strand, into the gap) has room to turn round in one arc
+    no tighter than it bends (:data:`HIDDEN_BEND_RADII` ``[0]`` of ``cable_radius``);
+    where it has not, it swings out into a bulb.
+
+    A cable turning round by a half turn in one arc of radius ``R`` spans ``2 R``
+    across its strands' direction, whatever the stretch of straight strand before the
+    arc: two strands doubled back (their headings within a quarter turn of each other,
+    :data:`BULB_MIN_TURN`, both into the object) need to lie twice the tightest bend
+    apart ACROSS their mean heading, not merely end that far apart. Where one strand
+    runs on past the other's cut (the cuts staggered along the strands), the ends lie
+    far apart while the strands beside each other are too close for one arc: a bulb.
+    Ends that do not turn back on each other keep the plain spacing."""
+    offset = np.asarray(second, np.float64) - np.asarray(first, np.float64)
+    room = 2.0 * HIDDEN_BEND_RADII[0] * cable_radius
+    if float(np.hypot(*offset)) < room:
+        return False
+    heading = np.asarray(first_heading, np.float64) + np.asarray(second_heading, np.float64)
+    length = float(np.hypot(*heading))
+    # Two unit headings within BULB_MIN_TURN of a half turn of each other's reverse
+    # (a turn of at least BULB_MIN_TURN) sum to at least 2 cos(half the rest).
+    if length < 2.0 * np.cos(0.5 * (np.pi - BULB_MIN_TURN)):
+        return True
+    across = abs(float(offset[0] * heading[1] - offset[1] * heading[0])) / length
+    return across >= room
+
+
 def _likeliest_shape(
     first: np.ndarray,
     others: Iterator[np.ndarray],
@@ -685,9 +719,10 @@ def turn_joins(
                 # bridged as any gap is (from where the fits begin, a short piece along
                 # its partner, :mod:`.bridge_ends`), unless its strands lie too close to
                 # turn round in one arc (a bulb, which only the turn's curve follows).
-                apart = float(np.hypot(*(a.position - b.position)))
                 shaped = strength < len(along_curve) and along_curve[strength]
-                if shaped or apart < 2.0 * HIDDEN_BEND_RADII[0] * cable:
+                if shaped or not turns_round_in_one_arc(
+                    a.position, a.direction, b.position, b.direction, cable
+                ):
                     hidden_curves[i, j] = found
                 break
     if not turns:

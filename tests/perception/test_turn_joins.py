@@ -20,6 +20,7 @@ from service.perception.turn_joins import (
     hidden_turn_curves,
     natural_turn,
     tightest_bend,
+    turns_round_in_one_arc,
 )
 from service.synthetic import make_family_scene
 
@@ -461,3 +462,35 @@ def test_a_round_turn_cut_along_its_bends_by_an_object_of_the_grounds_colour_is_
     )
     assert hidden.sum() > 20
     assert distance_to_polyline(line[hidden], np.asarray(chains[0].points, float)).max() < 5.0
+
+
+def test_strands_side_by_side_with_staggered_cuts_have_no_room_for_one_arc():
+    """Two strands of a cable of half width 5 doubled back, both heading left into an
+    object: a half turn in one arc no tighter than 2 half widths spans 20 px across
+    them. Cut 15 px apart across and 40 px apart along (one runs on past the other's
+    cut), their ends lie 42.7 px apart, yet the strands are too close for one arc: a
+    bulb. 25 px apart across they have room, however staggered; ends closer than
+    20 px never have; and two ends that face each other (a straight gap) are judged
+    on their distance alone."""
+    left = np.array([-1.0, 0.0])
+    assert not turns_round_in_one_arc([0.0, 0.0], left, [40.0, -15.0], left, 5.0)
+    assert turns_round_in_one_arc([0.0, 0.0], left, [40.0, -25.0], left, 5.0)
+    tilted = np.array([-np.cos(0.3), np.sin(0.3)])
+    assert not turns_round_in_one_arc([0.0, 0.0], tilted, [40.0, -15.0], left, 5.0)
+    assert not turns_round_in_one_arc([0.0, 0.0], left, [0.0, -18.0], left, 5.0)
+    assert turns_round_in_one_arc([0.0, 0.0], left, [-30.0, 0.0], -left, 5.0)
+
+
+def test_a_doubled_back_turn_whose_cuts_are_staggered_follows_its_bulb():
+    """Tuning scene doubled_back 490264, true mask: a cable of half width 6.7 doubled back
+    under a box of the ground's own colour whose long edge runs at a slant across both
+    strands, so the upper strand is cut 33 px further along than the lower: the ends
+    lie 40 px apart (6 half widths) but the strands only 15 px apart across (2.2): too
+    close to turn round in one arc, the cable swings out into a bulb. Read by the ends'
+    distance the turn was bridged as a gap between the cuts, a spiral 9.3 px off the
+    hidden bulb (tolerance 6.7); the turn pass's curve follows it (branch turnbg21,
+    docs/BENCHMARKS.md)."""
+    score, _ = evaluate_scene(
+        make_family_scene("doubled_back", 490264), 490264, mask_from_labels=True
+    )
+    assert score.frame.correct, score.frame.coverage
