@@ -26,6 +26,7 @@ from service.perception.appearance import (
     unlike_background,
 )
 from service.perception.geometry import polyline_length
+from service.perception.turn_joins import PIXEL_ROUNDING
 
 # A gap over open background whose curve is up to this many of the cable's radii long
 # may be joined, by the mutual rule or as a turn (:mod:`.turn_joins`), when both ends
@@ -359,7 +360,15 @@ def turn_out_of_view(image, mask, ends, radius) -> Callable[[int, int, np.ndarra
     """Whether a cable turning from end ``i`` to end ``j`` along a curve would be out of
     view all the way (:func:`.appearance.out_of_view`), as a callable ``(i, j, curve)``
     for the turns under objects (:func:`.turn_joins.turn_joins`' ``out_of_view``). The
-    background beside a pair of ends is read once for all the curves tried between them."""
+    background beside a pair of ends is read once for all the curves tried between them.
+
+    The cable is a tube, not a line: where an object the image shows hides the turn,
+    the whole of it lies under the object (else it would show), and a curve whose tube
+    reaches out past the object's outline onto open background, though its middle
+    keeps under it, is no cable's hidden turn. So the tube's two borders are read too,
+    at the two ends' mean half width less a pixel's rounding
+    (:data:`.turn_joins.PIXEL_ROUNDING`), as :func:`.turn_joins.turn_joins` measures
+    the cable."""
     backgrounds: dict[tuple[int, int], tuple | None] = {}
 
     def hidden(i: int, j: int, curve: np.ndarray) -> bool:
@@ -368,7 +377,8 @@ def turn_out_of_view(image, mask, ends, radius) -> Callable[[int, int, np.ndarra
             backgrounds[i, j] = background_beside(image, mask, pair, radius)
         if backgrounds[i, j] is None:
             return False
-        return out_of_view(image, mask, curve, pair, radius, backgrounds[i, j])
+        half_width = (0.5 * (ends[i].width + ends[j].width) or radius) - PIXEL_ROUNDING
+        return out_of_view(image, mask, curve, pair, radius, backgrounds[i, j], half_width)
 
     return hidden
 

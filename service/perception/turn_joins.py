@@ -40,6 +40,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from functools import partial
+from itertools import chain, islice
 
 import numpy as np
 
@@ -189,6 +190,7 @@ def hidden_turn_curves(
     arriving: np.ndarray,
     cable_radius: float,
     step: float = 1.0,
+    limit: int | None = MAX_TURN_TRIALS,
 ) -> Iterator[np.ndarray]:
     """The shapes a cable may have taken between two ends where it turned out of sight,
     shortest (most compact) first: the join is made when something lies over any one.
@@ -209,9 +211,9 @@ def hidden_turn_curves(
     (:data:`DIRECTION_TILTS`). Ends further apart than :data:`BULB_REACH_RADII`, or
     turning by less than :data:`BULB_MIN_TURN` the short way and by more than
     :data:`MAX_HIDDEN_TURN` the long way with one direction tilted towards it, get the
-    natural curves alone. At most
-    :data:`MAX_TURN_TRIALS` distinct curves are yielded, lazily: a pair whose first
-    curve is hidden is tested once.
+    natural curves alone. At most ``limit`` (:data:`MAX_TURN_TRIALS`; None: every one)
+    distinct curves are yielded, lazily: a pair whose first curve is hidden is tested
+    once.
 
     Parameters
     ----------
@@ -223,6 +225,8 @@ def hidden_turn_curves(
         The cable's half width (px).
     step : float
         Sample spacing (px).
+    limit : int or None
+        The most curves yielded.
     """
     apart = float(np.hypot(*(np.asarray(end, np.float64) - np.asarray(start, np.float64))))
     fitted_turn = abs(float(np.arctan2(*_cross_dot(leaving, arriving))))
@@ -251,7 +255,7 @@ def hidden_turn_curves(
                     curves.append((length / step, (first, segments)))
     seen: list[np.ndarray] = []
     for _, curve in sorted(curves, key=lambda item: item[0]):
-        if len(seen) == MAX_TURN_TRIALS:
+        if len(seen) == limit:
             return
         if isinstance(curve, tuple):
             curve = _trace_to(start, curve[0], end, curve[1], step)
@@ -662,6 +666,7 @@ def turn_joins(
                 _turn_leaves_at(b, distance, cable),
                 -b.direction,
                 cable,
+                limit=None,
             ),
             a_from,
             b_from,
@@ -670,14 +675,21 @@ def turn_joins(
         # is seen over before the shortest one the ends' cuts allow.
         tried: list[np.ndarray] = []
         for strength, test in enumerate(evidence):
-            passing = (curve for curve in _cached(curves, tried) if test(i, j, curve))
+            candidates = _cached(curves, tried)
+            first_few = islice(candidates, MAX_TURN_TRIALS)
+            passing = (curve for curve in first_few if test(i, j, curve))
             found = next(passing, None)
             if found is not None:
                 # Where an object is seen over the turn, the cable lies under it all
-                # the way round, not out past its rim on open background.
+                # the way round, not out past its rim on open background. The first
+                # few curves say whether the evidence holds; the object's outline
+                # then bounds the turn's shape, and every curve is tried against it
+                # (the most compact ones may all reach out past it).
                 hidden_all_along = None
                 if strength == 0 and out_of_view is not None:
                     hidden_all_along = partial(out_of_view, i, j)
+                    rest = (curve for curve in candidates if test(i, j, curve))
+                    passing = chain(passing, rest)
                 found = _likeliest_shape(found, passing, cable, hidden_all_along)
                 turns[i, j] = pair_cost
                 # The ends' cuts say only that the gap is short enough for an object of
