@@ -407,8 +407,7 @@ def _off_mask_flags(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
         & (points[:, 0] <= width - 1)
         & (points[:, 1] <= height - 1)
     )
-    cols = np.rint(np.clip(points[:, 0], 0, width - 1)).astype(np.int64)
-    rows = np.rint(np.clip(points[:, 1], 0, height - 1)).astype(np.int64)
+    cols, rows = np.rint(np.where(inside[:, None], points, 0.0)).astype(np.int64).T
     return inside & ~mask[rows, cols]
 
 

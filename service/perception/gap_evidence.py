@@ -356,19 +356,23 @@ def turn_evidence(image, mask, ends, colours, radius, partings=()) -> tuple:
     )
 
 
-def turn_out_of_view(image, mask, ends, radius) -> Callable[[int, int, np.ndarray], bool]:
+def turn_out_of_view(
+    image, mask, ends, radius, whole_tube: bool = True
+) -> Callable[[int, int, np.ndarray], bool]:
     """Whether a cable turning from end ``i`` to end ``j`` along a curve would be out of
     view all the way (:func:`.appearance.out_of_view`), as a callable ``(i, j, curve)``
     for the turns under objects (:func:`.turn_joins.turn_joins`' ``out_of_view``). The
     background beside a pair of ends is read once for all the curves tried between them.
 
-    The cable is a tube, not a line: where an object the image shows hides the turn,
-    the whole of it lies under the object (else it would show), and a curve whose tube
-    reaches out past the object's outline onto open background, though its middle
-    keeps under it, is no cable's hidden turn. So the tube's two borders are read too,
-    at the two ends' mean half width less a pixel's rounding
+    The cable is a tube, not a line (``whole_tube``): where an object the image shows
+    hides the turn, the whole of it lies under the object (else it would show), and a
+    turn's curve whose tube reaches out past the object's outline onto open background,
+    though its middle keeps under it, is no cable's hidden turn. So the tube's two
+    borders are read too, at the two ends' mean half width less a pixel's rounding
     (:data:`.turn_joins.PIXEL_ROUNDING`), as :func:`.turn_joins.turn_joins` measures
-    the cable."""
+    the cable. Without ``whole_tube``, the middle alone (for a bridge from the traced
+    cuts, which starts on the object's very edge: its tube there straddles the edge
+    whatever the hidden shape, and reads the cut, not the turn)."""
     backgrounds: dict[tuple[int, int], tuple | None] = {}
 
     def hidden(i: int, j: int, curve: np.ndarray) -> bool:
@@ -378,6 +382,7 @@ def turn_out_of_view(image, mask, ends, radius) -> Callable[[int, int, np.ndarra
         if backgrounds[i, j] is None:
             return False
         half_width = (0.5 * (ends[i].width + ends[j].width) or radius) - PIXEL_ROUNDING
+        half_width = half_width if whole_tube else 0.0
         return out_of_view(image, mask, curve, pair, radius, backgrounds[i, j], half_width)
 
     return hidden
