@@ -81,6 +81,9 @@ MAX_TURN_TRIALS = 8
 PIXEL_ROUNDING = 1.0
 """How far (px) the mask's distance transform at a point on a cable's middle may fall
 short of its half width for the pixel grid alone (:func:`_turn_leaves_at`)."""
+WHOLE_TUBE_OUT_OF_VIEW = 2
+"""What a turn's ``out_of_view`` test gives a curve a cable's whole tube along which the
+object seen over the turn hides (1: its middle alone): the most a curve may be hidden."""
 KINK_SHARE = 0.75
 """A curve whose samples bend, over a stretch one cable radius long, tighter than this
 share of the tightest bend a cable takes (:data:`HIDDEN_BEND_RADII` ``[0]``) has a kink
@@ -321,22 +324,23 @@ def _likeliest_shape(
     first: np.ndarray,
     others: Iterator[np.ndarray],
     cable_radius: float,
-    out_of_view: Callable[[np.ndarray], bool] | None,
+    out_of_view: Callable[[np.ndarray], int] | None,
 ) -> np.ndarray:
     """Of the curves a test passes on, shortest first (``first``, then ``others``,
     drawn only while needed), the one a hidden cable most likely took: the first that
     lies out of view all the way (``out_of_view``, when given: the cable is not where
-    the image shows open background) and bends as a cable does
+    the image shows open background; how much of it, :data:`WHOLE_TUBE_OUT_OF_VIEW`
+    the most: its whole tube, then its middle alone) and bends as a cable does
     (:func:`bends_as_a_cable`: a bulb meeting the second end with a kink is no cable's
-    shape); failing both, the first that is out of view; failing that, the first that
+    shape); failing both, the first most out of view; failing that, the first that
     bends as a cable does; else ``first``."""
 
-    def rank(curve: np.ndarray) -> tuple[bool, bool]:
-        hidden = out_of_view is None or out_of_view(curve)
+    def rank(curve: np.ndarray) -> tuple[int, bool]:
+        hidden = WHOLE_TUBE_OUT_OF_VIEW if out_of_view is None else int(out_of_view(curve))
         return hidden, bends_as_a_cable(curve, cable_radius)
 
     best, best_rank = first, rank(first)
-    while best_rank != (True, True):
+    while best_rank != (WHOLE_TUBE_OUT_OF_VIEW, True):
         curve = next(others, None)
         if curve is None:
             break
@@ -614,10 +618,12 @@ def turn_joins(
         seen over the curve (the first test), or two strands parting from a stretch
         where they touch, whose bulb a gap's bridge would cut across. The others say
         only that the gap is short enough to hide.
-    out_of_view : callable (i, j, curve) -> bool, optional
-        Whether a cable along the curve would be hidden all the way from end ``i`` to
-        end ``j`` (nowhere over open background): of the curves the first test passes
-        on, the shortest such is the bridge (:func:`_likeliest_shape`).
+    out_of_view : callable (i, j, curve) -> int, optional
+        How much of a cable along the curve would be hidden all the way from end ``i``
+        to end ``j`` (nowhere over open background): :data:`WHOLE_TUBE_OUT_OF_VIEW`
+        its whole tube, 1 its middle alone, 0 neither; of the curves the first test
+        passes on, the shortest most hidden is the bridge (:func:`_likeliest_shape`),
+        every curve :func:`hidden_turn_curves` builds tried until one is hidden whole.
     distance : ndarray, optional
         The mask's distance transform: an end whose strand it reads whole and straight
         up to the tip has its turns drawn from there (:func:`_turn_leaves_at`).
