@@ -22,7 +22,9 @@ join is made here only on the image's evidence, after every other join
   cable is seen whole and straight up to it, else from where its fit begins:
   :func:`_turn_leaves_at`); the join is bridged along the
   shortest curve the strongest test passes (a curve an object is seen over before the
-  shortest the ends' cuts allow), except that a turn seen on the cuts alone, its strands
+  shortest the ends' cuts allow; under an object, the shortest that bends as a cable does
+  and along which the object hides a cable's whole tube, of every curve built:
+  :func:`_likeliest_shape`), except that a turn seen on the cuts alone, its strands
   far enough apart to turn round in one arc, is bridged as any gap is (the cuts say
   nothing of the curve's shape, :mod:`.bridge_ends`);
 - the two pieces agree in colour and width (:func:`.appearance.ends_alike`);
