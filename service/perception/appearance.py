@@ -395,6 +395,11 @@ def _unlike(image_bgr: np.ndarray, points: np.ndarray, background: tuple) -> np.
 
 def _off_mask(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """The (x, y) ``points`` inside the picture that lie off the foreground ``mask``."""
+    return points[_off_mask_flags(points, mask)]
+
+
+def _off_mask_flags(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Per (x, y) point, whether it lies inside the picture and off the ``mask``."""
     height, width = mask.shape
     inside = (
         (points[:, 0] >= 0)
@@ -402,10 +407,8 @@ def _off_mask(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
         & (points[:, 0] <= width - 1)
         & (points[:, 1] <= height - 1)
     )
-    points = points[inside]
-    cols = np.rint(points[:, 0]).astype(np.int64)
-    rows = np.rint(points[:, 1]).astype(np.int64)
-    return points[~mask[rows, cols]]
+    cols, rows = np.rint(np.where(inside[:, None], points, 0.0)).astype(np.int64).T
+    return inside & ~mask[rows, cols]
 
 
 def background_beside(
@@ -436,6 +439,7 @@ def out_of_view(
     ends: tuple,
     radius: float,
     background: tuple[np.ndarray, float] | None = None,
+    half_width: float = 0.0,
 ) -> bool:
     """Whether a cable along ``curve`` would be out of view all the way: every sample of
     the curve off the foreground differs from the open background beside the two
@@ -444,15 +448,25 @@ def out_of_view(
     background, where the cable would be seen, is not; nor is one with too few samples
     off the foreground, or ends with too little background beside them, to tell.
     ``background``: :func:`background_beside` of the two ends, when already read (the
-    same for every curve tried between them)."""
+    same for every curve tried between them). With ``half_width`` (px), the cable's
+    whole tube, not only its middle: the points that far to either side of each sample
+    off the foreground (across the curve), those off it too, must differ as well."""
     if background is None:
         background = background_beside(image_bgr, mask, ends, radius)
     if background is None:
         return False
     colour, spread = background
-    points = _off_mask(np.asarray(curve, np.float64), mask)
+    curve = np.asarray(curve, np.float64)
+    hidden = _off_mask_flags(curve, mask)
+    points = curve[hidden]
     if len(points) < MIN_GAP_SAMPLES:
         return False
+    if half_width > 0:
+        steps = np.gradient(curve, axis=0)
+        normals = np.column_stack([-steps[:, 1], steps[:, 0]])[hidden]
+        normals *= half_width / np.maximum(np.hypot(*normals.T), 1e-9)[:, None]
+        sides = np.concatenate([points + normals, points - normals])
+        points = np.concatenate([points, _off_mask(sides, mask)])
     distance = _lab_distance(_lab_means(image_bgr, points), colour)
     return bool(np.all(distance > COLOUR_TOLERANCE + 2 * spread))
 

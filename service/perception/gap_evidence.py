@@ -26,6 +26,7 @@ from service.perception.appearance import (
     unlike_background,
 )
 from service.perception.geometry import polyline_length
+from service.perception.turn_joins import PIXEL_ROUNDING, WHOLE_TUBE_OUT_OF_VIEW
 
 # A gap over open background whose curve is up to this many of the cable's radii long
 # may be joined, by the mutual rule or as a turn (:mod:`.turn_joins`), when both ends
@@ -355,20 +356,40 @@ def turn_evidence(image, mask, ends, colours, radius, partings=()) -> tuple:
     )
 
 
-def turn_out_of_view(image, mask, ends, radius) -> Callable[[int, int, np.ndarray], bool]:
-    """Whether a cable turning from end ``i`` to end ``j`` along a curve would be out of
-    view all the way (:func:`.appearance.out_of_view`), as a callable ``(i, j, curve)``
-    for the turns under objects (:func:`.turn_joins.turn_joins`' ``out_of_view``). The
-    background beside a pair of ends is read once for all the curves tried between them."""
+def turn_out_of_view(
+    image, mask, ends, radius, whole_tube: bool = True
+) -> Callable[[int, int, np.ndarray], int]:
+    """How much of a cable turning from end ``i`` to end ``j`` along a curve would be
+    out of view all the way (:func:`.appearance.out_of_view`), as a callable ``(i, j,
+    curve)`` for the turns under objects (:func:`.turn_joins.turn_joins`'
+    ``out_of_view``): :data:`.turn_joins.WHOLE_TUBE_OUT_OF_VIEW` its whole tube, 1 its
+    middle alone, 0 neither. The background beside a pair of ends is read once for all
+    the curves tried between them.
+
+    The cable is a tube, not a line (``whole_tube``): where an object the image shows
+    hides the turn, the whole of it lies under the object (else it would show), and a
+    turn's curve whose tube reaches out past the object's outline onto open background,
+    though its middle keeps under it, is less likely the hidden turn. So the tube's two
+    borders are read too, at the two ends' mean half width less a pixel's rounding
+    (:data:`.turn_joins.PIXEL_ROUNDING`), as :func:`.turn_joins.turn_joins` measures
+    the cable. Without ``whole_tube``, the middle alone (1 at most; for a bridge from
+    the traced cuts, which starts on the object's very edge: its tube there straddles
+    the edge whatever the hidden shape, and reads the cut, not the turn)."""
     backgrounds: dict[tuple[int, int], tuple | None] = {}
 
-    def hidden(i: int, j: int, curve: np.ndarray) -> bool:
+    def hidden(i: int, j: int, curve: np.ndarray) -> int:
         pair = (ends[i], ends[j])
         if (i, j) not in backgrounds:
             backgrounds[i, j] = background_beside(image, mask, pair, radius)
         if backgrounds[i, j] is None:
-            return False
-        return out_of_view(image, mask, curve, pair, radius, backgrounds[i, j])
+            return 0
+        if not out_of_view(image, mask, curve, pair, radius, backgrounds[i, j]):
+            return 0
+        if not whole_tube:
+            return 1
+        half_width = (0.5 * (ends[i].width + ends[j].width) or radius) - PIXEL_ROUNDING
+        tube = out_of_view(image, mask, curve, pair, radius, backgrounds[i, j], half_width)
+        return WHOLE_TUBE_OUT_OF_VIEW if tube else 1
 
     return hidden
 

@@ -875,7 +875,9 @@ def merge_chains(
         )
         widths = np.array([end.width for end in seen], np.float64)
         judged = evidence_ends(seen, ends, seen_from)
-        turn_hidden = turn_out_of_view(image, mask, seen, radius)
+        # The turn's own curves are read as a cable's whole tube; a bridge from the traced
+        # cuts by its middle (it starts on the object's edge, where the tube straddles it).
+        turn_hidden = turn_out_of_view(image, mask, seen, radius, whole_tube=False)
         turned = turn_joins(
             seen,
             joins,
@@ -894,7 +896,7 @@ def merge_chains(
             MAX_JUNCTION_ENDS,
             turn_bridges,
             TURN_EVIDENCE_ALONG_CURVE,
-            turn_hidden,
+            turn_out_of_view(image, mask, seen, radius),
             distance,
         )
         joins = joins + turned

@@ -22,7 +22,9 @@ join is made here only on the image's evidence, after every other join
   cable is seen whole and straight up to it, else from where its fit begins:
   :func:`_turn_leaves_at`); the join is bridged along the
   shortest curve the strongest test passes (a curve an object is seen over before the
-  shortest the ends' cuts allow), except that a turn seen on the cuts alone, its strands
+  shortest the ends' cuts allow; under an object, the shortest that bends as a cable does
+  and along which the object hides a cable's whole tube, of every curve built:
+  :func:`_likeliest_shape`), except that a turn seen on the cuts alone, its strands
   far enough apart to turn round in one arc, is bridged as any gap is (the cuts say
   nothing of the curve's shape, :mod:`.bridge_ends`);
 - the two pieces agree in colour and width (:func:`.appearance.ends_alike`);
@@ -40,6 +42,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from functools import partial
+from itertools import chain, islice
 
 import numpy as np
 
@@ -80,6 +83,9 @@ MAX_TURN_TRIALS = 8
 PIXEL_ROUNDING = 1.0
 """How far (px) the mask's distance transform at a point on a cable's middle may fall
 short of its half width for the pixel grid alone (:func:`_turn_leaves_at`)."""
+WHOLE_TUBE_OUT_OF_VIEW = 2
+"""What a turn's ``out_of_view`` test gives a curve a cable's whole tube along which the
+object seen over the turn hides (1: its middle alone): the most a curve may be hidden."""
 KINK_SHARE = 0.75
 """A curve whose samples bend, over a stretch one cable radius long, tighter than this
 share of the tightest bend a cable takes (:data:`HIDDEN_BEND_RADII` ``[0]``) has a kink
@@ -189,6 +195,7 @@ def hidden_turn_curves(
     arriving: np.ndarray,
     cable_radius: float,
     step: float = 1.0,
+    limit: int | None = MAX_TURN_TRIALS,
 ) -> Iterator[np.ndarray]:
     """The shapes a cable may have taken between two ends where it turned out of sight,
     shortest (most compact) first: the join is made when something lies over any one.
@@ -209,9 +216,9 @@ def hidden_turn_curves(
     (:data:`DIRECTION_TILTS`). Ends further apart than :data:`BULB_REACH_RADII`, or
     turning by less than :data:`BULB_MIN_TURN` the short way and by more than
     :data:`MAX_HIDDEN_TURN` the long way with one direction tilted towards it, get the
-    natural curves alone. At most
-    :data:`MAX_TURN_TRIALS` distinct curves are yielded, lazily: a pair whose first
-    curve is hidden is tested once.
+    natural curves alone. At most ``limit`` (:data:`MAX_TURN_TRIALS`; None: every one)
+    distinct curves are yielded, lazily: a pair whose first curve is hidden is tested
+    once.
 
     Parameters
     ----------
@@ -223,6 +230,8 @@ def hidden_turn_curves(
         The cable's half width (px).
     step : float
         Sample spacing (px).
+    limit : int or None
+        The most curves yielded.
     """
     apart = float(np.hypot(*(np.asarray(end, np.float64) - np.asarray(start, np.float64))))
     fitted_turn = abs(float(np.arctan2(*_cross_dot(leaving, arriving))))
@@ -251,7 +260,7 @@ def hidden_turn_curves(
                     curves.append((length / step, (first, segments)))
     seen: list[np.ndarray] = []
     for _, curve in sorted(curves, key=lambda item: item[0]):
-        if len(seen) == MAX_TURN_TRIALS:
+        if len(seen) == limit:
             return
         if isinstance(curve, tuple):
             curve = _trace_to(start, curve[0], end, curve[1], step)
@@ -351,22 +360,23 @@ def _likeliest_shape(
     first: np.ndarray,
     others: Iterator[np.ndarray],
     cable_radius: float,
-    out_of_view: Callable[[np.ndarray], bool] | None,
+    out_of_view: Callable[[np.ndarray], int] | None,
 ) -> np.ndarray:
     """Of the curves a test passes on, shortest first (``first``, then ``others``,
     drawn only while needed), the one a hidden cable most likely took: the first that
     lies out of view all the way (``out_of_view``, when given: the cable is not where
-    the image shows open background) and bends as a cable does
+    the image shows open background; how much of it, :data:`WHOLE_TUBE_OUT_OF_VIEW`
+    the most: its whole tube, then its middle alone) and bends as a cable does
     (:func:`bends_as_a_cable`: a bulb meeting the second end with a kink is no cable's
-    shape); failing both, the first that is out of view; failing that, the first that
+    shape); failing both, the first most out of view; failing that, the first that
     bends as a cable does; else ``first``."""
 
-    def rank(curve: np.ndarray) -> tuple[bool, bool]:
-        hidden = out_of_view is None or out_of_view(curve)
+    def rank(curve: np.ndarray) -> tuple[int, bool]:
+        hidden = WHOLE_TUBE_OUT_OF_VIEW if out_of_view is None else int(out_of_view(curve))
         return hidden, bends_as_a_cable(curve, cable_radius)
 
     best, best_rank = first, rank(first)
-    while best_rank != (True, True):
+    while best_rank != (WHOLE_TUBE_OUT_OF_VIEW, True):
         curve = next(others, None)
         if curve is None:
             break
@@ -644,10 +654,12 @@ def turn_joins(
         seen over the curve (the first test), or two strands parting from a stretch
         where they touch, whose bulb a gap's bridge would cut across. The others say
         only that the gap is short enough to hide.
-    out_of_view : callable (i, j, curve) -> bool, optional
-        Whether a cable along the curve would be hidden all the way from end ``i`` to
-        end ``j`` (nowhere over open background): of the curves the first test passes
-        on, the shortest such is the bridge (:func:`_likeliest_shape`).
+    out_of_view : callable (i, j, curve) -> int, optional
+        How much of a cable along the curve would be hidden all the way from end ``i``
+        to end ``j`` (nowhere over open background): :data:`WHOLE_TUBE_OUT_OF_VIEW`
+        its whole tube, 1 its middle alone, 0 neither; of the curves the first test
+        passes on, the shortest most hidden is the bridge (:func:`_likeliest_shape`),
+        every curve :func:`hidden_turn_curves` builds tried until one is hidden whole.
     distance : ndarray, optional
         The mask's distance transform: an end whose strand it reads whole and straight
         up to the tip has its turns drawn from there (:func:`_turn_leaves_at`).
@@ -696,6 +708,7 @@ def turn_joins(
                 _turn_leaves_at(b, distance, cable),
                 -b.direction,
                 cable,
+                limit=None,
             ),
             a_from,
             b_from,
@@ -704,14 +717,21 @@ def turn_joins(
         # is seen over before the shortest one the ends' cuts allow.
         tried: list[np.ndarray] = []
         for strength, test in enumerate(evidence):
-            passing = (curve for curve in _cached(curves, tried) if test(i, j, curve))
+            candidates = _cached(curves, tried)
+            first_few = islice(candidates, MAX_TURN_TRIALS)
+            passing = (curve for curve in first_few if test(i, j, curve))
             found = next(passing, None)
             if found is not None:
                 # Where an object is seen over the turn, the cable lies under it all
-                # the way round, not out past its rim on open background.
+                # the way round, not out past its rim on open background. The first
+                # few curves say whether the evidence holds; the object's outline
+                # then bounds the turn's shape, and every curve is tried against it
+                # (the most compact ones may all reach out past it).
                 hidden_all_along = None
                 if strength == 0 and out_of_view is not None:
                     hidden_all_along = partial(out_of_view, i, j)
+                    rest = (curve for curve in candidates if test(i, j, curve))
+                    passing = chain(passing, rest)
                 found = _likeliest_shape(found, passing, cable, hidden_all_along)
                 turns[i, j] = pair_cost
                 # The ends' cuts say only that the gap is short enough for an object of

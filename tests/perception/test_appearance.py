@@ -386,6 +386,19 @@ def test_a_curve_out_of_view_all_the_way_lies_under_the_object_at_every_sample()
     assert not appearance.out_of_view(open_image, open_mask, curve, ends, 3.5)
 
 
+def test_a_curve_whose_middle_keeps_under_the_object_but_whose_tube_reaches_past_it_shows():
+    """A cable is a tube: a curve swinging 20 px up from the gap's line has its middle
+    on the box's top row (y 30) and out of view, but a cable 3 px to either side of it
+    would reach up onto open paper, and be seen there; swinging 10 px, the whole tube
+    keeps under the box."""
+    image, mask, curve, ends = gap_scene((60, 140, 60))
+    for height, tube_hidden in ((10.0, True), (20.0, False)):
+        swing = curve.copy()
+        swing[:, 1] -= height * np.sin(np.pi * (swing[:, 0] - 78.0) / 104.0)
+        assert appearance.out_of_view(image, mask, swing, ends, 3.5)
+        assert appearance.out_of_view(image, mask, swing, ends, 3.5, half_width=3.0) == tube_hidden
+
+
 @pytest.mark.parametrize(
     ("seed", "position", "direction", "half_width", "skip"),
     [
