@@ -356,15 +356,13 @@ def turn_evidence(image, mask, ends, colours, radius, partings=()) -> tuple:
     )
 
 
-def turn_out_of_view(
-    image, mask, ends, radius, whole_tube: bool = True
-) -> Callable[[int, int, np.ndarray], int]:
+def turn_out_of_view(image, mask, ends, radius) -> Callable[..., int]:
     """How much of a cable turning from end ``i`` to end ``j`` along a curve would be
     out of view all the way (:func:`.appearance.out_of_view`), as a callable ``(i, j,
     curve)`` for the turns under objects (:func:`.turn_joins.turn_joins`'
     ``out_of_view``): :data:`.turn_joins.WHOLE_TUBE_OUT_OF_VIEW` its whole tube, 1 its
     middle alone, 0 neither. The background beside a pair of ends is read once for all
-    the curves tried between them.
+    the curves tried between them, whichever way each is read.
 
     The cable is a tube, not a line (``whole_tube``): where an object the image shows
     hides the turn, the whole of it lies under the object (else it would show), and a
@@ -372,12 +370,12 @@ def turn_out_of_view(
     though its middle keeps under it, is less likely the hidden turn. So the tube's two
     borders are read too, at the two ends' mean half width less a pixel's rounding
     (:data:`.turn_joins.PIXEL_ROUNDING`), as :func:`.turn_joins.turn_joins` measures
-    the cable. Without ``whole_tube``, the middle alone (1 at most; for a bridge from
+    the cable. Called with ``whole_tube=False``, the middle alone (1 at most; for a bridge from
     the traced cuts, which starts on the object's very edge: its tube there straddles
     the edge whatever the hidden shape, and reads the cut, not the turn)."""
     backgrounds: dict[tuple[int, int], tuple | None] = {}
 
-    def hidden(i: int, j: int, curve: np.ndarray) -> int:
+    def hidden(i: int, j: int, curve: np.ndarray, whole_tube: bool = True) -> int:
         pair = (ends[i], ends[j])
         if (i, j) not in backgrounds:
             backgrounds[i, j] = background_beside(image, mask, pair, radius)

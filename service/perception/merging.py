@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -875,9 +876,7 @@ def merge_chains(
         )
         widths = np.array([end.width for end in seen], np.float64)
         judged = evidence_ends(seen, ends, seen_from)
-        # The turn's own curves are read as a cable's whole tube; a bridge from the traced
-        # cuts by its middle (it starts on the object's edge, where the tube straddles it).
-        turn_hidden = turn_out_of_view(image, mask, seen, radius, whole_tube=False)
+        turn_hidden = turn_out_of_view(image, mask, seen, radius)
         turned = turn_joins(
             seen,
             joins,
@@ -896,7 +895,7 @@ def merge_chains(
             MAX_JUNCTION_ENDS,
             turn_bridges,
             TURN_EVIDENCE_ALONG_CURVE,
-            turn_out_of_view(image, mask, seen, radius),
+            turn_hidden,
             distance,
         )
         joins = joins + turned
@@ -955,10 +954,13 @@ def merge_chains(
             fronts,
         )
         if turn_hidden is not None:
+            # A bridge from the traced cuts is read by its middle: it starts on the
+            # object's edge, where its tube straddles the edge whatever the turn's shape.
+            middle_hidden = partial(turn_hidden, whole_tube=False)
             cut_bridges = {
                 pair: curve
                 for pair, curve in cut_bridges.items()
-                if not _cut_turn_seen(pair, curve, turn_bridges, wide_turns, turn_hidden)
+                if not _cut_turn_seen(pair, curve, turn_bridges, wide_turns, middle_hidden)
             }
         bridges = {**bridges, **cut_bridges}
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)
