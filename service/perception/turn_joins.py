@@ -495,38 +495,9 @@ def bulb_turns(
 
 
 def _trace_to(start, leaving, end, segments, step: float) -> np.ndarray:
-    """:func:`_trace` from ``start`` along ``leaving``, ending exactly at ``end``.
-
-    A bulb's segments reach ``end`` only to within :data:`BULB_TOLERANCE_RADII` of its
-    bend: the miss is spread along the whole curve in proportion to its arc length, not
-    closed in the last step, where it would kink the curve by as much as the bulb's own
-    bend turns it over a cable radius (:func:`bends_as_a_cable` would refuse a smooth
-    cable's shape for the grid of swings it was drawn from). Shifting every sample by a
-    share growing evenly along the curve turns its tangent by at most the miss over its
-    length and leaves its curvature all but unchanged."""
-    origin, heading = complex(*np.asarray(start, np.float64)), complex(*leaving)
-    curve = _trace(origin, heading, segments, step)
-    end = np.asarray(end, np.float64)
-    if len(curve):
-        reached = _segments_end(origin, heading, segments)
-        reached = np.array([reached.real, reached.imag])
-        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(curve, axis=0).T))])
-        total = arc[-1] + float(np.hypot(*(reached - curve[-1])))
-        if total > 0.0:
-            curve = curve + np.outer(arc / total, end - reached)
-    return np.concatenate([curve, end[None]])
-
-
-def _segments_end(start: complex, heading: complex, segments) -> complex:
-    """Where straight and circular ``segments`` (length, signed curvature) from
-    ``start`` along unit ``heading`` end (:func:`_trace`'s last point and beyond)."""
-    for length, curvature in segments:
-        if curvature == 0.0:
-            start = start + length * heading
-        else:
-            start = start + heading * (np.exp(1j * curvature * length) - 1) / (1j * curvature)
-            heading = heading * np.exp(1j * curvature * length)
-    return start
+    """:func:`_trace` from ``start`` along ``leaving``, ending exactly at ``end``."""
+    curve = _trace(complex(*np.asarray(start, np.float64)), complex(*leaving), segments, step)
+    return np.concatenate([curve, np.asarray(end, np.float64)[None]])
 
 
 def _bulb_shapes(start, leaving, end, arriving, turn: float, bends: list[float]):
