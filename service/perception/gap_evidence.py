@@ -374,8 +374,10 @@ def turn_out_of_view(image, mask, ends, radius) -> Callable[..., int]:
     the cable. Called with ``whole_tube=False``, the middle alone (1 at most; for a bridge from
     the traced cuts, which starts on the object's very edge: its tube there straddles
     the edge whatever the hidden shape, and reads the cut, not the turn); with
-    ``clear_of_rims=True``, the curve's samples within :data:`.appearance.GAP_END_CLEAR_RADII` of
-    either end left out, as :func:`.appearance.gap_hidden` leaves out the cut's rim."""
+    ``clear_of_rims=True``, the curve's samples within
+    :data:`.appearance.GAP_END_CLEAR_RADII` of either end left out, as
+    :func:`.appearance.gap_hidden` leaves out the cut's rim (in the pair's own radius,
+    :func:`cable_radius`)."""
     backgrounds: dict[tuple[int, int], tuple | None] = {}
 
     def hidden(
@@ -384,7 +386,8 @@ def turn_out_of_view(image, mask, ends, radius) -> Callable[..., int]:
         pair = (ends[i], ends[j])
         if clear_of_rims:
             curve = np.asarray(curve, np.float64)
-            clear = GAP_END_CLEAR_RADII * radius
+            # The rim is the cable's own: its width, not the picture's typical one.
+            clear = GAP_END_CLEAR_RADII * cable_radius(radius, ends[i].width, ends[j].width)
             curve = curve[
                 (np.hypot(*(curve - ends[i].position).T) > clear)
                 & (np.hypot(*(curve - ends[j].position).T) > clear)
