@@ -369,7 +369,13 @@ def _likeliest_shape(
     the most: its whole tube, then its middle alone) and bends as a cable does
     (:func:`bends_as_a_cable`: a bulb meeting the second end with a kink is no cable's
     shape); failing both, the first most out of view; failing that, the first that
-    bends as a cable does; else ``first``."""
+    bends as a cable does; else ``first``.
+
+    Where ``out_of_view`` is given (an object seen over the turn) and curves keep the
+    cable's whole tube under it and bend as a cable does, every such curve is one the
+    image allows, the most compact no likelier than a deeper one (how deep a bulb goes
+    under an object is not seen): the most central of them is the bridge
+    (:func:`_most_central`), every curve drawn for it."""
 
     def rank(curve: np.ndarray) -> tuple[int, bool]:
         hidden = WHOLE_TUBE_OUT_OF_VIEW if out_of_view is None else int(out_of_view(curve))
