@@ -369,13 +369,7 @@ def _likeliest_shape(
     the most: its whole tube, then its middle alone) and bends as a cable does
     (:func:`bends_as_a_cable`: a bulb meeting the second end with a kink is no cable's
     shape); failing both, the first most out of view; failing that, the first that
-    bends as a cable does; else ``first``.
-
-    Where ``out_of_view`` is given (an object seen over the turn) and curves keep the
-    cable's whole tube under it and bend as a cable does, every such curve is one the
-    image allows, the most compact no likelier than a deeper one (how deep a bulb goes
-    under an object is not seen): the most central of them is the bridge
-    (:func:`_most_central`), every curve drawn for it."""
+    bends as a cable does; else ``first``."""
 
     def rank(curve: np.ndarray) -> tuple[int, bool]:
         hidden = WHOLE_TUBE_OUT_OF_VIEW if out_of_view is None else int(out_of_view(curve))
@@ -389,25 +383,7 @@ def _likeliest_shape(
         curve_rank = rank(curve)
         if curve_rank > best_rank:
             best, best_rank = curve, curve_rank
-    if out_of_view is None or best_rank != (WHOLE_TUBE_OUT_OF_VIEW, True):
-        return best
-    held = [best] + [curve for curve in others if rank(curve) == best_rank]
-    return _most_central(held)
-
-
-def _most_central(curves: list[np.ndarray]) -> np.ndarray:
-    """Of ``curves`` (each ``(M, 2)``), the one whose worst (Hausdorff) distance from
-    any other is least: every one of them the image allows equally, and this one misses
-    whichever the cable took by the least in the worst case."""
-    if len(curves) <= 2:
-        return curves[0]
-    count = len(curves)
-    worst = np.zeros((count, count))
-    for a in range(count):
-        for b in range(a + 1, count):
-            gaps = np.hypot(*(curves[a][:, None, :] - curves[b][None, :, :]).transpose(2, 0, 1))
-            worst[a, b] = worst[b, a] = max(gaps.min(axis=1).max(), gaps.min(axis=0).max())
-    return curves[int(np.argmin(worst.max(axis=1)))]
+    return best
 
 
 def _turn_leaves_at(end, distance, cable: float) -> np.ndarray:
