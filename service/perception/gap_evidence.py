@@ -15,6 +15,7 @@ from collections.abc import Callable
 import numpy as np
 
 from service.perception.appearance import (
+    GAP_END_CLEAR_RADII,
     EndColours,
     background_beside,
     cut_or_lopsided,
@@ -372,11 +373,25 @@ def turn_out_of_view(image, mask, ends, radius) -> Callable[..., int]:
     (:data:`.turn_joins.PIXEL_ROUNDING`), as :func:`.turn_joins.turn_joins` measures
     the cable. Called with ``whole_tube=False``, the middle alone (1 at most; for a bridge from
     the traced cuts, which starts on the object's very edge: its tube there straddles
-    the edge whatever the hidden shape, and reads the cut, not the turn)."""
+    the edge whatever the hidden shape, and reads the cut, not the turn); with
+    ``clear_of_rims=True``, the curve's samples within
+    :data:`.appearance.GAP_END_CLEAR_RADII` of either end left out, as
+    :func:`.appearance.gap_hidden` leaves out the cut's rim (in the pair's own radius,
+    :func:`cable_radius`)."""
     backgrounds: dict[tuple[int, int], tuple | None] = {}
 
-    def hidden(i: int, j: int, curve: np.ndarray, whole_tube: bool = True) -> int:
+    def hidden(
+        i: int, j: int, curve: np.ndarray, whole_tube: bool = True, clear_of_rims: bool = False
+    ) -> int:
         pair = (ends[i], ends[j])
+        if clear_of_rims:
+            curve = np.asarray(curve, np.float64)
+            # The rim is the cable's own: its width, not the picture's typical one.
+            clear = GAP_END_CLEAR_RADII * cable_radius(radius, ends[i].width, ends[j].width)
+            curve = curve[
+                (np.hypot(*(curve - ends[i].position).T) > clear)
+                & (np.hypot(*(curve - ends[j].position).T) > clear)
+            ]
         if (i, j) not in backgrounds:
             backgrounds[i, j] = background_beside(image, mask, pair, radius)
         if backgrounds[i, j] is None:
@@ -390,6 +405,40 @@ def turn_out_of_view(image, mask, ends, radius) -> Callable[..., int]:
         return WHOLE_TUBE_OUT_OF_VIEW if tube else 1
 
     return hidden
+
+
+def cut_bridge_shows(
+    pair: tuple[int, int],
+    curve: np.ndarray,
+    turn_bridges: dict[tuple[int, int], np.ndarray],
+    wide_turns: frozenset,
+    hidden_all_along: Callable[..., int],
+) -> bool:
+    """Whether the bridge from the traced cuts of a turn under an object (``pair``, one
+    of ``wide_turns``, the turn pass's curve ``turn_bridges[pair]`` found out of view all
+    the way) would put the cable where the image shows open background: a cut misread
+    (a fork in the skeleton at the object's edge, a wedge a slanted border leaves) turns
+    the bridge out past the object, where a cable would be seen. The turn's own curve,
+    which the evidence placed under the object all the way, is kept then.
+
+    Shown is the bridge's middle anywhere, or, where the turn's curve keeps the cable's
+    whole tube under the object, the bridge's tube clear of the cuts' rims: right at a
+    cut the bridge starts on the object's very edge and its tube straddles the edge
+    whatever the turn's shape (it reads the cut), but past the rim a cable whose side
+    reaches out onto open background would be seen there. ``hidden_all_along`` is
+    :func:`turn_out_of_view`'s callable."""
+    if pair not in wide_turns or pair not in turn_bridges:
+        return False
+    i, j = pair
+    turn = turn_bridges[pair]
+    if not hidden_all_along(i, j, turn, whole_tube=False):
+        return False
+    if not hidden_all_along(i, j, curve, whole_tube=False):
+        return True
+    return (
+        hidden_all_along(i, j, turn) == WHOLE_TUBE_OUT_OF_VIEW
+        and hidden_all_along(i, j, curve, clear_of_rims=True) != WHOLE_TUBE_OUT_OF_VIEW
+    )
 
 
 def strands_turn_out_of_sight(a, b, curve: np.ndarray, mask: np.ndarray, radius: float) -> bool:

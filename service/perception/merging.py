@@ -26,7 +26,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from functools import partial
 
 import numpy as np
 
@@ -54,6 +53,7 @@ from service.perception.end_readings import ends_refitted_onto_the_mask
 from service.perception.gap_evidence import (
     TURN_EVIDENCE_ALONG_CURVE,
     beyond_hiding,
+    cut_bridge_shows,
     cut_ends_alike,
     open_gap_limit,
     open_gap_too_long,
@@ -954,38 +954,13 @@ def merge_chains(
             fronts,
         )
         if turn_hidden is not None:
-            # A bridge from the traced cuts is read by its middle: it starts on the
-            # object's edge, where its tube straddles the edge whatever the turn's shape.
-            middle_hidden = partial(turn_hidden, whole_tube=False)
             cut_bridges = {
                 pair: curve
                 for pair, curve in cut_bridges.items()
-                if not _cut_turn_seen(pair, curve, turn_bridges, wide_turns, middle_hidden)
+                if not cut_bridge_shows(pair, curve, turn_bridges, wide_turns, turn_hidden)
             }
         bridges = {**bridges, **cut_bridges}
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)
     paths = [p for p in assembled if p.pieces[0] not in dropped]
     paths = [path for path in paths if polyline_length(path.vertices) > 0]
     return MergeResult(paths, [Join(ends[i], ends[j], cost) for i, j, cost in joins])
-
-
-def _cut_turn_seen(
-    pair: tuple[int, int],
-    curve: np.ndarray,
-    turn_bridges: dict[tuple[int, int], np.ndarray],
-    wide_turns: frozenset,
-    hidden_all_along: Callable[[int, int, np.ndarray], bool],
-) -> bool:
-    """Whether the bridge from the traced cuts of a turn under an object (``pair``, one
-    of ``wide_turns``, the turn pass's curve ``turn_bridges[pair]`` found out of view all
-    the way) would put the cable where the image shows open background: a cut misread
-    (a fork in the skeleton at the object's edge, a wedge a slanted border leaves) turns
-    the bridge out past the object, where a cable would be seen. The turn's own curve,
-    which the evidence placed under the object all the way, is kept then.
-
-    ``hidden_all_along`` is the turn pass's test (:func:`.gap_evidence.turn_out_of_view`),
-    called ``(i, j, curve)``."""
-    if pair not in wide_turns or pair not in turn_bridges:
-        return False
-    i, j = pair
-    return hidden_all_along(i, j, turn_bridges[pair]) and not hidden_all_along(i, j, curve)
