@@ -361,6 +361,7 @@ def _likeliest_shape(
     others: Iterator[np.ndarray],
     cable_radius: float,
     out_of_view: Callable[[np.ndarray], int] | None,
+    leads: tuple[int, int] = (0, 0),
 ) -> np.ndarray:
     """Of the curves a test passes on, shortest first (``first``, then ``others``,
     drawn only while needed), the one a hidden cable most likely took: the first that
@@ -369,11 +370,18 @@ def _likeliest_shape(
     the most: its whole tube, then its middle alone) and bends as a cable does
     (:func:`bends_as_a_cable`: a bulb meeting the second end with a kink is no cable's
     shape); failing both, the first most out of view; failing that, the first that
-    bends as a cable does; else ``first``."""
+    bends as a cable does; else ``first``.
+
+    ``leads`` (samples) are each curve's straight lead-in and tail (:func:`_led_in`),
+    left out of the kink test: they run along the ends' fits over the strands' seen
+    tips, and a curve tilted at its start (:data:`DIRECTION_TILTS`, the fit's direction
+    read up to :data:`DIRECTION_SLACK` off) meets its lead-in at a corner of the tilt
+    itself, the fit's uncertainty, not a bend of the hidden cable."""
+    lead, tail = leads
 
     def rank(curve: np.ndarray) -> tuple[int, bool]:
         hidden = WHOLE_TUBE_OUT_OF_VIEW if out_of_view is None else int(out_of_view(curve))
-        return hidden, bends_as_a_cable(curve, cable_radius)
+        return hidden, bends_as_a_cable(curve[lead : len(curve) - tail], cable_radius)
 
     best, best_rank = first, rank(first)
     while best_rank != (WHOLE_TUBE_OUT_OF_VIEW, True):
@@ -701,11 +709,18 @@ def turn_joins(
         # over a cut's hook the fit's extrapolation may leave the cable. The bridge
         # starts where the fits begin either way (:func:`.bridge_ends.bridge_from_the_fits`).
         a_from, b_from = a.position - a.skip * a.direction, b.position - b.skip * b.direction
+        a_leaves, b_leaves = (
+            _turn_leaves_at(a, distance, cable),
+            _turn_leaves_at(b, distance, cable),
+        )
+        # Every curve's lead-in and tail (samples, :func:`_led_in`): the hidden curve
+        # lies between them.
+        leads = (len(_straight(a_from, a_leaves, 1.0)), len(_straight(b_leaves, b_from, 1.0)))
         curves = _led_in(
             hidden_turn_curves(
-                _turn_leaves_at(a, distance, cable),
+                a_leaves,
                 a.direction,
-                _turn_leaves_at(b, distance, cable),
+                b_leaves,
                 -b.direction,
                 cable,
                 limit=None,
@@ -732,7 +747,7 @@ def turn_joins(
                     hidden_all_along = partial(out_of_view, i, j)
                     rest = (curve for curve in candidates if test(i, j, curve))
                     passing = chain(passing, rest)
-                found = _likeliest_shape(found, passing, cable, hidden_all_along)
+                found = _likeliest_shape(found, passing, cable, hidden_all_along, leads)
                 turns[i, j] = pair_cost
                 # The ends' cuts say only that the gap is short enough for an object of
                 # the background's own colour to hide: a turn seen on them alone is
