@@ -747,7 +747,17 @@ def turn_joins(
                     hidden_all_along = partial(out_of_view, i, j)
                     rest = (curve for curve in candidates if test(i, j, curve))
                     passing = chain(passing, rest)
-                found = _likeliest_shape(found, passing, cable, hidden_all_along, leads)
+                # The object's outline reads how the curve leaves the strands (a curve
+                # tilted off a strand seen straight up to its tip reaches out past the
+                # object's rim there): the kink test reads the hidden curve alone. With
+                # no object, the kink test alone reads it, lead-in and all.
+                found = _likeliest_shape(
+                    found,
+                    passing,
+                    cable,
+                    hidden_all_along,
+                    (0, 0) if hidden_all_along is None else leads,
+                )
                 turns[i, j] = pair_cost
                 # The ends' cuts say only that the gap is short enough for an object of
                 # the background's own colour to hide: a turn seen on them alone is
