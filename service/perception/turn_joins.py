@@ -713,9 +713,6 @@ def turn_joins(
             _turn_leaves_at(a, distance, cable),
             _turn_leaves_at(b, distance, cable),
         )
-        # Every curve's lead-in and tail (samples, :func:`_led_in`): the hidden curve
-        # lies between them.
-        leads = (len(_straight(a_from, a_leaves, 1.0)), len(_straight(b_leaves, b_from, 1.0)))
         curves = _led_in(
             hidden_turn_curves(
                 a_leaves,
@@ -742,22 +739,22 @@ def turn_joins(
                 # few curves say whether the evidence holds; the object's outline
                 # then bounds the turn's shape, and every curve is tried against it
                 # (the most compact ones may all reach out past it).
-                hidden_all_along = None
+                hidden_all_along, leads = None, (0, 0)
                 if strength == 0 and out_of_view is not None:
                     hidden_all_along = partial(out_of_view, i, j)
                     rest = (curve for curve in candidates if test(i, j, curve))
                     passing = chain(passing, rest)
-                # The object's outline reads how the curve leaves the strands (a curve
-                # tilted off a strand seen straight up to its tip reaches out past the
-                # object's rim there): the kink test reads the hidden curve alone. With
-                # no object, the kink test alone reads it, lead-in and all.
-                found = _likeliest_shape(
-                    found,
-                    passing,
-                    cable,
-                    hidden_all_along,
-                    (0, 0) if hidden_all_along is None else leads,
-                )
+                    # The object's outline reads how the curve leaves the strands (a
+                    # curve tilted off a strand seen straight up to its tip reaches out
+                    # past the object's rim there): the kink test reads the hidden curve
+                    # alone, between every curve's lead-in and tail (samples,
+                    # :func:`_led_in`). With no object, the kink test alone reads it,
+                    # lead-in and all.
+                    leads = (
+                        len(_straight(a_from, a_leaves, 1.0)),
+                        len(_straight(b_leaves, b_from, 1.0)),
+                    )
+                found = _likeliest_shape(found, passing, cable, hidden_all_along, leads)
                 turns[i, j] = pair_cost
                 # The ends' cuts say only that the gap is short enough for an object of
                 # the background's own colour to hide: a turn seen on them alone is
