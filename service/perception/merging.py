@@ -63,6 +63,7 @@ from service.perception.gap_evidence import (
     turn_out_of_view,
 )
 from service.perception.geometry import polyline_length
+from service.perception.occluder_outline import turns_within_outlines
 from service.perception.pairing import Components, cheapest_pairing
 from service.perception.paths import MergedPath, assemble_paths, gap_curve
 from service.perception.short_pieces import (
@@ -897,6 +898,7 @@ def merge_chains(
             TURN_EVIDENCE_ALONG_CURVE,
             turn_hidden,
             distance,
+            turns_within_outlines(image, mask, seen) if image is not None else None,
         )
         joins = joins + turned
         turn_pairs = frozenset((i, j) for i, j, _ in turned)

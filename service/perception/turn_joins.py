@@ -394,6 +394,16 @@ def _likeliest_shape(
     return best
 
 
+def _within_outline(within_outline, i: int, j: int, compact, candidates, tried):
+    """``within_outline``'s curve for the turn from end ``i`` to end ``j`` (None: the
+    image shows no outline), of every curve :func:`hidden_turn_curves` builds (drawn
+    into ``tried`` from ``candidates``): the outline, not the order of compactness,
+    bounds the turn."""
+    for _ in candidates:
+        pass
+    return within_outline(i, j, compact, tried)
+
+
 def _turn_leaves_at(end, distance, cable: float) -> np.ndarray:
     """Where a turn out of sight leaves ``end``'s strand (:class:`.merging.ChainEnd`):
     its tip, where the cable is seen whole and straight along the fit's line from where
@@ -619,6 +629,7 @@ def turn_joins(
     along_curve: Sequence[bool] = (True,),
     out_of_view: Callable[[int, int, np.ndarray], bool] | None = None,
     distance: np.ndarray | None = None,
+    within_outline: Callable[[int, int, np.ndarray, list], np.ndarray | None] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -671,6 +682,13 @@ def turn_joins(
     distance : ndarray, optional
         The mask's distance transform: an end whose strand it reads whole and straight
         up to the tip has its turns drawn from there (:func:`_turn_leaves_at`).
+    within_outline : callable (i, j, compact, curves) -> ndarray or None, optional
+        For a turn no object is seen over (its cuts' evidence alone): where the image
+        shows the outline of an object of the ground's colour over it, the curve of
+        ``curves`` (every one built) in the middle of the depths the outline allows,
+        from ``compact`` (the curve the evidence chose) to the deepest under it
+        (:func:`.occluder_outline.turns_within_outlines`); the turn is then bridged
+        along it, however far apart its strands (:func:`_within_outline`).
 
     Returns
     -------
@@ -755,6 +773,10 @@ def turn_joins(
                         len(_straight(b_leaves, b_from, 1.0)),
                     )
                 found = _likeliest_shape(found, passing, cable, hidden_all_along, leads)
+                bounded = None
+                if strength > 0 and within_outline is not None:
+                    bounded = _within_outline(within_outline, i, j, found, candidates, tried)
+                    found = found if bounded is None else bounded
                 turns[i, j] = pair_cost
                 # The ends' cuts say only that the gap is short enough for an object of
                 # the background's own colour to hide: a turn seen on them alone is
@@ -762,8 +784,12 @@ def turn_joins(
                 # its partner, :mod:`.bridge_ends`), unless its strands lie too close to
                 # turn round in one arc (a bulb, which only the turn's curve follows).
                 shaped = strength < len(along_curve) and along_curve[strength]
-                if shaped or not turns_round_in_one_arc(
-                    a.position, a.direction, b.position, b.direction, cable
+                if (
+                    bounded is not None
+                    or shaped
+                    or not turns_round_in_one_arc(
+                        a.position, a.direction, b.position, b.direction, cable
+                    )
                 ):
                     hidden_curves[i, j] = found
                 break
