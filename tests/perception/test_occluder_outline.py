@@ -9,17 +9,21 @@ from service.perception.occluder_outline import middle_depth_within, rectangle_o
 from service.synthetic import make_family_scene
 
 RADIUS = 5.0
+NOISE = 6.0
+"""The ground's pixel noise: more than the rim darkens any one pixel."""
+RIM = 0.12
+"""How much darker a sheet's border is than its inside (the generator's: 0.2)."""
 
 
 def _ground_with_a_sheet(rim: float):
-    """A noisy ground 200 x 160 px with a sheet of it (a patch 4 % lighter) over
+    """A noisy ground 200 x 160 px (:data:`NOISE`) with a sheet of it (4 % lighter) over
     x 60-140, y 50-90, darkened by ``rim`` at its border fading to nothing 2 px inside
     (the synthetic generator's rim is 0.2); two strands of a cable (the mask) coming up
     from below to the sheet's near side at x 90 and 110. Returns the brightness, the
     mask, the two cuts and the sheet's corners."""
     rng = np.random.default_rng(7)
     rows, cols = np.mgrid[0:160, 0:200].astype(np.float64)
-    brightness = 120.0 + rng.normal(0.0, 3.0, rows.shape)
+    brightness = 120.0 + rng.normal(0.0, NOISE, rows.shape)
     left, right, top, bottom = 60.0, 140.0, 50.0, 90.0
     inside = (cols >= left) & (cols <= right) & (rows >= top) & (rows <= bottom)
     depth = np.minimum.reduce([cols - left, right - cols, rows - top, bottom - rows])
@@ -34,9 +38,10 @@ def _ground_with_a_sheet(rim: float):
 
 
 def test_a_sheet_of_the_grounds_colour_is_read_from_its_rim():
-    """The rim, a few units under pixel noise of 3 at any one pixel, stands out when
-    averaged along each side: the four sides are found within two pixels."""
-    brightness, mask, (first, second), corners = _ground_with_a_sheet(rim=0.2)
+    """The rim darkens its outer pixel by 15 units and the next by 8, about the pixel
+    noise (6) or less: no one pixel shows it, but averaged along each side it stands
+    out, and the four sides are found within two pixels."""
+    brightness, mask, (first, second), corners = _ground_with_a_sheet(rim=RIM)
     found = rectangle_over_turn(brightness, mask, first, second, np.array([0.0, -1.0]), RADIUS)
     assert found is not None
     for corner in corners:
@@ -49,7 +54,7 @@ def test_no_outline_where_the_sheet_has_no_rim():
     brightness, mask, (first, second), _ = _ground_with_a_sheet(rim=0.0)
     inward = np.array([0.0, -1.0])
     assert rectangle_over_turn(brightness, mask, first, second, inward, RADIUS) is None
-    ground, _, _, _ = _ground_with_a_sheet(rim=0.2)
+    ground, _, _, _ = _ground_with_a_sheet(rim=RIM)
     shifted = np.array([0.0, 60.0])
     assert rectangle_over_turn(ground, mask, first + shifted, second + shifted, inward, 3.0) is None
 
@@ -69,7 +74,7 @@ def _u_turn(depth: float) -> np.ndarray:
 def test_the_turn_lies_in_the_middle_of_the_depths_the_outline_allows():
     """Under a sheet 40 px deep, a cable of radius 5 turns at most 35 px past the cuts;
     the most compact curve reaches 10: the curve nearest the middle, 22.5, is taken."""
-    _, _, (first, second), corners = _ground_with_a_sheet(rim=0.2)
+    _, _, (first, second), corners = _ground_with_a_sheet(rim=RIM)
     curves = [_u_turn(depth) for depth in (10.0, 16.0, 22.0, 28.0, 34.0, 40.0, 46.0)]
     chosen = middle_depth_within(
         curves[0], curves, first, second, np.array([0.0, -1.0]), RADIUS, corners
