@@ -408,46 +408,49 @@ def _nearest_the_middle_depth(
     origin: np.ndarray,
     axis: np.ndarray,
     extent: Callable[[], tuple[float, float] | None],
+    cable_radius: float,
 ) -> np.ndarray:
     """Of the curves a region hides whole (``held``, shortest first), the one whose apex
-    lies nearest the middle of the region's depth along the turn's axis.
+    lies nearest the middle of the region's depth past the cuts.
 
-    A doubled-back cable turns round out of sight somewhere under the region that hides
-    it; the most compact curve is the shallowest turn the cable's tightest bend allows,
-    and deeper ones are hidden as well, up to the region's far side. Where under the
-    region the turn lies nothing seen says: the middle of the region's depth halves the
-    worst error. Depth is read along ``axis`` (unit: the strands' common direction out
-    into the turn) from ``origin`` (the cuts' midpoint): ``extent()`` is how far the
-    region reaches behind the origin and ahead of it (px; None: not known), its middle
-    half their difference ahead. The region reaches behind the cuts where the strands
-    pass under its sides, not its near side (a loop's wide bend under a box): the turn
-    then lies that much less deep past the cuts. The shortest curve is kept where it
-    already reaches the middle (the cable's bend allows no shallower turn), or where the
-    extent is not known.
+    A doubled-back cable passing under a region's near rim (its two cuts on the rim)
+    turns round out of sight somewhere under it: the most compact curve is the
+    shallowest turn the cable's tightest bend allows, and deeper ones are hidden as
+    well, up to the region's far rim. Where in between the turn lies nothing seen says:
+    the middle of the region's depth halves the worst error. Depth is read along
+    ``axis`` (unit: the strands' common direction out into the turn) from ``origin``
+    (the cuts' midpoint): ``extent()`` is how far the region reaches behind the origin
+    and ahead of it (px; None: not known), and its middle lies half the reach ahead.
+
+    The shortest curve is kept where it already reaches the middle (the cable's bend
+    allows no shallower turn), where the extent is not known, and where the region
+    reaches behind the cuts by more than the cable's half width ``cable_radius`` (the
+    cuts' midpoint lies off the near rim by no more than that on a rim slanting across
+    the strands): there the strands pass out from under the region's sides, not its near
+    rim, and its depth on the axis does not bound the turn from the cuts on.
 
     ``extent`` is the region's outline read on the axis: the object's, where it shows
     unlike the ground (:func:`.gap_evidence.turn_hiding_extent`); any other reading of
     where the region that hides the turn stops (a faint outline of an object of the
     ground's colour) would give the same two numbers."""
     reach = extent()
-    if reach is None:
+    if reach is None or reach[0] > cable_radius:
         return held[0]
-    behind, ahead = reach
-    middle = 0.5 * (ahead - behind)
+    middle = 0.5 * reach[1]
     apexes = np.array([float(np.max((curve - origin) @ axis)) for curve in held])
     if apexes[0] >= middle:
         return held[0]
     return held[int(np.argmin(np.abs(apexes - middle)))]
 
 
-def _by_depth(a, b, hiding_extent) -> Callable[[list[np.ndarray]], np.ndarray] | None:
+def _by_depth(a, b, cable: float, hiding_extent) -> Callable[[list[np.ndarray]], np.ndarray] | None:
     """The choice among the curves an object hides whole for a turn from end ``a`` to
-    end ``b`` (:class:`.merging.ChainEnd`) by how deep the object lets it go
-    (:func:`_nearest_the_middle_depth`), with ``hiding_extent`` ``(origin, axis) ->
-    (behind, ahead) or None`` the object's reach on that line; None (the shortest)
-    without it, or where the strands are not doubled back (turning by less than
-    :data:`BULB_MIN_TURN`: no common direction out into the turn to read its depth
-    along)."""
+    end ``b`` (:class:`.merging.ChainEnd`; ``cable``: the cable's half width) by how deep
+    the object lets it go (:func:`_nearest_the_middle_depth`), with ``hiding_extent``
+    ``(origin, axis) -> (behind, ahead) or None`` the object's reach on that line; None
+    (the shortest) without it, or where the strands are not doubled back (turning by
+    less than :data:`BULB_MIN_TURN`: no common direction out into the turn to read its
+    depth along)."""
     if hiding_extent is None:
         return None
     axis = np.asarray(a.direction, np.float64) + np.asarray(b.direction, np.float64)
@@ -459,7 +462,9 @@ def _by_depth(a, b, hiding_extent) -> Callable[[list[np.ndarray]], np.ndarray] |
     axis /= length
     origin = 0.5 * (np.asarray(a.position, np.float64) + np.asarray(b.position, np.float64))
     extent = partial(hiding_extent, origin, axis)
-    return partial(_nearest_the_middle_depth, origin=origin, axis=axis, extent=extent)
+    return partial(
+        _nearest_the_middle_depth, origin=origin, axis=axis, extent=extent, cable_radius=cable
+    )
 
 
 def _turn_leaves_at(end, distance, cable: float) -> np.ndarray:
@@ -829,7 +834,9 @@ def turn_joins(
                         len(_straight(a_from, a_leaves, 1.0)),
                         len(_straight(b_leaves, b_from, 1.0)),
                     )
-                    among = _by_depth(a, b, partial(hiding_extent, i, j) if hiding_extent else None)
+                    among = _by_depth(
+                        a, b, cable, partial(hiding_extent, i, j) if hiding_extent else None
+                    )
                 found = _likeliest_shape(found, passing, cable, hidden_all_along, leads, among)
                 turns[i, j] = pair_cost
                 # The ends' cuts say only that the gap is short enough for an object of

@@ -590,22 +590,23 @@ def _u_turn(apex_depth: float) -> np.ndarray:
 
 def test_a_turn_under_an_object_takes_the_held_curve_nearest_the_middle_of_its_depth():
     """Held curves whose apexes lie 10, 20 and 30 px past the cuts: an object reaching
-    44 px past them leaves the middle at 22, and the 20 px curve is taken; one reaching
-    16 px, whose middle (8) the shortest already passes, keeps the shortest, and so does
-    an unknown extent; one reaching 20 px back behind the cuts (the strands pass under
-    its sides) leaves the middle at 12, and the 10 px curve is taken."""
+    44 px past them leaves the middle at 22, and the 20 px curve is taken (64 px: the
+    30 px one); one reaching 16 px, whose middle (8) the shortest already passes, keeps
+    the shortest, and so does an unknown extent, and one reaching 20 px back behind the
+    cuts, more than the cable's half width (the strands pass out under its sides)."""
     held = [_u_turn(depth) for depth in (10.0, 20.0, 30.0)]
     origin, axis = np.zeros(2), np.array([0.0, -1.0])
 
     def chosen(extent):
-        curve = _nearest_the_middle_depth(held, origin, axis, lambda: extent)
+        curve = _nearest_the_middle_depth(held, origin, axis, lambda: extent, 5.0)
         return next(k for k, other in enumerate(held) if other is curve)
 
     assert chosen((0.0, 44.0)) == 1
+    assert chosen((3.0, 44.0)) == 1
+    assert chosen((0.0, 64.0)) == 2
     assert chosen((0.0, 16.0)) == 0
     assert chosen(None) == 0
-    assert chosen((0.0, 64.0)) == 2
-    assert chosen((20.0, 44.0)) == 0
+    assert chosen((20.0, 64.0)) == 0
 
 
 def test_the_objects_extent_on_a_turns_axis_is_read_to_its_outline():
