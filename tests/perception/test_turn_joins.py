@@ -574,7 +574,7 @@ def test_a_cuts_bridge_whose_tube_shows_only_at_a_cuts_rim_is_kept():
     assert score.frame.correct, score.frame.coverage
 
 
-def _u_turn(apex_depth: float) -> np.ndarray:
+def _half_circle_turn(apex_depth: float) -> np.ndarray:
     """Two strands 10 px apart at x = +-5 leaving the cuts' line y = 0 upwards (-y) and
     turning round in a half circle whose apex lies ``apex_depth`` px past the cuts."""
     straight = np.linspace(0.0, apex_depth - 5.0, 20)
@@ -594,7 +594,7 @@ def test_a_turn_under_an_object_takes_the_held_curve_nearest_the_middle_of_its_d
     30 px one); one reaching 16 px, whose middle (8) the shortest already passes, keeps
     the shortest, and so does an unknown extent, and one reaching 20 px back behind the
     cuts, more than the cable's half width (the strands pass out under its sides)."""
-    held = [_u_turn(depth) for depth in (10.0, 20.0, 30.0)]
+    held = [_half_circle_turn(depth) for depth in (10.0, 20.0, 30.0)]
     origin, axis = np.zeros(2), np.array([0.0, -1.0])
 
     def chosen(extent):
