@@ -407,6 +407,58 @@ def turn_out_of_view(image, mask, ends, radius) -> Callable[..., int]:
     return hidden
 
 
+def turn_hiding_extent(image, mask, ends, radius) -> Callable[..., tuple[float, float] | None]:
+    """How far the object seen over a turn from end ``i`` to end ``j`` reaches on a line
+    through the cuts, as a callable ``(i, j, origin, axis) -> (behind, ahead) or None``
+    for the turns under objects (:func:`.turn_joins.turn_joins`' ``hiding_extent``): the
+    distances (px) from ``origin`` to where the object's pixels stop, its outline, back
+    against ``axis`` (unit) and on along it.
+
+    On the line, each point off the foreground is the object's when it looks unlike the
+    open background beside the two ends' cables (:func:`.appearance.unlike_background`,
+    as :func:`turn_out_of_view` reads the object) and the ground's otherwise; points on
+    the foreground (a cable) say neither. Ahead, the object's pixels stop at the first
+    ground point past the first object point (the strands' tips may lie between the
+    origin and the object's rim); behind, at the first point from the origin that is not
+    the object's (a strand, or the ground between the strands where they pass under the
+    object's rim). The picture's edge stops both (nothing says how far the object goes
+    on). None where no object point lies ahead, or no background beside the ends can be
+    read."""
+
+    def line(i: int, j: int, origin: np.ndarray, heading: np.ndarray):
+        height, width = mask.shape
+        along = np.arange(0.0, float(np.hypot(height, width)), 1.0)
+        points = np.asarray(origin, np.float64) + np.outer(along, heading)
+        inside = (
+            (points[:, 0] >= 0)
+            & (points[:, 1] >= 0)
+            & (points[:, 0] <= width - 1)
+            & (points[:, 1] <= height - 1)
+        )
+        stop = int(np.argmin(inside)) if not inside.all() else len(inside)
+        points = points[:stop]
+        cols, rows = np.rint(points).astype(np.int64).T
+        off = ~mask[rows, cols]
+        unlike = np.zeros(stop, bool)
+        unlike[off] = unlike_background(image, mask, points[off], (ends[i], ends[j]), radius)
+        return off & unlike, off & ~unlike, stop
+
+    def extent(i: int, j: int, origin: np.ndarray, axis: np.ndarray):
+        axis = np.asarray(axis, np.float64)
+        seen, ground, stop = line(i, j, origin, axis)
+        first = np.flatnonzero(seen)
+        if not len(first):
+            return None
+        beyond = np.flatnonzero(ground[first[0] :])
+        ahead = float(first[0] + beyond[0]) if len(beyond) else float(stop)
+        seen_behind, _, stop_behind = line(i, j, origin, -axis)
+        not_seen = np.flatnonzero(~seen_behind)
+        behind = float(not_seen[0]) if len(not_seen) else float(stop_behind)
+        return behind, ahead
+
+    return extent
+
+
 def cut_bridge_shows(
     pair: tuple[int, int],
     curve: np.ndarray,

@@ -60,6 +60,7 @@ from service.perception.gap_evidence import (
     own_tips_rule,
     points_out_of_picture,
     turn_evidence,
+    turn_hiding_extent,
     turn_out_of_view,
 )
 from service.perception.geometry import polyline_length
@@ -898,6 +899,7 @@ def merge_chains(
             TURN_EVIDENCE_ALONG_CURVE,
             turn_hidden,
             distance,
+            turn_hiding_extent(image, mask, seen, radius),
             turns_within_outlines(image, mask, seen) if image is not None else None,
         )
         joins = joins + turned

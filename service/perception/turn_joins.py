@@ -362,6 +362,7 @@ def _likeliest_shape(
     cable_radius: float,
     out_of_view: Callable[[np.ndarray], int] | None,
     leads: tuple[int, int] = (0, 0),
+    among: Callable[[list[np.ndarray]], np.ndarray] | None = None,
 ) -> np.ndarray:
     """Of the curves a test passes on, shortest first (``first``, then ``others``,
     drawn only while needed), the one a hidden cable most likely took: the first that
@@ -376,22 +377,94 @@ def _likeliest_shape(
     left out of the kink test: they run along the ends' fits over the strands' seen
     tips, and a curve tilted at its start (:data:`DIRECTION_TILTS`, the fit's direction
     read up to :data:`DIRECTION_SLACK` off) meets its lead-in at a corner of the tilt
-    itself, the fit's uncertainty, not a bend of the hidden cable."""
+    itself, the fit's uncertainty, not a bend of the hidden cable.
+
+    ``among``, when given, chooses among every curve hidden whole and bending as a cable
+    does (all of them drawn, shortest first), not the shortest of them: where the
+    object's outline says how deep the turn may go (:func:`_nearest_the_middle_depth`)."""
     lead, tail = leads
 
     def rank(curve: np.ndarray) -> tuple[int, bool]:
         hidden = WHOLE_TUBE_OUT_OF_VIEW if out_of_view is None else int(out_of_view(curve))
         return hidden, bends_as_a_cable(curve[lead : len(curve) - tail], cable_radius)
 
+    held_whole = (WHOLE_TUBE_OUT_OF_VIEW, True)
     best, best_rank = first, rank(first)
-    while best_rank != (WHOLE_TUBE_OUT_OF_VIEW, True):
+    held = [first] if best_rank == held_whole else []
+    while among is not None or best_rank != held_whole:
         curve = next(others, None)
         if curve is None:
             break
         curve_rank = rank(curve)
+        if curve_rank == held_whole:
+            held.append(curve)
         if curve_rank > best_rank:
             best, best_rank = curve, curve_rank
-    return best
+    return among(held) if among is not None and len(held) > 1 else best
+
+
+def _nearest_the_middle_depth(
+    held: list[np.ndarray],
+    origin: np.ndarray,
+    axis: np.ndarray,
+    extent: Callable[[], tuple[float, float] | None],
+    cable_radius: float,
+) -> np.ndarray:
+    """Of the curves a region hides whole (``held``, shortest first), the one whose apex
+    lies nearest the middle of the region's depth past the cuts.
+
+    A doubled-back cable passing under a region's near rim (its two cuts on the rim)
+    turns round out of sight somewhere under it: the most compact curve is the
+    shallowest turn the cable's tightest bend allows, and deeper ones are hidden as
+    well, up to the region's far rim. Where in between the turn lies nothing seen says:
+    the middle of the region's depth halves the worst error. Depth is read along
+    ``axis`` (unit: the strands' common direction out into the turn) from ``origin``
+    (the cuts' midpoint): ``extent()`` is how far the region reaches behind the origin
+    and ahead of it (px; None: not known), and its middle lies half the reach ahead.
+
+    The shortest curve is kept where it already reaches the middle (the cable's bend
+    allows no shallower turn), where the extent is not known, and where the region
+    reaches behind the cuts by more than the cable's half width ``cable_radius`` (the
+    cuts' midpoint lies off the near rim by no more than that on a rim slanting across
+    the strands): there the strands pass out from under the region's sides, not its near
+    rim, and its depth on the axis does not bound the turn from the cuts on.
+
+    ``extent`` is the region's outline read on the axis: the object's, where it shows
+    unlike the ground (:func:`.gap_evidence.turn_hiding_extent`); any other reading of
+    where the region that hides the turn stops (a faint outline of an object of the
+    ground's colour) would give the same two numbers."""
+    reach = extent()
+    if reach is None or reach[0] > cable_radius:
+        return held[0]
+    middle = 0.5 * reach[1]
+    apexes = np.array([float(np.max((curve - origin) @ axis)) for curve in held])
+    if apexes[0] >= middle:
+        return held[0]
+    return held[int(np.argmin(np.abs(apexes - middle)))]
+
+
+def _by_depth(a, b, cable: float, hiding_extent) -> Callable[[list[np.ndarray]], np.ndarray] | None:
+    """The choice among the curves an object hides whole for a turn from end ``a`` to
+    end ``b`` (:class:`.merging.ChainEnd`; ``cable``: the cable's half width) by how deep
+    the object lets it go (:func:`_nearest_the_middle_depth`), with ``hiding_extent``
+    ``(origin, axis) -> (behind, ahead) or None`` the object's reach on that line; None
+    (the shortest) without it, or where the strands are not doubled back (turning by
+    less than :data:`BULB_MIN_TURN`: no common direction out into the turn to read its
+    depth along)."""
+    if hiding_extent is None:
+        return None
+    axis = np.asarray(a.direction, np.float64) + np.asarray(b.direction, np.float64)
+    length = float(np.hypot(*axis))
+    # The ends point out into the turn: a turn of BULB_MIN_TURN or more between a's
+    # direction and b's reversed leaves their directions at most a quarter turn apart.
+    if float(np.dot(a.direction, b.direction)) < np.cos(np.pi - BULB_MIN_TURN) or length < 1e-9:
+        return None
+    axis /= length
+    origin = 0.5 * (np.asarray(a.position, np.float64) + np.asarray(b.position, np.float64))
+    extent = partial(hiding_extent, origin, axis)
+    return partial(
+        _nearest_the_middle_depth, origin=origin, axis=axis, extent=extent, cable_radius=cable
+    )
 
 
 def _within_outline(within_outline, i: int, j: int, compact, candidates, tried):
@@ -629,6 +702,7 @@ def turn_joins(
     along_curve: Sequence[bool] = (True,),
     out_of_view: Callable[[int, int, np.ndarray], bool] | None = None,
     distance: np.ndarray | None = None,
+    hiding_extent: Callable[..., tuple[float, float] | None] | None = None,
     within_outline: Callable[[int, int, np.ndarray, list], np.ndarray | None] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
@@ -682,6 +756,12 @@ def turn_joins(
     distance : ndarray, optional
         The mask's distance transform: an end whose strand it reads whole and straight
         up to the tip has its turns drawn from there (:func:`_turn_leaves_at`).
+    hiding_extent : callable (i, j, origin, axis) -> (float, float) or None, optional
+        How far the object seen over a turn from end ``i`` to end ``j`` reaches behind
+        ``origin`` and ahead of it along ``axis`` (px; None: not known). Given with
+        ``out_of_view``, a doubled-back turn under an object takes, of the curves it
+        hides whole, the one whose apex lies nearest the middle of that extent
+        (:func:`_nearest_the_middle_depth`), not the shortest.
     within_outline : callable (i, j, compact, curves) -> ndarray or None, optional
         For a turn no object is seen over (its cuts' evidence alone): where the image
         shows the outline of an object of the ground's colour over it, the curve of
@@ -757,7 +837,7 @@ def turn_joins(
                 # few curves say whether the evidence holds; the object's outline
                 # then bounds the turn's shape, and every curve is tried against it
                 # (the most compact ones may all reach out past it).
-                hidden_all_along, leads = None, (0, 0)
+                hidden_all_along, leads, among = None, (0, 0), None
                 if strength == 0 and out_of_view is not None:
                     hidden_all_along = partial(out_of_view, i, j)
                     rest = (curve for curve in candidates if test(i, j, curve))
@@ -772,7 +852,10 @@ def turn_joins(
                         len(_straight(a_from, a_leaves, 1.0)),
                         len(_straight(b_leaves, b_from, 1.0)),
                     )
-                found = _likeliest_shape(found, passing, cable, hidden_all_along, leads)
+                    among = _by_depth(
+                        a, b, cable, partial(hiding_extent, i, j) if hiding_extent else None
+                    )
+                found = _likeliest_shape(found, passing, cable, hidden_all_along, leads, among)
                 bounded = None
                 if strength > 0 and within_outline is not None:
                     bounded = _within_outline(within_outline, i, j, found, candidates, tried)
