@@ -445,10 +445,12 @@ def _nearest_the_middle_depth(
     apexes = [float(np.max((curve - origin) @ axis)) for curve in held]
     if apexes and apexes[0] >= middle:
         return shortest
-    # The turn built for the middle (:func:`.turn_to_depth.turn_to_depth`), where the
-    # region hides it whole too: the built curves' bulbs swing out sideways, and may
-    # stop short of the middle or pass out under the region's sides.
-    built = next((curve for curve in build(middle) if holds(curve)), None) if build else None
+    # Where every held curve stops short of the middle (the built curves' bulbs swing
+    # out sideways rather than deep, or pass out under the region's sides), the turn
+    # built for the middle (:func:`_built_to_depth`), where the region hides it whole too.
+    built = None
+    if build is not None and max(apexes, default=-np.inf) < middle:
+        built = next((curve for curve in build(middle) if holds(curve)), None)
     if built is not None:
         held, apexes = [*held, built], [*apexes, float(np.max((built - origin) @ axis))]
     if not held:
