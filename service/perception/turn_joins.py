@@ -49,7 +49,6 @@ import numpy as np
 from service.perception.appearance import EndColours, ends_alike
 from service.perception.geometry import rotated
 from service.perception.pairing import Components, cheapest_pairing
-from service.perception.turn_to_depth import bulb_to_depth, turn_to_depth
 
 NEAR_U_TURN = 0.75 * np.pi
 """Turns sharper than this (radians) may have gone either way round (:func:`natural_turn`)."""
@@ -401,19 +400,16 @@ def _likeliest_shape(
             held.append(curve)
         if curve_rank > best_rank:
             best, best_rank = curve, curve_rank
-    chosen = None if among is None else among(held, lambda curve: rank(curve) == held_whole)
-    return best if chosen is None else chosen
+    return among(held) if among is not None and len(held) > 1 else best
 
 
 def _nearest_the_middle_depth(
     held: list[np.ndarray],
-    holds: Callable[[np.ndarray], bool],
     origin: np.ndarray,
     axis: np.ndarray,
     extent: Callable[[], tuple[float, float] | None],
     cable_radius: float,
-    build: Callable[[float], np.ndarray | None] | None = None,
-) -> np.ndarray | None:
+) -> np.ndarray:
     """Of the curves a region hides whole (``held``, shortest first), the one whose apex
     lies nearest the middle of the region's depth past the cuts.
 
@@ -437,28 +433,17 @@ def _nearest_the_middle_depth(
     unlike the ground (:func:`.gap_evidence.turn_hiding_extent`); any other reading of
     where the region that hides the turn stops (a faint outline of an object of the
     ground's colour) would give the same two numbers."""
-    shortest = held[0] if held else None
     reach = extent()
     if reach is None or reach[0] > cable_radius:
-        return shortest
+        return held[0]
     middle = 0.5 * reach[1]
-    apexes = [float(np.max((curve - origin) @ axis)) for curve in held]
-    if apexes and apexes[0] >= middle:
-        return shortest
-    # Where every held curve stops short of the middle (the built curves' bulbs swing
-    # out sideways rather than deep, or pass out under the region's sides), the turn
-    # built for the middle (:func:`_built_to_depth`), where the region hides it whole too.
-    built = None
-    if build is not None and max(apexes, default=-np.inf) < middle:
-        built = next((curve for curve in build(middle) if holds(curve)), None)
-    if built is not None:
-        held, apexes = [*held, built], [*apexes, float(np.max((built - origin) @ axis))]
-    if not held:
-        return None
-    return held[int(np.argmin(np.abs(np.array(apexes) - middle)))]
+    apexes = np.array([float(np.max((curve - origin) @ axis)) for curve in held])
+    if apexes[0] >= middle:
+        return held[0]
+    return held[int(np.argmin(np.abs(apexes - middle)))]
 
 
-def _by_depth(a, b, cable: float, hiding_extent, build=None) -> Callable | None:
+def _by_depth(a, b, cable: float, hiding_extent) -> Callable[[list[np.ndarray]], np.ndarray] | None:
     """The choice among the curves an object hides whole for a turn from end ``a`` to
     end ``b`` (:class:`.merging.ChainEnd`; ``cable``: the cable's half width) by how deep
     the object lets it go (:func:`_nearest_the_middle_depth`), with ``hiding_extent``
@@ -477,15 +462,8 @@ def _by_depth(a, b, cable: float, hiding_extent, build=None) -> Callable | None:
     axis /= length
     origin = 0.5 * (np.asarray(a.position, np.float64) + np.asarray(b.position, np.float64))
     extent = partial(hiding_extent, origin, axis)
-    if build is not None:
-        build = partial(build, origin, axis)
     return partial(
-        _nearest_the_middle_depth,
-        origin=origin,
-        axis=axis,
-        extent=extent,
-        cable_radius=cable,
-        build=build,
+        _nearest_the_middle_depth, origin=origin, axis=axis, extent=extent, cable_radius=cable
     )
 
 
@@ -497,58 +475,6 @@ def _within_outline(within_outline, i: int, j: int, compact, candidates, tried):
     for _ in candidates:
         pass
     return within_outline(i, j, compact, tried)
-
-
-def _built_to_depth(start, a, end, b, cable, a_from, b_from, origin, axis, depth):
-    """The turns from ``start`` on end ``a``'s strand to ``end`` on ``b``'s built so
-    that their apex lies ``depth`` past ``origin`` along ``axis``, each led in from where
-    the fits begin: per tilt of the ends' fitted directions (a cut's fit may be read up
-    to :data:`DIRECTION_SLACK` off; a third of it at a time, least tilted first), the
-    bulb of the bend radius that reaches that deep, each way round
-    (:func:`.turn_to_depth.bulb_to_depth`), then the strands carried straight on to the
-    turn's beginning (:func:`.turn_to_depth.turn_to_depth`)."""
-    shares = np.linspace(-1.0, 1.0, 7)
-    tilts = sorted(
-        ((first, last) for first in shares for last in shares), key=lambda t: abs(t[0]) + abs(t[1])
-    )
-    for tilt_first, tilt_last in (DIRECTION_SLACK * np.array(tilts)).tolist():
-        leaving = rotated(a.direction, tilt_first)
-        arriving = -rotated(b.direction, tilt_last)
-        turn = float(np.arctan2(*_cross_dot(leaving, arriving)))
-        curves = [
-            bulb_to_depth(
-                start,
-                leaving,
-                end,
-                arriving,
-                origin,
-                axis,
-                depth,
-                HIDDEN_BEND_RADII[0] * cable,
-                partial(_one_bulb, start, leaving, end, arriving, reading),
-            )
-            for reading in (turn, turn - np.copysign(2 * np.pi, turn))
-        ]
-        curves.append(
-            turn_to_depth(
-                start,
-                leaving,
-                end,
-                arriving,
-                origin,
-                axis,
-                depth,
-                cable,
-                partial(hidden_turn_curves, limit=None),
-                bends_as_a_cable,
-            )
-        )
-        yield from _led_in((curve for curve in curves if curve is not None), a_from, b_from)
-
-
-def _one_bulb(start, leaving, end, arriving, turn, bend):
-    """:func:`bulb_turns` of the one bend radius ``bend``."""
-    return bulb_turns(start, leaving, end, arriving, turn, [bend])
 
 
 def _turn_leaves_at(end, distance, cable: float) -> np.ndarray:
@@ -927,11 +853,7 @@ def turn_joins(
                         len(_straight(b_leaves, b_from, 1.0)),
                     )
                     among = _by_depth(
-                        a,
-                        b,
-                        cable,
-                        partial(hiding_extent, i, j) if hiding_extent else None,
-                        partial(_built_to_depth, a_leaves, a, b_leaves, b, cable, a_from, b_from),
+                        a, b, cable, partial(hiding_extent, i, j) if hiding_extent else None
                     )
                 found = _likeliest_shape(found, passing, cable, hidden_all_along, leads, among)
                 bounded = None
