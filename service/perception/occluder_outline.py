@@ -91,7 +91,7 @@ def turns_within_outlines(
         if outline is None:
             return None
         return middle_depth_within(
-            compact, curves, first.position, second.position, inward, cable, outline
+            compact, curves(), first.position, second.position, inward, cable, outline
         )
 
     return within

@@ -471,10 +471,15 @@ def _within_outline(within_outline, i: int, j: int, compact, candidates, tried):
     """``within_outline``'s curve for the turn from end ``i`` to end ``j`` (None: the
     image shows no outline), of every curve :func:`hidden_turn_curves` builds (drawn
     into ``tried`` from ``candidates``): the outline, not the order of compactness,
-    bounds the turn."""
-    for _ in candidates:
-        pass
-    return within_outline(i, j, compact, tried)
+    bounds the turn. The curves are drawn only once an outline is read: most turns
+    show none, and building all of them costs more than reading it."""
+
+    def every_curve() -> list[np.ndarray]:
+        for _ in candidates:
+            pass
+        return tried
+
+    return within_outline(i, j, compact, every_curve)
 
 
 def _turn_leaves_at(end, distance, cable: float) -> np.ndarray:
