@@ -64,16 +64,17 @@ pass under the object's near side, their tubes straddling it whatever the turn."
 
 def turns_within_outlines(
     image: np.ndarray, mask: np.ndarray, ends: Sequence
-) -> Callable[[int, int, np.ndarray, Sequence[np.ndarray]], np.ndarray | None]:
+) -> Callable[[int, int, np.ndarray, Callable[[], Sequence[np.ndarray]]], np.ndarray | None]:
     """For the turns seen on their cuts alone (:func:`.turn_joins.turn_joins`'
     ``within_outline``): a callable ``(i, j, compact, curves)`` giving, where the image
     shows the rectangle of an object of the ground's colour over the turn between ends
-    ``i`` and ``j`` (:func:`rectangle_over_turn`), the curve of ``curves`` whose depth
+    ``i`` and ``j`` (:func:`rectangle_over_turn`), the curve of ``curves()`` (called
+    only then: building every curve costs more than reading the outline) whose depth
     lies in the middle of what the object allows (:func:`middle_depth_within`); else
     None. The image's brightness is read once, on the first call."""
     brightness: list[np.ndarray] = []
 
-    def within(i: int, j: int, compact: np.ndarray, curves: Sequence[np.ndarray]):
+    def within(i: int, j: int, compact: np.ndarray, curves: Callable[[], Sequence[np.ndarray]]):
         first, second = ends[i], ends[j]
         inward = np.asarray(first.direction, np.float64) + np.asarray(second.direction, np.float64)
         length = float(np.hypot(*inward))

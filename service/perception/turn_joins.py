@@ -708,7 +708,8 @@ def turn_joins(
     out_of_view: Callable[[int, int, np.ndarray], bool] | None = None,
     distance: np.ndarray | None = None,
     hiding_extent: Callable[..., tuple[float, float] | None] | None = None,
-    within_outline: Callable[[int, int, np.ndarray, list], np.ndarray | None] | None = None,
+    within_outline: Callable[[int, int, np.ndarray, Callable[[], list]], np.ndarray | None]
+    | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -770,8 +771,9 @@ def turn_joins(
     within_outline : callable (i, j, compact, curves) -> ndarray or None, optional
         For a turn no object is seen over (its cuts' evidence alone): where the image
         shows the outline of an object of the ground's colour over it, the curve of
-        ``curves`` (every one built) in the middle of the depths the outline allows,
-        from ``compact`` (the curve the evidence chose) to the deepest under it
+        ``curves()`` (every one built, built when asked) in the middle of the depths
+        the outline allows, from ``compact`` (the curve the evidence chose) to the
+        deepest under it
         (:func:`.occluder_outline.turns_within_outlines`); the turn is then bridged
         along it, however far apart its strands (:func:`_within_outline`).
 
