@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 import cv2
 import numpy as np
 
+from service.perception.appearance import unlike_background
 from service.perception.geometry import rotated
 from service.perception.turn_joins import bends_as_a_cable
 
@@ -89,13 +90,40 @@ def turns_within_outlines(
         outline = rectangle_over_turn(
             brightness[0], mask, first.position, second.position, inward, cable
         )
-        if outline is None:
+        if outline is None or _unlike_the_ground(image, mask, outline, (first, second), cable):
             return None
         return middle_depth_within(
             compact, curves(), first.position, second.position, inward, cable, outline
         )
 
     return within
+
+
+INTERIOR_SPAN = np.linspace(0.2, 0.8, 7)
+"""Where across and along a rectangle read over a turn its inside is sampled (shares of
+its sides): clear of its rims and of the strands entering at its near side."""
+
+
+def _unlike_the_ground(image, mask, outline, ends, cable_radius) -> bool:
+    """Whether most of the inside of the rectangle ``outline`` (corners in order round it)
+    off the foreground looks unlike the open ground beside the two ``ends``' cables
+    (:func:`.appearance.unlike_background`): an object of another colour, whose border
+    the rim reading finds as well. Such an object is read by the turn pass's own object
+    test (its outline, ``turn_out_of_view``); where that test did not pass on the turn,
+    the strands do not turn round under it as a sheet over a turn does (they pass out
+    under its sides), and its depth does not bound the turn."""
+    u, v = np.meshgrid(INTERIOR_SPAN, INTERIOR_SPAN)
+    u, v = u.ravel()[:, None], v.ravel()[:, None]
+    c0, c1, c2, c3 = outline
+    points = (1 - u) * (1 - v) * c0 + u * (1 - v) * c1 + u * v * c2 + (1 - u) * v * c3
+    height, width = mask.shape
+    cols, rows = np.rint(points).astype(np.int64).T
+    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
+    points, cols, rows = points[inside], cols[inside], rows[inside]
+    points = points[~mask[rows, cols].astype(bool)]
+    if not len(points):
+        return False
+    return bool(np.mean(unlike_background(image, mask, points, ends, cable_radius)) > 0.5)
 
 
 def middle_depth_within(

@@ -91,3 +91,15 @@ def test_turns_under_sheets_of_the_grounds_colour_follow_their_outline(seed):
     middle depth follows the cable."""
     score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
+
+
+def test_an_object_of_another_colour_is_no_sheet_of_the_grounds():
+    """Tuning scene occluded 460186, true mask: a cable passes under a box of another
+    colour (75 x 108 px) and out under another of its sides; the object test does not
+    pass on that turn, the rim reading finds the box's border all round, and bounding the
+    turn to the box's middle depth put the chain 16.3 px off (tolerance 8.7) where the
+    compact curve was 2.7 px off. A rectangle whose inside looks unlike the ground is an
+    object, not a sheet of the ground's colour: it does not bound the turn."""
+    seed = 460186
+    score, _ = evaluate_scene(make_family_scene("occluded", seed), seed, mask_from_labels=True)
+    assert score.frame.correct, score.frame.coverage
