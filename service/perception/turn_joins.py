@@ -461,9 +461,17 @@ def _by_depth(a, b, cable: float, hiding_extent) -> Callable[[list[np.ndarray]],
         return None
     axis /= length
     origin = 0.5 * (np.asarray(a.position, np.float64) + np.asarray(b.position, np.float64))
-    extent = partial(hiding_extent, origin, axis)
+    # Read the object's reach first: where it does not bound the turn the shortest curve
+    # is the choice, and the curves past it need not all be built and tested.
+    reach = hiding_extent(origin, axis)
+    if reach is None or reach[0] > cable:
+        return None
     return partial(
-        _nearest_the_middle_depth, origin=origin, axis=axis, extent=extent, cable_radius=cable
+        _nearest_the_middle_depth,
+        origin=origin,
+        axis=axis,
+        extent=lambda: reach,
+        cable_radius=cable,
     )
 
 
