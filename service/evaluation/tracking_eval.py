@@ -46,7 +46,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from schemas import Detection, DetectParams, TrackParams
-from service.perception import detect_full
+from service.perception import detect
 from service.perception.tracking import Tracker
 from service.synthetic.videos import VideoFrame, make_video
 
@@ -126,7 +126,7 @@ def evaluate_video(
     tracking_ms, detection_ms = [], []
     for frame in video.frames():
         started = time.perf_counter()
-        detection = detect_full(frame.image, params, frame.mask if use_mask else None).detection
+        detection = detect(frame.image, params, frame.mask if use_mask else None)
         detection_ms.append((time.perf_counter() - started) * 1000.0)
         tracks = tracker.follow(detection, frame.image, frame.timestamp_s)
         tracking_ms.append(tracks.tracking.tracking_ms)

@@ -222,6 +222,21 @@ def detect_full(
     >>> len(result.detection.chains), result.mask.shape, bool(result.mask[60, 100])
     (1, (120, 200), True)
     """
+    return _detect(image, params, mask, segmenter, deadline, mask_wanted=True)
+
+
+def _detect(
+    image: np.ndarray | None,
+    params: DetectParams | None,
+    mask: np.ndarray | None,
+    segmenter: Segmenter | None,
+    deadline: Deadline | None,
+    mask_wanted: bool,
+) -> DetectionResult:
+    """:func:`detect_full`; with ``mask_wanted`` False the result's mask is the one the
+    chains were found in, not grown by each cable's own threshold afterwards
+    (:func:`grow_by_own_thresholds`): that growth changes nothing but the mask, which
+    :func:`detect` does not return (a third of a ms per photograph)."""
     started = time.perf_counter()
     params = DetectParams() if params is None else params
     if not isinstance(params, DetectParams):
@@ -327,7 +342,7 @@ def detect_full(
     watch.lap("merging")
     check(deadline, "merging")
 
-    if cue is not None and joint_arrays:
+    if mask_wanted and cue is not None and joint_arrays:
         # Back to step 1 with the chains known: a cable dimmer than the rest gets the
         # rims the image-wide threshold cut off (the caller's own mask is kept as is).
         foreground = grow_by_own_thresholds(
@@ -431,7 +446,8 @@ def detect(
     >>> round(detection.chains[0].length / 10)
     18
     """
-    return detect_full(image, params, mask, segmenter=segmenter, deadline=deadline).detection
+    # The mask is not returned: it is not grown by the cables' own thresholds either.
+    return _detect(image, params, mask, segmenter, deadline, mask_wanted=False).detection
 
 
 def _numba_cache_dir() -> str:

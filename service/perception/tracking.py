@@ -41,7 +41,7 @@ from schemas import Detection, DetectParams, Track, TrackingStatus, TrackParams,
 from service.perception import _tracking_kernels
 from service.perception.errors import InvalidInputError
 from service.perception.geometry import distances_to_polyline
-from service.perception.pipeline import detect_full
+from service.perception.pipeline import detect
 from service.perception.segmenter import Segmenter
 from service.perception.track_crossings import track_crossings
 from service.perception.track_identity import (
@@ -448,7 +448,7 @@ class Tracker:
             are kept and the frame counts as lost (so does one the detection fails on).
         """
         try:
-            detection = detect_full(image, self.params, mask, segmenter=self.segmenter).detection
+            detection = detect(image, self.params, mask, segmenter=self.segmenter)
         except BaseException:
             self._lost += 1  # the frame is lost to the tracks, whatever went wrong
             raise

@@ -245,6 +245,30 @@ def test_the_true_mask_gives_the_same_chains_as_good_segmentation():
         assert distance_to_polyline(a, b).max() < 3.0
 
 
+def test_detect_gives_detect_fulls_chains_without_growing_the_mask_it_drops(monkeypatch):
+    # Two bright cables and a dim one with shaded rims on black: the image-wide
+    # threshold cuts the dim cable's rims off, and its own threshold gives them back.
+    image = np.zeros((200, 240, 3), np.uint8)
+    for y in (30, 70):
+        cv2.line(image, (10, y), (230, y), (200, 200, 200), 9)
+    cv2.line(image, (10, 140), (230, 150), (60, 60, 60), 13)
+    cv2.line(image, (10, 140), (230, 150), (120, 120, 120), 9)
+    full = detect_full(image)
+    assert len(full.detection.chains) == 3
+    assert full.mask[136:155, 20:220].sum() > (image[136:155, 20:220, 0] >= 100).sum()
+    # The growth changes the mask alone, which detect() does not return: it is not run.
+    import service.perception.pipeline as pipeline
+
+    def not_wanted(*args, **kwargs):
+        raise AssertionError("detect() grew a mask it does not return")
+
+    monkeypatch.setattr(pipeline, "grow_by_own_thresholds", not_wanted)
+    bare = detect(image)
+    assert bare.model_dump(exclude={"timings_ms"}) == full.detection.model_dump(
+        exclude={"timings_ms"}
+    )
+
+
 def test_mask_only_detection_reports_crossings_without_an_order():
     scene = make_scene(640, 360, 2, seed=2)
     detection = detect(None, mask=scene.mask)
