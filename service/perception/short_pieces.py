@@ -401,7 +401,9 @@ def short_piece_widths(
     height, width = distance.shape
     inner = [pieces[k][1:-1] for k in short]
     joints = np.rint(np.concatenate(inner)).astype(np.int64)
-    values = distance[joints[:, 1].clip(0, height - 1), joints[:, 0].clip(0, width - 1)]
+    # np.clip's values on integers, without its checks.
+    rows = np.minimum(np.maximum(joints[:, 1], 0), height - 1)
+    values = distance[rows, np.minimum(np.maximum(joints[:, 0], 0), width - 1)]
     starts = np.cumsum([0, *(len(points) for points in inner[:-1])])
     widest = np.maximum.reduceat(values, starts).astype(np.float64)
     narrow = widths[short] < full_width_fraction * widest
@@ -445,7 +447,8 @@ def widths_clear_of_crossings(
     ends = list(ends)
     for k in flagged:
         joints = np.rint(pieces[k]).astype(np.int64)
-        rows, cols = joints[:, 1].clip(0, height - 1), joints[:, 0].clip(0, width - 1)
+        rows = np.minimum(np.maximum(joints[:, 1], 0), height - 1)
+        cols = np.minimum(np.maximum(joints[:, 0], 0), width - 1)
         clear = ~_merging_kernels.on_grown_zones(
             zones_u8, np.ascontiguousarray(pieces[k], np.float64), reach
         )
