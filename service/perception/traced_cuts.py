@@ -45,6 +45,7 @@ from service.perception.gap_evidence import (
     alike_and_short_enough_to_hide,
     cut_ends_alike,
 )
+from service.perception.one_border import one_border_test
 from service.perception.turn_joins import PIXEL_ROUNDING
 
 # Step (px) of the walk back along a piece from its tip (:func:`_start_on_the_piece`).
@@ -205,4 +206,13 @@ def traced_cut_tests(ends, mask, colours, radius, image, pieces=None, distance=N
             at_cut(i), at_cut(j), i, j, curve, mask, colours, radius, image
         )
 
-    return (test(2), test(TURN_CUT_ENDS), one_cut_the_other_no_tip)
+    def readings(index: int) -> tuple:
+        fitted, traced = ends[index], at_cut(index)
+        return (fitted,) if traced is fitted else (fitted, traced)
+
+    return (
+        test(2),
+        test(TURN_CUT_ENDS),
+        one_cut_the_other_no_tip,
+        one_border_test(ends, readings, mask, colours, radius, image),
+    )
