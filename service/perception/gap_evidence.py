@@ -459,32 +459,43 @@ def turn_hiding_extent(image, mask, ends, radius) -> Callable[..., tuple[float, 
     return extent
 
 
-def cut_bridge_shows(
+def cut_bridge_gives_way(
     pair: tuple[int, int],
     curve: np.ndarray,
     turn_bridges: dict[tuple[int, int], np.ndarray],
     wide_turns: frozenset,
     hidden_all_along: Callable[..., int],
+    depth_bounded: frozenset = frozenset(),
 ) -> bool:
     """Whether the bridge from the traced cuts of a turn under an object (``pair``, one
     of ``wide_turns``, the turn pass's curve ``turn_bridges[pair]`` found out of view all
-    the way) would put the cable where the image shows open background: a cut misread
-    (a fork in the skeleton at the object's edge, a wedge a slanted border leaves) turns
-    the bridge out past the object, where a cable would be seen. The turn's own curve,
-    which the evidence placed under the object all the way, is kept then.
+    the way) gives way to the turn's own curve, which the evidence placed under the
+    object all the way.
 
-    Shown is the bridge's middle anywhere, or, where the turn's curve keeps the cable's
-    whole tube under the object, the bridge's tube clear of the cuts' rims: right at a
-    cut the bridge starts on the object's very edge and its tube straddles the edge
-    whatever the turn's shape (it reads the cut), but past the rim a cable whose side
-    reaches out onto open background would be seen there. ``hidden_all_along`` is
-    :func:`turn_out_of_view`'s callable."""
+    It does where it would put the cable where the image shows open background: a cut
+    misread (a fork in the skeleton at the object's edge, a wedge a slanted border
+    leaves) turns the bridge out past the object, where a cable would be seen. Shown is
+    the bridge's middle anywhere, or, where the turn's curve keeps the cable's whole tube
+    under the object, the bridge's tube clear of the cuts' rims: right at a cut the
+    bridge starts on the object's very edge and its tube straddles the edge whatever the
+    turn's shape (it reads the cut), but past the rim a cable whose side reaches out
+    onto open background would be seen there.
+
+    It does also where the object bounds the turn's depth (``depth_bounded``: the cuts
+    lie on its near rim, :func:`.turn_joins._by_depth`) and the turn's curve keeps the
+    whole tube under it: that curve was chosen, of every curve the object hides whole,
+    by where the object lets the turn go (the middle of its depth); the cuts' bridge is
+    one natural curve from the cuts' positions and directions, read where the strands
+    pass under the rim, and nothing there says how deep the hidden turn goes.
+    ``hidden_all_along`` is :func:`turn_out_of_view`'s callable."""
     if pair not in wide_turns or pair not in turn_bridges:
         return False
     i, j = pair
     turn = turn_bridges[pair]
     if not hidden_all_along(i, j, turn, whole_tube=False):
         return False
+    if pair in depth_bounded and hidden_all_along(i, j, turn) == WHOLE_TUBE_OUT_OF_VIEW:
+        return True
     if not hidden_all_along(i, j, curve, whole_tube=False):
         return True
     return (

@@ -718,6 +718,7 @@ def turn_joins(
     hiding_extent: Callable[..., tuple[float, float] | None] | None = None,
     within_outline: Callable[[int, int, np.ndarray, Callable[[], list]], np.ndarray | None]
     | None = None,
+    depth_bounded: set[tuple[int, int]] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -784,6 +785,9 @@ def turn_joins(
         deepest under it
         (:func:`.occluder_outline.turns_within_outlines`); the turn is then bridged
         along it, however far apart its strands (:func:`_within_outline`).
+    depth_bounded : set, optional
+        When given, gets each pair ``(i, j)`` whose curve was chosen by the object's
+        depth (:func:`_by_depth`: the cuts lie on its near rim).
 
     Returns
     -------
@@ -871,6 +875,8 @@ def turn_joins(
                         a, b, cable, partial(hiding_extent, i, j) if hiding_extent else None
                     )
                 found = _likeliest_shape(found, passing, cable, hidden_all_along, leads, among)
+                if among is not None and depth_bounded is not None:
+                    depth_bounded.add((i, j))
                 bounded = None
                 if strength > 0 and within_outline is not None:
                     bounded = _within_outline(within_outline, i, j, found, candidates, tried)
