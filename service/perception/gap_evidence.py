@@ -465,7 +465,7 @@ def cut_bridge_gives_way(
     turn_bridges: dict[tuple[int, int], np.ndarray],
     wide_turns: frozenset,
     hidden_all_along: Callable[..., int],
-    depth_bounded: frozenset = frozenset(),
+    depth_bounded: dict | None = None,
 ) -> bool:
     """Whether the bridge from the traced cuts of a turn under an object (``pair``, one
     of ``wide_turns``, the turn pass's curve ``turn_bridges[pair]`` found out of view all
@@ -481,12 +481,13 @@ def cut_bridge_gives_way(
     turn's shape (it reads the cut), but past the rim a cable whose side reaches out
     onto open background would be seen there.
 
-    It does also where the object bounds the turn's depth (``depth_bounded``: the cuts
-    lie on its near rim, :func:`.turn_joins._by_depth`) and the turn's curve keeps the
-    whole tube under it: that curve was chosen, of every curve the object hides whole,
-    by where the object lets the turn go (the middle of its depth); the cuts' bridge is
-    one natural curve from the cuts' positions and directions, read where the strands
-    pass under the rim, and nothing there says how deep the hidden turn goes.
+    It does also where the object bounds the turn's depth (the cuts lie on its near rim,
+    :func:`.turn_joins._by_depth`), the turn's curve keeps the whole tube under it, and
+    its apex lies nearer the middle of the object's depth than the bridge's
+    (``depth_bounded[pair]``, :func:`.turn_joins._apex_off_the_middle`): the turn's curve
+    was chosen, of every curve the object hides whole, by that measure (with nothing
+    seen to say where under the object the cable turns, the middle halves the worst
+    error); the bridge is one more curve for the same turn, judged by it too.
     ``hidden_all_along`` is :func:`turn_out_of_view`'s callable."""
     if pair not in wide_turns or pair not in turn_bridges:
         return False
@@ -494,7 +495,12 @@ def cut_bridge_gives_way(
     turn = turn_bridges[pair]
     if not hidden_all_along(i, j, turn, whole_tube=False):
         return False
-    if pair in depth_bounded and hidden_all_along(i, j, turn) == WHOLE_TUBE_OUT_OF_VIEW:
+    off_the_middle = (depth_bounded or {}).get(pair)
+    if (
+        off_the_middle is not None
+        and off_the_middle(turn) < off_the_middle(curve)
+        and hidden_all_along(i, j, turn) == WHOLE_TUBE_OUT_OF_VIEW
+    ):
         return True
     if not hidden_all_along(i, j, curve, whole_tube=False):
         return True

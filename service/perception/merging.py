@@ -860,7 +860,7 @@ def merge_chains(
         lambda made: free_ends_beside_crossings(pieces, ends, made, span, junction_of_end),
     )
     turn_bridges: dict[tuple[int, int], np.ndarray] = {}
-    depth_bounded: set[tuple[int, int]] = set()
+    depth_bounded: dict[tuple[int, int], Callable] = {}
     turn_hidden = None
     turn_pairs: frozenset[tuple[int, int]] = frozenset()
     if hidden_gap is not None and params.expected_count is None and ends:
@@ -964,7 +964,7 @@ def merge_chains(
                 pair: curve
                 for pair, curve in cut_bridges.items()
                 if not cut_bridge_gives_way(
-                    pair, curve, turn_bridges, wide_turns, turn_hidden, frozenset(depth_bounded)
+                    pair, curve, turn_bridges, wide_turns, turn_hidden, depth_bounded
                 )
             }
         bridges = {**bridges, **cut_bridges}
