@@ -482,13 +482,17 @@ def cut_bridge_gives_way(
     onto open background would be seen there.
 
     It does also where the object bounds the turn's depth (the cuts lie on its near rim,
-    :func:`.turn_joins._by_depth`), the turn's curve keeps the whole tube under it, and
-    its apex lies nearer the middle of the object's depth than the bridge's
-    (``depth_bounded[pair]``, :func:`.turn_joins._apex_off_the_middle`): the turn's curve
-    was chosen, of every curve the object hides whole, by that measure (with nothing
-    seen to say where under the object the cable turns, the middle halves the worst
-    error); the bridge is one more curve for the same turn, judged by it too.
-    ``hidden_all_along`` is :func:`turn_out_of_view`'s callable."""
+    :func:`.turn_joins._by_depth`) and both readings favour the turn's curve: its apex
+    lies nearer the middle of the object's depth than the bridge's
+    (``depth_bounded[pair]``, :func:`.turn_joins._apex_off_the_middle`: the measure the
+    curve was chosen by, of every curve the object hides whole), and it keeps the whole
+    tube under the object where the bridge's tube reaches out somewhere, be it only at
+    a cut's rim. Each alone is weak: the middle is read along the ends' directions,
+    which may cross the object at a slant and overstate its depth, and at a cut the
+    bridge's tube straddles the object's edge whatever the turn. A bridge the object
+    hides whole is kept whatever its depth: traced from the cuts, it follows the cable
+    closely where the cuts are read right. ``hidden_all_along`` is
+    :func:`turn_out_of_view`'s callable."""
     if pair not in wide_turns or pair not in turn_bridges:
         return False
     i, j = pair
@@ -500,6 +504,7 @@ def cut_bridge_gives_way(
         off_the_middle is not None
         and off_the_middle(turn) < off_the_middle(curve)
         and hidden_all_along(i, j, turn) == WHOLE_TUBE_OUT_OF_VIEW
+        and hidden_all_along(i, j, curve) != WHOLE_TUBE_OUT_OF_VIEW
     ):
         return True
     if not hidden_all_along(i, j, curve, whole_tube=False):

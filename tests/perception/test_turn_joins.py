@@ -584,7 +584,7 @@ def test_a_turn_whose_depth_the_object_bounds_keeps_its_curve_over_the_cuts_brid
     its middle and its tube clear of the rims under the object too, so main kept it,
     7.7 and 7.4 px off, though its apex lies further from the middle of the object's
     depth (23.5 against the curve's 23.9, middle 24.5; 24.3 against 27.7, middle 30)
-    (branch obj38, docs/BENCHMARKS.md)."""
+    and its tube reaches out at a cut's rim (branch obj38, docs/BENCHMARKS.md)."""
     score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
     assert score.frame.correct, score.frame.coverage
 
