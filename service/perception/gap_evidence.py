@@ -459,25 +459,39 @@ def turn_hiding_extent(image, mask, ends, radius) -> Callable[..., tuple[float, 
     return extent
 
 
-def cut_bridge_shows(
+def cut_bridge_gives_way(
     pair: tuple[int, int],
     curve: np.ndarray,
     turn_bridges: dict[tuple[int, int], np.ndarray],
     wide_turns: frozenset,
     hidden_all_along: Callable[..., int],
+    depth_bounded: dict | None = None,
 ) -> bool:
     """Whether the bridge from the traced cuts of a turn under an object (``pair``, one
     of ``wide_turns``, the turn pass's curve ``turn_bridges[pair]`` found out of view all
-    the way) would put the cable where the image shows open background: a cut misread
-    (a fork in the skeleton at the object's edge, a wedge a slanted border leaves) turns
-    the bridge out past the object, where a cable would be seen. The turn's own curve,
-    which the evidence placed under the object all the way, is kept then.
+    the way) gives way to the turn's own curve, which the evidence placed under the
+    object all the way.
 
-    Shown is the bridge's middle anywhere, or, where the turn's curve keeps the cable's
-    whole tube under the object, the bridge's tube clear of the cuts' rims: right at a
-    cut the bridge starts on the object's very edge and its tube straddles the edge
-    whatever the turn's shape (it reads the cut), but past the rim a cable whose side
-    reaches out onto open background would be seen there. ``hidden_all_along`` is
+    It does where it would put the cable where the image shows open background: a cut
+    misread (a fork in the skeleton at the object's edge, a wedge a slanted border
+    leaves) turns the bridge out past the object, where a cable would be seen. Shown is
+    the bridge's middle anywhere, or, where the turn's curve keeps the cable's whole tube
+    under the object, the bridge's tube clear of the cuts' rims: right at a cut the
+    bridge starts on the object's very edge and its tube straddles the edge whatever the
+    turn's shape (it reads the cut), but past the rim a cable whose side reaches out
+    onto open background would be seen there.
+
+    It does also where the object bounds the turn's depth (the cuts lie on its near rim,
+    :func:`.turn_joins._by_depth`) and both readings favour the turn's curve: its apex
+    lies nearer the middle of the object's depth than the bridge's
+    (``depth_bounded[pair]``, :func:`.turn_joins._apex_off_the_middle`: the measure the
+    curve was chosen by, of every curve the object hides whole), and it keeps the whole
+    tube under the object where the bridge's tube reaches out somewhere, be it only at
+    a cut's rim. Each alone is weak: the middle is read along the ends' directions,
+    which may cross the object at a slant and overstate its depth, and at a cut the
+    bridge's tube straddles the object's edge whatever the turn. A bridge the object
+    hides whole is kept whatever its depth: traced from the cuts, it follows the cable
+    closely where the cuts are read right. ``hidden_all_along`` is
     :func:`turn_out_of_view`'s callable."""
     if pair not in wide_turns or pair not in turn_bridges:
         return False
@@ -485,6 +499,14 @@ def cut_bridge_shows(
     turn = turn_bridges[pair]
     if not hidden_all_along(i, j, turn, whole_tube=False):
         return False
+    off_the_middle = (depth_bounded or {}).get(pair)
+    if (
+        off_the_middle is not None
+        and off_the_middle(turn) < off_the_middle(curve)
+        and hidden_all_along(i, j, turn) == WHOLE_TUBE_OUT_OF_VIEW
+        and hidden_all_along(i, j, curve) != WHOLE_TUBE_OUT_OF_VIEW
+    ):
+        return True
     if not hidden_all_along(i, j, curve, whole_tube=False):
         return True
     return (

@@ -53,7 +53,7 @@ from service.perception.end_readings import ends_refitted_onto_the_mask
 from service.perception.gap_evidence import (
     TURN_EVIDENCE_ALONG_CURVE,
     beyond_hiding,
-    cut_bridge_shows,
+    cut_bridge_gives_way,
     cut_ends_alike,
     open_gap_limit,
     open_gap_too_long,
@@ -860,6 +860,7 @@ def merge_chains(
         lambda made: free_ends_beside_crossings(pieces, ends, made, span, junction_of_end),
     )
     turn_bridges: dict[tuple[int, int], np.ndarray] = {}
+    depth_bounded: dict[tuple[int, int], Callable] = {}
     turn_hidden = None
     turn_pairs: frozenset[tuple[int, int]] = frozenset()
     if hidden_gap is not None and params.expected_count is None and ends:
@@ -901,6 +902,7 @@ def merge_chains(
             distance,
             turn_hiding_extent(image, mask, seen, radius),
             turns_within_outlines(image, mask, seen) if image is not None else None,
+            depth_bounded,
         )
         joins = joins + turned
         turn_pairs = frozenset((i, j) for i, j, _ in turned)
@@ -961,7 +963,9 @@ def merge_chains(
             cut_bridges = {
                 pair: curve
                 for pair, curve in cut_bridges.items()
-                if not cut_bridge_shows(pair, curve, turn_bridges, wide_turns, turn_hidden)
+                if not cut_bridge_gives_way(
+                    pair, curve, turn_bridges, wide_turns, turn_hidden, depth_bounded
+                )
             }
         bridges = {**bridges, **cut_bridges}
     assembled = assemble_paths(pieces, bridging_ends, joins, params.gap_curve, trims, bridges)

@@ -443,6 +443,19 @@ def _nearest_the_middle_depth(
     return held[int(np.argmin(np.abs(apexes - middle)))]
 
 
+def _apex_off_the_middle(
+    curve: np.ndarray,
+    origin: np.ndarray,
+    axis: np.ndarray,
+    extent: Callable[[], tuple[float, float]],
+) -> float:
+    """How far (px) ``curve``'s apex lies from the middle of the depth the region that
+    hides it allows past the cuts (half its reach ahead of ``origin`` along ``axis``,
+    ``extent()``: :func:`_nearest_the_middle_depth`): the measure the turn's curve was
+    chosen by, for any other curve of the same turn."""
+    return abs(float(np.max((np.asarray(curve) - origin) @ axis)) - 0.5 * extent()[1])
+
+
 def _by_depth(a, b, cable: float, hiding_extent) -> Callable[[list[np.ndarray]], np.ndarray] | None:
     """The choice among the curves an object hides whole for a turn from end ``a`` to
     end ``b`` (:class:`.merging.ChainEnd`; ``cable``: the cable's half width) by how deep
@@ -718,6 +731,7 @@ def turn_joins(
     hiding_extent: Callable[..., tuple[float, float] | None] | None = None,
     within_outline: Callable[[int, int, np.ndarray, Callable[[], list]], np.ndarray | None]
     | None = None,
+    depth_bounded: dict[tuple[int, int], Callable[[np.ndarray], float]] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Joins of free chain ends where the cable turns sharply under something.
 
@@ -784,6 +798,10 @@ def turn_joins(
         deepest under it
         (:func:`.occluder_outline.turns_within_outlines`); the turn is then bridged
         along it, however far apart its strands (:func:`_within_outline`).
+    depth_bounded : dict, optional
+        When given, gets for each pair ``(i, j)`` whose curve was chosen by the object's
+        depth (:func:`_by_depth`: the cuts lie on its near rim) how far a curve's apex
+        lies from the middle of that depth (:func:`_apex_off_the_middle`).
 
     Returns
     -------
@@ -871,6 +889,13 @@ def turn_joins(
                         a, b, cable, partial(hiding_extent, i, j) if hiding_extent else None
                     )
                 found = _likeliest_shape(found, passing, cable, hidden_all_along, leads, among)
+                if among is not None and depth_bounded is not None:
+                    depth_bounded[i, j] = partial(
+                        _apex_off_the_middle,
+                        origin=among.keywords["origin"],
+                        axis=among.keywords["axis"],
+                        extent=among.keywords["extent"],
+                    )
                 bounded = None
                 if strength > 0 and within_outline is not None:
                     bounded = _within_outline(within_outline, i, j, found, candidates, tried)
