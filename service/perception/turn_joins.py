@@ -43,6 +43,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 from functools import partial
 from itertools import chain, islice
+from typing import NamedTuple
 
 import numpy as np
 
@@ -456,14 +457,25 @@ def _apex_off_the_middle(
     return abs(float(np.max((np.asarray(curve) - origin) @ axis)) - 0.5 * extent()[1])
 
 
-def _by_depth(a, b, cable: float, hiding_extent) -> Callable[[list[np.ndarray]], np.ndarray] | None:
+class _DepthChoice(NamedTuple):
+    """How the object's depth chooses a turn's curve (:func:`_by_depth`)."""
+
+    choose: Callable[[list[np.ndarray]], np.ndarray]
+    """Of the curves the object hides whole, the one to take
+    (:func:`_nearest_the_middle_depth`)."""
+    off_the_middle: Callable[[np.ndarray], float]
+    """How far (px) a curve's apex lies from the middle of that depth
+    (:func:`_apex_off_the_middle`): the measure ``choose`` chose by."""
+
+
+def _by_depth(a, b, cable: float, hiding_extent) -> _DepthChoice | None:
     """The choice among the curves an object hides whole for a turn from end ``a`` to
     end ``b`` (:class:`.merging.ChainEnd`; ``cable``: the cable's half width) by how deep
     the object lets it go (:func:`_nearest_the_middle_depth`), with ``hiding_extent``
-    ``(origin, axis) -> (behind, ahead) or None`` the object's reach on that line; None
-    (the shortest) without it, or where the strands are not doubled back (turning by
-    less than :data:`BULB_MIN_TURN`: no common direction out into the turn to read its
-    depth along)."""
+    ``(origin, axis) -> (behind, ahead) or None`` the object's reach on that line, and
+    the measure it chose by; None (the shortest) without it, or where the strands are
+    not doubled back (turning by less than :data:`BULB_MIN_TURN`: no common direction
+    out into the turn to read its depth along)."""
     if hiding_extent is None:
         return None
     axis = np.asarray(a.direction, np.float64) + np.asarray(b.direction, np.float64)
@@ -479,12 +491,15 @@ def _by_depth(a, b, cable: float, hiding_extent) -> Callable[[list[np.ndarray]],
     reach = hiding_extent(origin, axis)
     if reach is None or reach[0] > cable:
         return None
-    return partial(
-        _nearest_the_middle_depth,
-        origin=origin,
-        axis=axis,
-        extent=lambda: reach,
-        cable_radius=cable,
+    return _DepthChoice(
+        partial(
+            _nearest_the_middle_depth,
+            origin=origin,
+            axis=axis,
+            extent=lambda: reach,
+            cable_radius=cable,
+        ),
+        partial(_apex_off_the_middle, origin=origin, axis=axis, extent=lambda: reach),
     )
 
 
@@ -885,17 +900,14 @@ def turn_joins(
                         len(_straight(a_from, a_leaves, 1.0)),
                         len(_straight(b_leaves, b_from, 1.0)),
                     )
-                    among = _by_depth(
+                    by_depth = _by_depth(
                         a, b, cable, partial(hiding_extent, i, j) if hiding_extent else None
                     )
+                    if by_depth is not None:
+                        among = by_depth.choose
+                        if depth_bounded is not None:
+                            depth_bounded[i, j] = by_depth.off_the_middle
                 found = _likeliest_shape(found, passing, cable, hidden_all_along, leads, among)
-                if among is not None and depth_bounded is not None:
-                    depth_bounded[i, j] = partial(
-                        _apex_off_the_middle,
-                        origin=among.keywords["origin"],
-                        axis=among.keywords["axis"],
-                        extent=among.keywords["extent"],
-                    )
                 bounded = None
                 if strength > 0 and within_outline is not None:
                     bounded = _within_outline(within_outline, i, j, found, candidates, tried)
