@@ -349,7 +349,7 @@ def gap_hidden_beside(
         return False
 
     def mostly_unlike(points):
-        points = _off_mask(points, mask)
+        points = off_mask(points, mask)
         if len(points) < MIN_GAP_SAMPLES:
             return False
         return bool(np.mean(_unlike(image_bgr, points, background)) > 0.5)
@@ -393,7 +393,7 @@ def _unlike(image_bgr: np.ndarray, points: np.ndarray, background: tuple) -> np.
     return _lab_distance(_lab_means(image_bgr, points), colour) > COLOUR_TOLERANCE + 2 * spread
 
 
-def _off_mask(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def off_mask(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """The (x, y) ``points`` inside the picture that lie off the foreground ``mask``."""
     return points[_off_mask_flags(points, mask)]
 
@@ -424,7 +424,7 @@ def background_beside(
             centre = end.position - behind * radius * end.direction
             for side in (-1.0, 1.0):
                 reference.append(centre + side * BESIDE_SIDE_RADII * radius * normal)
-    reference = _off_mask(np.array(reference), mask)
+    reference = off_mask(np.array(reference), mask)
     if len(reference) < MIN_GAP_SAMPLES:
         return None
     background = _lab_means(image_bgr, reference)
@@ -466,7 +466,7 @@ def out_of_view(
         normals = np.column_stack([-steps[:, 1], steps[:, 0]])[hidden]
         normals *= half_width / np.maximum(np.hypot(*normals.T), 1e-9)[:, None]
         sides = np.concatenate([points + normals, points - normals])
-        points = np.concatenate([points, _off_mask(sides, mask)])
+        points = np.concatenate([points, off_mask(sides, mask)])
     distance = _lab_distance(_lab_means(image_bgr, points), colour)
     return bool(np.all(distance > COLOUR_TOLERANCE + 2 * spread))
 

@@ -497,22 +497,22 @@ def cut_bridge_gives_way(
         return False
     i, j = pair
     turn = turn_bridges[pair]
-    if not hidden_all_along(i, j, turn, whole_tube=False):
+    # Each curve read once: 0 its middle shows, 1 its middle alone hidden, else the tube.
+    turn_hidden = hidden_all_along(i, j, turn)
+    if not turn_hidden:
+        return False
+    if not hidden_all_along(i, j, curve, whole_tube=False):
+        return True
+    if turn_hidden != WHOLE_TUBE_OUT_OF_VIEW:
         return False
     off_the_middle = (depth_bounded or {}).get(pair)
     if (
         off_the_middle is not None
         and off_the_middle(turn) < off_the_middle(curve)
-        and hidden_all_along(i, j, turn) == WHOLE_TUBE_OUT_OF_VIEW
         and hidden_all_along(i, j, curve) != WHOLE_TUBE_OUT_OF_VIEW
     ):
         return True
-    if not hidden_all_along(i, j, curve, whole_tube=False):
-        return True
-    return (
-        hidden_all_along(i, j, turn) == WHOLE_TUBE_OUT_OF_VIEW
-        and hidden_all_along(i, j, curve, clear_of_rims=True) != WHOLE_TUBE_OUT_OF_VIEW
-    )
+    return hidden_all_along(i, j, curve, clear_of_rims=True) != WHOLE_TUBE_OUT_OF_VIEW
 
 
 def strands_turn_out_of_sight(a, b, curve: np.ndarray, mask: np.ndarray, radius: float) -> bool:

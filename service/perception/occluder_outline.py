@@ -24,7 +24,7 @@ from collections.abc import Callable, Sequence
 import cv2
 import numpy as np
 
-from service.perception.appearance import unlike_background
+from service.perception.appearance import off_mask, unlike_background
 from service.perception.geometry import rotated
 from service.perception.turn_joins import bends_as_a_cable
 
@@ -116,11 +116,7 @@ def _unlike_the_ground(image, mask, outline, ends, cable_radius) -> bool:
     u, v = u.ravel()[:, None], v.ravel()[:, None]
     c0, c1, c2, c3 = outline
     points = (1 - u) * (1 - v) * c0 + u * (1 - v) * c1 + u * v * c2 + (1 - u) * v * c3
-    height, width = mask.shape
-    cols, rows = np.rint(points).astype(np.int64).T
-    inside = (cols >= 0) & (rows >= 0) & (cols < width) & (rows < height)
-    points, cols, rows = points[inside], cols[inside], rows[inside]
-    points = points[~mask[rows, cols].astype(bool)]
+    points = off_mask(points, mask)
     if not len(points):
         return False
     return bool(np.mean(unlike_background(image, mask, points, ends, cable_radius)) > 0.5)
