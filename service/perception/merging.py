@@ -787,6 +787,9 @@ def merge_chains(
         at_border = None if at_border is None else at_border[from_ends]
         leaving = None if leaving is None else leaving[from_ends]
         runs_out = None if runs_out is None else runs_out[from_ends]
+        for flags in (at_border, leaving, runs_out):
+            if flags is not None:
+                flags[touching.cut_tips] = False  # an object cuts them, not the border
     junction_of_end, dropped, crossing_pairs = absorb_shared_pieces(
         pieces,
         touching.junction_of_end,

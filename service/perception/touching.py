@@ -60,7 +60,9 @@ class TouchingSplit:
     the strands shorter than their stretch is wide, read from their mask
     (:func:`_strand_widths`), by piece; ``turns`` the two tips of the strands of a
     stretch that both stop where an object cuts it off (:mod:`.touching_ends`), left
-    to the turn pass (:func:`.touching_ends.keep_turns_free`).
+    to the turn pass (:func:`.touching_ends.keep_turns_free`); ``cut_tips`` the tips of
+    strands an object cuts where the piece they were split from left the picture (the
+    strand going on leaves it, not they).
     """
 
     pieces: list[np.ndarray]
@@ -72,6 +74,7 @@ class TouchingSplit:
     partings: list[tuple[int, int]] = field(default_factory=list)
     strand_widths: dict[int, float] = field(default_factory=dict)
     turns: list[tuple[int, int]] = field(default_factory=list)
+    cut_tips: list[int] = field(default_factory=list)
 
     def split_in_two(self, index: int, left: np.ndarray, right: np.ndarray) -> int:
         """Put piece ``index``'s ``left`` strand in its place and append its ``right``
@@ -141,12 +144,12 @@ def split_touching_strands(
         if all(len(members.get(labels[end], ())) == 3 for end in (2 * index, 2 * index + 1))
     ]
     # A stretch an object cuts off (:mod:`.touching_ends`): a three-way junction at one
-    # end, a free end in the picture at the other.
+    # end, a free end at the other (in the picture, unless the line runs on into the
+    # one strand that goes on: that strand may leave the picture).
     ending = [
         index
         for index in range(len(pieces))
         if sorted(len(members.get(labels[end], ())) for end in (2 * index, 2 * index + 1)) == [0, 3]
-        and not (leaving is not None and leaving[2 * index : 2 * index + 2].any())
     ]
     # A stretch whose one strand goes on as a piece of its own where the object cuts the
     # other (:mod:`.touching_ends`): a three-way junction at one end, two ends at the other.

@@ -21,7 +21,7 @@ import numpy as np
 
 from service.perception.appearance import WIDTH_AGREEMENT, cut_or_lopsided
 from service.perception.geometry import arc_lengths, points_along, polyline_length
-from service.perception.junction_widths import narrowest
+from service.perception.junction_widths import narrowest, widest
 from service.perception.strand_sides import (
     SIDE_BY_SIDE_WIDTH_FRACTION,
     end_kind,
@@ -59,7 +59,9 @@ def split_stretches_ending(
       tight to leave a hole: each strand is run straight on to the mask's border;
     - or one strand goes on, as wide as one of the two: the line beyond is its, and
       joins the offset strand on the side it lies; the other strand is run straight on
-      to the mask's border, where the object cuts it.
+      to the mask's border, where the object cuts it. The strand going on may leave the
+      picture (a loop whose strands touch from its crossing down to the object that
+      hides where they part: doubled_back 480171, 490151).
 
     ``widths``: every piece's half width (median distance at its joints).
     """
@@ -69,7 +71,7 @@ def split_stretches_ending(
     for index in candidates:
         at_junction = 0 if labels[2 * index] >= 0 else 1
         end, free = 2 * index + at_junction, 2 * index + 1 - at_junction
-        if labels[end] in handled:
+        if labels[end] in handled or (leaving is not None and leaving[end]):
             continue
         found = _parting_strands(
             end, index, labels, members, positions, directions, pieces, leaving, widths
@@ -90,6 +92,11 @@ def split_stretches_ending(
         shared = _up_to(oriented, along, stop)
         left, right = offset_strands(shared, strands)
         if rest <= RUN_ON_STRETCH_WIDTHS * strands:
+            # Both strands stop: at an object that cuts them, never at the picture's
+            # border (two strands leaving side by side look as a crossing the border
+            # cuts: ariadne simple/00017).
+            if leaving is not None and leaving[free]:
+                continue
             if not cut_or_lopsided(mask, positions[free], directions[free], strands):
                 continue
             left, right = (_run_on(strand, distance, strands) for strand in (left, right))
@@ -118,6 +125,12 @@ def split_stretches_ending(
         result.partings.append(tips)
         if turn:
             result.turns.append(tips)
+        elif leaving is not None and leaving[free]:
+            # The strand going on takes the line's free end out of the picture; the
+            # other's tip is where the object cuts it (the right one where offset < 0,
+            # read from the junction: the sides swap where the piece starts at its
+            # free end).
+            result.cut_tips.append(tips[1] if (offset < 0) != (at_junction == 1) else tips[0])
         handled.add(labels[end])
     return handled
 
@@ -172,7 +185,7 @@ def split_stretches_going_on(
             SIDE_BY_SIDE_WIDTH_FRACTION * strands
         ):
             continue
-        going_on = float(widths[beyond // 2])
+        going_on = _going_on_width(beyond, pieces, widths[index], distance, leaving, widths)
         strand = float(np.mean(side_widths))
         if min(going_on, strand) < WIDTH_AGREEMENT * max(going_on, strand):
             continue
@@ -205,6 +218,20 @@ def split_stretches_going_on(
             result.junction_of_end[far] = -1
         handled.add(labels[end])
     return handled
+
+
+def _going_on_width(beyond, pieces, stretch_half_width, distance, leaving, widths) -> float:
+    """The half width of the piece going on past a stretch's two-end junction (``beyond``:
+    its end there): the median of its joints (``widths``), or, where it is shorter than
+    the stretch is wide and does not leave the picture, the widest its mask gets, as a
+    short strand's at a three-way junction (:func:`.touching._strand_widths`): the object
+    cuts it a little past the junction, and the median of its few joints falls in its
+    cut's narrowing tip (doubled_back 384092: 6.4 px against the strands' 8.3)."""
+    points = pieces[beyond // 2]
+    short = polyline_length(points) < 2.0 * stretch_half_width
+    if short and not (leaving is not None and leaving[beyond ^ 1]):
+        return widest(points, distance)
+    return float(widths[beyond // 2])
 
 
 def _parting_strands(end, index, labels, members, positions, directions, pieces, leaving, widths):

@@ -174,3 +174,63 @@ def test_doubled_back_strands_touching_up_to_an_object_are_one_cable(seed, frame
     assert min(score.frame.coverage) > 0.9
     if frame_right:
         assert score.frame.correct
+
+
+def test_a_stretch_whose_going_on_strand_leaves_the_picture_is_split_by_side():
+    """As where one strand stops and the other goes on, but the strand going on leaves
+    the picture (a loop whose strands touch from its crossing down to the object that
+    hides where they part): the line is split all the same, and the cut strand's tip,
+    though the line's end it was split from left the picture, is where the object cuts
+    it (``cut_tips``). Where both strands stop at the picture's border, nothing is split."""
+    upper = [*UPPER_LEFT, (300, 95.5), (380, -10)]
+    lower = [*LOWER_LEFT, (320, 104.5)]
+    mask = touching_strands_mask(upper, lower, shape=(200, 400))
+    mask[100:, 301:] = False
+    stretch = np.vstack([_middle_line(108, 292), [(300, 97), (310, 82), (330, 56), (370, 3)]])
+    arms = [
+        np.array([UPPER_LEFT[0], (70, 75), (92, 99)], np.float64),
+        np.array([LOWER_LEFT[0], (70, 125), (92, 101)], np.float64),
+    ]
+    pieces = [stretch, *arms]
+    positions = np.array([points[index] for points in pieces for index in (0, -1)])
+    directions = np.array(
+        [points[index] - points[inner] for points in pieces for index, inner in ((0, 1), (-1, -2))]
+    )
+    directions /= np.hypot(directions[:, 0], directions[:, 1])[:, None]
+    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    labels = [0, -1, -1, 0, -1, 0]
+    leaving = np.array([False, True, True, False, True, False])
+    split = split_touching_strands(pieces, positions, directions, labels, distance, leaving)
+    assert split.split == [0]
+    upper_strand, lower_strand = split.pieces[0], split.pieces[3]
+    assert tuple(upper_strand[-1]) == (370, 3)
+    assert abs(lower_strand[:, 1].mean() - 104.5) < 1.5 and lower_strand[-1, 0] >= 298.0
+    assert split.cut_tips == [7]
+    assert split.turns == []
+    # Both strands cut off at the picture's border: no object's cut, left whole.
+    upper = [*UPPER_LEFT, (320, 95.5)]
+    lower = [*LOWER_LEFT, (320, 104.5)]
+    mask = touching_strands_mask(upper, lower, shape=(200, 301))
+    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    stretch = np.vstack([_middle_line(108, 292), [(300, 100)]])
+    pieces = [stretch, *arms]
+    positions = np.array([points[index] for points in pieces for index in (0, -1)])
+    directions = np.array(
+        [points[index] - points[inner] for points in pieces for index, inner in ((0, 1), (-1, -2))]
+    )
+    directions /= np.hypot(directions[:, 0], directions[:, 1])[:, None]
+    split = split_touching_strands(pieces, positions, directions, labels, distance, leaving)
+    assert split.split == []
+
+
+@pytest.mark.parametrize("seed", [384092, 480171, 490151])
+def test_doubled_back_strands_touching_up_to_an_object_split_past_a_short_or_leaving_strand(seed):
+    """Tuning scenes where a doubled-back cable's strands touch up to the object and the
+    strand going on past it is a short piece the object cuts a little further on, its
+    median width in its cut's narrowing tip (384092), or runs on out of the picture, the
+    turn a loop seen whole above the stretch (480171, 490151): the touching stretch was
+    not split, the cut strand's tip no end, and the cable one chain too many. Each cable
+    one chain now, the frame right."""
+    score, _ = evaluate_scene(make_family_scene("doubled_back", seed), seed, mask_from_labels=True)
+    assert score.frame.n_chains == score.frame.n_cables
+    assert score.frame.correct
