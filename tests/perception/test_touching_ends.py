@@ -14,9 +14,10 @@ UPPER_LEFT = [(20, 40), (100, 95.5)]
 LOWER_LEFT = [(20, 160), (100, 104.5)]
 
 
-def _split_stretch_to_free_end(mask, stretch):
+def _split_stretch_to_free_end(mask, stretch, leaving=None):
     """:func:`split_touching_strands` of a ``stretch`` piece from a three-way junction
-    (label 0, at its start, with the upper and lower left arms) to a free end."""
+    (label 0, at its start, with the upper and lower left arms) to a free end; ``leaving``
+    the six ends' flags of leaving the picture, if any."""
     arms = [
         np.array([UPPER_LEFT[0], (70, 75), (92, 99)], np.float64),
         np.array([LOWER_LEFT[0], (70, 125), (92, 101)], np.float64),
@@ -28,7 +29,8 @@ def _split_stretch_to_free_end(mask, stretch):
     )
     directions /= np.hypot(directions[:, 0], directions[:, 1])[:, None]
     distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
-    return split_touching_strands(pieces, positions, directions, [0, -1, -1, 0, -1, 0], distance)
+    labels = [0, -1, -1, 0, -1, 0]
+    return split_touching_strands(pieces, positions, directions, labels, distance, leaving)
 
 
 def _middle_line(start, stop):
@@ -187,20 +189,8 @@ def test_a_stretch_whose_going_on_strand_leaves_the_picture_is_split_by_side():
     mask = touching_strands_mask(upper, lower, shape=(200, 400))
     mask[100:, 301:] = False
     stretch = np.vstack([_middle_line(108, 292), [(300, 97), (310, 82), (330, 56), (370, 3)]])
-    arms = [
-        np.array([UPPER_LEFT[0], (70, 75), (92, 99)], np.float64),
-        np.array([LOWER_LEFT[0], (70, 125), (92, 101)], np.float64),
-    ]
-    pieces = [stretch, *arms]
-    positions = np.array([points[index] for points in pieces for index in (0, -1)])
-    directions = np.array(
-        [points[index] - points[inner] for points in pieces for index, inner in ((0, 1), (-1, -2))]
-    )
-    directions /= np.hypot(directions[:, 0], directions[:, 1])[:, None]
-    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
-    labels = [0, -1, -1, 0, -1, 0]
     leaving = np.array([False, True, True, False, True, False])
-    split = split_touching_strands(pieces, positions, directions, labels, distance, leaving)
+    split = _split_stretch_to_free_end(mask, stretch, leaving)
     assert split.split == [0]
     upper_strand, lower_strand = split.pieces[0], split.pieces[3]
     assert tuple(upper_strand[-1]) == (370, 3)
@@ -211,15 +201,8 @@ def test_a_stretch_whose_going_on_strand_leaves_the_picture_is_split_by_side():
     upper = [*UPPER_LEFT, (320, 95.5)]
     lower = [*LOWER_LEFT, (320, 104.5)]
     mask = touching_strands_mask(upper, lower, shape=(200, 301))
-    distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
     stretch = np.vstack([_middle_line(108, 292), [(300, 100)]])
-    pieces = [stretch, *arms]
-    positions = np.array([points[index] for points in pieces for index in (0, -1)])
-    directions = np.array(
-        [points[index] - points[inner] for points in pieces for index, inner in ((0, 1), (-1, -2))]
-    )
-    directions /= np.hypot(directions[:, 0], directions[:, 1])[:, None]
-    split = split_touching_strands(pieces, positions, directions, labels, distance, leaving)
+    split = _split_stretch_to_free_end(mask, stretch, leaving)
     assert split.split == []
 
 
