@@ -202,6 +202,19 @@ def distances_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarra
     return np.sqrt((gap * gap).sum(axis=2)).min(axis=1)
 
 
+def reach_along(points: np.ndarray, origin: np.ndarray, axis: np.ndarray) -> float:
+    """How far (px) ``points`` reach past ``origin`` along the unit ``axis`` (the
+    largest projection; negative where they all lie behind it).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> reach_along(np.array([[0.0, 0.0], [3.0, -8.0]]), np.zeros(2), np.array([0.0, -1.0]))
+    8.0
+    """
+    return float(np.max((np.asarray(points) - origin) @ axis))
+
+
 def rotated(direction: np.ndarray, angle: float) -> np.ndarray:
     """The 2-D ``direction`` turned by ``angle`` radians (counter-clockwise in x, y)."""
     direction = np.asarray(direction, np.float64)

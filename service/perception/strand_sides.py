@@ -20,6 +20,14 @@ from service.perception.geometry import arc_lengths, points_along
 SIDE_BY_SIDE_WIDTH_FRACTION = 0.75
 
 
+def short_strand(other, lengths, stretch_width, leaving) -> bool:
+    """Whether the strand ending at ``other`` (an end; ``lengths`` by piece) is shorter
+    than the stretch is wide (``stretch_width``) and does not leave the picture: an
+    object cuts it a little past the junction, and the median of its few joints falls in
+    its cut's narrowing tip, so its width is read as the widest its mask gets."""
+    return lengths[other // 2] < stretch_width and (leaving is None or not leaving[other ^ 1])
+
+
 def end_kind(end, index, labels, members, positions, directions, pieces, reach):
     """What one end of piece ``index`` meets: the two other strands of a three-way
     junction, left one first; or None (anything else).

@@ -38,6 +38,7 @@ from service.perception.strand_sides import (
     end_kind,
     offset_strands,
     point_in,
+    short_strand,
     side_offsets,
 )
 from service.perception.touching_ends import split_stretches_ending, split_stretches_going_on
@@ -393,16 +394,11 @@ def _split_shared_pieces(
     return handled
 
 
-def _short(other, lengths, stretch_width, leaving) -> bool:
-    """Whether the strand ending at ``other`` is shorter than the stretch is wide
-    (``stretch_width``) and does not leave the picture."""
-    return lengths[other // 2] < stretch_width and (leaving is None or not leaving[other ^ 1])
-
-
 def _long_strands(side, lengths, widths, stretch_width, leaving) -> list[float] | None:
     """The half widths (``widths``: medians of their joints) of a junction's two other
-    strands (ends ``side``) when neither is short (:func:`_short`), else None."""
-    if any(_short(other, lengths, stretch_width, leaving) for other in side):
+    strands (ends ``side``) when neither is short (:func:`.strand_sides.short_strand`),
+    else None."""
+    if any(short_strand(other, lengths, stretch_width, leaving) for other in side):
         return None
     return [float(widths[other // 2]) for other in side]
 
@@ -417,7 +413,7 @@ def _strand_widths(
     joints falls in the hook an object's slanted cut leaves), put in ``short_widths``
     (by piece); the others' their median (``widths``). ``beyond``: the half widths of
     the two long strands at the stretch's other junction, or None."""
-    short = [_short(other, lengths, stretch_width, leaving) for other in side]
+    short = [short_strand(other, lengths, stretch_width, leaving) for other in side]
     side_widths = [
         widest(pieces[other // 2], distance) if is_short else float(widths[other // 2])
         for other, is_short in zip(side, short, strict=True)

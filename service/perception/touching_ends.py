@@ -27,6 +27,7 @@ from service.perception.strand_sides import (
     end_kind,
     offset_strands,
     point_in,
+    short_strand,
     side_offsets,
 )
 
@@ -228,8 +229,8 @@ def _going_on_width(beyond, pieces, stretch_half_width, distance, leaving, width
     cuts it a little past the junction, and the median of its few joints falls in its
     cut's narrowing tip (doubled_back 384092: 6.4 px against the strands' 8.3)."""
     points = pieces[beyond // 2]
-    short = polyline_length(points) < 2.0 * stretch_half_width
-    if short and not (leaving is not None and leaving[beyond ^ 1]):
+    lengths = {beyond // 2: polyline_length(points)}
+    if short_strand(beyond, lengths, 2.0 * stretch_half_width, leaving):
         return widest(points, distance)
     return float(widths[beyond // 2])
 

@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numpy as np
 
 from service.perception.appearance import EndColours, ends_alike
-from service.perception.geometry import rotated
+from service.perception.geometry import reach_along, rotated
 from service.perception.pairing import Components, cheapest_pairing
 
 NEAR_U_TURN = 0.75 * np.pi
@@ -438,7 +438,7 @@ def _nearest_the_middle_depth(
     if reach is None or reach[0] > cable_radius:
         return held[0]
     middle = 0.5 * reach[1]
-    apexes = np.array([float(np.max((curve - origin) @ axis)) for curve in held])
+    apexes = np.array([reach_along(curve, origin, axis) for curve in held])
     if apexes[0] >= middle:
         return held[0]
     return held[int(np.argmin(np.abs(apexes - middle)))]
@@ -454,7 +454,7 @@ def _apex_off_the_middle(
     hides it allows past the cuts (half its reach ahead of ``origin`` along ``axis``,
     ``extent()``: :func:`_nearest_the_middle_depth`): the measure the turn's curve was
     chosen by, for any other curve of the same turn."""
-    return abs(float(np.max((np.asarray(curve) - origin) @ axis)) - 0.5 * extent()[1])
+    return abs(reach_along(curve, origin, axis) - 0.5 * extent()[1])
 
 
 class _DepthChoice(NamedTuple):
